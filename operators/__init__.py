@@ -1,0 +1,17 @@
+"""Blender operators (thin glue around :mod:`..core`)."""
+
+classes = ()
+
+
+def register():
+    import bpy
+
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    import bpy
+
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
