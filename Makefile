@@ -1,15 +1,16 @@
 # FurCollide developer commands. Each target bootstraps the pinned .venv first.
 PY := .venv/bin/python
-.PHONY: venv test test-core lint bench demo
+.PHONY: venv test test-core lint bench demo package
 
 venv:
 	@./scripts/bootstrap.sh
 
+# The README's test command (CI runs exactly this through .ci/run).
 test: venv
 	$(PY) -m pytest -q tests
 
 test-core: venv
-	$(PY) -m pytest -q tests -m "not blender"
+	$(PY) -m pytest -q tests/core
 
 lint: venv
 	$(PY) -m ruff check .
@@ -19,3 +20,6 @@ bench: venv
 
 demo: venv
 	$(PY) scripts/demo.py
+
+package: venv
+	$(PY) scripts/package.py

@@ -1,0 +1,41 @@
+"""Every numerical tolerance of the core, in one place.
+
+Distances relative to a scene are multiplied by that scene's size (the
+diagonal of the collider's bounding box, or the curve's length), so the core
+behaves the same in millimetres and in kilometres.
+"""
+
+#: Segment-triangle tests are done in float32 (embree). A hit at ray
+#: parameter ``t`` in ``[0, 1 + T_SLACK]`` counts, so a segment that ends
+#: *exactly* on a surface is a contact, not a miss.
+T_SLACK = 1e-6
+
+#: Re-cast offset (relative to the collider's size) used when counting every
+#: crossing of a parity ray: the next cast starts this far past the last hit.
+PARITY_STEP_REL = 1e-5
+
+#: At most this many crossings are followed along one parity ray.
+PARITY_MAX_HITS = 64
+
+#: A triangle whose area is below ``DEGENERATE_AREA_REL * diag**2`` (``diag``
+#: the collider's bounding box diagonal) is degenerate.
+DEGENERATE_AREA_REL = 1e-14
+
+#: A segment shorter than ``ZERO_SEGMENT_REL`` times its curve's length (or of
+#: absolute length 0) is a zero-length segment and is rejected.
+ZERO_SEGMENT_REL = 1e-9
+
+#: Rotations below half a Rotation Precision step snap to exactly zero, so a
+#: recovering curve reaches its input shape bit for bit.
+SNAP_FRACTION = 0.5
+
+#: Below this |cross| (unit vectors) two directions count as parallel and a
+#: fallback rotation axis is used.
+PARALLEL_EPS = 1e-6
+
+#: The curve's shape perpendicular (tip minus root, orthogonal to the root
+#: segment) is trusted for the local frame when its length exceeds
+#: ``FRAME_SHAPE_LO`` of the curve length, fully from ``FRAME_SHAPE_HI`` on;
+#: in between the frame blends with the time-transported one (no pops).
+FRAME_SHAPE_LO = 0.01
+FRAME_SHAPE_HI = 0.05
