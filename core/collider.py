@@ -1,0 +1,443 @@
+"""Collision meshes: validation, closedness, acceleration structure, queries.
+
+A :class:`Collider` keeps its triangles in its own (object) space. Rigid
+motion only changes :attr:`Collider.matrix`: rays are moved into the
+collider's space, the BVH is never rebuilt. Deformation sets
+:attr:`Collider.vertices`, which rebuilds the BVH lazily, and only when the
+vertices really changed.
+
+Naming: ``_wo`` is world space, ``_lo`` the collider's local space.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import tolerances as tol
+from .errors import ColliderError
+from .rays import make_backend
+
+#: Fixed, irrational-ish unit directions for the parity (inside) test.
+#: Three votes make the test robust to a ray grazing an edge or a vertex.
+_PARITY_DIRS = np.array(
+    [
+        [0.5773502691896258, 0.5773502691896258, 0.5773502691896258],
+        [-0.2672612419124244, 0.8017837257372732, -0.5345224838248488],
+        [0.6246950475544243, -0.2498780190217697, -0.7399400733959437],
+    ]
+)
+_PARITY_DIRS /= np.linalg.norm(_PARITY_DIRS, axis=1, keepdims=True)
+
+
+def _as_vertices(V, what="vertices") -> np.ndarray:
+    try:
+        V = np.asarray(V)
+    except Exception as exc:  # ragged lists
+        raise ColliderError(f"collider {what} must be an (n, 3) array: {exc}") from None
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ColliderError(f"collider {what} must have shape (n, 3), got {V.shape}")
+    if not np.issubdtype(V.dtype, np.floating) and not np.issubdtype(V.dtype, np.integer):
+        raise ColliderError(f"collider {what} must be numeric, got dtype {V.dtype}")
+    V = V.astype(np.float32)
+    bad = ~np.isfinite(V).all(axis=1)
+    if bad.any():
+        raise ColliderError(
+            f"collider {what}: vertex {int(np.argmax(bad))} is not finite "
+            f"({int(bad.sum())} non-finite vertices)"
+        )
+    return V
+
+
+def _as_matrix(M) -> tuple[np.ndarray, np.ndarray]:
+    if M is None:
+        return np.eye(4), np.eye(4)
+    try:
+        M = np.array(M, dtype=np.float64)
+    except Exception as exc:
+        raise ColliderError(f"collider matrix must be a 4x4 array: {exc}") from None
+    if M.shape != (4, 4):
+        raise ColliderError(f"collider matrix must be 4x4, got shape {M.shape}")
+    if not np.isfinite(M).all():
+        raise ColliderError("collider matrix has non-finite entries")
+    if not np.allclose(M[3], [0, 0, 0, 1], atol=1e-9):
+        raise ColliderError("collider matrix must be affine (last row 0, 0, 0, 1)")
+    det = np.linalg.det(M[:3, :3])
+    scale = np.abs(M[:3, :3]).max()
+    if not abs(det) > 1e-12 * max(scale, 1e-30) ** 3:
+        raise ColliderError("collider matrix is singular (zero scale on some axis)")
+    return M, np.linalg.inv(M)
+
+
+class Collider:
+    """A triangle mesh that curves must not pass through.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+        Vertices in the collider's own space.
+    F : (m, 3) array_like of int
+        Triangles (indices into ``V``). ``m == 0`` is allowed: an empty
+        collider never collides (a documented no-op).
+    double_sided : bool
+        Treat the mesh as a thin two-sided shell: curves are pushed back to
+        the side their root is on, offsets apply on both sides, and it never
+        reports pinches. Single-sided meshes push along the hit normal (or
+        its inverse when a back face is crossed) and, when closed, detect
+        pinched roots (roots inside the volume).
+    matrix : (4, 4) array_like, optional
+        Affine world transform (None = identity).
+    offset : float, optional
+        Collision offset of this collider (world units), overriding
+        ``Settings.collision_offset``.
+    drop_degenerate : bool
+        Silently drop zero-area triangles instead of raising. The number
+        dropped is in :attr:`dropped_faces`.
+    backend : {'embree', 'numpy'}, optional
+        Ray tracer; default embree. 'numpy' is the brute-force reference.
+    name : str
+        Used in error messages (e.g. the Blender object's name).
+
+    Raises
+    ------
+    ColliderError
+        Malformed vertices, faces or matrix; the message names the vertex
+        or face at fault.
+    """
+
+    def __init__(
+        self,
+        V,
+        F,
+        double_sided=False,
+        matrix=None,
+        offset=None,
+        drop_degenerate=False,
+        backend=None,
+        name="collider",
+    ):
+        self.name = str(name)
+        if backend not in (None, "embree", "numpy"):
+            raise ColliderError(f"collider '{self.name}': unknown backend {backend!r}")
+        self._backend_name = backend
+        self.double_sided = bool(double_sided)
+        self.offset = None if offset is None else self._check_offset(offset)
+        V = _as_vertices(V, f"'{self.name}' vertices")
+        F = self._check_faces(F, len(V))
+        self.dropped_faces = 0
+        self._V = V
+        bad = self._degenerate(V, F)
+        if bad.any():
+            if not drop_degenerate:
+                i = int(np.argmax(bad))
+                raise ColliderError(
+                    f"collider '{self.name}': face {i} {F[i].tolist()} is degenerate "
+                    f"(zero area or repeated vertex); {int(bad.sum())} such faces "
+                    f"(use drop_degenerate=True to ignore them)"
+                )
+            self.dropped_faces = int(bad.sum())
+            F = F[~bad]
+        self._F = F
+        self.closed = self._is_closed(F, len(V))
+        self._M, self._Minv = _as_matrix(matrix)
+        self._version = 0
+        self._built = None  # (key, backend, n_front_faces)
+        self.build_count = 0
+        self._geometry_cache = None
+
+    # ----------------------------------------------------------------- input
+    def _check_offset(self, offset):
+        try:
+            offset = float(offset)
+        except (TypeError, ValueError):
+            raise ColliderError(f"collider '{self.name}': offset must be a number") from None
+        if not (np.isfinite(offset) and offset >= 0):
+            raise ColliderError(f"collider '{self.name}': offset must be >= 0, got {offset}")
+        return offset
+
+    def _check_faces(self, F, n):
+        F = np.asarray(F)
+        if F.size == 0:
+            return np.zeros((0, 3), np.int32)
+        if F.ndim != 2 or F.shape[1] != 3:
+            raise ColliderError(
+                f"collider '{self.name}': faces must have shape (m, 3) (triangles), got {F.shape}"
+            )
+        if not np.issubdtype(F.dtype, np.integer):
+            if np.issubdtype(F.dtype, np.floating) and np.all(np.mod(F, 1) == 0):
+                F = F.astype(np.int64)
+            else:
+                raise ColliderError(
+                    f"collider '{self.name}': faces must be integers, got {F.dtype}"
+                )
+        bad = ((F < 0) | (F >= n)).any(axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ColliderError(
+                f"collider '{self.name}': face {i} {F[i].tolist()} indexes a vertex out of "
+                f"range (the mesh has {n} vertices)"
+            )
+        return F.astype(np.int32)
+
+    @staticmethod
+    def _degenerate(V, F):
+        if len(F) == 0:
+            return np.zeros(0, bool)
+        V64 = V.astype(np.float64)
+        diag = float(np.linalg.norm(V64.max(0) - V64.min(0))) or 1.0
+        a = np.cross(V64[F[:, 1]] - V64[F[:, 0]], V64[F[:, 2]] - V64[F[:, 0]])
+        area2 = np.einsum("ij,ij->i", a, a)
+        rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+        return rep | (area2 <= (2 * tol.DEGENERATE_AREA_REL * diag**2) ** 2)
+
+    @staticmethod
+    def _is_closed(F, n):
+        """Every directed edge appears once and its reverse once."""
+        if len(F) == 0:
+            return False
+        a = F.astype(np.int64)
+        e0 = np.concatenate([a[:, 0], a[:, 1], a[:, 2]])
+        e1 = np.concatenate([a[:, 1], a[:, 2], a[:, 0]])
+        fwd = np.sort(e0 * n + e1)
+        rev = np.sort(e1 * n + e0)
+        return bool(np.all(fwd[1:] != fwd[:-1]) and np.array_equal(fwd, rev))
+
+    # ------------------------------------------------------------ properties
+    @property
+    def faces(self) -> np.ndarray:
+        """(m, 3) int32 triangles (after dropping degenerate ones)."""
+        return self._F
+
+    @property
+    def empty(self) -> bool:
+        """True when the collider has no triangle (it never collides)."""
+        return len(self._F) == 0
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(n, 3) float32 vertices in the collider's own space (read-only view)."""
+        v = self._V.view()
+        v.flags.writeable = False
+        return v
+
+    @vertices.setter
+    def vertices(self, V2):
+        V2 = _as_vertices(V2, f"'{self.name}' vertices")
+        if V2.shape != self._V.shape:
+            raise ColliderError(
+                f"collider '{self.name}': new vertices have shape {V2.shape}, expected "
+                f"{self._V.shape} (same topology); build a new Collider when topology changes"
+            )
+        if np.array_equal(V2, self._V):
+            return
+        if len(self._F) and self._degenerate(V2, self._F).any():
+            # A deformation that collapses a triangle is legal; keep going with
+            # it (embree skips zero-area triangles), but never with NaN normals.
+            pass
+        self._V = V2
+        self._version += 1
+        self._geometry_cache = None
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """(4, 4) float64 world transform (a copy)."""
+        return self._M.copy()
+
+    @matrix.setter
+    def matrix(self, M):
+        self._M, self._Minv = _as_matrix(M)
+
+    # ------------------------------------------------------------ geometry
+    def _geometry(self):
+        """Face normals, vertex normals and local bounds (cached per vertices)."""
+        if self._geometry_cache is None:
+            V = self._V.astype(np.float64)
+            F = self._F
+            if len(F):
+                fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+                vn = np.zeros_like(V)
+                for k in range(3):  # area-weighted vertex normals
+                    np.add.at(vn, F[:, k], fn)
+                ln = np.linalg.norm(fn, axis=1, keepdims=True)
+                fn = np.divide(fn, ln, out=np.zeros_like(fn), where=ln > 0)
+                lv = np.linalg.norm(vn, axis=1, keepdims=True)
+                vn = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
+                used = np.unique(F)
+                lo, hi = V[used].min(0), V[used].max(0)
+            else:
+                fn = np.zeros((0, 3))
+                vn = np.zeros_like(V)
+                lo = hi = np.zeros(3)
+            self._geometry_cache = (fn, vn, lo, hi)
+        return self._geometry_cache
+
+    def _scale(self) -> float:
+        """Mean linear scale of the matrix (offsets are given in world units)."""
+        return float(abs(np.linalg.det(self._M[:3, :3])) ** (1.0 / 3.0))
+
+    def effective_offset(self, default: float) -> float:
+        """This collider's offset in world units (its own, else ``default``)."""
+        return self.offset if self.offset is not None else float(default)
+
+    def _backend(self, offset_wo: float):
+        """The ray backend for the shell at ``offset_wo`` (built lazily)."""
+        off_lo = offset_wo / self._scale()
+        key = (self._version, round(off_lo, 12))
+        if self._built is not None and self._built[0] == key:
+            return self._built[1], self._built[2]
+        fn, vn, _, _ = self._geometry()
+        V = self._V.astype(np.float64)
+        F = self._F
+        if off_lo > 0:
+            if self.double_sided:
+                V = np.concatenate([V + off_lo * vn, V - off_lo * vn])
+                F = np.concatenate([F, F[:, ::-1] + len(self._V)])
+            else:
+                V = V + off_lo * vn
+        backend = make_backend(self._backend_name, V, F)
+        self.build_count += 1
+        self._built = (key, backend, len(self._F))
+        return backend, len(self._F)
+
+    def bounds_world(self, offset_wo: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """World-space axis-aligned bounds (lo, hi), grown by the offset."""
+        _, _, lo, hi = self._geometry()
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                            for z in (lo[2], hi[2])])
+        c_wo = corners @ self._M[:3, :3].T + self._M[:3, 3]
+        pad = offset_wo * 1.01 + 1e-6 * (float(np.abs(c_wo).max()) + 1.0)
+        return c_wo.min(0) - pad, c_wo.max(0) + pad
+
+    def diagonal_world(self) -> float:
+        lo, hi = self.bounds_world()
+        return float(np.linalg.norm(hi - lo)) or 1.0
+
+    def _to_local(self, o_wo, d_wo):
+        A, b = self._Minv[:3, :3], self._Minv[:3, 3]
+        return o_wo @ A.T + b, d_wo @ A.T
+
+    def _normals_world(self, prim, n_front):
+        fn = self._geometry()[0]
+        idx = np.where(prim >= n_front, prim - n_front, prim)
+        n_lo = fn[idx] * np.where(prim >= n_front, -1.0, 1.0)[:, None]
+        n_wo = n_lo @ self._Minv[:3, :3]  # inverse-transpose for normals
+        ln = np.linalg.norm(n_wo, axis=1, keepdims=True)
+        return np.divide(n_wo, ln, out=np.zeros_like(n_wo), where=ln > 0)
+
+    # ------------------------------------------------------------- queries
+    def segment_hits(self, o_wo, d_wo, offset_wo=0.0, threads=1) -> np.ndarray:
+        """Which segments ``o + t d, t in [0, 1]`` hit the collider.
+
+        Parameters
+        ----------
+        o_wo, d_wo : (k, 3) ndarray
+            Segment starts and vectors (end minus start), world space.
+
+        Returns
+        -------
+        (k,) bool
+        """
+        if self.empty or len(o_wo) == 0:
+            return np.zeros(len(o_wo), bool)
+        be, _ = self._backend(offset_wo)
+        o_lo, d_lo = self._to_local(o_wo, d_wo)
+        return be.first_hit(o_lo, d_lo, 1.0 + tol.T_SLACK, threads) >= 0
+
+    def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0):
+        """First hit of each segment: parameter, point and unit normal.
+
+        Returns
+        -------
+        hit : (k,) bool
+        t : (k,) float64
+            Segment parameter of the hit in [0, 1] (inf for none).
+        n_wo : (k, 3) float64
+            Unit face normal (world), oriented as the shell that was hit.
+        """
+        k = len(o_wo)
+        if self.empty or k == 0:
+            return np.zeros(k, bool), np.full(k, np.inf), np.zeros((k, 3))
+        be, n_front = self._backend(offset_wo)
+        o_lo, d_lo = self._to_local(o_wo, d_wo)
+        prim, t = be.hit_details(o_lo, d_lo, 1.0 + tol.T_SLACK)
+        hit = prim >= 0
+        n_wo = np.zeros((k, 3))
+        if hit.any():
+            n_wo[hit] = self._normals_world(prim[hit], n_front)
+        return hit, np.minimum(t, 1.0), n_wo
+
+    @property
+    def detects_pinch(self) -> bool:
+        """Only closed, single-sided colliders have an inside."""
+        return self.closed and not self.double_sided
+
+    def contains(self, p_wo, offset_wo=0.0) -> np.ndarray:
+        """Parity inside test (paper 3.1): more back faces than front faces.
+
+        Three fixed directions vote, so a ray that grazes an edge cannot flip
+        the answer. Always False for open or double-sided colliders.
+
+        Parameters
+        ----------
+        p_wo : (k, 3) ndarray
+            Points, world space.
+
+        Returns
+        -------
+        (k,) bool
+        """
+        k = len(p_wo)
+        if not self.detects_pinch or k == 0:
+            return np.zeros(k, bool)
+        be, n_front = self._backend(offset_wo)
+        fn = self._geometry()[0]
+        p_lo = self._to_local(np.asarray(p_wo, np.float64), np.zeros((k, 3)))[0]
+        _, _, lo, hi = self._geometry()
+        diag = float(np.linalg.norm(hi - lo)) or 1.0
+        step = tol.PARITY_STEP_REL * diag
+        far = 4.0 * diag + float(np.abs(p_lo).max(initial=0.0)) * 2.0
+        votes = np.zeros(k, np.int8)
+        for dirn in _PARITY_DIRS:
+            o = p_lo.copy()
+            balance = np.zeros(k, np.int32)  # back hits minus front hits
+            active = np.arange(k)
+            d = np.broadcast_to(dirn * far, (k, 3))
+            for _ in range(tol.PARITY_MAX_HITS):
+                if len(active) == 0:
+                    break
+                prim, t = be.hit_details(o[active], d[active], 1.0)
+                hit = prim >= 0
+                active, prim, t = active[hit], prim[hit], t[hit]
+                front = (fn[np.where(prim >= n_front, prim - n_front, prim)] @ dirn) < 0
+                balance[active] += np.where(front, -1, 1)
+                o[active] = o[active] + (t * far + step)[:, None] * dirn
+            votes += (balance > 0).astype(np.int8)
+        return votes >= 2
+
+    def closest_points(self, q_wo, offset_wo=0.0):
+        """Closest point on the (un-inflated) mesh to each query and its normal.
+
+        Parameters
+        ----------
+        q_wo : (k, 3) ndarray
+            Query points, world space.
+
+        Returns
+        -------
+        p_wo : (k, 3) float64
+        n_wo : (k, 3) float64
+            Unit face normal at the closest point.
+        """
+        from .closest import closest_points_on_mesh
+
+        k = len(q_wo)
+        if self.empty or k == 0:
+            return np.array(q_wo, np.float64), np.zeros((k, 3))
+        q_lo = self._to_local(np.asarray(q_wo, np.float64), np.zeros((k, 3)))[0]
+        if getattr(self, "_closest_key", None) != self._version:
+            self._closest = None
+            self._closest_key = self._version
+        p_lo, face, self._closest = closest_points_on_mesh(
+            self._V.astype(np.float64), self._F, q_lo, self._closest
+        )
+        p_wo = p_lo @ self._M[:3, :3].T + self._M[:3, 3]
+        return p_wo, self._normals_world(face, len(self._F) + 1)

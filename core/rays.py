@@ -1,0 +1,221 @@
+"""Ray adapter: the only module that talks to a ray tracer.
+
+Two backends share one small API (as trimesh's ``ray/`` does):
+
+* :class:`EmbreeBackend` - embreex (Embree 4) BVH, float32, multi-threaded
+  (embreex releases the GIL, so ray batches are split over a thread pool).
+* :class:`NumpyBackend` - brute-force Moller-Trumbore in float64. Slow; it is
+  the reference the embree path is tested against, and a fallback.
+
+Rays are *segments*: origin ``o`` and unnormalized direction ``d`` with a hit
+counted for ray parameter ``t`` in ``[0, tmax]``. Because ``d`` is not
+normalized, ``t`` is invariant under affine maps, which is what lets a rigid
+collider keep its BVH in its own space and move the rays instead.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from .errors import BackendUnavailable
+
+try:  # embreex wheels exist for linux-x64, windows-x64, macOS 13+ (arm64/x64) only
+    from embreex import mesh_construction as _mc
+    from embreex import rtcore_scene as _rs
+
+    _EMBREE_ERROR = None
+except Exception as exc:  # pragma: no cover - depends on the platform
+    _mc = _rs = None
+    _EMBREE_ERROR = exc
+
+#: Below this many rays a batch is not worth splitting over threads.
+_MIN_RAYS_PER_THREAD = 16384
+
+_pool: ThreadPoolExecutor | None = None
+_pool_size = 0
+_pool_lock = threading.Lock()
+
+
+def embree_available() -> bool:
+    """True when embreex imported on this platform."""
+    return _EMBREE_ERROR is None
+
+
+def embree_error() -> str:
+    """Human-readable reason why embreex is unavailable ('' if it is)."""
+    if _EMBREE_ERROR is None:
+        return ""
+    return (
+        f"FurCollide needs the embreex ray tracer, which could not be loaded on this "
+        f"platform ({type(_EMBREE_ERROR).__name__}: {_EMBREE_ERROR}). Supported: Linux x64, "
+        f"Windows x64, macOS 13+ (Apple Silicon and Intel)."
+    )
+
+
+def default_threads() -> int:
+    """Number of CPUs this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _executor(n: int) -> ThreadPoolExecutor:
+    global _pool, _pool_size
+    with _pool_lock:
+        if _pool is None or _pool_size < n:
+            if _pool is not None:
+                _pool.shutdown(wait=False)
+            _pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="furcollide-rays")
+            _pool_size = n
+        return _pool
+
+
+class EmbreeBackend:
+    """Embree BVH over one triangle mesh (in the mesh's own space).
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+        Vertices.
+    F : (m, 3) array_like of int
+        Triangles, ``m >= 1``.
+    """
+
+    name = "embree"
+
+    def __init__(self, V, F):
+        if _EMBREE_ERROR is not None:
+            raise BackendUnavailable(embree_error())
+        self._scene = _rs.EmbreeScene()
+        _mc.TriangleMesh(
+            self._scene,
+            np.ascontiguousarray(V, dtype=np.float32),
+            np.ascontiguousarray(F, dtype=np.int32),
+        )
+        # Commit now (Embree commits lazily on the first query) so that the
+        # threads of a split batch never race to commit the same scene.
+        one = np.zeros((1, 3), np.float32)
+        self._scene.run(one, one + np.float32(1.0), dists=np.ones(1, np.float32))
+
+    def _run(self, o, d, tmax):
+        return self._scene.run(o, d, dists=tmax, query="INTERSECT")
+
+    def first_hit(self, o, d, tmax, threads: int = 1):
+        """Index of the first triangle hit by each ray, -1 for none.
+
+        Parameters
+        ----------
+        o, d : (k, 3) ndarray
+            Ray origins and unnormalized directions.
+        tmax : (k,) ndarray or float
+            Largest ray parameter that counts.
+        threads : int
+            Split the batch over this many threads (the result does not depend
+            on it).
+
+        Returns
+        -------
+        (k,) ndarray of int32
+        """
+        o = np.ascontiguousarray(o, dtype=np.float32)
+        d = np.ascontiguousarray(d, dtype=np.float32)
+        k = len(o)
+        tmax = np.ascontiguousarray(np.broadcast_to(tmax, (k,)), dtype=np.float32)
+        if k == 0:
+            return np.empty(0, np.int32)
+        n = int(min(threads, max(1, k // _MIN_RAYS_PER_THREAD)))
+        if n <= 1:
+            return np.asarray(self._run(o, d, tmax), dtype=np.int32)
+        bounds = np.linspace(0, k, n + 1).astype(np.int64)
+        futs = [
+            _executor(n).submit(self._run, o[a:b], d[a:b], tmax[a:b])
+            for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+        ]
+        return np.concatenate([np.asarray(f.result(), dtype=np.int32) for f in futs])
+
+    def hit_details(self, o, d, tmax):
+        """First hit with its ray parameter.
+
+        Returns
+        -------
+        prim : (k,) int32
+            Triangle index, -1 for none.
+        t : (k,) float64
+            Ray parameter of the hit (``inf`` for none).
+        """
+        o = np.ascontiguousarray(o, dtype=np.float32)
+        d = np.ascontiguousarray(d, dtype=np.float32)
+        k = len(o)
+        if k == 0:
+            return np.empty(0, np.int32), np.empty(0)
+        tmax = np.ascontiguousarray(np.broadcast_to(tmax, (k,)), dtype=np.float32)
+        r = self._scene.run(o, d, dists=tmax, query="INTERSECT", output=1)
+        prim = np.asarray(r["primID"], dtype=np.int32)
+        t = np.where(prim >= 0, np.asarray(r["tfar"], dtype=np.float64), np.inf)
+        return prim, t
+
+
+class NumpyBackend:
+    """Brute-force reference with the same API as :class:`EmbreeBackend`.
+
+    Moller-Trumbore in float64, chunked so memory stays bounded. Two-sided
+    (like Embree's default): both front and back faces are hit.
+    """
+
+    name = "numpy"
+
+    def __init__(self, V, F):
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F, dtype=np.int64)
+        self._v0 = V[F[:, 0]]
+        self._e1 = V[F[:, 1]] - self._v0
+        self._e2 = V[F[:, 2]] - self._v0
+
+    def _all_t(self, o, d):
+        """(k, m) ray parameter of every ray-triangle hit (inf where none)."""
+        p = np.cross(d[:, None, :], self._e2[None])
+        det = np.einsum("kmi,mi->km", p, self._e1)
+        ok = np.abs(det) > 1e-300
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        s = o[:, None, :] - self._v0[None]
+        u = np.einsum("kmi,kmi->km", s, p) * inv
+        q = np.cross(s, self._e1[None])
+        v = np.einsum("ki,kmi->km", d, q) * inv
+        t = np.einsum("mi,kmi->km", self._e2, q) * inv
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= 0)
+        return np.where(hit, t, np.inf)
+
+    def hit_details(self, o, d, tmax):
+        o = np.asarray(o, dtype=np.float64)
+        d = np.asarray(d, dtype=np.float64)
+        k = len(o)
+        tmax = np.broadcast_to(np.asarray(tmax, dtype=np.float64), (k,))
+        prim = np.full(k, -1, np.int32)
+        tt = np.full(k, np.inf)
+        m = max(1, len(self._v0))
+        step = max(1, 2_000_000 // m)
+        for a in range(0, k, step):
+            t = self._all_t(o[a : a + step], d[a : a + step])
+            j = np.argmin(t, axis=1)
+            tj = t[np.arange(len(t)), j]
+            hit = tj <= tmax[a : a + step]
+            prim[a : a + step][hit] = j[hit]
+            tt[a : a + step][hit] = tj[hit]
+        return prim, tt
+
+    def first_hit(self, o, d, tmax, threads: int = 1):
+        return self.hit_details(o, d, tmax)[0]
+
+
+def make_backend(name: str | None, V, F):
+    """Build the backend called ``name`` ('embree', 'numpy'; None = embree)."""
+    if name in (None, "embree"):
+        return EmbreeBackend(V, F)
+    if name == "numpy":
+        return NumpyBackend(V, F)
+    raise ValueError(f"unknown ray backend {name!r}; use 'embree' or 'numpy'")

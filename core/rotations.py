@@ -1,0 +1,146 @@
+"""Small vectorized rotation helpers (axis-angle, quaternions, frames).
+
+Quaternions are ``(w, x, y, z)`` arrays of shape (k, 4); angles in radians.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import tolerances as tol
+
+
+def normalize(v):
+    """Row-normalize (k, 3); zero rows stay zero."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
+
+
+def dot(a, b):
+    return np.einsum("...i,...i->...", a, b)
+
+
+def stable_perpendicular(v):
+    """A unit vector perpendicular to each unit row of ``v``, continuous per octant.
+
+    Uses the world axis least aligned with ``v`` (deterministic).
+    """
+    e = np.zeros_like(v)
+    e[np.arange(len(v)), np.argmin(np.abs(v), axis=1)] = 1.0
+    return normalize(np.cross(v, e))
+
+
+def rotate(v, axis, angle):
+    """Rodrigues: rotate rows of ``v`` about unit ``axis`` rows by ``angle`` (k,)."""
+    c = np.cos(angle)[:, None]
+    s = np.sin(angle)[:, None]
+    return v * c + np.cross(axis, v) * s + axis * (dot(axis, v)[:, None] * (1.0 - c))
+
+
+def rotate_between(v, a, b):
+    """Apply the minimal rotation taking unit ``a`` to unit ``b`` to ``v`` (rows)."""
+    w = np.cross(a, b)
+    c = dot(a, b)
+    k = 1.0 / np.maximum(1.0 + c, 1e-12)
+    return v * c[:, None] + np.cross(w, v) + w * (dot(w, v) * k)[:, None]
+
+
+def quat_from_axis_angle(axis, angle):
+    h = 0.5 * angle
+    return np.concatenate([np.cos(h)[:, None], axis * np.sin(h)[:, None]], axis=1)
+
+
+def quat_mul(p, q):
+    pw, pv = p[:, :1], p[:, 1:]
+    qw, qv = q[:, :1], q[:, 1:]
+    w = pw * qw - dot(pv, qv)[:, None]
+    v = pw * qv + qw * pv + np.cross(pv, qv)
+    return np.concatenate([w, v], axis=1)
+
+
+def quat_rotate(q, v):
+    """Rotate rows of ``v`` by unit quaternions ``q``."""
+    w, u = q[:, :1], q[:, 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_angle(q):
+    """Rotation angle in [0, pi] of each unit quaternion."""
+    return 2.0 * np.arctan2(np.linalg.norm(q[:, 1:], axis=1), np.abs(q[:, 0]))
+
+
+def quat_canonical(q):
+    """Same rotation with ``w >= 0`` (so slerp takes the short way)."""
+    return np.where(q[:, :1] < 0, -q, q)
+
+
+def quat_slerp(p, q, t):
+    """Spherical interpolation from ``p`` to ``q`` by ``t`` (k,) in [0, 1]."""
+    d = dot(p, q)
+    q = np.where(d[:, None] < 0, -q, q)
+    d = np.abs(d)
+    t = np.broadcast_to(np.asarray(t, np.float64), d.shape)
+    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    s = np.sin(theta)
+    small = s < 1e-9
+    a = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / np.where(small, 1.0, s))
+    b = np.where(small, t, np.sin(t * theta) / np.where(small, 1.0, s))
+    out = p * a[:, None] + q * b[:, None]
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def rotation_axis(c, d):
+    """Unit axis turning vector ``c`` toward direction ``d`` (rows).
+
+    Falls back to a deterministic perpendicular of ``c`` when they are
+    parallel (any axis turns ``c`` away from itself).
+    """
+    a = np.cross(c, d)
+    n = np.linalg.norm(a, axis=1)
+    cn = np.linalg.norm(c, axis=1) * np.maximum(np.linalg.norm(d, axis=1), 1e-300)
+    bad = n <= tol.PARALLEL_EPS * np.maximum(cn, 1e-300)
+    a = normalize(a)
+    if bad.any():
+        a[bad] = stable_perpendicular(normalize(c[bad]))
+    return a
+
+
+def curve_frames(t, u_shape, shape_ratio, prev=None):
+    """Orthonormal per-curve frames, rows (e0, e1, e2), shape (k, 3, 3).
+
+    ``e0`` is the root segment direction ``t``. ``e1`` follows the curve's own
+    shape (its tip offset perpendicular to ``t``) when the curve is bent
+    enough, and otherwise the previous frame's ``e1`` carried over by the
+    minimal rotation of the root segment, blending between the two so the
+    frame never jumps.
+
+    Parameters
+    ----------
+    t : (k, 3) unit root segment directions.
+    u_shape : (k, 3) tip minus root, made perpendicular to ``t``.
+    shape_ratio : (k,) ``|u_shape|`` over the curve length.
+    prev : (k, 3, 3) or None
+        Previous frames (None: no history).
+    """
+    alpha = np.clip(
+        (shape_ratio - tol.FRAME_SHAPE_LO) / (tol.FRAME_SHAPE_HI - tol.FRAME_SHAPE_LO), 0.0, 1.0
+    )
+    us = normalize(u_shape)
+    if prev is None:
+        carried = stable_perpendicular(t)
+    else:
+        carried = rotate_between(prev[:, 1], prev[:, 0], t)
+    e1 = alpha[:, None] * us + (1.0 - alpha[:, None]) * carried
+    e1 = e1 - dot(e1, t)[:, None] * t
+    n = np.linalg.norm(e1, axis=1)
+    bad = n < 1e-6
+    e1 = normalize(e1)
+    if bad.any():
+        fb = carried[bad] - dot(carried[bad], t[bad])[:, None] * t[bad]
+        fb = normalize(fb)
+        worse = np.linalg.norm(fb, axis=1) < 0.5
+        fb[worse] = stable_perpendicular(t[bad][worse])
+        e1[bad] = fb
+    e2 = np.cross(t, e1)
+    return np.stack([t, e1, e2], axis=1)

@@ -1,0 +1,988 @@
+"""The FurCollide solver (paper sections 3.1-3.2 and 5).
+
+One :meth:`Solver.step` is one frame: it takes that frame's *input* curves
+(already moving with the growth surface) and the colliders, and returns
+curves that no longer pass through the colliders.
+
+How a curve is deformed
+-----------------------
+Every output curve is its input curve with each segment rotated (and, with
+Shrink, scaled) and the segments re-chained from the root::
+
+    out[0] = in[0]
+    out[j + 1] = out[j] + scale_j * R_j @ (in[j + 1] - in[j])
+
+so roots never move and lengths are kept unless Shrink says otherwise.
+
+* Stiff: ``R_j = R(axis, theta)`` for every segment.
+* Bend: ``R_j = R(axis, theta * (j + 1) / n)`` (uniform bend root to tip).
+* Soft: one quaternion per segment, built up from the colliding segments'
+  own rotations (each dragging ``affected_connected_cvs`` following
+  segments with ``cv_falloff``).
+
+The per-curve state (``theta``, its axis, soft quaternions) is stored in a
+*local frame* carried along with the input curve, so it follows the
+animated growth surface; the axis is chosen at the first hit and kept
+until the curve has recovered (no pops when hit normals change).
+
+Searching the angle
+-------------------
+The smallest clearing rotation on the Rotation Precision grid is found by
+galloping (1, 2, 4, ... steps) then bisecting, for all colliding curves at
+once: every probe round is a single batched ray query. Where clearance is
+monotone in the angle (the usual case) this is exactly what stepping by
+Rotation Precision gives; otherwise it is a clearing angle within one step
+of a transition.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+from . import rotations as rot
+from . import tolerances as tol
+from .collider import Collider
+from .errors import InputError, SettingsError
+from .rays import default_threads
+from .settings import Settings
+
+_STATE_VERSION = 1
+
+
+class Status(IntEnum):
+    """Per-curve outcome of a step (``StepResult.status`` values)."""
+
+    FREE = 0  #: not in contact, shape unchanged this frame
+    COLLIDING = 1  #: in contact: rotated to clear, or recovery blocked
+    RECOVERING = 2  #: clear, rotating back toward its input shape
+    PINCHED = 3  #: root inside a closed collider (not solved, see pinch_resolution)
+    UNRESOLVED = 4  #: could not be cleared within max_angle: last collision-free state kept
+    DISABLED = 5  #: switched off by ``enabled``: prior local state kept
+
+
+@dataclass
+class StepResult:
+    """What :meth:`Solver.step` returns.
+
+    Attributes
+    ----------
+    points : (P, 3) ndarray
+        Resolved positions, world space, the input's dtype.
+    status : (C,) int8 ndarray
+        :class:`Status` code per curve.
+    timings : dict
+        Milliseconds per phase (for benchmarks and the panel's stats).
+    """
+
+    points: np.ndarray
+    status: np.ndarray
+    timings: dict = field(default_factory=dict)
+
+    def count(self, status: Status) -> int:
+        """Number of curves with ``status``."""
+        return int(np.count_nonzero(self.status == status))
+
+
+def _check_offsets(offsets) -> np.ndarray:
+    try:
+        off = np.asarray(offsets)
+    except Exception as exc:
+        raise InputError(f"offsets must be a 1-D integer array: {exc}") from None
+    if off.ndim != 1 or len(off) < 2:
+        raise InputError(f"offsets must be a 1-D array of C+1 >= 2 integers, got shape {off.shape}")
+    if not np.issubdtype(off.dtype, np.integer):
+        raise InputError(f"offsets must be integers, got dtype {off.dtype}")
+    off = off.astype(np.int64)
+    if off[0] != 0:
+        raise InputError(f"offsets must start at 0, got {int(off[0])}")
+    sizes = np.diff(off)
+    if (sizes < 2).any():
+        i = int(np.argmax(sizes < 2))
+        if sizes[i] <= 0:
+            raise InputError(f"offsets must increase: curve {i} has {int(sizes[i])} points")
+        raise InputError(f"curve {i} has only 1 point; every curve needs at least 2")
+    return off
+
+
+def _gallop_bisect(n, test, k_max, lo=None, hi=None):
+    """Smallest integer ``k`` in ``(lo, k_max]`` with ``test`` true, per item.
+
+    Gallops (lo + 1, lo + 2, lo + 4, ...) until a good probe, then bisects
+    between the last bad and the first good probe. Every round calls
+    ``test(items, ks)`` once for all unsettled items (one batched ray query).
+
+    Parameters
+    ----------
+    n : int
+        Number of items.
+    test : callable(items (k,) int, ks (k,) int) -> (k,) bool
+    k_max : (n,) int
+        Largest admissible ``k``.
+    lo : (n,) int, optional
+        Known bad ``k`` (default 0).
+    hi : (n,) int, optional
+        Known good ``k`` (-1 = unknown, gallop first).
+
+    Returns
+    -------
+    (n,) int
+        The first good ``k`` found, -1 where none up to ``k_max``.
+    """
+    lo = np.zeros(n, np.int64) if lo is None else np.asarray(lo, np.int64).copy()
+    hi = np.full(n, -1, np.int64) if hi is None else np.asarray(hi, np.int64).copy()
+    stride = np.ones(n, np.int64)
+    k_max = np.asarray(k_max, np.int64)
+    for _ in range(256):  # bounded: log2(k_max) gallops + log2 bisections
+        gallop = (hi < 0) & (lo < k_max)
+        bisect = (hi >= 0) & (hi - lo > 1)
+        items = np.flatnonzero(gallop | bisect)
+        if len(items) == 0:
+            break
+        ks = np.where(
+            gallop[items],
+            np.minimum(lo[items] + stride[items], k_max[items]),
+            (lo[items] + hi[items]) // 2,
+        )
+        good = test(items, ks)
+        hi[items[good]] = ks[good]
+        bad = items[~good]
+        lo[bad] = ks[~good]
+        stride[bad] *= 2
+    return hi
+
+
+class Solver:
+    """Frame-by-frame FurCollide solver for one set of curves.
+
+    Parameters
+    ----------
+    offsets : (C+1,) array_like of int
+        Curve ``i`` is ``points[offsets[i]:offsets[i + 1]]`` (Blender's
+        layout). Every curve needs at least 2 points.
+    settings : Settings, optional
+        Default ``Settings()``.
+
+    Examples
+    --------
+    >>> solver = Solver(offsets, Settings(mode="bend"))
+    >>> res = solver.step(points, [Collider(V, F)])
+    >>> res.points, res.status
+    """
+
+    def __init__(self, offsets, settings: Settings | None = None):
+        off = _check_offsets(offsets)
+        self._off = off
+        self.n_curves = C = len(off) - 1
+        self.n_points = int(off[-1])
+        nseg = np.diff(off) - 1
+        self._nseg = nseg
+        self._soff = np.concatenate([[0], np.cumsum(nseg)])
+        is_last = np.zeros(self.n_points, bool)
+        is_last[off[1:] - 1] = True
+        self._seg_start = np.flatnonzero(~is_last)
+        self._seg_curve = np.repeat(np.arange(C), nseg)
+        seg_j = np.arange(len(self._seg_start)) - self._soff[self._seg_curve]
+        self._w_bend = (seg_j + 1) / nseg[self._seg_curve]
+        self._seg_j = seg_j
+        self._settings = Settings() if settings is None else self._check_settings(settings)
+        self.reset()
+
+    # ------------------------------------------------------------ settings
+    @staticmethod
+    def _check_settings(s):
+        if not isinstance(s, Settings):
+            raise SettingsError(f"settings must be a core.Settings, got {type(s).__name__}")
+        return s
+
+    @property
+    def settings(self) -> Settings:
+        """The :class:`Settings` in use. Assigning new ones keeps the state,
+        except that a change of ``mode`` resets the solver."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, s):
+        s = self._check_settings(s)
+        mode_changed = s.mode != self._settings.mode
+        self._settings = s
+        if mode_changed:
+            self.reset()
+
+    # --------------------------------------------------------------- state
+    def reset(self):
+        """Forget every curve's history (the next step starts afresh)."""
+        C, S = self.n_curves, len(self._seg_start)
+        self._angle = np.zeros(C)  # radians (stiff/bend)
+        self._angle_max = np.zeros(C)
+        self._axis_lo = np.zeros((C, 3))
+        self._frame = np.zeros((C, 3, 3))
+        self._active = np.zeros(C, bool)  # has a non-identity local state
+        self._hold = np.zeros(C, bool)  # no recovery (out of a pinch, recover_pinched off)
+        self._pinched = np.zeros(C, bool)
+        self._quat = np.tile([1.0, 0.0, 0.0, 0.0], (S, 1))  # soft, local frame
+        self._quat_max = self._quat.copy()
+        self._steps = 0
+
+    _STATE_KEYS = {
+        "angle": ("C",), "angle_max": ("C",), "axis": ("C", 3), "frame": ("C", 3, 3),
+        "active": ("C",), "hold": ("C",), "pinched": ("C",), "quat": ("S", 4),
+        "quat_max": ("S", 4), "meta": (4,),
+    }
+
+    @property
+    def state(self) -> dict:
+        """Snapshot (copies) of all per-curve state as numpy arrays.
+
+        Restoring it with ``solver.state = snapshot`` makes the next step
+        bit-identical to what it was after the snapshot. Only numpy arrays:
+        it can be written with ``np.savez`` and read without pickle.
+        """
+        mode = ("stiff", "bend", "soft").index(self._settings.mode)
+        return {
+            "angle": self._angle.copy(), "angle_max": self._angle_max.copy(),
+            "axis": self._axis_lo.copy(), "frame": self._frame.copy(),
+            "active": self._active.copy(), "hold": self._hold.copy(),
+            "pinched": self._pinched.copy(), "quat": self._quat.copy(),
+            "quat_max": self._quat_max.copy(),
+            "meta": np.array([_STATE_VERSION, self.n_curves, self.n_points, mode], np.int64),
+        }
+
+    @state.setter
+    def state(self, s):
+        if not isinstance(s, dict) and not hasattr(s, "keys"):
+            raise InputError("state must be a dict of numpy arrays (from Solver.state)")
+        missing = set(self._STATE_KEYS) - set(s.keys())
+        if missing:
+            raise InputError(f"state is missing {sorted(missing)}")
+        dims = {"C": self.n_curves, "S": len(self._seg_start)}
+        arrs = {}
+        for k, shape in self._STATE_KEYS.items():
+            a = np.asarray(s[k])
+            want = tuple(dims.get(d, d) for d in shape)
+            if a.shape != want:
+                raise InputError(f"state['{k}'] has shape {a.shape}, expected {want}")
+            arrs[k] = a
+        meta = arrs["meta"]
+        if int(meta[0]) != _STATE_VERSION or int(meta[1]) != self.n_curves or int(
+            meta[2]
+        ) != self.n_points:
+            raise InputError("state was saved for other curves (curve/point count differs)")
+        if int(meta[3]) != ("stiff", "bend", "soft").index(self._settings.mode):
+            raise InputError("state was saved with another mode")
+        self._angle = arrs["angle"].astype(np.float64).copy()
+        self._angle_max = arrs["angle_max"].astype(np.float64).copy()
+        self._axis_lo = arrs["axis"].astype(np.float64).copy()
+        self._frame = arrs["frame"].astype(np.float64).copy()
+        self._active = arrs["active"].astype(bool).copy()
+        self._hold = arrs["hold"].astype(bool).copy()
+        self._pinched = arrs["pinched"].astype(bool).copy()
+        self._quat = arrs["quat"].astype(np.float64).copy()
+        self._quat_max = arrs["quat_max"].astype(np.float64).copy()
+
+    # --------------------------------------------------------------- input
+    def _check_points(self, points):
+        if not isinstance(points, np.ndarray):
+            try:
+                points = np.asarray(points)
+            except Exception as exc:
+                raise InputError(f"points must be a (P, 3) float array: {exc}") from None
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InputError(f"points must have shape (P, 3), got {points.shape}")
+        if points.dtype not in (np.float32, np.float64):
+            raise InputError(f"points must be float32 or float64, got {points.dtype}")
+        if len(points) != self.n_points:
+            raise InputError(
+                f"points has {len(points)} rows but offsets describe {self.n_points} points"
+            )
+        P64 = points.astype(np.float64)
+        bad = ~np.isfinite(P64).all(axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            c = int(np.searchsorted(self._off, i, "right") - 1)
+            raise InputError(f"point {i} (curve {c}) is not finite: {points[i].tolist()}")
+        return P64
+
+    def _check_enabled(self, enabled):
+        if enabled is None:
+            return np.ones(self.n_curves, bool)
+        e = np.asarray(enabled)
+        if e.shape != (self.n_curves,):
+            raise InputError(f"enabled must have shape ({self.n_curves},), got {e.shape}")
+        if e.dtype != bool:
+            if not (np.issubdtype(e.dtype, np.integer) or np.issubdtype(e.dtype, np.floating)):
+                raise InputError(f"enabled must be booleans, got dtype {e.dtype}")
+            if not np.isfinite(e).all():
+                raise InputError("enabled has non-finite values")
+            e = e != 0
+        return e
+
+    # ------------------------------------------------------------ the step
+    def step(self, points, colliders=(), growth=None, enabled=None) -> StepResult:
+        """Solve one frame.
+
+        Parameters
+        ----------
+        points : (P, 3) ndarray of float32 or float64
+            This frame's input curves, world space.
+        colliders : sequence of Collider
+            Meshes the curves must not pass through (world transforms in
+            their ``matrix``). Empty colliders are ignored.
+        growth : Collider, optional
+            The growth surface (for Attract to Growth Surface and Put to
+            Growth Surface). Never collided with.
+        enabled : (C,) array_like of bool, optional
+            Curves to solve; disabled curves keep their prior local state.
+
+        Returns
+        -------
+        StepResult
+
+        Raises
+        ------
+        InputError
+            Malformed points, mask or collider list (the message names the
+            curve or point at fault).
+        """
+        t_start = time.perf_counter()
+        s = self._settings
+        P64 = self._check_points(points)
+        enabled = self._check_enabled(enabled)
+        if isinstance(colliders, Collider):
+            colliders = [colliders]
+        cols = []
+        for i, c in enumerate(colliders):
+            if not isinstance(c, Collider):
+                raise InputError(f"colliders[{i}] is a {type(c).__name__}, not a core.Collider")
+            if not c.empty:
+                cols.append((c, c.effective_offset(s.collision_offset)))
+        if growth is not None and not isinstance(growth, Collider):
+            raise InputError(f"growth must be a core.Collider, got {type(growth).__name__}")
+        if growth is not None and growth.empty:
+            growth = None
+        if s.attract_to_growth_surface and growth is None:
+            raise InputError(
+                "attract_to_growth_surface needs the growth surface (step(growth=...))"
+            )
+        if s.pinch_resolution == "growth_surface" and growth is None:
+            raise InputError(
+                "pinch_resolution='growth_surface' needs the growth surface (step(growth=...))"
+            )
+
+        ctx = _StepContext(self, P64, cols, growth, points.dtype)
+        timings = ctx.timings
+        timings["setup"] = (time.perf_counter() - t_start) * 1e3
+
+        C = self.n_curves
+        status = np.zeros(C, np.int8)
+        status[~enabled] = Status.DISABLED
+
+        # Local frames of every curve that carries state, and its axes in world.
+        t0 = time.perf_counter()
+        ctx.load_state()
+        timings["frames"] = (time.perf_counter() - t0) * 1e3
+
+        # Pinch detection (paper 3.1): roots inside closed single-sided colliders.
+        t0 = time.perf_counter()
+        pinched = np.zeros(C, bool)
+        for (c, off), cand, box in zip(cols, ctx.cand, ctx.boxes, strict=True):
+            if c.detects_pinch:
+                q = np.flatnonzero(cand & enabled & ctx.root_in_box(box))
+                if len(q):
+                    pinched[q[c.contains(ctx.roots[q], off)]] = True
+        timings["pinch"] = (time.perf_counter() - t0) * 1e3
+
+        t0 = time.perf_counter()
+        was_pinched = self._pinched
+        out_of_pinch = was_pinched & ~pinched & enabled
+        if not s.recover_pinched:
+            self._hold |= out_of_pinch & self._active
+        pin = np.flatnonzero(pinched)
+        status[pin] = Status.PINCHED
+        if len(pin) and s.pinch_resolution == "growth_surface":
+            ctx.put_to_growth_surface(pin)
+        self._pinched = pinched & enabled | (was_pinched & ~enabled)
+
+        solve = enabled & ~pinched & (ctx.cand_any | self._active)
+        idx = np.flatnonzero(solve)
+        if len(idx):
+            ctx.solve(idx, status)
+        timings["solve"] = (time.perf_counter() - t0) * 1e3
+
+        t0 = time.perf_counter()
+        out = ctx.output()
+        ctx.store_state()
+        self._steps += 1
+        timings["output"] = (time.perf_counter() - t0) * 1e3
+        timings["total"] = (time.perf_counter() - t_start) * 1e3
+        timings["rays"] = ctx.n_rays
+        return StepResult(out.astype(points.dtype, copy=False), status, timings)
+
+
+class _StepContext:
+    """Everything one step needs; methods are the phases of the step."""
+
+    def __init__(self, solver: Solver, P64, cols, growth, out_dtype):
+        self.sv_ = solver
+        self.s = s = solver.settings
+        self.P = P64
+        self.cols = cols
+        self.growth = growth
+        self.threads = s.threads or default_threads()
+        self.prec = np.deg2rad(s.rotation_precision)
+        self.max_angle = np.deg2rad(s.max_angle)
+        self.out_dtype = out_dtype
+        self.timings = {}
+        self.n_rays = 0
+        ss = solver._seg_start
+        self.seg_in = P64[ss + 1] - P64[ss]  # (S, 3) input segments
+        L = np.linalg.norm(self.seg_in, axis=1)
+        self.curve_len = np.add.reduceat(L, solver._soff[:-1])
+        short = L <= tol.ZERO_SEGMENT_REL * self.curve_len[solver._seg_curve]
+        if short.any():
+            k = int(np.argmax(short))
+            c = int(solver._seg_curve[k])
+            raise InputError(
+                f"curve {c} has a zero-length segment between points {int(ss[k])} and "
+                f"{int(ss[k]) + 1}"
+            )
+        self.roots = P64[solver._off[:-1]]
+        # Candidate curves per collider: the sphere a curve can sweep about its
+        # root (any rotation, scale <= 1) meets the collider's bounds.
+        self.cand = []
+        self.boxes = []
+        for c, off in cols:
+            lo, hi = c.bounds_world(off)
+            self.boxes.append((lo, hi))
+            gap = np.maximum(lo - self.roots, 0) + np.maximum(self.roots - hi, 0)
+            self.cand.append(np.einsum("ij,ij->i", gap, gap) <= self.curve_len**2)
+        if self.cand:
+            self.cand_any = np.logical_or.reduce(self.cand)
+        else:
+            self.cand_any = np.zeros(solver.n_curves, bool)
+        self.soft = s.mode == "soft"
+
+    def root_in_box(self, box):
+        lo, hi = box
+        return np.all((self.roots >= lo) & (self.roots <= hi), axis=1)
+
+    # ------------------------------------------------------------ frames
+    def load_state(self):
+        sv = self.sv_
+        self.angle = sv._angle.copy()
+        self.angle_max = sv._angle_max.copy()
+        self.axis = np.zeros((sv.n_curves, 3))
+        self.quat = sv._quat.copy()
+        self.quat_max = sv._quat_max.copy()
+        self.active = sv._active.copy()
+        idx = np.flatnonzero(self.active)
+        self.frame = sv._frame.copy()
+        if len(idx):
+            B = self._frames(idx, sv._frame[idx])
+            self.frame[idx] = B
+            self.axis[idx] = np.einsum("kji,kj->ki", B, sv._axis_lo[idx])
+            if self.soft:
+                seg, rep, _ = self.segments(idx)
+                self.quat[seg] = self._quat_to(B[rep], self.quat[seg], to_world=True)
+                self.quat_max[seg] = self._quat_to(B[rep], self.quat_max[seg], to_world=True)
+
+    @staticmethod
+    def _quat_to(B, q, to_world):
+        v = q[:, 1:]
+        v = np.einsum("kji,kj->ki", B, v) if to_world else np.einsum("kij,kj->ki", B, v)
+        return np.concatenate([q[:, :1], v], axis=1)
+
+    def _frames(self, idx, prev):
+        sv = self.sv_
+        first = sv._soff[idx]
+        t = rot.normalize(self.seg_in[first])
+        chord = self.P[sv._off[idx + 1] - 1] - self.roots[idx]
+        u = chord - rot.dot(chord, t)[:, None] * t
+        ratio = np.linalg.norm(u, axis=1) / self.curve_len[idx]
+        return rot.curve_frames(t, u, ratio, prev)
+
+    def store_state(self):
+        sv = self.sv_
+        idx = np.flatnonzero(self.active)
+        fresh = idx[~sv._active[idx]]
+        if len(fresh):
+            self.frame[fresh] = self._frames(fresh, None)
+        sv._angle = self.angle
+        sv._angle_max = self.angle_max
+        sv._active = self.active
+        sv._frame = np.where(self.active[:, None, None], self.frame, 0.0)
+        axis_lo = np.zeros_like(self.axis)
+        if len(idx):
+            axis_lo[idx] = np.einsum("kij,kj->ki", self.frame[idx], self.axis[idx])
+        sv._axis_lo = axis_lo
+        sv._hold &= self.active
+        if self.soft:
+            q = np.tile([1.0, 0.0, 0.0, 0.0], (len(self.quat), 1))
+            qm = q.copy()
+            if len(idx):
+                seg, rep, _ = self.segments(idx)
+                q[seg] = self._quat_to(self.frame[idx][rep], self.quat[seg], to_world=False)
+                qm[seg] = self._quat_to(self.frame[idx][rep], self.quat_max[seg], to_world=False)
+            sv._quat, sv._quat_max = q, qm
+
+    # ----------------------------------------------------------- geometry
+    def segments(self, idx):
+        """Segments of curves ``idx``: (seg ids, owner position in idx, starts)."""
+        sv = self.sv_
+        cnt = sv._nseg[idx]
+        starts = np.concatenate([[0], np.cumsum(cnt)[:-1]])
+        rep = np.repeat(np.arange(len(idx)), cnt)
+        seg = sv._soff[idx][rep] + (np.arange(int(cnt.sum())) - starts[rep])
+        return seg, rep, starts
+
+    def rigid_rotations(self, idx, angle, axis, seg, rep):
+        """Per-segment (angle, axis) of stiff/bend curves ``idx``."""
+        w = self.sv_._w_bend[seg] if self.s.mode == "bend" else 1.0
+        return angle[rep] * w, axis[rep]
+
+    def deform(self, idx, angle=None, axis=None, quat=None):
+        """Deformed segments of curves ``idx``.
+
+        Returns
+        -------
+        o, d : (k, 3) segment starts and vectors, world space
+        seg, rep, starts : see :meth:`segments`
+        """
+        seg, rep, starts = self.segments(idx)
+        v = self.seg_in[seg]
+        if quat is not None:
+            v = rot.quat_rotate(quat, v)
+        else:
+            a_seg, ax_seg = self.rigid_rotations(idx, angle, axis, seg, rep)
+            v = rot.rotate(v, ax_seg, a_seg)
+            if self.s.shrink:
+                ramp = np.minimum(a_seg / np.deg2rad(self.s.scale_angle), 1.0)
+                v = v * (1.0 - (1.0 - self.s.scale_minimum) * ramp)[:, None]
+        cs = np.cumsum(v, axis=0)
+        base = self.roots[idx] - (cs[starts] - v[starts])
+        # Round to the output dtype so the segments tested are exactly the
+        # segments written out (float32 rounding must not re-open a contact).
+        end = (cs + base[rep]).astype(self.out_dtype).astype(np.float64)
+        o = np.empty_like(end)
+        o[1:] = end[:-1]
+        o[starts] = self.roots[idx]
+        return o, end - o, seg, rep, starts
+
+    def hits(self, idx, o, d, rep, starts):
+        """Per-curve: does any segment of curve ``idx[i]`` hit any collider."""
+        hit = np.zeros(len(o), bool)
+        for (c, off), cand in zip(self.cols, self.cand, strict=True):
+            m = cand[idx][rep]
+            if m.all():
+                hit |= c.segment_hits(o, d, off, self.threads)
+                self.n_rays += len(o)
+            elif m.any():
+                w = np.flatnonzero(m)
+                hit[w] |= c.segment_hits(o[w], d[w], off, self.threads)
+                self.n_rays += len(w)
+        return hit
+
+    def curve_hits(self, idx, **deformation):
+        if len(idx) == 0:
+            return np.zeros(0, bool)
+        o, d, seg, rep, starts = self.deform(idx, **deformation)
+        return np.logical_or.reduceat(self.hits(idx, o, d, rep, starts), starts)
+
+    def first_hit_details(self, idx, o, d, rep, starts):
+        """First hit (root to tip) of each curve: segment, point, push direction.
+
+        Returns
+        -------
+        k : (n,) int  index into o/d of the first hitting segment (-1: none)
+        point : (n, 3)  hit point
+        push : (n, 3)  unit direction away from the collider (paper 3.2.1)
+        """
+        n = len(idx)
+        hit = self.hits(idx, o, d, rep, starts)
+        k = np.full(n, -1, np.int64)
+        w = np.flatnonzero(hit)
+        if len(w):
+            owners, first = np.unique(rep[w], return_index=True)
+            k[owners] = w[first]
+        point = np.zeros((n, 3))
+        push = np.zeros((n, 3))
+        has = np.flatnonzero(k >= 0)
+        if len(has) == 0:
+            return k, point, push
+        ks = k[has]
+        best_t = np.full(len(has), np.inf)
+        best_n = np.zeros((len(has), 3))
+        double = np.zeros(len(has), bool)
+        for (c, off), cand in zip(self.cols, self.cand, strict=True):
+            m = np.flatnonzero(cand[idx[has]])
+            if len(m) == 0:
+                continue
+            h, t, nrm = c.segment_hit_details(o[ks[m]], d[ks[m]], off)
+            better = h & (t < best_t[m])
+            mm = m[better]
+            best_t[mm] = t[better]
+            best_n[mm] = nrm[better]
+            double[mm] = c.double_sided
+        best_t = np.where(np.isfinite(best_t), best_t, 0.0)
+        pt = o[ks] + d[ks] * best_t[:, None]
+        # Single-sided: along the normal, or its inverse when a back face is
+        # crossed. Double-sided: toward the side the root is on.
+        side = -np.sign(rot.dot(d[ks], best_n))
+        root_side = np.sign(rot.dot(self.roots[idx[has]] - pt, best_n))
+        side = np.where(double & (root_side != 0), root_side, side)
+        side = np.where(side == 0, 1.0, side)
+        point[has] = pt
+        push[has] = best_n * side[:, None]
+        return k, point, push
+
+    # ----------------------------------------------------------- solving
+    def target_fraction(self, idx):
+        """Recovery target as a fraction of the maximum rotation (plasticity)."""
+        return np.where(self.sv_._hold[idx], np.nan, self.s.plasticity)
+
+    def solve(self, idx, status):
+        if self.soft:
+            _SoftSolve(self).run(idx, status)
+        else:
+            self.solve_rigid(idx, status)
+
+    def new_axes(self, idx, o, d, rep, starts):
+        """Rotation axes for curves starting a contact (paper 3.2.1)."""
+        k, point, push = self.first_hit_details(idx, o, d, rep, starts)
+        c = point - self.roots[idx]
+        if self.s.attract_to_growth_surface:
+            mid = self._midpoints(idx, o, d, starts)
+            cp, _ = self.growth.closest_points(mid)
+            toward = cp - mid
+            a = np.cross(c, toward)
+            ok = np.linalg.norm(a, axis=1) > tol.PARALLEL_EPS * np.maximum(
+                np.linalg.norm(c, axis=1) * np.linalg.norm(toward, axis=1), 1e-300
+            )
+            push = np.where(ok[:, None], rot.normalize(toward), push)
+        return rot.rotation_axis(c, push)
+
+    def _midpoints(self, idx, o, d, starts):
+        nseg = self.sv_._nseg[idx]
+        j = starts + nseg // 2
+        return o[j] + np.where((nseg % 2 == 1)[:, None], 0.5 * d[j], 0.0)
+
+    def solve_rigid(self, idx, status):
+        s, p = self.s, self.prec
+        angle, axis = self.angle, self.axis
+        near = idx[self.cand_any[idx]]
+        far = idx[~self.cand_any[idx]]
+        # 1. Test every near curve in its current state.
+        hit_now = np.zeros(len(near), bool)
+        if len(near):
+            o, d, seg, rep, starts = self.deform(near, angle=angle[near], axis=axis[near])
+            hit_seg = self.hits(near, o, d, rep, starts)
+            hit_now = np.logical_or.reduceat(hit_seg, starts)
+            new = hit_now & ~self.active[near]
+            if new.any():
+                sub = np.flatnonzero(new)
+                # Re-deform just the new contacts (they are at angle 0).
+                cn = near[sub]
+                o2, d2, _, rep2, st2 = self.deform(cn, angle=angle[cn], axis=axis[cn])
+                axis[cn] = self.new_axes(cn, o2, d2, rep2, st2)
+                self.active[cn] = True
+        colliding = near[hit_now]
+        clear = near[~hit_now]
+
+        # 2. Collision: smallest clearing angle above the current one.
+        if len(colliding):
+            th0 = angle[colliding]
+            kmax = np.maximum(np.ceil((self.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
+
+            def test(items, ks):
+                c = colliding[items]
+                th = np.minimum(th0[items] + ks * p, self.max_angle)
+                return ~self.curve_hits(c, angle=th, axis=axis[c])
+
+            k = _gallop_bisect(len(colliding), test, kmax)
+            ok = k >= 0
+            res = colliding[ok]
+            angle[res] = np.minimum(th0[ok] + k[ok] * p, self.max_angle)
+            self.angle_max[res] = np.maximum(self.angle_max[res], angle[res])
+            status[res] = Status.COLLIDING
+            bad = colliding[~ok]
+            status[bad] = Status.UNRESOLVED
+            # Fallback: the state of the previous frame (last collision-free).
+            angle[bad] = th0[~ok]
+            fresh = bad[self.sv_._angle[bad] == 0]
+            self.active[fresh] = self.sv_._active[fresh]
+
+        # 3. Recovery toward the (plasticity) target, stopping before contact.
+        rec = np.concatenate([clear, far])
+        rec = rec[self.active[rec]]
+        if len(rec):
+            th0 = angle[rec]
+            frac = self.target_fraction(rec)
+            target = np.where(np.isnan(frac), th0, np.nan_to_num(frac) * self.angle_max[rec])
+            target = np.minimum(target, th0)
+            th1 = th0 - s.recovery_rate * (th0 - target)
+            th1 = np.where(th1 - target < tol.SNAP_FRACTION * p, target, th1)
+            th1 = np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
+            moving = th1 < th0
+            is_near = self.cand_any[rec]
+            check = np.flatnonzero(moving & is_near)
+            blocked = np.zeros(len(rec), bool)
+            if len(check):
+                cc = rec[check]
+                blocked[check] = self.curve_hits(cc, angle=th1[check], axis=axis[cc])
+            if blocked.any():
+                b = np.flatnonzero(blocked)
+                cb = rec[b]
+                lo_th, hi_th = th1[b], th0[b]
+                K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
+
+                def test_r(items, ks):
+                    c = cb[items]
+                    th = np.minimum(lo_th[items] + ks[:] * p, hi_th[items])
+                    return ~self.curve_hits(c, angle=th, axis=axis[c])
+
+                k = _gallop_bisect(len(b), test_r, K, lo=np.zeros(len(b)), hi=K)
+                th1[b] = np.minimum(lo_th + k * p, hi_th)
+            angle[rec] = th1
+            st = np.where(blocked, Status.COLLIDING,
+                          np.where(th1 < th0, Status.RECOVERING, Status.FREE))
+            status[rec] = np.maximum(status[rec], st)
+        self._release(idx)
+
+    def _release(self, idx):
+        """Curves back at exactly their input shape drop their local state."""
+        if self.soft:
+            return
+        done = idx[self.active[idx] & (self.angle[idx] == 0)]
+        self.active[done] = False
+        self.axis[done] = 0.0
+        self.angle_max[done] = 0.0
+
+    # ------------------------------------------------------------ pinch
+    def put_to_growth_surface(self, pin):
+        """Rotate pinched curves down onto the growth surface (paper 3.2.5)."""
+        _, n_g = self.growth.closest_points(self.roots[pin])
+        chord = self.P[self.sv_._off[pin + 1] - 1] - self.roots[pin]
+        down = -n_g
+        axis = rot.rotation_axis(chord, down)
+        # Elevation of the deformed chord over the tangent plane, bisected on
+        # the angle so the same works for every mode's deformation.
+        lo = np.zeros(len(pin))
+        hi = np.full(len(pin), np.pi)
+        for _ in range(24):
+            mid = 0.5 * (lo + hi)
+            o, d, seg, rep, starts = self._deform_mode(pin, mid, axis)
+            tip = o[starts + self.sv_._nseg[pin] - 1] + d[starts + self.sv_._nseg[pin] - 1]
+            above = rot.dot(tip - self.roots[pin], n_g) > 0
+            lo = np.where(above, mid, lo)
+            hi = np.where(above, hi, mid)
+        ang = np.where(rot.dot(chord, n_g) > 0, hi, 0.0)
+        self._set_uniform(pin, ang, axis)
+
+    def _deform_mode(self, idx, angle, axis):
+        if self.soft:
+            seg, rep, _ = self.segments(idx)
+            q = rot.quat_from_axis_angle(axis[rep], angle[rep])
+            return self.deform(idx, quat=q)
+        return self.deform(idx, angle=angle, axis=axis)
+
+    def _set_uniform(self, idx, angle, axis):
+        if self.soft:
+            seg, rep, _ = self.segments(idx)
+            q = rot.quat_from_axis_angle(axis[rep], angle[rep])
+            self.quat[seg] = q
+            grow = rot.quat_angle(q) > rot.quat_angle(self.quat_max[seg])
+            self.quat_max[seg[grow]] = q[grow]
+        else:
+            self.angle[idx] = angle
+            self.axis[idx] = axis
+            self.angle_max[idx] = np.maximum(self.angle_max[idx], angle)
+        self.active[idx] = angle > 0
+
+    # ------------------------------------------------------------ output
+    def output(self):
+        out = self.P.copy()
+        idx = np.flatnonzero(self.active)
+        if len(idx):
+            if self.soft:
+                seg, _, _ = self.segments(idx)
+                o, d, seg, rep, starts = self.deform(idx, quat=self.quat[seg])
+            else:
+                o, d, seg, rep, starts = self.deform(
+                    idx, angle=self.angle[idx], axis=self.axis[idx]
+                )
+            out[self.sv_._seg_start[seg] + 1] = o + d
+        return out
+
+
+class _SoftSolve:
+    """Soft mode (paper 3.2.1): per-segment rotations, prefix by prefix.
+
+    The first colliding segment of each curve turns about its own axis (away
+    from the collider) by the smallest clearing angle; the next
+    ``affected_connected_cvs`` segments turn with it scaled by
+    ``(1 - cv_falloff) ** i``; segment lengths are kept because output
+    curves are re-chained from rotated input segments (length correction).
+    Segments before the one being solved never move, so each round clears
+    one more prefix of the curve and the loop ends after at most one round
+    per segment.
+    """
+
+    def __init__(self, ctx: _StepContext):
+        self.ctx = ctx
+        s = ctx.s
+        A = s.affected_connected_cvs
+        self.weights = (1.0 - s.cv_falloff) ** np.arange(1, A + 1) if A else np.zeros(0)
+
+    def run(self, idx, status):
+        ctx, p = self.ctx, self.ctx.prec
+        sv = ctx.sv_
+        near = idx[ctx.cand_any[idx]]
+        far = idx[~ctx.cand_any[idx]]
+        q0 = ctx.quat.copy()  # world, state at the start of the step
+        unresolved = np.zeros(sv.n_curves, bool)
+        touched = np.zeros(sv.n_curves, bool)
+        todo = near
+        for _ in range(int(sv._nseg.max(initial=0)) + 1):
+            if len(todo) == 0:
+                break
+            seg, rep, starts = ctx.segments(todo)
+            o, d, _, rep, starts = ctx.deform(todo, quat=ctx.quat[seg])
+            k, point, push = ctx.first_hit_details(todo, o, d, rep, starts)
+            hit = k >= 0
+            todo, k, push = todo[hit], k[hit], push[hit]
+            if len(todo) == 0:
+                break
+            touched[todo] = True
+            ctx.active[todo] = True
+            seg_hit = seg[k]  # global segment id of the first hitting segment
+            if ctx.s.attract_to_growth_surface:
+                mid = ctx._midpoints(todo, o, d, starts[hit])
+                cp, _ = ctx.growth.closest_points(mid)
+                pull = rot.normalize(cp - mid)
+                ok = np.linalg.norm(np.cross(d[k], pull), axis=1) > tol.PARALLEL_EPS
+                push = np.where(ok[:, None], pull, push)
+            axis = rot.rotation_axis(d[k], push)
+            last = sv._soff[todo + 1]  # one past the curve's last segment
+
+            def test(items, ks, seg_hit=seg_hit, axis=axis, todo=todo, last=last):
+                c = todo[items]
+                q = self._rotated(seg_hit[items], last[items], axis[items], ks * p)
+                # Only the solved segment needs testing: segments before it
+                # did not move, segments after it are the next rounds' job.
+                sseg, srep, sst = ctx.segments(c)
+                qq = ctx.quat[sseg]
+                qq[np.searchsorted(sseg, q[0])] = q[1]
+                o2, d2, _, r2, st2 = ctx.deform(c, quat=qq)
+                j = st2 + (seg_hit[items] - sv._soff[c])
+                return ~ctx.hits(c, o2[j], d2[j], np.arange(len(c)), np.arange(len(c)))
+
+            kmax = np.full(len(todo), int(np.ceil(ctx.max_angle / p - 1e-9)))
+            kk = _gallop_bisect(len(todo), test, kmax)
+            ok = kk >= 0
+            if ok.any():
+                w = np.flatnonzero(ok)
+                sel, q = self._rotated(seg_hit[w], last[w], axis[w], kk[w] * p)
+                ctx.quat[sel] = q
+                grow = rot.quat_angle(q) > rot.quat_angle(ctx.quat_max[sel])
+                ctx.quat_max[sel[grow]] = q[grow]
+            unresolved[todo[~ok]] = True
+            todo = todo[ok]
+        # Unresolvable curves fall back to their state at the start of the step.
+        bad = np.flatnonzero(unresolved)
+        if len(bad):
+            seg, _, _ = ctx.segments(bad)
+            ctx.quat[seg] = q0[seg]
+            ctx.active[bad] = self.ctx.sv_._active[bad]
+            status[bad] = Status.UNRESOLVED
+        status[touched & ~unresolved] = Status.COLLIDING
+        rec = np.sort(np.concatenate([near, far]))
+        rec = rec[~touched[rec] & ctx.active[rec]]
+        if len(rec):
+            self.recover(rec, status)
+
+    def _rotated(self, seg_hit, last, axis, phi):
+        """Segment ids and composed quaternions after turning ``seg_hit`` by ``phi``."""
+        ctx = self.ctx
+        n = len(seg_hit)
+        span = np.minimum(len(self.weights) + 1, last - seg_hit)  # segments affected
+        rep = np.repeat(np.arange(n), span)
+        first = np.concatenate([[0], np.cumsum(span)[:-1]])
+        i = np.arange(int(span.sum())) - first[rep]
+        sel = seg_hit[rep] + i
+        w = np.concatenate([[1.0], self.weights])[i]
+        r = rot.quat_from_axis_angle(axis[rep], phi[rep] * w)
+        return sel, rot.quat_canonical(rot.quat_mul(r, ctx.quat[sel]))
+
+    def recover(self, rec, status):
+        """Slerp every segment toward its target; stop before contact."""
+        ctx, s, p = self.ctx, self.ctx.s, self.ctx.prec
+        seg, rep, starts = ctx.segments(rec)
+        q0 = ctx.quat[seg]
+        ident = np.zeros_like(q0)
+        ident[:, 0] = 1.0
+        frac = ctx.target_fraction(rec)
+        hold = np.isnan(frac)
+        qt = rot.quat_slerp(ident, ctx.quat_max[seg], np.nan_to_num(frac)[rep])
+        qt = np.where(hold[rep][:, None], q0, qt)
+
+        def at(lam, which=None):
+            r = rep if which is None else which
+            q = rot.quat_slerp(q0[r], qt[r], lam)
+            # Snap: within half a precision step of the target, land on it.
+            close = rot.quat_angle(rot.quat_mul(q, qt[r] * [1, -1, -1, -1])) < (
+                tol.SNAP_FRACTION * p
+            )
+            closec = np.logical_and.reduceat(close, starts) if which is None else close
+            return q, closec
+
+        lam = np.full(len(rec), s.recovery_rate)
+        q1, close = at(lam[rep])
+        q1 = np.where(close[rep][:, None], qt, q1)
+        moving = ~np.all(np.isclose(q1, q0, rtol=0, atol=0), axis=1)
+        moving_c = np.logical_or.reduceat(moving, starts)
+        is_near = ctx.cand_any[rec]
+        chk = np.flatnonzero(moving_c & is_near)
+        blocked = np.zeros(len(rec), bool)
+        if len(chk):
+            sseg, srep, _ = ctx.segments(rec[chk])
+            pos = np.searchsorted(seg, sseg)
+            blocked[chk] = ctx.curve_hits(rec[chk], quat=q1[pos])
+        if blocked.any():
+            b = np.flatnonzero(blocked)
+            # Bisect the recovery fraction on 16 levels (finer than precision
+            # for any recovery step a frame can take).
+            levels = 16
+
+            def test(items, ks):
+                c = rec[b[items]]
+                sseg, srep, _ = ctx.segments(c)
+                pos = np.searchsorted(seg, sseg)
+                lamk = (ks / levels * s.recovery_rate)[srep]
+                q = rot.quat_slerp(q0[pos], qt[pos], lamk)
+                return ~ctx.curve_hits(c, quat=q)
+
+            # The largest safe fraction is the smallest good k of the reversed
+            # grid (fraction levels - k): k = levels (fraction 0) is known good.
+            def test_rev(items, ks):
+                return test(items, levels - ks)
+
+            kr = _gallop_bisect(len(b), test_rev, np.full(len(b), levels),
+                                lo=np.zeros(len(b)), hi=np.full(len(b), levels))
+            sseg, srep, _ = ctx.segments(rec[b])
+            pos = np.searchsorted(seg, sseg)
+            lamk = ((levels - kr) / levels * s.recovery_rate)[srep]
+            q1[pos] = rot.quat_slerp(q0[pos], qt[pos], lamk)
+        ctx.quat[seg] = q1
+        changed = np.logical_or.reduceat(~np.all(q1 == q0, axis=1), starts)
+        st = np.where(blocked, Status.COLLIDING,
+                      np.where(changed, Status.RECOVERING, Status.FREE))
+        status[rec] = np.maximum(status[rec], st)
+        # Back exactly at the input shape: drop the state.
+        identity = np.logical_and.reduceat(np.all(q1 == ident, axis=1), starts)
+        done = rec[identity]
+        ctx.active[done] = False
+        dseg, _, _ = ctx.segments(done)
+        ctx.quat_max[dseg] = ident[: len(dseg)]
