@@ -184,6 +184,7 @@ class Solver:
         is_last = np.zeros(self.n_points, bool)
         is_last[off[1:] - 1] = True
         self._seg_start = np.flatnonzero(~is_last)
+        self._curve_end = off[1:-1] - 1  # point-difference rows that span two curves
         self._seg_curve = np.repeat(np.arange(C), nseg)
         seg_j = np.arange(len(self._seg_start)) - self._soff[self._seg_curve]
         self._w_bend = (seg_j + 1) / nseg[self._seg_curve]
@@ -298,13 +299,11 @@ class Solver:
             raise InputError(
                 f"points has {len(points)} rows but offsets describe {self.n_points} points"
             )
-        P64 = points.astype(np.float64)
-        bad = ~np.isfinite(P64).all(axis=1)
-        if bad.any():
-            i = int(np.argmax(bad))
+        if not np.isfinite(points).all():
+            i = int(np.argmax(~np.isfinite(points).all(axis=1)))
             c = int(np.searchsorted(self._off, i, "right") - 1)
             raise InputError(f"point {i} (curve {c}) is not finite: {points[i].tolist()}")
-        return P64
+        return np.ascontiguousarray(points)
 
     def _check_enabled(self, enabled):
         if enabled is None:
@@ -349,7 +348,7 @@ class Solver:
         """
         t_start = time.perf_counter()
         s = self._settings
-        P64 = self._check_points(points)
+        points = self._check_points(points)
         enabled = self._check_enabled(enabled)
         if isinstance(colliders, Collider):
             colliders = [colliders]
@@ -372,7 +371,7 @@ class Solver:
                 "pinch_resolution='growth_surface' needs the growth surface (step(growth=...))"
             )
 
-        ctx = _StepContext(self, P64, cols, growth, points.dtype)
+        ctx = _StepContext(self, points, cols, growth)
         timings = ctx.timings
         timings["setup"] = (time.perf_counter() - t_start) * 1e3
 
@@ -419,16 +418,17 @@ class Solver:
         timings["output"] = (time.perf_counter() - t0) * 1e3
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         timings["rays"] = ctx.n_rays
-        return StepResult(out.astype(points.dtype, copy=False), status, timings)
+        return StepResult(out, status, timings)
 
 
 class _StepContext:
     """Everything one step needs; methods are the phases of the step."""
 
-    def __init__(self, solver: Solver, P64, cols, growth, out_dtype):
+    def __init__(self, solver: Solver, points, cols, growth):
         self.sv_ = solver
         self.s = s = solver.settings
-        self.P = P64
+        self.points = points  # the input, its own dtype (never modified)
+        out_dtype = points.dtype
         self.cols = cols
         self.growth = growth
         self.threads = s.threads or default_threads()
@@ -438,10 +438,13 @@ class _StepContext:
         self.timings = {}
         self.n_rays = 0
         ss = solver._seg_start
-        self.seg_in = P64[ss + 1] - P64[ss]  # (S, 3) input segments
-        L = np.linalg.norm(self.seg_in, axis=1)
-        self.curve_len = np.add.reduceat(L, solver._soff[:-1])
-        short = L <= tol.ZERO_SEGMENT_REL * self.curve_len[solver._seg_curve]
+        # Point differences in the input dtype: contiguous and cheap. Entry i is
+        # the segment starting at point i (entries at curve ends are unused).
+        self.D = np.diff(points, axis=0)
+        L = np.sqrt(np.einsum("ij,ij->i", self.D, self.D))
+        L[solver._curve_end] = 0
+        self.curve_len = np.add.reduceat(L, solver._off[:-1]).astype(np.float64)
+        short = L[ss] <= tol.ZERO_SEGMENT_REL * self.curve_len[solver._seg_curve]
         if short.any():
             k = int(np.argmax(short))
             c = int(solver._seg_curve[k])
@@ -449,7 +452,7 @@ class _StepContext:
                 f"curve {c} has a zero-length segment between points {int(ss[k])} and "
                 f"{int(ss[k]) + 1}"
             )
-        self.roots = P64[solver._off[:-1]]
+        self.roots = points[solver._off[:-1]].astype(np.float64)
         # Candidate curves per collider: the sphere a curve can sweep about its
         # root (any rotation, scale <= 1) meets the collider's bounds.
         self.cand = []
@@ -475,14 +478,15 @@ class _StepContext:
         self.angle = sv._angle.copy()
         self.angle_max = sv._angle_max.copy()
         self.axis = np.zeros((sv.n_curves, 3))
-        self.quat = sv._quat.copy()
-        self.quat_max = sv._quat_max.copy()
+        if self.soft:
+            self.quat = sv._quat.copy()
+            self.quat_max = sv._quat_max.copy()
         self.active = sv._active.copy()
         idx = np.flatnonzero(self.active)
-        self.frame = sv._frame.copy()
+        self.frame = sv._frame  # rows of active curves are replaced in store_state
         if len(idx):
             B = self._frames(idx, sv._frame[idx])
-            self.frame[idx] = B
+            self.frame_idx, self.frame_B = idx, B
             self.axis[idx] = np.einsum("kji,kj->ki", B, sv._axis_lo[idx])
             if self.soft:
                 seg, rep, _ = self.segments(idx)
@@ -498,8 +502,8 @@ class _StepContext:
     def _frames(self, idx, prev):
         sv = self.sv_
         first = sv._soff[idx]
-        t = rot.normalize(self.seg_in[first])
-        chord = self.P[sv._off[idx + 1] - 1] - self.roots[idx]
+        t = rot.normalize(self.seg_in(first))
+        chord = self.points[sv._off[idx + 1] - 1] - self.roots[idx]
         u = chord - rot.dot(chord, t)[:, None] * t
         ratio = np.linalg.norm(u, axis=1) / self.curve_len[idx]
         return rot.curve_frames(t, u, ratio, prev)
@@ -507,16 +511,21 @@ class _StepContext:
     def store_state(self):
         sv = self.sv_
         idx = np.flatnonzero(self.active)
+        frame = sv._frame
+        old = np.flatnonzero(sv._active)
+        if len(old):
+            frame[old] = self.frame_B
+        dropped = old[~self.active[old]]
+        frame[dropped] = 0.0
         fresh = idx[~sv._active[idx]]
         if len(fresh):
-            self.frame[fresh] = self._frames(fresh, None)
+            frame[fresh] = self._frames(fresh, None)
         sv._angle = self.angle
         sv._angle_max = self.angle_max
         sv._active = self.active
-        sv._frame = np.where(self.active[:, None, None], self.frame, 0.0)
         axis_lo = np.zeros_like(self.axis)
         if len(idx):
-            axis_lo[idx] = np.einsum("kij,kj->ki", self.frame[idx], self.axis[idx])
+            axis_lo[idx] = np.einsum("kij,kj->ki", frame[idx], self.axis[idx])
         sv._axis_lo = axis_lo
         sv._hold &= self.active
         if self.soft:
@@ -524,8 +533,8 @@ class _StepContext:
             qm = q.copy()
             if len(idx):
                 seg, rep, _ = self.segments(idx)
-                q[seg] = self._quat_to(self.frame[idx][rep], self.quat[seg], to_world=False)
-                qm[seg] = self._quat_to(self.frame[idx][rep], self.quat_max[seg], to_world=False)
+                q[seg] = self._quat_to(frame[idx][rep], self.quat[seg], to_world=False)
+                qm[seg] = self._quat_to(frame[idx][rep], self.quat_max[seg], to_world=False)
             sv._quat, sv._quat_max = q, qm
 
     # ----------------------------------------------------------- geometry
@@ -552,7 +561,7 @@ class _StepContext:
         seg, rep, starts : see :meth:`segments`
         """
         seg, rep, starts = self.segments(idx)
-        v = self.seg_in[seg]
+        v = self.seg_in(seg)
         if quat is not None:
             v = rot.quat_rotate(quat, v)
         else:
@@ -583,6 +592,29 @@ class _StepContext:
                 w = np.flatnonzero(m)
                 hit[w] |= c.segment_hits(o[w], d[w], off, self.threads)
                 self.n_rays += len(w)
+        return hit
+
+    def current_hits(self, idx):
+        """Per-curve hits of curves ``idx`` in their current state.
+
+        Curves without a local rotation are the input itself: their rays come
+        straight from the input points, with no deformation to compute.
+        """
+        hit = np.zeros(len(idx), bool)
+        act = self.active[idx]
+        a = idx[act]
+        if len(a):
+            if self.soft:
+                seg, _, _ = self.segments(a)
+                hit[act] = self.curve_hits(a, quat=self.quat[seg])
+            else:
+                hit[act] = self.curve_hits(a, angle=self.angle[a], axis=self.axis[a])
+        b = idx[~act]
+        if len(b):
+            seg, rep, starts = self.segments(b)
+            ss = self.sv_._seg_start[seg]
+            h = self.hits(b, self.points[ss], self.D[ss], rep, starts)
+            hit[~act] = np.logical_or.reduceat(h, starts)
         return hit
 
     def curve_hits(self, idx, **deformation):
@@ -677,9 +709,7 @@ class _StepContext:
         # 1. Test every near curve in its current state.
         hit_now = np.zeros(len(near), bool)
         if len(near):
-            o, d, seg, rep, starts = self.deform(near, angle=angle[near], axis=axis[near])
-            hit_seg = self.hits(near, o, d, rep, starts)
-            hit_now = np.logical_or.reduceat(hit_seg, starts)
+            hit_now = self.current_hits(near)
             new = hit_now & ~self.active[near]
             if new.any():
                 sub = np.flatnonzero(new)
@@ -764,7 +794,7 @@ class _StepContext:
     def put_to_growth_surface(self, pin):
         """Rotate pinched curves down onto the growth surface (paper 3.2.5)."""
         _, n_g = self.growth.closest_points(self.roots[pin])
-        chord = self.P[self.sv_._off[pin + 1] - 1] - self.roots[pin]
+        chord = self.points[self.sv_._off[pin + 1] - 1] - self.roots[pin]
         down = -n_g
         axis = rot.rotation_axis(chord, down)
         # Elevation of the deformed chord over the tangent plane, bisected on
@@ -803,7 +833,7 @@ class _StepContext:
 
     # ------------------------------------------------------------ output
     def output(self):
-        out = self.P.copy()
+        out = self.points.copy()
         idx = np.flatnonzero(self.active)
         if len(idx):
             if self.soft:
@@ -815,6 +845,10 @@ class _StepContext:
                 )
             out[self.sv_._seg_start[seg] + 1] = o + d
         return out
+
+    def seg_in(self, seg):
+        """Input segment vectors (float64) of segment ids ``seg``."""
+        return self.D[self.sv_._seg_start[seg]].astype(np.float64)
 
 
 class _SoftSolve:
