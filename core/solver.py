@@ -444,13 +444,15 @@ class _StepContext:
         L = np.sqrt(np.einsum("ij,ij->i", self.D, self.D))
         L[solver._curve_end] = 0
         self.curve_len = np.add.reduceat(L, solver._off[:-1]).astype(np.float64)
-        short = L[ss] <= tol.ZERO_SEGMENT_REL * self.curve_len[solver._seg_curve]
-        if short.any():
-            k = int(np.argmax(short))
-            c = int(solver._seg_curve[k])
+        L[solver._curve_end] = np.inf
+        shortest = np.minimum.reduceat(L, solver._off[:-1])
+        bad = shortest <= tol.ZERO_SEGMENT_REL * self.curve_len
+        if bad.any():
+            c = int(np.argmax(bad))
+            a, b = int(solver._off[c]), int(solver._off[c + 1])
+            k = a + int(np.argmin(L[a : b - 1]))
             raise InputError(
-                f"curve {c} has a zero-length segment between points {int(ss[k])} and "
-                f"{int(ss[k]) + 1}"
+                f"curve {c} has a zero-length segment between points {k} and {k + 1}"
             )
         self.roots = points[solver._off[:-1]].astype(np.float64)
         # Candidate curves per collider: the sphere a curve can sweep about its
