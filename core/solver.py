@@ -455,6 +455,11 @@ class _StepContext:
                 f"curve {c} has a zero-length segment between points {k} and {k + 1}"
             )
         self.roots = points[solver._off[:-1]].astype(np.float64)
+        scale = float(np.abs(points).max(initial=0.0))
+        for c, off in cols:
+            lo, hi = c.bounds_world(off)
+            scale = max(scale, float(np.abs(lo).max()), float(np.abs(hi).max()))
+        self.eps_abs = tol.RAY_EXTEND_ULPS * float(np.finfo(np.float32).eps) * max(scale, 1e-30)
         # Candidate curves per collider: the sphere a curve can sweep about its
         # root (any rotation, scale <= 1) meets the collider's bounds.
         self.cand = []
@@ -582,8 +587,26 @@ class _StepContext:
         o[starts] = self.roots[idx]
         return o, end - o, seg, rep, starts
 
-    def hits(self, idx, o, d, rep, starts):
-        """Per-curve: does any segment of curve ``idx[i]`` hit any collider."""
+    def extend(self, o, d, root):
+        """Segments grown by a few float32 ulps (see ``tol.RAY_EXTEND_ULPS``).
+
+        ``root`` marks root segments, which are not grown backward: roots
+        never move, so a root resting on a collider is a pinch, not a contact.
+        """
+        L = np.sqrt(np.einsum("ij,ij->i", d, d))
+        e = self.eps_abs / np.maximum(L, 1e-300)
+        back = np.where(root, 0.0, e)
+        return o - back[:, None] * d, d * (1.0 + back + e)[:, None]
+
+    def hits(self, idx, o, d, rep, root):
+        """Per segment: does it hit any collider (segments of curves ``idx``).
+
+        Parameters
+        ----------
+        rep : (k,) int  owner of each segment (position in ``idx``)
+        root : (k,) bool  which segments are root segments
+        """
+        o, d = self.extend(o, d, root)
         hit = np.zeros(len(o), bool)
         for (c, off), cand in zip(self.cols, self.cand, strict=True):
             m = cand[idx][rep]
@@ -615,7 +638,7 @@ class _StepContext:
         if len(b):
             seg, rep, starts = self.segments(b)
             ss = self.sv_._seg_start[seg]
-            h = self.hits(b, self.points[ss], self.D[ss], rep, starts)
+            h = self.hits(b, self.points[ss], self.D[ss], rep, self.root_mask(len(seg), starts))
             hit[~act] = np.logical_or.reduceat(h, starts)
         return hit
 
@@ -623,7 +646,14 @@ class _StepContext:
         if len(idx) == 0:
             return np.zeros(0, bool)
         o, d, seg, rep, starts = self.deform(idx, **deformation)
-        return np.logical_or.reduceat(self.hits(idx, o, d, rep, starts), starts)
+        root = self.root_mask(len(o), starts)
+        return np.logical_or.reduceat(self.hits(idx, o, d, rep, root), starts)
+
+    @staticmethod
+    def root_mask(k, starts):
+        m = np.zeros(k, bool)
+        m[starts] = True
+        return m
 
     def first_hit_details(self, idx, o, d, rep, starts):
         """First hit (root to tip) of each curve: segment, point, push direction.
@@ -635,7 +665,8 @@ class _StepContext:
         push : (n, 3)  unit direction away from the collider (paper 3.2.1)
         """
         n = len(idx)
-        hit = self.hits(idx, o, d, rep, starts)
+        root = self.root_mask(len(o), starts)
+        hit = self.hits(idx, o, d, rep, root)
         k = np.full(n, -1, np.int64)
         w = np.flatnonzero(hit)
         if len(w):
@@ -647,6 +678,7 @@ class _StepContext:
         if len(has) == 0:
             return k, point, push
         ks = k[has]
+        o, d = self.extend(o[ks], d[ks], root[ks])
         best_t = np.full(len(has), np.inf)
         best_n = np.zeros((len(has), 3))
         double = np.zeros(len(has), bool)
@@ -654,17 +686,17 @@ class _StepContext:
             m = np.flatnonzero(cand[idx[has]])
             if len(m) == 0:
                 continue
-            h, t, nrm = c.segment_hit_details(o[ks[m]], d[ks[m]], off)
+            h, t, nrm = c.segment_hit_details(o[m], d[m], off)
             better = h & (t < best_t[m])
             mm = m[better]
             best_t[mm] = t[better]
             best_n[mm] = nrm[better]
             double[mm] = c.double_sided
         best_t = np.where(np.isfinite(best_t), best_t, 0.0)
-        pt = o[ks] + d[ks] * best_t[:, None]
+        pt = o + d * best_t[:, None]
         # Single-sided: along the normal, or its inverse when a back face is
         # crossed. Double-sided: toward the side the root is on.
-        side = -np.sign(rot.dot(d[ks], best_n))
+        side = -np.sign(rot.dot(d, best_n))
         root_side = np.sign(rot.dot(self.roots[idx[has]] - pt, best_n))
         side = np.where(double & (root_side != 0), root_side, side)
         side = np.where(side == 0, 1.0, side)
@@ -913,7 +945,8 @@ class _SoftSolve:
                 qq[np.searchsorted(sseg, q[0])] = q[1]
                 o2, d2, _, r2, st2 = ctx.deform(c, quat=qq)
                 j = st2 + (seg_hit[items] - sv._soff[c])
-                return ~ctx.hits(c, o2[j], d2[j], np.arange(len(c)), np.arange(len(c)))
+                root = seg_hit[items] == sv._soff[c]
+                return ~ctx.hits(c, o2[j], d2[j], np.arange(len(c)), root)
 
             kmax = np.full(len(todo), int(np.ceil(ctx.max_angle / p - 1e-9)))
             kk = _gallop_bisect(len(todo), test, kmax)

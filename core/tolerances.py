@@ -39,3 +39,10 @@ PARALLEL_EPS = 1e-6
 #: in between the frame blends with the time-transported one (no pops).
 FRAME_SHAPE_LO = 0.01
 FRAME_SHAPE_HI = 0.05
+
+#: Every tested segment is extended by this many float32 ulps of the scene's
+#: coordinate magnitude: forward always, backward except the root segment.
+#: A CV resting within rounding distance of a surface then counts as a
+#: contact, so a curve reported clear is clear by a margin any float32 or
+#: float64 segment test resolves (embree tests in float32).
+RAY_EXTEND_ULPS = 32
