@@ -7,11 +7,25 @@ glue lives in :mod:`.operators` and :mod:`.ui`.
 ADDON_ID = __package__
 
 
+def _backend_problem() -> str:
+    """Why the ray tracer cannot run here ('' when it can)."""
+    try:
+        from . import core
+    except Exception as exc:  # noqa: BLE001 - reported, never raised
+        return f"FurCollide could not load its core: {type(exc).__name__}: {exc}"
+    return "" if core.embree_available() else core.embree_error()
+
+
 def register():
     from . import operators, ui
 
     operators.register()
     ui.register()
+    problem = _backend_problem()
+    if problem:
+        # Registered anyway: the panel shows the message and the operators'
+        # poll explains why they are unavailable.
+        print(f"FurCollide: {problem}")
 
 
 def unregister():

@@ -437,7 +437,6 @@ class _StepContext:
         self.out_dtype = out_dtype
         self.timings = {}
         self.n_rays = 0
-        ss = solver._seg_start
         # Point differences in the input dtype: contiguous and cheap. Entry i is
         # the segment starting at point i (entries at curve ends are unused).
         self.D = np.diff(points, axis=0)

@@ -1,6 +1,8 @@
-"""Sidebar panel and UI lists (thin glue around :mod:`..core`)."""
+"""Sidebar panel, colliders list and presets (thin glue around :mod:`..operators`)."""
 
-classes = ()
+from . import panel, presets
+
+classes = presets.classes + panel.classes
 
 
 def register():
@@ -8,6 +10,7 @@ def register():
 
     for cls in classes:
         bpy.utils.register_class(cls)
+    presets.install_shipped_presets()
 
 
 def unregister():
