@@ -106,41 +106,48 @@ def rotation_axis(c, d):
     return a
 
 
-def curve_frames(t, u_shape, shape_ratio, prev=None):
-    """Orthonormal per-curve frames, rows (e0, e1, e2), shape (k, 3, 3).
+def curve_frames(t, u_shape, shape_ratio, prev_ref=None):
+    """Per-curve orthonormal frames, rows (e0, e1, e2), shape (k, 3, 3).
 
     ``e0`` is the root segment direction ``t``. ``e1`` follows the curve's own
     shape (its tip offset perpendicular to ``t``) when the curve is bent
-    enough, and otherwise the previous frame's ``e1`` carried over by the
-    minimal rotation of the root segment, blending between the two so the
-    frame never jumps.
+    enough, and otherwise a *reference* perpendicular carried from frame to
+    frame by the minimal rotation of the root segment, blending between the
+    two so the frame never jumps. The reference is pure transport (no shape
+    in it), so a curve that does not move keeps exactly the same frame.
 
     Parameters
     ----------
     t : (k, 3) unit root segment directions.
     u_shape : (k, 3) tip minus root, made perpendicular to ``t``.
     shape_ratio : (k,) ``|u_shape|`` over the curve length.
-    prev : (k, 3, 3) or None
-        Previous frames (None: no history).
+    prev_ref : (k, 3, 3) or None
+        The previous step's references (rows ``t``, reference, their cross);
+        None: no history.
+
+    Returns
+    -------
+    frames : (k, 3, 3)
+    ref : (k, 3, 3)
+        The references to pass as ``prev_ref`` next time.
     """
+    if prev_ref is None:
+        carried = stable_perpendicular(t)
+    else:
+        carried = rotate_between(prev_ref[:, 1], prev_ref[:, 0], t)
+        carried = carried - dot(carried, t)[:, None] * t
+        bad = np.linalg.norm(carried, axis=1) < 0.5
+        carried = normalize(carried)
+        if bad.any():
+            carried[bad] = stable_perpendicular(t[bad])
     alpha = np.clip(
         (shape_ratio - tol.FRAME_SHAPE_LO) / (tol.FRAME_SHAPE_HI - tol.FRAME_SHAPE_LO), 0.0, 1.0
     )
-    us = normalize(u_shape)
-    if prev is None:
-        carried = stable_perpendicular(t)
-    else:
-        carried = rotate_between(prev[:, 1], prev[:, 0], t)
-    e1 = alpha[:, None] * us + (1.0 - alpha[:, None]) * carried
+    e1 = alpha[:, None] * normalize(u_shape) + (1.0 - alpha[:, None]) * carried
     e1 = e1 - dot(e1, t)[:, None] * t
-    n = np.linalg.norm(e1, axis=1)
-    bad = n < 1e-6
+    bad = np.linalg.norm(e1, axis=1) < 1e-6
     e1 = normalize(e1)
-    if bad.any():
-        fb = carried[bad] - dot(carried[bad], t[bad])[:, None] * t[bad]
-        fb = normalize(fb)
-        worse = np.linalg.norm(fb, axis=1) < 0.5
-        fb[worse] = stable_perpendicular(t[bad][worse])
-        e1[bad] = fb
-    e2 = np.cross(t, e1)
-    return np.stack([t, e1, e2], axis=1)
+    e1[bad] = carried[bad]
+    frames = np.stack([t, e1, np.cross(t, e1)], axis=1)
+    ref = np.stack([t, carried, np.cross(t, carried)], axis=1)
+    return frames, ref

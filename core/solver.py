@@ -489,10 +489,11 @@ class _StepContext:
             self.quat_max = sv._quat_max.copy()
         self.active = sv._active.copy()
         idx = np.flatnonzero(self.active)
-        self.frame = sv._frame  # rows of active curves are replaced in store_state
+        self.B = np.zeros((sv.n_curves, 3, 3))  # this step's frames (rows in use only)
+        self.ref = None
         if len(idx):
-            B = self._frames(idx, sv._frame[idx])
-            self.frame_idx, self.frame_B = idx, B
+            B, self.ref = self._frames(idx, sv._frame[idx])
+            self.B[idx] = B
             self.axis[idx] = np.einsum("kji,kj->ki", B, sv._axis_lo[idx])
             if self.soft:
                 seg, rep, _ = self.segments(idx)
@@ -517,21 +518,22 @@ class _StepContext:
     def store_state(self):
         sv = self.sv_
         idx = np.flatnonzero(self.active)
-        frame = sv._frame
+        frame = sv._frame  # the transported references (see rot.curve_frames)
         old = np.flatnonzero(sv._active)
         if len(old):
-            frame[old] = self.frame_B
+            frame[old] = self.ref
         dropped = old[~self.active[old]]
         frame[dropped] = 0.0
         fresh = idx[~sv._active[idx]]
         if len(fresh):
-            frame[fresh] = self._frames(fresh, None)
+            self.B[fresh], frame[fresh] = self._frames(fresh, None)
+        B = self.B
         sv._angle = self.angle
         sv._angle_max = self.angle_max
         sv._active = self.active
         axis_lo = np.zeros_like(self.axis)
         if len(idx):
-            axis_lo[idx] = np.einsum("kij,kj->ki", frame[idx], self.axis[idx])
+            axis_lo[idx] = np.einsum("kij,kj->ki", B[idx], self.axis[idx])
         sv._axis_lo = axis_lo
         sv._hold &= self.active
         if self.soft:
@@ -539,8 +541,8 @@ class _StepContext:
             qm = q.copy()
             if len(idx):
                 seg, rep, _ = self.segments(idx)
-                q[seg] = self._quat_to(frame[idx][rep], self.quat[seg], to_world=False)
-                qm[seg] = self._quat_to(frame[idx][rep], self.quat_max[seg], to_world=False)
+                q[seg] = self._quat_to(B[idx][rep], self.quat[seg], to_world=False)
+                qm[seg] = self._quat_to(B[idx][rep], self.quat_max[seg], to_world=False)
             sv._quat, sv._quat_max = q, qm
 
     # ----------------------------------------------------------- geometry
