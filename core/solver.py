@@ -811,8 +811,9 @@ class _StepContext:
                 k = _gallop_bisect(len(b), test_r, K, lo=np.zeros(len(b)), hi=K)
                 th1[b] = np.minimum(lo_th + k * p, hi_th)
             angle[rec] = th1
+            # Back at exactly the input shape counts as FREE, not RECOVERING.
             st = np.where(blocked, Status.COLLIDING,
-                          np.where(th1 < th0, Status.RECOVERING, Status.FREE))
+                          np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE))
             status[rec] = np.maximum(status[rec], st)
         self._release(idx)
 
@@ -998,20 +999,13 @@ class _SoftSolve:
         qt = rot.quat_slerp(ident, ctx.quat_max[seg], np.nan_to_num(frac)[rep])
         qt = np.where(hold[rep][:, None], q0, qt)
 
-        def at(lam, which=None):
-            r = rep if which is None else which
-            q = rot.quat_slerp(q0[r], qt[r], lam)
-            # Snap: within half a precision step of the target, land on it.
-            close = rot.quat_angle(rot.quat_mul(q, qt[r] * [1, -1, -1, -1])) < (
-                tol.SNAP_FRACTION * p
-            )
-            closec = np.logical_and.reduceat(close, starts) if which is None else close
-            return q, closec
-
-        lam = np.full(len(rec), s.recovery_rate)
-        q1, close = at(lam[rep])
-        q1 = np.where(close[rep][:, None], qt, q1)
-        moving = ~np.all(np.isclose(q1, q0, rtol=0, atol=0), axis=1)
+        q1 = rot.quat_slerp(q0, qt, np.full(len(q0), s.recovery_rate))
+        # Within half a precision step of the target (every segment): land on it.
+        conj = qt * np.array([1.0, -1.0, -1.0, -1.0])
+        near_t = rot.quat_angle(rot.quat_mul(q1, conj)) < tol.SNAP_FRACTION * p
+        snap = np.logical_and.reduceat(near_t, starts)
+        q1 = np.where(snap[rep][:, None], qt, q1)
+        moving = ~np.all(q1 == q0, axis=1)
         moving_c = np.logical_or.reduceat(moving, starts)
         is_near = ctx.cand_any[rec]
         chk = np.flatnonzero(moving_c & is_near)
@@ -1047,11 +1041,11 @@ class _SoftSolve:
             q1[pos] = rot.quat_slerp(q0[pos], qt[pos], lamk)
         ctx.quat[seg] = q1
         changed = np.logical_or.reduceat(~np.all(q1 == q0, axis=1), starts)
+        identity = np.logical_and.reduceat(np.all(q1 == ident, axis=1), starts)
         st = np.where(blocked, Status.COLLIDING,
-                      np.where(changed, Status.RECOVERING, Status.FREE))
+                      np.where(changed & ~identity, Status.RECOVERING, Status.FREE))
         status[rec] = np.maximum(status[rec], st)
         # Back exactly at the input shape: drop the state.
-        identity = np.logical_and.reduceat(np.all(q1 == ident, axis=1), starts)
         done = rec[identity]
         ctx.active[done] = False
         dseg, _, _ = ctx.segments(done)
