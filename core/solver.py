@@ -224,13 +224,14 @@ class Solver:
         self._active = np.zeros(C, bool)  # has a non-identity local state
         self._hold = np.zeros(C, bool)  # no recovery (out of a pinch, recover_pinched off)
         self._pinched = np.zeros(C, bool)
+        self._stiff = np.zeros(C, bool)  # Bend curves solved as Stiff (bending could not clear)
         self._quat = np.tile([1.0, 0.0, 0.0, 0.0], (S, 1))  # soft, local frame
         self._quat_max = self._quat.copy()
         self._steps = 0
 
     _STATE_KEYS = {
         "angle": ("C",), "angle_max": ("C",), "axis": ("C", 3), "frame": ("C", 3, 3),
-        "active": ("C",), "hold": ("C",), "pinched": ("C",), "quat": ("S", 4),
+        "active": ("C",), "hold": ("C",), "pinched": ("C",), "stiff": ("C",), "quat": ("S", 4),
         "quat_max": ("S", 4), "meta": (4,),
     }
 
@@ -247,7 +248,8 @@ class Solver:
             "angle": self._angle.copy(), "angle_max": self._angle_max.copy(),
             "axis": self._axis_lo.copy(), "frame": self._frame.copy(),
             "active": self._active.copy(), "hold": self._hold.copy(),
-            "pinched": self._pinched.copy(), "quat": self._quat.copy(),
+            "pinched": self._pinched.copy(), "stiff": self._stiff.copy(),
+            "quat": self._quat.copy(),
             "quat_max": self._quat_max.copy(),
             "meta": np.array([_STATE_VERSION, self.n_curves, self.n_points, mode], np.int64),
         }
@@ -281,6 +283,7 @@ class Solver:
         self._active = arrs["active"].astype(bool).copy()
         self._hold = arrs["hold"].astype(bool).copy()
         self._pinched = arrs["pinched"].astype(bool).copy()
+        self._stiff = arrs["stiff"].astype(bool).copy()
         self._quat = arrs["quat"].astype(np.float64).copy()
         self._quat_max = arrs["quat_max"].astype(np.float64).copy()
 
@@ -557,7 +560,10 @@ class _StepContext:
 
     def rigid_rotations(self, idx, angle, axis, seg, rep):
         """Per-segment (angle, axis) of stiff/bend curves ``idx``."""
-        w = self.sv_._w_bend[seg] if self.s.mode == "bend" else 1.0
+        if self.s.mode == "bend":
+            w = np.where(self.sv_._stiff[idx][rep], 1.0, self.sv_._w_bend[seg])
+        else:
+            w = 1.0
         return angle[rep] * w, axis[rep]
 
     def deform(self, idx, angle=None, axis=None, quat=None):
@@ -759,14 +765,20 @@ class _StepContext:
         # 2. Collision: smallest clearing angle above the current one.
         if len(colliding):
             th0 = angle[colliding]
-            kmax = np.maximum(np.ceil((self.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
-
-            def test(items, ks):
-                c = colliding[items]
-                th = np.minimum(th0[items] + ks * p, self.max_angle)
-                return ~self.curve_hits(c, angle=th, axis=axis[c])
-
-            k = _gallop_bisect(len(colliding), test, kmax)
+            k = self.search_angles(colliding, th0)
+            if s.mode == "bend":
+                # Bending turns the root segment by only 1/n of the angle: curves
+                # hit near the root that bending cannot clear turn at the root
+                # (as Stiff) instead, until they have recovered.
+                retry = np.flatnonzero((k < 0) & ~self.sv_._stiff[colliding])
+                if len(retry):
+                    cr = colliding[retry]
+                    self.sv_._stiff[cr] = True
+                    k2 = self.search_angles(cr, np.zeros(len(cr)))
+                    self.sv_._stiff[cr[k2 < 0]] = False
+                    ok2 = k2 >= 0
+                    k[retry[ok2]] = k2[ok2]
+                    th0[retry[ok2]] = 0.0
             ok = k >= 0
             res = colliding[ok]
             angle[res] = np.minimum(th0[ok] + k[ok] * p, self.max_angle)
@@ -817,12 +829,32 @@ class _StepContext:
             status[rec] = np.maximum(status[rec], st)
         self._release(idx)
 
+    def search_angles(self, curves, th0):
+        """Smallest clearing rotation above ``th0``, in precision steps.
+
+        Returns
+        -------
+        (n,) int
+            Steps ``k`` (angle ``min(th0 + k p, max_angle)``), -1 where no
+            angle up to ``max_angle`` clears the curve.
+        """
+        p = self.prec
+        kmax = np.maximum(np.ceil((self.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
+
+        def test(items, ks):
+            c = curves[items]
+            th = np.minimum(th0[items] + ks * p, self.max_angle)
+            return ~self.curve_hits(c, angle=th, axis=self.axis[c])
+
+        return _gallop_bisect(len(curves), test, kmax)
+
     def _release(self, idx):
         """Curves back at exactly their input shape drop their local state."""
         if self.soft:
             return
         done = idx[self.active[idx] & (self.angle[idx] == 0)]
         self.active[done] = False
+        self.sv_._stiff[done] = False
         self.axis[done] = 0.0
         self.angle_max[done] = 0.0
 
