@@ -338,8 +338,17 @@ class Collider:
         """
         if self.empty or len(o_wo) == 0:
             return np.zeros(len(o_wo), bool)
+        return self.segment_hits_local(*self._to_local(o_wo, d_wo), offset_wo, threads)
+
+    def local_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, b)`` with ``x_lo = A @ x_wo + b`` (vectors: ``A @ v``)."""
+        return self._Minv[:3, :3], self._Minv[:3, 3]
+
+    def segment_hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1) -> np.ndarray:
+        """:meth:`segment_hits` for segments already in the collider's space."""
+        if self.empty or len(o_lo) == 0:
+            return np.zeros(len(o_lo), bool)
         be, _ = self._backend(offset_wo)
-        o_lo, d_lo = self._to_local(o_wo, d_wo)
         return be.first_hit(o_lo, d_lo, 1.0 + tol.T_SLACK, threads) >= 0
 
     def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0):

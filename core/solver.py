@@ -553,7 +553,7 @@ class _StepContext:
         """Segments of curves ``idx``: (seg ids, owner position in idx, starts)."""
         sv = self.sv_
         cnt = sv._nseg[idx]
-        starts = np.concatenate([[0], np.cumsum(cnt)[:-1]])
+        starts = np.cumsum(cnt) - cnt
         rep = np.repeat(np.arange(len(idx)), cnt)
         seg = sv._soff[idx][rep] + (np.arange(int(cnt.sum())) - starts[rep])
         return seg, rep, starts
@@ -742,95 +742,118 @@ class _StepContext:
         j = starts + nseg // 2
         return o[j] + np.where((nseg % 2 == 1)[:, None], 0.5 * d[j], 0.0)
 
+    def input_rays(self, idx):
+        """Segments of the *input* curves ``idx`` (float64), like :meth:`deform`."""
+        seg, rep, starts = self.segments(idx)
+        ss = self.sv_._seg_start[seg]
+        return self.points[ss].astype(np.float64), self.seg_in(seg), seg, rep, starts
+
     def solve_rigid(self, idx, status):
-        s, p = self.s, self.prec
-        angle, axis = self.angle, self.axis
+        """Stiff and Bend: one angle per curve about its kept axis."""
+        angle = self.angle
         near = idx[self.cand_any[idx]]
         far = idx[~self.cand_any[idx]]
-        # 1. Test every near curve in its current state.
-        hit_now = np.zeros(len(near), bool)
-        if len(near):
-            hit_now = self.current_hits(near)
-            new = hit_now & ~self.active[near]
-            if new.any():
-                sub = np.flatnonzero(new)
-                # Re-deform just the new contacts (they are at angle 0).
-                cn = near[sub]
-                o2, d2, _, rep2, st2 = self.deform(cn, angle=angle[cn], axis=axis[cn])
-                axis[cn] = self.new_axes(cn, o2, d2, rep2, st2)
-                self.active[cn] = True
-        colliding = near[hit_now]
-        clear = near[~hit_now]
+        act = near[self.active[near]]  # rotated curves near a collider
+        new = near[~self.active[near]]  # unrotated: their segments are the input's
+        # 1. Every near curve in its current state: one ray query each.
+        batch = _RigidBatch(self, act)
+        hit_act = batch.hits(np.arange(len(act)), angle[act])
+        hit_new = np.zeros(len(new), bool)
+        if len(new):
+            o, d, seg, rep, starts = self.input_rays(new)
+            hit_new = np.logical_or.reduceat(
+                self.hits(new, o, d, rep, self.root_mask(len(o), starts)), starts
+            )
+        cn = new[hit_new]
+        if len(cn):  # first hit: choose the axis (kept until recovered)
+            self.axis[cn] = self.new_axes(cn, *self.input_rays(cn)[:2],
+                                          *self.segments(cn)[1:])
+            self.active[cn] = True
 
-        # 2. Collision: smallest clearing angle above the current one.
-        if len(colliding):
-            th0 = angle[colliding]
-            k = self.search_angles(colliding, th0)
-            if s.mode == "bend":
-                # Bending turns the root segment by only 1/n of the angle: curves
-                # hit near the root that bending cannot clear turn at the root
-                # (as Stiff) instead, until they have recovered.
-                retry = np.flatnonzero((k < 0) & ~self.sv_._stiff[colliding])
-                if len(retry):
-                    cr = colliding[retry]
-                    self.sv_._stiff[cr] = True
-                    k2 = self.search_angles(cr, np.zeros(len(cr)))
-                    self.sv_._stiff[cr[k2 < 0]] = False
-                    ok2 = k2 >= 0
-                    k[retry[ok2]] = k2[ok2]
-                    th0[retry[ok2]] = 0.0
-            ok = k >= 0
-            res = colliding[ok]
-            angle[res] = np.minimum(th0[ok] + k[ok] * p, self.max_angle)
-            self.angle_max[res] = np.maximum(self.angle_max[res], angle[res])
-            status[res] = Status.COLLIDING
-            bad = colliding[~ok]
-            status[bad] = Status.UNRESOLVED
-            # Fallback: the state of the previous frame (last collision-free).
-            angle[bad] = th0[~ok]
-            fresh = bad[self.sv_._angle[bad] == 0]
-            self.active[fresh] = self.sv_._active[fresh]
+        # 2. Collision: the smallest clearing angle above the current one.
+        self.collide(batch, np.flatnonzero(hit_act), status)
+        if len(cn):
+            self.collide(_RigidBatch(self, cn), np.arange(len(cn)), status)
 
         # 3. Recovery toward the (plasticity) target, stopping before contact.
-        rec = np.concatenate([clear, far])
-        rec = rec[self.active[rec]]
-        if len(rec):
-            th0 = angle[rec]
-            frac = self.target_fraction(rec)
-            target = np.where(np.isnan(frac), th0, np.nan_to_num(frac) * self.angle_max[rec])
-            target = np.minimum(target, th0)
-            th1 = th0 - s.recovery_rate * (th0 - target)
-            th1 = np.where(th1 - target < tol.SNAP_FRACTION * p, target, th1)
-            th1 = np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
-            moving = th1 < th0
-            is_near = self.cand_any[rec]
-            check = np.flatnonzero(moving & is_near)
-            blocked = np.zeros(len(rec), bool)
-            if len(check):
-                cc = rec[check]
-                blocked[check] = self.curve_hits(cc, angle=th1[check], axis=axis[cc])
-            if blocked.any():
-                b = np.flatnonzero(blocked)
-                cb = rec[b]
+        items = np.flatnonzero(~hit_act)
+        self.recover_rigid(act[items], status, batch, items)
+        self.recover_rigid(far[self.active[far]], status, None, None)
+        self._release(idx)
+
+    def collide(self, batch, items, status):
+        """Resolve colliding curves ``batch.curves[items]`` (paper 3.2.1)."""
+        if len(items) == 0:
+            return
+        p, angle = self.prec, self.angle
+        c = batch.curves[items]
+        th0 = angle[c]
+        k = self.search_angles(batch, items, th0)
+        if self.s.mode == "bend":
+            # Bending turns the root segment by only 1/n of the angle: curves
+            # hit near the root that bending cannot clear turn at the root (as
+            # Stiff) instead, until they have recovered.
+            retry = np.flatnonzero((k < 0) & ~self.sv_._stiff[c])
+            if len(retry):
+                cr = c[retry]
+                self.sv_._stiff[cr] = True
+                k2 = self.search_angles(_RigidBatch(self, cr), np.arange(len(cr)),
+                                        np.zeros(len(cr)))
+                self.sv_._stiff[cr[k2 < 0]] = False
+                ok2 = k2 >= 0
+                k[retry[ok2]] = k2[ok2]
+                th0[retry[ok2]] = 0.0
+        ok = k >= 0
+        res = c[ok]
+        angle[res] = np.minimum(th0[ok] + k[ok] * p, self.max_angle)
+        self.angle_max[res] = np.maximum(self.angle_max[res], angle[res])
+        status[res] = Status.COLLIDING
+        bad = c[~ok]
+        status[bad] = Status.UNRESOLVED
+        # Fallback: the state of the previous frame (last collision-free).
+        angle[bad] = th0[~ok]
+        fresh = bad[self.sv_._angle[bad] == 0]
+        self.active[fresh] = self.sv_._active[fresh]
+
+    def recover_rigid(self, rec, status, batch, items):
+        """Turn clear curves ``rec`` back toward their target (paper 3.2.3-4).
+
+        ``batch.curves[items]`` are ``rec`` when they are near a collider (the
+        step is checked and, if it would collide, bisected back); ``batch`` is
+        None for curves far from every collider.
+        """
+        if len(rec) == 0:
+            return
+        p = self.prec
+        th0 = self.angle[rec]
+        frac = self.target_fraction(rec)
+        target = np.where(np.isnan(frac), th0, np.nan_to_num(frac) * self.angle_max[rec])
+        target = np.minimum(target, th0)
+        th1 = th0 - self.s.recovery_rate * (th0 - target)
+        th1 = np.where(th1 - target < tol.SNAP_FRACTION * p, target, th1)
+        th1 = np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
+        blocked = np.zeros(len(rec), bool)
+        if batch is not None:
+            check = np.flatnonzero(th1 < th0)
+            blocked[check] = batch.hits(items[check], th1[check])
+            b = np.flatnonzero(blocked)
+            if len(b):
                 lo_th, hi_th = th1[b], th0[b]
                 K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
 
-                def test_r(items, ks):
-                    c = cb[items]
-                    th = np.minimum(lo_th[items] + ks[:] * p, hi_th[items])
-                    return ~self.curve_hits(c, angle=th, axis=axis[c])
+                def test(it, ks):
+                    return ~batch.hits(items[b[it]], np.minimum(lo_th[it] + ks * p, hi_th[it]))
 
-                k = _gallop_bisect(len(b), test_r, K, lo=np.zeros(len(b)), hi=K)
+                k = _gallop_bisect(len(b), test, K, lo=np.zeros(len(b)), hi=K)
                 th1[b] = np.minimum(lo_th + k * p, hi_th)
-            angle[rec] = th1
-            # Back at exactly the input shape counts as FREE, not RECOVERING.
-            st = np.where(blocked, Status.COLLIDING,
-                          np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE))
-            status[rec] = np.maximum(status[rec], st)
-        self._release(idx)
+        self.angle[rec] = th1
+        # Back at exactly the input shape counts as FREE, not RECOVERING.
+        st = np.where(blocked, Status.COLLIDING,
+                      np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE))
+        status[rec] = np.maximum(status[rec], st)
 
-    def search_angles(self, curves, th0):
-        """Smallest clearing rotation above ``th0``, in precision steps.
+    def search_angles(self, batch, items, th0):
+        """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
 
         Returns
         -------
@@ -841,12 +864,10 @@ class _StepContext:
         p = self.prec
         kmax = np.maximum(np.ceil((self.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
 
-        def test(items, ks):
-            c = curves[items]
-            th = np.minimum(th0[items] + ks * p, self.max_angle)
-            return ~self.curve_hits(c, angle=th, axis=self.axis[c])
+        def test(it, ks):
+            return ~batch.hits(items[it], np.minimum(th0[it] + ks * p, self.max_angle))
 
-        return _gallop_bisect(len(curves), test, kmax)
+        return _gallop_bisect(len(items), test, kmax)
 
     def _release(self, idx):
         """Curves back at exactly their input shape drop their local state."""
@@ -917,6 +938,91 @@ class _StepContext:
     def seg_in(self, seg):
         """Input segment vectors (float64) of segment ids ``seg``."""
         return self.D[self.sv_._seg_start[seg]].astype(np.float64)
+
+
+class _RigidBatch:
+    """Stiff/Bend curves under search, with all angle-independent work done once.
+
+    Rodrigues' rotation of a segment ``v`` about the curve's axis ``a`` is
+    ``Y + V0 cos(t) + X sin(t)`` with ``Y = a (a.v)``, ``V0 = v - Y`` and
+    ``X = a x v``; the map into a collider's space is affine, so ``Y``, ``V0``,
+    ``X`` and the roots are moved into each collider's space once. A probe
+    round then costs a gather, a cos/sin, a cumulative sum and the ray query.
+    Rays are grown by ``tol.RAY_EXTEND_ULPS`` as in :meth:`_StepContext.hits`.
+    """
+
+    def __init__(self, ctx: _StepContext, curves):
+        self.ctx = ctx
+        self.curves = curves
+        sv = ctx.sv_
+        seg, rep, starts = ctx.segments(curves)
+        self.cnt = sv._nseg[curves]
+        self.starts = starts
+        v = ctx.seg_in(seg)
+        ax = ctx.axis[curves][rep]
+        Y = ax * rot.dot(ax, v)[:, None]
+        X = np.cross(ax, v)
+        V0 = v - Y
+        if ctx.s.mode == "bend":
+            self.w = np.where(sv._stiff[curves][rep], 1.0, sv._w_bend[seg])
+        else:
+            self.w = np.ones(len(seg))
+        self.length = np.sqrt(rot.dot(v, v))
+        self.root = ctx.root_mask(len(seg), starts)
+        self.per_col = []
+        for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
+            m = cand[curves]
+            if not m.any():
+                continue
+            A, b = c.local_map()
+            self.per_col.append(
+                (c, off, m, ctx.roots[curves] @ A.T + b, Y @ A.T, V0 @ A.T, X @ A.T)
+            )
+
+    def hits(self, items, theta):
+        """Does curve ``curves[items[i]]`` turned by ``theta[i]`` hit a collider.
+
+        ``items`` may repeat (several angles of one curve in one query).
+        """
+        n = len(items)
+        hit = np.zeros(n, bool)
+        if n == 0:
+            return hit
+        ctx = self.ctx
+        cnt = self.cnt[items]
+        first = np.cumsum(cnt) - cnt
+        rep = np.repeat(np.arange(n), cnt)
+        sel = self.starts[items][rep] + (np.arange(len(rep)) - first[rep])
+        a = theta[rep] * self.w[sel]
+        cos, sin = np.cos(a)[:, None], np.sin(a)[:, None]
+        scale = None
+        if ctx.s.shrink:
+            ramp = np.minimum(a / np.deg2rad(ctx.s.scale_angle), 1.0)
+            scale = 1.0 - (1.0 - ctx.s.scale_minimum) * ramp
+        length = self.length[sel] if scale is None else self.length[sel] * scale
+        ext = ctx.eps_abs / np.maximum(length, 1e-300)
+        grow = (1.0 + np.where(self.root[sel], 0.0, ext) + ext)[:, None]
+        back = np.where(self.root[sel], 0.0, ext)[:, None]
+        for c, off, m, root_lo, Y, V0, X in self.per_col:
+            mi = m[items]
+            if not mi.any():
+                continue
+            d = Y[sel] + V0[sel] * cos + X[sel] * sin
+            if scale is not None:
+                d *= scale[:, None]
+            cs = np.cumsum(d, axis=0)
+            o = cs - d + (root_lo[items] - (cs[first] - d[first]))[rep]
+            rays = mi[rep]
+            if rays.all():
+                h = c.segment_hits_local(o - back * d, d * grow, off, ctx.threads)
+            else:
+                w = np.flatnonzero(rays)
+                h = np.zeros(len(rep), bool)
+                h[w] = c.segment_hits_local(o[w] - back[w] * d[w], d[w] * grow[w], off,
+                                            ctx.threads)
+            ctx.n_rays += int(rays.sum())
+            hit |= np.logical_or.reduceat(h, first)
+        return hit
 
 
 class _SoftSolve:
