@@ -143,6 +143,13 @@ class Collider:
         self._built = None  # (key, backend, n_front_faces)
         self.build_count = 0
         self._geometry_cache = None
+        self._recenter()
+
+    def _recenter(self):
+        # The BVH is float32: keep its coordinates centred on the mesh, so a
+        # collider modelled far from the origin keeps its full precision.
+        V = self._V.astype(np.float64)
+        self._center = 0.5 * (V.min(0) + V.max(0)) if len(V) else np.zeros(3)
 
     # ----------------------------------------------------------------- input
     def _check_offset(self, offset):
@@ -236,6 +243,7 @@ class Collider:
         self._V = V2
         self._version += 1
         self._geometry_cache = None
+        self._recenter()
 
     @property
     def matrix(self) -> np.ndarray:
@@ -285,7 +293,7 @@ class Collider:
         if self._built is not None and self._built[0] == key:
             return self._built[1], self._built[2]
         fn, vn, _, _ = self._geometry()
-        V = self._V.astype(np.float64)
+        V = self._V.astype(np.float64) - self._center
         F = self._F
         if off_lo > 0:
             if self.double_sided:
@@ -312,7 +320,7 @@ class Collider:
         return float(np.linalg.norm(hi - lo)) or 1.0
 
     def _to_local(self, o_wo, d_wo):
-        A, b = self._Minv[:3, :3], self._Minv[:3, 3]
+        A, b = self.local_map()
         return o_wo @ A.T + b, d_wo @ A.T
 
     def _normals_world(self, prim, n_front):
@@ -341,8 +349,12 @@ class Collider:
         return self.segment_hits_local(*self._to_local(o_wo, d_wo), offset_wo, threads)
 
     def local_map(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(A, b)`` with ``x_lo = A @ x_wo + b`` (vectors: ``A @ v``)."""
-        return self._Minv[:3, :3], self._Minv[:3, 3]
+        """``(A, b)`` with ``x_lo = A @ x_wo + b`` (vectors: ``A @ v``).
+
+        The local space is the collider's own space shifted to the centre of
+        its bounds (where the float32 BVH lives).
+        """
+        return self._Minv[:3, :3], self._Minv[:3, 3] - self._center
 
     def segment_hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1) -> np.ndarray:
         """:meth:`segment_hits` for segments already in the collider's space."""
@@ -403,6 +415,7 @@ class Collider:
         _, _, lo, hi = self._geometry()
         diag = float(np.linalg.norm(hi - lo)) or 1.0
         step = tol.PARITY_STEP_REL * diag
+        lo, hi = lo - self._center, hi - self._center
         far = 4.0 * diag + float(np.abs(p_lo).max(initial=0.0)) * 2.0
         votes = np.zeros(k, np.int8)
         for dirn in _PARITY_DIRS:
@@ -446,7 +459,7 @@ class Collider:
             self._closest = None
             self._closest_key = self._version
         p_lo, face, self._closest = closest_points_on_mesh(
-            self._V.astype(np.float64), self._F, q_lo, self._closest
+            self._V.astype(np.float64) - self._center, self._F, q_lo, self._closest
         )
-        p_wo = p_lo @ self._M[:3, :3].T + self._M[:3, 3]
+        p_wo = (p_lo + self._center) @ self._M[:3, :3].T + self._M[:3, 3]
         return p_wo, self._normals_world(face, len(self._F) + 1)

@@ -457,11 +457,19 @@ class _StepContext:
                 f"curve {c} has a zero-length segment between points {k} and {k + 1}"
             )
         self.roots = points[solver._off[:-1]].astype(np.float64)
-        scale = float(np.abs(points).max(initial=0.0))
-        for c, off in cols:
-            lo, hi = c.bounds_world(off)
-            scale = max(scale, float(np.abs(lo).max()), float(np.abs(hi).max()))
-        self.eps_abs = tol.RAY_EXTEND_ULPS * float(np.finfo(np.float32).eps) * max(scale, 1e-30)
+        # Ray growth (tol.RAY_EXTEND_ULPS): float32 ulps at the size of the
+        # largest collider (where embree works, centred), plus the output
+        # dtype's rounding at the colliders' distance from the origin. It
+        # depends on the colliders only, so a curve's result does not depend
+        # on which other curves are solved with it.
+        size = mag = 0.0
+        for c, _ in cols:
+            lo, hi = c.bounds_world()
+            size = max(size, float(np.linalg.norm(hi - lo)))
+            mag = max(mag, float(np.abs(lo).max()), float(np.abs(hi).max()))
+        self.eps_abs = tol.RAY_EXTEND_ULPS * (
+            float(np.finfo(np.float32).eps) * size + float(np.finfo(points.dtype).eps) * mag
+        )
         # Candidate curves per collider: the sphere a curve can sweep about its
         # root (any rotation, scale <= 1) meets the collider's bounds.
         self.cand = []
