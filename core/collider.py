@@ -16,6 +16,7 @@ import numpy as np
 from . import tolerances as tol
 from .errors import ColliderError
 from .rays import make_backend
+from .rotations import apply
 
 #: Fixed, irrational-ish unit directions for the parity (inside) test.
 #: Three votes make the test robust to a ray grazing an edge or a vertex.
@@ -321,13 +322,13 @@ class Collider:
 
     def _to_local(self, o_wo, d_wo):
         A, b = self.local_map()
-        return o_wo @ A.T + b, d_wo @ A.T
+        return apply(A, o_wo) + b, apply(A, d_wo)
 
     def _normals_world(self, prim, n_front):
         fn = self._geometry()[0]
         idx = np.where(prim >= n_front, prim - n_front, prim)
         n_lo = fn[idx] * np.where(prim >= n_front, -1.0, 1.0)[:, None]
-        n_wo = n_lo @ self._Minv[:3, :3]  # inverse-transpose for normals
+        n_wo = apply(self._Minv[:3, :3].T, n_lo)  # inverse-transpose for normals
         ln = np.linalg.norm(n_wo, axis=1, keepdims=True)
         return np.divide(n_wo, ln, out=np.zeros_like(n_wo), where=ln > 0)
 
@@ -461,5 +462,5 @@ class Collider:
         p_lo, face, self._closest = closest_points_on_mesh(
             self._V.astype(np.float64) - self._center, self._F, q_lo, self._closest
         )
-        p_wo = (p_lo + self._center) @ self._M[:3, :3].T + self._M[:3, 3]
+        p_wo = apply(self._M[:3, :3], p_lo + self._center) + self._M[:3, 3]
         return p_wo, self._normals_world(face, len(self._F) + 1)

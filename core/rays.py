@@ -33,7 +33,7 @@ except Exception as exc:  # pragma: no cover - depends on the platform
     _EMBREE_ERROR = exc
 
 #: Below this many rays a batch is not worth splitting over threads.
-_MIN_RAYS_PER_THREAD = 16384
+_MIN_RAYS_PER_THREAD = 4096
 
 _pool: ThreadPoolExecutor | None = None
 _pool_size = 0

@@ -20,6 +20,16 @@ def dot(a, b):
     return np.einsum("...i,...i->...", a, b)
 
 
+def apply(A, x):
+    """Rows of ``x`` (k, 3) mapped by the 3x3 ``A`` (``x @ A.T``).
+
+    einsum rather than ``@``: numpy's BLAS would start its own thread pool
+    for these tall, thin products, spinning against the ray tracer's threads
+    for no gain.
+    """
+    return np.einsum("ij,kj->ki", A, x)
+
+
 def stable_perpendicular(v):
     """A unit vector perpendicular to each unit row of ``v``, continuous per octant.
 

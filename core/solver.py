@@ -984,7 +984,8 @@ class _RigidBatch:
                 continue
             A, b = c.local_map()
             self.per_col.append(
-                (c, off, m, ctx.roots[curves] @ A.T + b, Y @ A.T, V0 @ A.T, X @ A.T)
+                (c, off, m, rot.apply(A, ctx.roots[curves]) + b, rot.apply(A, Y),
+                 rot.apply(A, V0), rot.apply(A, X))
             )
 
     def hits(self, items, theta):
