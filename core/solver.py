@@ -108,50 +108,67 @@ def _check_offsets(offsets) -> np.ndarray:
     return off
 
 
-def _gallop_bisect(n, test, k_max, lo=None, hi=None):
+def _gallop_bisect(n, test, k_max, lo=None, hi=None, width=4):
     """Smallest integer ``k`` in ``(lo, k_max]`` with ``test`` true, per item.
 
-    Gallops (lo + 1, lo + 2, lo + 4, ...) until a good probe, then bisects
-    between the last bad and the first good probe. Every round calls
-    ``test(items, ks)`` once for all unsettled items (one batched ray query).
+    A ``width``-ary gallop-then-bisect: each round probes ``width`` values
+    per unsettled item (galloping: ``lo + stride * 1, 2, 4, ...``; once a good
+    probe is known: evenly inside the bracket) and calls ``test`` once for all
+    of them, i.e. one batched ray query per round. Where ``test`` is monotone
+    the result is exactly the first good ``k``; otherwise it is a good ``k``
+    right after a bad one.
 
     Parameters
     ----------
     n : int
         Number of items.
-    test : callable(items (k,) int, ks (k,) int) -> (k,) bool
+    test : callable(items (m,) int, ks (m,) int) -> (m,) bool
+        ``items`` may repeat (several probes of one item).
     k_max : (n,) int
         Largest admissible ``k``.
     lo : (n,) int, optional
         Known bad ``k`` (default 0).
     hi : (n,) int, optional
-        Known good ``k`` (-1 = unknown, gallop first).
+        Known good ``k`` (-1 = unknown: gallop first).
+    width : int
+        Probes per item per round.
 
     Returns
     -------
     (n,) int
-        The first good ``k`` found, -1 where none up to ``k_max``.
+        The good ``k`` found, -1 where none up to ``k_max``.
     """
     lo = np.zeros(n, np.int64) if lo is None else np.asarray(lo, np.int64).copy()
     hi = np.full(n, -1, np.int64) if hi is None else np.asarray(hi, np.int64).copy()
     stride = np.ones(n, np.int64)
-    k_max = np.asarray(k_max, np.int64)
-    for _ in range(256):  # bounded: log2(k_max) gallops + log2 bisections
+    k_max = np.broadcast_to(np.asarray(k_max, np.int64), (n,))
+    ladder = 2 ** np.arange(width)
+    frac = np.arange(1, width + 1) / (width + 1)
+    for _ in range(128):  # bounded: each round multiplies the stride or divides the bracket
         gallop = (hi < 0) & (lo < k_max)
         bisect = (hi >= 0) & (hi - lo > 1)
         items = np.flatnonzero(gallop | bisect)
         if len(items) == 0:
             break
-        ks = np.where(
-            gallop[items],
-            np.minimum(lo[items] + stride[items], k_max[items]),
-            (lo[items] + hi[items]) // 2,
+        g = gallop[items][:, None]
+        l, h = lo[items][:, None], hi[items][:, None]
+        probes = np.where(
+            g,
+            np.minimum(l + stride[items][:, None] * ladder, k_max[items][:, None]),
+            np.clip(l + np.ceil((h - l) * frac).astype(np.int64), l + 1, h),
         )
-        good = test(items, ks)
-        hi[items[good]] = ks[good]
-        bad = items[~good]
-        lo[bad] = ks[~good]
-        stride[bad] *= 2
+        good = test(np.repeat(items, width), probes.ravel()).reshape(len(items), width)
+        anyg = good.any(axis=1)
+        first = np.argmax(good, axis=1)
+        rows = np.arange(len(items))
+        k_first = probes[rows, first]
+        k_before = np.where(first > 0, probes[rows, np.maximum(first - 1, 0)], lo[items])
+        hit_i = items[anyg]
+        hi[hit_i] = k_first[anyg]
+        lo[hit_i] = k_before[anyg]
+        miss_i = items[~anyg]
+        lo[miss_i] = probes[~anyg, -1]
+        stride[miss_i] *= 2**width
     return hi
 
 
@@ -1085,13 +1102,13 @@ class _SoftSolve:
             last = sv._soff[todo + 1]  # one past the curve's last segment
 
             def test(items, ks, seg_hit=seg_hit, axis=axis, todo=todo, last=last):
-                c = todo[items]
-                q = self._rotated(seg_hit[items], last[items], axis[items], ks * p)
+                c = todo[items]  # may repeat: several angles of one curve
+                owner, sel, q = self._rotated(seg_hit[items], last[items], axis[items], ks * p)
                 # Only the solved segment needs testing: segments before it
                 # did not move, segments after it are the next rounds' job.
                 sseg, srep, sst = ctx.segments(c)
                 qq = ctx.quat[sseg]
-                qq[np.searchsorted(sseg, q[0])] = q[1]
+                qq[sst[owner] + (sel - sv._soff[c][owner])] = q
                 o2, d2, _, r2, st2 = ctx.deform(c, quat=qq)
                 j = st2 + (seg_hit[items] - sv._soff[c])
                 root = seg_hit[items] == sv._soff[c]
@@ -1102,7 +1119,7 @@ class _SoftSolve:
             ok = kk >= 0
             if ok.any():
                 w = np.flatnonzero(ok)
-                sel, q = self._rotated(seg_hit[w], last[w], axis[w], kk[w] * p)
+                _, sel, q = self._rotated(seg_hit[w], last[w], axis[w], kk[w] * p)
                 ctx.quat[sel] = q
                 grow = rot.quat_angle(q) > rot.quat_angle(ctx.quat_max[sel])
                 ctx.quat_max[sel[grow]] = q[grow]
@@ -1122,7 +1139,7 @@ class _SoftSolve:
             self.recover(rec, status)
 
     def _rotated(self, seg_hit, last, axis, phi):
-        """Segment ids and composed quaternions after turning ``seg_hit`` by ``phi``."""
+        """(owner, segment ids, composed quaternions) after turning ``seg_hit`` by ``phi``."""
         ctx = self.ctx
         n = len(seg_hit)
         span = np.minimum(len(self.weights) + 1, last - seg_hit)  # segments affected
@@ -1132,7 +1149,7 @@ class _SoftSolve:
         sel = seg_hit[rep] + i
         w = np.concatenate([[1.0], self.weights])[i]
         r = rot.quat_from_axis_angle(axis[rep], phi[rep] * w)
-        return sel, rot.quat_canonical(rot.quat_mul(r, ctx.quat[sel]))
+        return rep, sel, rot.quat_canonical(rot.quat_mul(r, ctx.quat[sel]))
 
     def recover(self, rec, status):
         """Slerp every segment toward its target; stop before contact."""
