@@ -300,8 +300,14 @@ class Collider:
             if self.double_sided:
                 V = np.concatenate([V + off_lo * vn, V - off_lo * vn])
                 F = np.concatenate([F, F[:, ::-1] + len(self._V)])
-            else:
+            elif self.closed:
                 V = V + off_lo * vn
+            else:
+                # An open single-sided sheet keeps the offset on its front; the
+                # sheet itself stays in, so curves coming from the back still
+                # collide with it (the second copy shares the face normals).
+                V = np.concatenate([V + off_lo * vn, V])
+                F = np.concatenate([F, F + len(self._V)])
         backend = make_backend(self._backend_name, V, F)
         self.build_count += 1
         self._built = (key, backend, len(self._F))
@@ -327,7 +333,8 @@ class Collider:
     def _normals_world(self, prim, n_front):
         fn = self._geometry()[0]
         idx = np.where(prim >= n_front, prim - n_front, prim)
-        n_lo = fn[idx] * np.where(prim >= n_front, -1.0, 1.0)[:, None]
+        flip = self.double_sided & (prim >= n_front)  # the inner shell faces inward
+        n_lo = fn[idx] * np.where(flip, -1.0, 1.0)[:, None]
         n_wo = apply(self._Minv[:3, :3].T, n_lo)  # inverse-transpose for normals
         ln = np.linalg.norm(n_wo, axis=1, keepdims=True)
         return np.divide(n_wo, ln, out=np.zeros_like(n_wo), where=ln > 0)
