@@ -407,9 +407,9 @@ class Solver:
         # Pinch detection (paper 3.1): roots inside closed single-sided colliders.
         t0 = time.perf_counter()
         pinched = np.zeros(C, bool)
-        for (c, off), cand, box in zip(cols, ctx.cand, ctx.boxes, strict=True):
+        for (c, off), box in zip(cols, ctx.boxes, strict=True):
             if c.detects_pinch:
-                q = np.flatnonzero(cand & enabled & ctx.root_in_box(box))
+                q = np.flatnonzero(enabled & ctx.root_in_box(box))
                 if len(q):
                     pinched[q[c.contains(ctx.roots[q], off)]] = True
         timings["pinch"] = (time.perf_counter() - t0) * 1e3
@@ -487,15 +487,19 @@ class _StepContext:
         self.eps_abs = tol.RAY_EXTEND_ULPS * (
             float(np.finfo(np.float32).eps) * size + float(np.finfo(points.dtype).eps) * mag
         )
-        # Candidate curves per collider: the sphere a curve can sweep about its
-        # root (any rotation, scale <= 1) meets the collider's bounds.
+        # Candidate curves per collider: the ball a curve can sweep about its
+        # root (any rotation, scale <= 1) meets the collider's bounds, then
+        # comes near one of its vertices (Collider.near_surface).
         self.cand = []
         self.boxes = []
         for c, off in cols:
             lo, hi = c.bounds_world(off)
             self.boxes.append((lo, hi))
             gap = np.maximum(lo - self.roots, 0) + np.maximum(self.roots - hi, 0)
-            self.cand.append(np.einsum("ij,ij->i", gap, gap) <= self.curve_len**2)
+            cand = np.einsum("ij,ij->i", gap, gap) <= self.curve_len**2
+            w = np.flatnonzero(cand)
+            cand[w] = c.near_surface(self.roots[w], self.curve_len[w], off)
+            self.cand.append(cand)
         if self.cand:
             self.cand_any = np.logical_or.reduce(self.cand)
         else:

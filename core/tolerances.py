@@ -46,3 +46,7 @@ FRAME_SHAPE_HI = 0.05
 #: contact, so a curve reported clear is clear by a margin any float32 or
 #: float64 segment test resolves (embree tests in float32).
 RAY_EXTEND_ULPS = 32
+
+#: Cells along the longest side of a collider's vertex occupancy grid (the
+#: tight "can this curve touch the mesh" test and the inside-test cache).
+OCCUPANCY_CELLS = 64

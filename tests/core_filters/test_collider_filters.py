@@ -1,0 +1,89 @@
+"""The collider's conservative shortcuts agree with brute force.
+
+``Collider.near_surface`` may only say False where a ball certainly misses
+the mesh, and ``Collider.contains`` (cell-cached for points far from the
+surface) must equal the plain three-vote ray parity everywhere.
+"""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from core import Collider
+from core.closest import closest_on_triangles
+
+
+def ellipsoid(n=24, m=12, axes=(0.6, 0.4, 0.3)):
+    u = np.linspace(0, np.pi, m + 1)[1:-1]
+    v = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    ring = np.stack([np.sin(uu) * np.cos(vv), np.sin(uu) * np.sin(vv), np.cos(uu)], -1)
+    V = np.concatenate([[[0, 0, 1]], ring.reshape(-1, 3), [[0, 0, -1]]]) * axes
+    F = []
+    top, bot = 0, len(V) - 1
+    idx = 1 + np.arange(len(u) * n).reshape(len(u), n)
+    for j in range(n):
+        F.append([top, idx[0, j], idx[0, (j + 1) % n]])
+        F.append([bot, idx[-1, (j + 1) % n], idx[-1, j]])
+        for i in range(len(u) - 1):
+            a, b = idx[i, j], idx[i, (j + 1) % n]
+            c, d = idx[i + 1, j], idx[i + 1, (j + 1) % n]
+            F += [[a, c, d], [a, d, b]]
+    return V, np.array(F)
+
+
+def brute_distance(V_wo, F, p):
+    tri = V_wo[F]
+    out = np.empty(len(p))
+    for i, q in enumerate(p):
+        qq = np.repeat(q[None], len(F), 0)
+        c = closest_on_triangles(qq, tri[:, 0], tri[:, 1], tri[:, 2])
+        out[i] = np.linalg.norm(c - qq, axis=1).min()
+    return out
+
+
+def matrix(rng):
+    a = rng.normal(size=3)
+    a /= np.linalg.norm(a)
+    t = rng.uniform(0, np.pi)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    R = np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
+    M = np.eye(4)
+    M[:3, :3] = R * rng.uniform(0.5, 2.0)
+    M[:3, 3] = rng.normal(size=3) * 3
+    return M
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_near_surface_is_conservative(seed):
+    rng = np.random.default_rng(seed)
+    V, F = ellipsoid()
+    M = matrix(rng)
+    col = Collider(V, F, matrix=M)
+    V_wo = V @ M[:3, :3].T + M[:3, 3]
+    p = V_wo.mean(0) + rng.normal(size=(200, 3)) * 2.0
+    r = rng.uniform(0.01, 0.8, 200)
+    near = col.near_surface(p, r)
+    dist = brute_distance(V_wo, F, p)
+    assert not np.any(~near & (dist <= r)), "a ball touching the mesh was filtered out"
+    assert near[dist <= r].all()
+    assert (~near).any(), "the filter never filters: useless"
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**31 - 1), offset=st.sampled_from([0.0, 0.05]))
+def test_cached_inside_test_equals_parity(seed, offset):
+    rng = np.random.default_rng(seed)
+    V, F = ellipsoid()
+    M = matrix(rng)
+    col = Collider(V, F, matrix=M)
+    V_wo = V @ M[:3, :3].T + M[:3, 3]
+    for _ in range(3):  # repeated calls hit the per-cell cache
+        p = V_wo.mean(0) + rng.normal(size=(300, 3)) * 0.8
+        assert np.array_equal(col.contains(p, offset), col._parity(p, offset))
+    col.matrix = matrix(rng)  # rigid motion keeps the (local) cache valid
+    p = rng.normal(size=(300, 3)) * 3
+    assert np.array_equal(col.contains(p, offset), col._parity(p, offset))
+    col.vertices = V * 1.1  # deformation invalidates it
+    assert np.array_equal(col.contains(p, offset), col._parity(p, offset))
