@@ -17,6 +17,7 @@ from . import tolerances as tol
 from .errors import ColliderError
 from .rays import make_backend
 from .rotations import apply
+from .rotations import dot as rot_dot
 
 #: Fixed, irrational-ish unit directions for the parity (inside) test.
 #: Three votes make the test robust to a ray grazing an edge or a vertex.
@@ -138,6 +139,7 @@ class Collider:
             self.dropped_faces = int(bad.sum())
             F = F[~bad]
         self._F = F
+        self._used = np.unique(F)  # vertices referenced by a face (topology only)
         self.closed = self._is_closed(F, len(V))
         self._M, self._Minv = _as_matrix(matrix)
         self._version = 0
@@ -149,8 +151,8 @@ class Collider:
     def _recenter(self):
         # The BVH is float32: keep its coordinates centred on the mesh, so a
         # collider modelled far from the origin keeps its full precision.
-        V = self._V.astype(np.float64)
-        self._center = 0.5 * (V.min(0) + V.max(0)) if len(V) else np.zeros(3)
+        V = self._V[self._used] if len(self._F) else self._V
+        self._center = 0.5 * (V.min(0).astype(np.float64) + V.max(0)) if len(V) else np.zeros(3)
 
     # ----------------------------------------------------------------- input
     def _check_offset(self, offset):
@@ -237,10 +239,8 @@ class Collider:
             )
         if np.array_equal(V2, self._V):
             return
-        if len(self._F) and self._degenerate(V2, self._F).any():
-            # A deformation that collapses a triangle is legal; keep going with
-            # it (embree skips zero-area triangles), but never with NaN normals.
-            pass
+        # A deformation may collapse a triangle: legal (embree skips it, its
+        # normal is zero), so no degenerate check here.
         self._V = V2
         self._version += 1
         self._geometry_cache = None
@@ -257,27 +257,39 @@ class Collider:
 
     # ------------------------------------------------------------ geometry
     def _geometry(self):
-        """Face normals, vertex normals and local bounds (cached per vertices)."""
+        """Local bounds ``(lo, hi)`` of the used vertices (cached per vertices)."""
         if self._geometry_cache is None:
-            V = self._V.astype(np.float64)
-            F = self._F
-            if len(F):
-                fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-                vn = np.zeros_like(V)
-                for k in range(3):  # area-weighted vertex normals
-                    np.add.at(vn, F[:, k], fn)
-                ln = np.linalg.norm(fn, axis=1, keepdims=True)
-                fn = np.divide(fn, ln, out=np.zeros_like(fn), where=ln > 0)
-                lv = np.linalg.norm(vn, axis=1, keepdims=True)
-                vn = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
-                used = np.unique(F)
-                lo, hi = V[used].min(0), V[used].max(0)
+            if len(self._F):
+                Vu = self._V[self._used].astype(np.float64)
+                self._geometry_cache = (Vu.min(0), Vu.max(0))
             else:
-                fn = np.zeros((0, 3))
-                vn = np.zeros_like(V)
-                lo = hi = np.zeros(3)
-            self._geometry_cache = (fn, vn, lo, hi)
+                self._geometry_cache = (np.zeros(3), np.zeros(3))
         return self._geometry_cache
+
+    def _face_normals(self, prim, unit=True):
+        """Face normals (right-handed, local space) of triangles ``prim``.
+
+        Computed on demand: only hit triangles ever need one.
+        """
+        V = self._V
+        F = self._F[prim]
+        a = V[F[:, 0]].astype(np.float64)
+        n = np.cross(V[F[:, 1]] - a, V[F[:, 2]] - a)
+        if not unit:
+            return n
+        ln = np.linalg.norm(n, axis=1, keepdims=True)
+        return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+
+    def _vertex_normals(self):
+        """Area-weighted unit vertex normals (only offsets need them)."""
+        fa = self._face_normals(np.arange(len(self._F)), unit=False)
+        n = len(self._V)
+        vn = np.stack([
+            sum(np.bincount(self._F[:, k], weights=fa[:, i], minlength=n) for k in range(3))
+            for i in range(3)
+        ], axis=1)
+        lv = np.linalg.norm(vn, axis=1, keepdims=True)
+        return np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
 
     def _occupancy(self):
         """Vertex occupancy grid of the (centred) local space, as a summed-area table.
@@ -288,7 +300,7 @@ class Collider:
         than the bounding box. Rebuilt with the vertices (O(n)).
         """
         if getattr(self, "_occ_key", None) != self._version:
-            V = self._V.astype(np.float64)[np.unique(self._F)] - self._center
+            V = self._V.astype(np.float64)[self._used] - self._center
             lo, hi = V.min(0), V.max(0)
             h = max(float((hi - lo).max()) / tol.OCCUPANCY_CELLS, 1e-30)
             dims = np.floor((hi - lo) / h).astype(np.int64) + 1
@@ -297,9 +309,13 @@ class Collider:
             occ[cell[:, 0], cell[:, 1], cell[:, 2]] = 1
             sat = np.zeros(dims + 1, np.int32)
             sat[1:, 1:, 1:] = occ.cumsum(0).cumsum(1).cumsum(2)
-            E = self._V.astype(np.float64)
-            e = np.concatenate([E[self._F[:, k]] - E[self._F[:, (k + 1) % 3]] for k in range(3)])
-            max_edge = float(np.sqrt(np.einsum("ij,ij->i", e, e).max()))
+            E, F = self._V, self._F
+            max_edge = max(
+                float(np.einsum("ij,ij->i", e, e).max())
+                for e in (E[F[:, k]] - E[F[:, (k + 1) % 3]] for k in range(3))
+            )
+            # float32 edges: pad by a relative ulp margin to stay conservative
+            max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
             self._occ = (lo, h, dims, sat, max_edge, np.full(dims, -1, np.int8))
             self._occ_key = self._version
             self._occ_inside_key = None
@@ -354,10 +370,10 @@ class Collider:
         key = (self._version, round(off_lo, 12))
         if self._built is not None and self._built[0] == key:
             return self._built[1], self._built[2]
-        fn, vn, _, _ = self._geometry()
         V = self._V.astype(np.float64) - self._center
         F = self._F
         if off_lo > 0:
+            vn = self._vertex_normals()
             if self.double_sided:
                 V = np.concatenate([V + off_lo * vn, V - off_lo * vn])
                 F = np.concatenate([F, F[:, ::-1] + len(self._V)])
@@ -376,7 +392,7 @@ class Collider:
 
     def bounds_world(self, offset_wo: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """World-space axis-aligned bounds (lo, hi), grown by the offset."""
-        _, _, lo, hi = self._geometry()
+        lo, hi = self._geometry()
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                             for z in (lo[2], hi[2])])
         c_wo = corners @ self._M[:3, :3].T + self._M[:3, 3]
@@ -392,10 +408,9 @@ class Collider:
         return apply(A, o_wo) + b, apply(A, d_wo)
 
     def _normals_world(self, prim, n_front):
-        fn = self._geometry()[0]
         idx = np.where(prim >= n_front, prim - n_front, prim)
         flip = self.double_sided & (prim >= n_front)  # the inner shell faces inward
-        n_lo = fn[idx] * np.where(flip, -1.0, 1.0)[:, None]
+        n_lo = self._face_normals(idx) * np.where(flip, -1.0, 1.0)[:, None]
         n_wo = apply(self._Minv[:3, :3].T, n_lo)  # inverse-transpose for normals
         ln = np.linalg.norm(n_wo, axis=1, keepdims=True)
         return np.divide(n_wo, ln, out=np.zeros_like(n_wo), where=ln > 0)
@@ -513,9 +528,8 @@ class Collider:
         """Ray-parity inside test of world points (three votes)."""
         k = len(p_wo)
         be, n_front = self._backend(offset_wo)
-        fn = self._geometry()[0]
         p_lo = self._to_local(np.asarray(p_wo, np.float64), np.zeros((k, 3)))[0]
-        _, _, lo, hi = self._geometry()
+        lo, hi = self._geometry()
         diag = float(np.linalg.norm(hi - lo)) or 1.0
         step = tol.PARITY_STEP_REL * diag
         far = 4.0 * diag + float(np.abs(p_lo).max(initial=0.0)) * 2.0
@@ -531,7 +545,8 @@ class Collider:
                 prim, t = be.hit_details(o[active], d[active], 1.0)
                 hit = prim >= 0
                 active, prim, t = active[hit], prim[hit], t[hit]
-                front = (fn[np.where(prim >= n_front, prim - n_front, prim)] @ dirn) < 0
+                fn = self._face_normals(np.where(prim >= n_front, prim - n_front, prim))
+                front = rot_dot(fn, dirn) < 0
                 balance[active] += np.where(front, -1, 1)
                 o[active] = o[active] + (t * far + step)[:, None] * dirn
             votes += (balance > 0).astype(np.int8)
