@@ -1,0 +1,271 @@
+"""numpy <-> Blender data bridge (the only place that touches bulk bpy data).
+
+Every transfer goes through ``foreach_get``/``foreach_set`` on float32 /
+int32 buffers of the exact size Blender reports; a size mismatch raises
+:class:`BridgeError` with the object's name instead of corrupting data.
+No geometry math here beyond applying 4x4 matrices.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Per-curve status attribute written on the output (core ``Status`` codes).
+STATUS_ATTRIBUTE = "furcollide_status"
+#: Point colour attribute for the viewport's *Attribute* colour mode.
+COLOR_ATTRIBUTE = "furcollide_color"
+
+#: RGBA per core Status code: free, colliding, recovering, pinched,
+#: unresolved, disabled.
+STATUS_COLORS = np.array(
+    [
+        [0.60, 0.60, 0.60, 1.0],  # FREE: grey
+        [1.00, 0.45, 0.05, 1.0],  # COLLIDING: orange
+        [0.10, 0.55, 1.00, 1.0],  # RECOVERING: blue
+        [0.90, 0.05, 0.70, 1.0],  # PINCHED: magenta
+        [1.00, 0.00, 0.00, 1.0],  # UNRESOLVED: red
+        [0.15, 0.15, 0.15, 1.0],  # DISABLED: dark grey
+    ],
+    np.float32,
+)
+
+# Attributes never copied from the source to the output. Built-in curve
+# attributes with cached derived data must go through the API (writing
+# ``curve_type`` as a plain attribute corrupts Blender's type counts).
+_SKIP_ATTRIBUTES = {
+    "position",
+    STATUS_ATTRIBUTE,
+    COLOR_ATTRIBUTE,
+    "curve_type",
+    "handle_type_left",
+    "handle_type_right",
+    "nurbs_order",
+    "knots_mode",
+    "normal_mode",
+}
+_CURVE_TYPES = ("CATMULL_ROM", "POLY", "BEZIER", "NURBS")
+
+
+class BridgeError(ValueError):
+    """Blender data does not have the size or layout FurCollide expects."""
+
+
+# ----------------------------------------------------------------- matrices
+def matrix(ob) -> np.ndarray:
+    """World matrix of ``ob`` as a float64 (4, 4) array."""
+    return np.array(ob.matrix_world, dtype=np.float64)
+
+
+def transform(P: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """Apply the affine 4x4 ``M`` to points ``P`` (n, 3); returns float32.
+
+    Identity matrices return a float32 copy bit for bit; otherwise the
+    product is computed in float32 (Blender's own precision).
+    """
+    P = np.asarray(P, np.float32)
+    if np.array_equal(M, _IDENTITY):
+        return P.copy()
+    M32 = np.asarray(M, np.float32)
+    out = P @ M32[:3, :3].T
+    out += M32[:3, 3]
+    return out
+
+
+_IDENTITY = np.eye(4)
+
+
+# ------------------------------------------------------------------ curves
+def curve_offsets(curves) -> np.ndarray:
+    """``(C+1,)`` int32 point offsets of a ``bpy.types.Curves``."""
+    n = len(curves.curves)
+    offs = np.zeros(n + 1, np.int32)
+    if n:
+        curves.curve_offset_data.foreach_get("value", offs)
+    return offs
+
+
+def get_positions(curves) -> np.ndarray:
+    """Point positions (P, 3) float32, in the object's local space."""
+    n = len(curves.points)
+    P = np.empty(n * 3, np.float32)
+    if n:
+        curves.position_data.foreach_get("vector", P)
+    return P.reshape(-1, 3)
+
+
+def set_positions(curves, P: np.ndarray) -> None:
+    """Write local-space positions ``P`` (n, 3) into ``curves`` (original data)."""
+    n = len(curves.points)
+    if P.shape != (n, 3):
+        raise BridgeError(
+            f"'{curves.name}' has {n} points but {P.shape[0]} positions were given"
+        )
+    if n:
+        curves.position_data.foreach_set("vector", np.ascontiguousarray(P, np.float32).ravel())
+    curves.update_tag()
+
+
+def read_curve_mask(curves, name: str, n_curves: int) -> tuple[np.ndarray | None, str]:
+    """Per-curve enable mask from attribute ``name``.
+
+    Returns
+    -------
+    mask : (C,) bool ndarray or None
+        ``None`` when the attribute is absent (every curve enabled).
+    warning : str
+        Non-empty when the attribute exists but cannot be used.
+    """
+    if not name:
+        return None, ""
+    attr = curves.attributes.get(name)
+    if attr is None:
+        return None, ""
+    if attr.domain != "CURVE":
+        return None, f"Attribute '{name}' is on the {attr.domain} domain; it must be per curve"
+    kind = attr.data_type
+    if kind == "BOOLEAN":
+        buf = np.zeros(n_curves, bool)
+    elif kind in {"INT", "INT8"}:
+        buf = np.zeros(n_curves, np.int32)
+    elif kind == "FLOAT":
+        buf = np.zeros(n_curves, np.float32)
+    else:
+        return None, f"Attribute '{name}' has type {kind}; use Boolean, Integer or Float"
+    if len(attr.data) != n_curves:
+        raise BridgeError(f"attribute '{name}' has {len(attr.data)} values for {n_curves} curves")
+    if n_curves:
+        attr.data.foreach_get("value", buf)
+    return (buf > 0.5) if kind == "FLOAT" else buf.astype(bool), ""
+
+
+def _ensure_attribute(curves, name, kind, domain):
+    attr = curves.attributes.get(name)
+    if attr is not None and (attr.data_type != kind or attr.domain != domain):
+        curves.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = curves.attributes.new(name, kind, domain)
+    return attr
+
+
+def write_status(curves, status: np.ndarray, offsets: np.ndarray) -> None:
+    """Write per-curve ``furcollide_status`` and the per-point status colour."""
+    n = len(curves.curves)
+    if status.shape != (n,):
+        raise BridgeError(f"'{curves.name}' has {n} curves but {status.shape[0]} status codes")
+    attr = _ensure_attribute(curves, STATUS_ATTRIBUTE, "INT", "CURVE")
+    if n:
+        attr.data.foreach_set("value", status.astype(np.int32))
+    fresh = curves.attributes.get(COLOR_ATTRIBUTE) is None
+    col = _ensure_attribute(curves, COLOR_ATTRIBUTE, "FLOAT_COLOR", "POINT")
+    codes = np.clip(status.astype(np.int64), 0, len(STATUS_COLORS) - 1)
+    per_point = np.repeat(STATUS_COLORS[codes], np.diff(offsets), axis=0)
+    if len(per_point):
+        col.data.foreach_set("color", per_point.ravel())
+    if fresh:  # make it the active attribute once (the viewport's Attribute colour)
+        try:
+            curves.attributes.active = col
+        except (AttributeError, TypeError, ValueError):  # API differs between versions
+            pass
+
+
+def copy_topology(src, dst) -> None:
+    """Give ``dst`` (original Curves) the curve sizes and attributes of ``src``.
+
+    ``src`` is usually the *evaluated* source data. Existing curves of ``dst``
+    are removed; every non-internal attribute of ``src`` (radius,
+    ``surface_uv_coordinate``, custom attributes...) is copied.
+    """
+    offs = curve_offsets(src)
+    sizes = np.diff(offs)
+    if len(dst.curves):
+        dst.remove_curves()
+    if len(sizes):
+        dst.add_curves(sizes.tolist())
+    if len(curve_offsets(dst)) != len(offs) or not np.array_equal(curve_offsets(dst), offs):
+        raise BridgeError(f"could not give '{dst.name}' the curve layout of '{src.name}'")
+    for attr in src.attributes:
+        name = attr.name
+        if name in _SKIP_ATTRIBUTES or name.startswith("."):
+            continue
+        if attr.domain not in {"POINT", "CURVE"}:
+            continue
+        try:
+            _copy_attribute(attr, dst)
+        except (RuntimeError, TypeError, ValueError, KeyError) as exc:
+            print(f"FurCollide: attribute '{name}' not copied to '{dst.name}': {exc}")
+    _copy_curve_types(src, dst)
+    set_positions(dst, get_positions(src))
+
+
+def _copy_curve_types(src, dst) -> None:
+    attr = src.attributes.get("curve_type")
+    n = len(src.curves)
+    if attr is None or not n or not hasattr(dst, "set_types"):
+        return
+    types = np.empty(n, np.int32)
+    attr.data.foreach_get("value", types)
+    for code in np.unique(types):
+        if 0 <= code < len(_CURVE_TYPES) and _CURVE_TYPES[code] != "CATMULL_ROM":
+            idx = np.flatnonzero(types == code)
+            dst.set_types(type=_CURVE_TYPES[code], indices=idx.tolist())
+
+
+_VALUE_KEYS = {
+    "FLOAT": ("value", np.float32, 1),
+    "INT": ("value", np.int32, 1),
+    "INT8": ("value", np.int32, 1),
+    "BOOLEAN": ("value", bool, 1),
+    "FLOAT_VECTOR": ("vector", np.float32, 3),
+    "FLOAT_COLOR": ("color", np.float32, 4),
+    "BYTE_COLOR": ("color", np.float32, 4),
+    "FLOAT2": ("vector", np.float32, 2),
+    "QUATERNION": ("value", np.float32, 4),
+    "INT32_2D": ("value", np.int32, 2),
+}
+
+
+def _copy_attribute(attr, dst) -> None:
+    spec = _VALUE_KEYS.get(attr.data_type)
+    if spec is None:
+        return
+    key, dtype, width = spec
+    n = len(attr.data)
+    buf = np.empty(n * width, dtype)
+    if n:
+        attr.data.foreach_get(key, buf)
+    out = dst.attributes.get(attr.name)
+    if out is not None and (out.data_type != attr.data_type or out.domain != attr.domain):
+        dst.attributes.remove(out)
+        out = None
+    if out is None:
+        out = dst.attributes.new(attr.name, attr.data_type, attr.domain)
+    if len(out.data) != n:
+        raise BridgeError(f"attribute '{attr.name}' size differs ({len(out.data)} != {n})")
+    if n:
+        out.data.foreach_set(key, buf)
+
+
+# ---------------------------------------------------------------- meshes
+def mesh_topology_key(me) -> tuple:
+    """Cheap key that changes when a mesh's triangulation can change."""
+    return (len(me.vertices), len(me.polygons), len(me.loops))
+
+
+def mesh_vertices(me) -> np.ndarray:
+    """Vertex positions (n, 3) float32 in the mesh object's local space."""
+    n = len(me.vertices)
+    V = np.empty(n * 3, np.float32)
+    if n:
+        me.attributes["position"].data.foreach_get("vector", V)
+    return V.reshape(-1, 3)
+
+
+def mesh_triangles(me) -> np.ndarray:
+    """Loop triangles (m, 3) int32 (``calc_loop_triangles`` is cached by Blender)."""
+    me.calc_loop_triangles()
+    m = len(me.loop_triangles)
+    F = np.empty(m * 3, np.int32)
+    if m:
+        me.loop_triangles.foreach_get("vertices", F)
+    return F.reshape(-1, 3)

@@ -1,0 +1,165 @@
+"""Command line: ``blender -b --command furcollide <action> FILE.blend [options]``.
+
+Actions
+-------
+``bake``  bake every unbaked setup (``--frames A-B`` overrides the range,
+          ``--object NAME`` restricts to one setup, ``--force`` frees old
+          bakes first) and save the file (unless ``--no-save``).
+``free``  free every bake (or ``--object``'s) and save.
+``info``  print each setup, its range and cache state.
+
+Exit codes: 0 success, 1 a bake/free failed, 2 bad arguments or file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import bpy
+
+from . import bake, cache, runtime
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+
+
+def _parser():
+    p = argparse.ArgumentParser(
+        prog="blender -b --command furcollide",
+        description="Bake, free or inspect FurCollide setups of a .blend file.",
+    )
+    p.add_argument("action", choices=("bake", "free", "info"))
+    p.add_argument("blend", help=".blend file to open (saved back after bake/free)")
+    p.add_argument("--frames", help="frame range A-B (overrides the setups' ranges)")
+    p.add_argument("--object", help="only the setup on this hair object")
+    p.add_argument("--scene", help="scene name (default: the file's active scene)")
+    p.add_argument("--force", action="store_true", help="free existing bakes first")
+    p.add_argument("--no-save", action="store_true", help="do not save the .blend file")
+    return p
+
+
+def _frames(text):
+    try:
+        a, _, b = text.partition("-")
+        a, b = int(a), int(b or a)
+    except ValueError:
+        raise ValueError(f"--frames must look like 1-240, got {text!r}") from None
+    if b < a:
+        raise ValueError(f"--frames end {b} is before start {a}")
+    return a, b
+
+
+def run(argv) -> int:
+    """Entry point of the CLI command; returns the process exit code."""
+    try:
+        args = _parser().parse_args(list(argv))
+    except SystemExit as exc:  # argparse exits on --help / errors
+        return EXIT_OK if exc.code == 0 else EXIT_USAGE
+    blend = os.path.abspath(args.blend)
+    if not os.path.isfile(blend):
+        print(f"furcollide: no such file: {blend}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        frames = _frames(args.frames) if args.frames else None
+    except ValueError as exc:
+        print(f"furcollide: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        bpy.ops.wm.open_mainfile(filepath=blend)
+    except RuntimeError as exc:
+        print(f"furcollide: cannot open {blend}: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    scene = bpy.data.scenes.get(args.scene) if args.scene else bpy.context.scene
+    if scene is None:
+        print(f"furcollide: no scene named {args.scene!r}", file=sys.stderr)
+        return EXIT_USAGE
+    sources = runtime.setups(scene)
+    if args.object:
+        sources = [o for o in sources if o.name == args.object]
+        if not sources:
+            print(f"furcollide: no FurCollide setup on {args.object!r}", file=sys.stderr)
+            return EXIT_USAGE
+    if not sources:
+        print(f"furcollide: no FurCollide setup in scene {scene.name!r}", file=sys.stderr)
+        return EXIT_USAGE
+
+    if args.action == "info":
+        for ob in sources:
+            s = ob.furcollide
+            try:
+                n = len(cache.list_frames(runtime.bake_directory(ob)))
+            except ValueError:
+                n = 0
+            state = "baked" if s.is_baked else ("partial" if n else "not baked")
+            print(
+                f"{ob.name}: frames {s.frame_start}-{s.frame_end}, {state}, {n} files, "
+                f"output {s.output.name if s.output else '-'}, colliders "
+                f"{', '.join(c.object.name for c in s.colliders if c.object) or '-'}"
+            )
+        return EXIT_OK
+
+    if args.action == "free" or args.force:
+        for ob in sources:
+            n = bake.free_bake(ob)
+            print(f"furcollide: freed '{ob.name}' ({n} files)")
+        if args.action == "free":
+            return _save(args)
+
+    todo = [o for o in sources if not o.furcollide.is_baked]
+    if frames is not None:
+        for ob in todo:
+            ob.furcollide.frame_start, ob.furcollide.frame_end = frames
+    if not todo:
+        print("furcollide: every setup is already baked (use --force to re-bake)")
+        return _save(args)
+    try:
+        job = bake.BakeJob(scene, todo, verbose=True)
+        try:
+            while not job.done:
+                job.step()
+        except bake.BakeError:
+            job.finish(cancelled=True)
+            _save(args)  # keep bake_path so the next run resumes
+            raise
+        baked = job.finish()
+    except bake.BakeError as exc:
+        print(f"furcollide: bake failed: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    print(f"furcollide: baked {', '.join(o.name for o in baked)}")
+    code = _save(args)
+    return code if len(baked) == len(todo) else EXIT_FAILED
+
+
+def _save(args) -> int:
+    if args.no_save:
+        return EXIT_OK
+    try:
+        bpy.ops.wm.save_mainfile()
+    except RuntimeError as exc:
+        print(f"furcollide: could not save: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+_handle = None
+
+
+def register():
+    global _handle
+    fn = getattr(bpy.utils, "register_cli_command", None)
+    if fn is None or _handle is not None:  # Blender < 4.2
+        return
+    try:
+        _handle = fn("furcollide", run)
+    except (ValueError, RuntimeError) as exc:
+        print(f"FurCollide: command line not registered: {exc}")
+
+
+def unregister():
+    global _handle
+    if _handle is not None:
+        bpy.utils.unregister_cli_command(_handle)
+        _handle = None

@@ -1,0 +1,930 @@
+"""Per-setup runtime (solver, colliders, caches) and the frame handler.
+
+The registry maps a setup's ``uid`` to a :class:`Runtime` that lives only in
+this Blender session (never in bpy properties): the core ``Solver``, one
+``Collider`` per collider object (kept alive across frames so rigid motion
+never rebuilds a BVH), the bounded memory cache and the status/stats shown
+in the panel.
+
+Frame rules (``frame_change_post``; see docs/blender.md):
+
+* subframes (motion blur) never step: the output keeps the whole frame;
+* ``f == frame_start``: reset the solver and solve;
+* ``f`` cached (memory, or disk when baked): show it, bit for bit;
+* ``f - 1`` cached: restore its solver state if needed and step;
+* otherwise (jump ahead): hold the newest cached frame, mark outdated;
+* ``f < frame_start``: the output follows the source; ``f > frame_end``:
+  the end frame is held.
+
+The handler never raises: errors become the setup's status message plus
+one console line, and the output keeps its last good result.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import traceback
+import uuid
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+from bpy.app.handlers import persistent
+
+from . import bridge, cache
+
+#: Name of the pass-through geometry-nodes modifier FurCollide puts first on
+#: the output. It references the source, colliders and growth surface so the
+#: render depsgraph evaluates them even when they are hidden from render.
+DEPENDENCY_MODIFIER = "FurCollide Inputs"
+
+_busy = False  # re-entrancy guard of the frame handler
+
+
+def _core():
+    from .. import core
+
+    return core
+
+
+# -------------------------------------------------------------- registry
+@dataclass
+class ColliderEntry:
+    collider: object
+    key: tuple
+    double_sided: bool
+    offset: float | None
+
+
+@dataclass
+class Runtime:
+    """Session-only state of one setup."""
+
+    uid: str
+    solver: object = None
+    solver_key: tuple | None = None  # topology the solver was built for
+    settings: object = None  # core.Settings in use
+    topology: tuple | None = None
+    offsets: np.ndarray | None = None
+    colliders: dict = field(default_factory=dict)
+    growth: ColliderEntry | None = None
+    memory: cache.MemoryCache = field(default_factory=cache.MemoryCache)
+    solver_frame: int | None = None  # frame whose result the solver state holds
+    hold: tuple | None = None  # (frame, world positions, status) of newest frame
+    signature: str | None = None  # colliders + settings seen last
+    outdated: bool = False
+    baking: bool = False
+    status: tuple = ("INFO", "")
+    printed: str = ""
+    stats: dict = field(default_factory=dict)
+    error: str = ""  # last solve error (kept visible while frames cannot be solved)
+    written_status: tuple | None = None  # (data session uid, status) last written
+
+    def forget_solver(self):
+        self.solver = None
+        self.solver_frame = None
+        self.colliders.clear()
+        self.growth = None
+
+
+registry: dict[str, Runtime] = {}
+
+
+def ensure_uid(ob) -> str:
+    """The setup id of ``ob`` (created on first use)."""
+    s = ob.furcollide
+    if not s.uid:
+        s.uid = uuid.uuid4().hex
+    return s.uid
+
+
+def _key(ob) -> str:
+    # The setup id plus the object's session id: a duplicated source (same
+    # setup id) never shares the original's runtime. Both survive undo.
+    return f"{ob.furcollide.uid}:{ob.original.session_uid}"
+
+
+def get_runtime(ob, create=True) -> Runtime | None:
+    """Runtime of the setup on source ``ob``."""
+    uid = ob.furcollide.uid
+    if not uid:
+        return None
+    key = _key(ob)
+    rt = registry.get(key)
+    if rt is None and create:
+        rt = registry[key] = Runtime(uid)
+        rt.memory = cache.MemoryCache(ob.furcollide.memory_limit)
+    return rt
+
+
+def source_of(ob):
+    """Source object of the setup ``ob`` belongs to (itself, or its source)."""
+    if ob is None:
+        return None
+    s = getattr(ob, "furcollide", None)
+    if s is None:
+        return None
+    if s.is_setup:
+        return ob
+    if s.is_output and s.source is not None and s.source.furcollide.is_setup:
+        return s.source
+    return None
+
+
+def setups(scene):
+    """Source objects of every FurCollide setup in ``scene``."""
+    return [ob for ob in scene.objects if ob.type == "CURVES" and ob.furcollide.is_setup]
+
+
+def set_status(ob, level: str, message: str) -> None:
+    """Set the setup's status; a new warning/error prints one console line."""
+    rt = get_runtime(ob)
+    if rt is None:
+        return
+    rt.status = (level, message)
+    # One console line per distinct problem (frame numbers do not count).
+    key = re.sub(r"\d+", "#", message) if level != "INFO" else ""
+    if key and key != rt.printed:
+        print(f"FurCollide '{ob.name}': {message}", flush=True)
+    rt.printed = key
+
+
+def stats_for(ob) -> dict:
+    rt = get_runtime(ob, create=False)
+    return rt.stats if rt else {}
+
+
+def status_for(ob) -> tuple:
+    rt = get_runtime(ob, create=False)
+    return rt.status if rt else ("INFO", "")
+
+
+def is_outdated(ob) -> bool:
+    rt = get_runtime(ob, create=False)
+    return bool(rt and rt.outdated)
+
+
+# ------------------------------------------------------------ invalidation
+def invalidate(ob, reason="", from_frame=None, colliders=False, refresh=True) -> None:
+    """Drop the memory-cached frames after ``from_frame`` (default: current).
+
+    A baked setup is not affected (its bake is read-only until freed).
+    ``refresh`` re-evaluates the current frame soon (interactive sessions
+    only; never from inside the frame handler).
+    """
+    ob = source_of(ob)
+    if ob is None:
+        return
+    rt = get_runtime(ob, create=False)
+    if rt is None:
+        return
+    s = ob.furcollide
+    scene = bpy.context.scene
+    f = scene.frame_current if from_frame is None else from_frame
+    if f <= s.frame_start:
+        rt.memory.clear()
+        rt.hold = None
+    else:
+        rt.memory.drop_after(f)
+        if rt.hold is not None and rt.hold[0] > f:
+            rt.hold = None
+    if rt.solver_frame is not None and rt.solver_frame > f:
+        rt.solver_frame = None
+    rt.signature = None  # accept the new settings without a second drop
+    if colliders:
+        rt.colliders.clear()
+        rt.growth = None
+        update_dependencies(ob)
+    if refresh:
+        _schedule_refresh(ob.name)
+
+
+_pending_refresh: set = set()
+
+
+def _schedule_refresh(name: str) -> None:
+    """Re-evaluate the current frame soon (UI only: timers need an event loop)."""
+    if bpy.app.background or name in _pending_refresh:
+        return
+    _pending_refresh.add(name)
+
+    def refresh():
+        _pending_refresh.discard(name)
+        ob = bpy.data.objects.get(name)
+        scene = bpy.context.scene
+        if ob is None or scene is None or not ob.furcollide.is_setup:
+            return None
+        global _busy
+        if _busy:
+            return 0.1
+        _busy = True
+        try:
+            evaluate(scene, bpy.context.evaluated_depsgraph_get(), ob)
+        except Exception as exc:  # noqa: BLE001
+            set_status(ob, "ERROR", _describe(exc))
+        finally:
+            _busy = False
+        return None
+
+    bpy.app.timers.register(refresh, first_interval=0.05)
+
+
+def clear_runtime(ob) -> None:
+    """Forget everything held in memory for the setup on ``ob``."""
+    registry.pop(_key(ob), None)
+
+
+# -------------------------------------------------------------- helpers
+def bake_directory(ob, create=False) -> str:
+    """Absolute bake directory of the setup (raises ValueError if unsaved)."""
+    s = ob.furcollide
+    if s.bake_path:
+        return bpy.path.abspath(s.bake_path)
+    if not bpy.data.filepath and s.cache_directory.startswith("//"):
+        raise ValueError(
+            "Save the .blend file first: the bake cache is written next to it "
+            f"('{s.cache_directory}')"
+        )
+    root = bpy.path.abspath(s.cache_directory)
+    blend = os.path.splitext(os.path.basename(bpy.data.filepath))[0] or "untitled"
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", ob.name)
+    return os.path.join(root, blend, f"{name}_{ensure_uid(ob)[:8]}")
+
+
+def in_scene(o, scene=None) -> bool:
+    """Is ``o`` linked into ``scene`` (default: the context scene)?
+
+    Deleting an object in the UI can leave it alive (our pointers hold a
+    user); such an object no longer collides.
+    """
+    scene = scene or bpy.context.scene
+    return scene is not None and scene.objects.get(o.name) == o
+
+
+def collider_objects(ob, scene=None) -> list[tuple]:
+    """Enabled collider objects: (object, double_sided, offset or None)."""
+    s = ob.furcollide
+    out, seen = [], set()
+    for c in s.colliders:
+        o = c.object
+        if o is None or not c.enabled or o.type != "MESH" or o == ob:
+            continue
+        if not in_scene(o, scene):
+            continue
+        seen.add(o.name)
+        out.append((o, bool(c.double_sided), float(c.collision_offset) if c.use_offset else None))
+    coll = s.collider_collection
+    if coll is not None:
+        for o in coll.all_objects:
+            if o.type == "MESH" and o.name not in seen:
+                seen.add(o.name)
+                out.append((o, bool(s.collection_double_sided), None))
+    return out
+
+
+def core_settings(ob):
+    """core.Settings for the setup's properties (raises SettingsError)."""
+    return _core().Settings(**ob.furcollide.to_core_kwargs())
+
+
+def signature(ob, stable=False, scene=None) -> str:
+    """Fingerprint of everything that changes the result except the input.
+
+    ``stable=False`` identifies colliders by session id (renames do not
+    count); ``stable=True`` by name, which survives saving and reloading
+    (bake files, so a bake resumes in a new session).
+    """
+    s = ob.furcollide
+    cols = [
+        (o.name if stable else o.session_uid, ds, off)
+        for o, ds, off in collider_objects(ob, scene)
+    ]
+    kw = s.to_core_kwargs()
+    kw.pop("threads", None)
+    surface = ob.data.surface.name if ob.data.surface else ""
+    return json.dumps([cols, kw, s.enable_attribute, s.frame_start, surface, bool(s.enabled)])
+
+
+def apply_visibility(ob) -> None:
+    """Show source or output in the viewport according to ``show_result``."""
+    ob = source_of(ob)
+    if ob is None:
+        return
+    s = ob.furcollide
+    out = s.output
+    for target, hide in ((ob, s.show_result), (out, not s.show_result)):
+        if target is None:
+            continue
+        try:
+            target.hide_set(hide)
+        except RuntimeError:  # not in the active view layer
+            pass
+
+
+def update_dependencies(ob) -> None:
+    """(Re)build the output's pass-through dependency modifier.
+
+    The modifier's node group holds Object Info nodes for the source, the
+    colliders (including the collider collection's meshes; no Collection Info
+    node, which would make a cycle when the collection holds the output) and
+    the growth surface; nothing is connected, the geometry passes through
+    unchanged. It only makes Blender evaluate those objects for the output,
+    including in render depsgraphs where they are hidden.
+    """
+    s = ob.furcollide
+    out = s.output
+    if out is None:
+        return
+    name = f".FurCollide Inputs {s.uid[:8]}"
+    ng = bpy.data.node_groups.get(name)
+    if ng is None or ng.bl_idname != "GeometryNodeTree":
+        ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
+        ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+        ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    ng.nodes.clear()
+    gin = ng.nodes.new("NodeGroupInput")
+    gout = ng.nodes.new("NodeGroupOutput")
+    ng.links.new(gin.outputs[0], gout.inputs[0])
+    refs = [ob] + [o for o, _ds, _off in collider_objects(ob)]
+    if ob.data.surface is not None:
+        refs.append(ob.data.surface)
+    for i, o in enumerate(refs):
+        node = ng.nodes.new("GeometryNodeObjectInfo")
+        node.inputs["Object"].default_value = o
+        node.location = (-300, -150 * i)
+    mod = out.modifiers.get(DEPENDENCY_MODIFIER)
+    if mod is None:
+        mod = out.modifiers.new(DEPENDENCY_MODIFIER, "NODES")
+        mod.show_expanded = False
+    index = list(out.modifiers).index(mod)
+    if index != 0 and hasattr(out.modifiers, "move"):  # first, before the artist's own
+        out.modifiers.move(index, 0)
+    mod.node_group = ng
+
+
+# ---------------------------------------------------------------- inputs
+@dataclass
+class Inputs:
+    points: np.ndarray  # world (P, 3) float32
+    offsets: np.ndarray
+    key: tuple
+    m_out_inv: np.ndarray
+    enabled: np.ndarray | None
+    warning: str
+
+
+def read_inputs(ob, depsgraph) -> Inputs:
+    """Evaluated source positions (world), offsets, enable mask."""
+    s = ob.furcollide
+    src = ob.evaluated_get(depsgraph)
+    if not src.is_evaluated:
+        raise RuntimeError("the source is not evaluated in this depsgraph")
+    data = src.data
+    offs = bridge.curve_offsets(data)
+    key = cache.topology_key(offs)
+    Pw = bridge.transform(bridge.get_positions(data), bridge.matrix(src))
+    out = s.output.evaluated_get(depsgraph)
+    m_out_inv = np.linalg.inv(bridge.matrix(out))
+    mask, warning = bridge.read_curve_mask(data, s.enable_attribute, len(offs) - 1)
+    return Inputs(Pw, offs, key, m_out_inv, mask, warning)
+
+
+def _collider_list(ob, rt, depsgraph):
+    core = _core()
+    cols, alive = [], set()
+    for o, ds, off in collider_objects(ob, depsgraph.scene):
+        oe = o.evaluated_get(depsgraph)
+        me = oe.data
+        key = bridge.mesh_topology_key(me)
+        V = bridge.mesh_vertices(me)
+        M = bridge.matrix(oe)
+        uid = o.session_uid
+        alive.add(uid)
+        e = rt.colliders.get(uid)
+        if e is None or e.key != key or e.double_sided != ds or e.offset != off:
+            F = bridge.mesh_triangles(me)
+            col = core.Collider(
+                V, F, double_sided=ds, matrix=M, offset=off, drop_degenerate=True, name=o.name
+            )
+            rt.colliders[uid] = e = ColliderEntry(col, key, ds, off)
+        else:
+            e.collider.vertices = V
+            e.collider.matrix = M
+        cols.append(e.collider)
+    for uid in set(rt.colliders) - alive:
+        del rt.colliders[uid]
+    return cols
+
+
+def _growth(ob, rt, settings, depsgraph):
+    if not (settings.attract_to_growth_surface or settings.pinch_resolution == "growth_surface"):
+        return None
+    surf = ob.data.surface
+    if surf is None or surf.type != "MESH":
+        raise ValueError(
+            "Attract to Growth Surface / Put to Growth Surface need the hair's Surface "
+            "object (Object Data > Surface)"
+        )
+    oe = surf.evaluated_get(depsgraph)
+    me = oe.data
+    key = bridge.mesh_topology_key(me)
+    V = bridge.mesh_vertices(me)
+    M = bridge.matrix(oe)
+    e = rt.growth
+    if e is None or e.key != key:
+        F = bridge.mesh_triangles(me)
+        col = _core().Collider(V, F, matrix=M, drop_degenerate=True, name=surf.name)
+        rt.growth = e = ColliderEntry(col, key, False, None)
+    else:
+        e.collider.vertices = V
+        e.collider.matrix = M
+    return e.collider
+
+
+def _ensure_solver(ob, rt, inp):
+    core = _core()
+    settings = core_settings(ob)
+    if rt.solver is None or rt.solver_key != inp.key:
+        rt.solver = core.Solver(inp.offsets, settings)
+        rt.solver_key = inp.key
+        rt.solver_frame = None
+        rt.memory.sparse = cache.SparseState(rt.solver.state)
+    elif rt.solver.settings != settings:
+        if rt.solver.settings.mode != settings.mode:
+            rt.solver_frame = None  # the solver resets on a mode change
+        rt.solver.settings = settings
+    rt.settings = settings
+    return rt.solver
+
+
+def _stats(res, frame, source="solved") -> dict:
+    st = res.status
+    return {
+        "frame": int(frame),
+        "colliding": int(np.count_nonzero(st == 1)),
+        "recovering": int(np.count_nonzero(st == 2)),
+        "pinched": int(np.count_nonzero(st == 3)),
+        "unresolved": int(np.count_nonzero(st == 4)),
+        "disabled": int(np.count_nonzero(st == 5)),
+        "solve_ms": float(res.timings.get("total", 0.0)),
+        "source": source,
+    }
+
+
+def _write(ob, inp, points_world, status) -> None:
+    out = ob.furcollide.output
+    data = out.data
+    local = bridge.transform(points_world, inp.m_out_inv)
+    bridge.set_positions(data, local)
+    rt = get_runtime(ob)
+    last = rt.written_status
+    attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
+    if (
+        last is None
+        or attr is None
+        or last[0] != data.session_uid
+        or not np.array_equal(last[1], status)
+        or len(attr.data) != len(status)
+    ):
+        bridge.write_status(data, status, inp.offsets)
+        rt.written_status = (data.session_uid, status.copy())
+
+
+def _sync_output(ob, inp, depsgraph) -> None:
+    """Give the output the evaluated source's topology when it differs."""
+    out = ob.furcollide.output
+    if cache.topology_key(bridge.curve_offsets(out.data)) != inp.key:
+        old = out.data
+        if len(old.curves) and not hasattr(old, "remove_curves"):  # older Blender
+            new = bpy.data.hair_curves.new(old.name)
+            for mat in old.materials:
+                new.materials.append(mat)
+            new.surface, new.surface_uv_map = old.surface, old.surface_uv_map
+            out.data = new
+            if old.users == 0:
+                bpy.data.hair_curves.remove(old)
+        bridge.copy_topology(ob.evaluated_get(depsgraph).data, out.data)
+
+
+def _check_topology(ob, rt, inp) -> bool:
+    """Adopt or verify the source topology; False (with an error) on change."""
+    if rt.topology is None or rt.topology == inp.key:
+        rt.topology = inp.key
+        rt.offsets = inp.offsets
+        return True
+    if len(rt.memory) == 0 and not ob.furcollide.is_baked:
+        rt.forget_solver()
+        rt.hold = None
+        rt.topology = inp.key
+        rt.offsets = inp.offsets
+        return True
+    old, new = rt.topology, inp.key
+    what = "bake" if ob.furcollide.is_baked else "cached frames"
+    set_status(
+        ob,
+        "ERROR",
+        f"Source hair changed from {old[0]} curves / {old[1]} points to {new[0]} / {new[1]}: "
+        f"the output keeps its last result and the {what} are kept. "
+        f"Press {'Free Bake' if what == 'bake' else 'Reset'} to simulate the new curves.",
+    )
+    return False
+
+
+# --------------------------------------------------------------- evaluate
+def evaluate(scene, depsgraph, ob) -> str:
+    """Run the frame rules (module docstring) for the setup on ``ob``.
+
+    Parameters
+    ----------
+    scene : bpy.types.Scene
+        Scene whose ``frame_current`` / ``frame_subframe`` are evaluated.
+    depsgraph : bpy.types.Depsgraph
+        Evaluated depsgraph (viewport or render) to read inputs from.
+    ob : bpy.types.Object
+        Source hair object of the setup.
+
+    Returns
+    -------
+    str
+        What was done: ``'reset'``, ``'step'``, ``'cache'``, ``'bake'``,
+        ``'hold'``, ``'outdated'``, ``'passthrough'``, ``'subframe'``,
+        ``'topology'`` or ``'baking'``.
+
+    Raises
+    ------
+    Exception
+        Any error; the frame handler turns it into the status message, the
+        bake into a report.
+    """
+    s = ob.furcollide
+    rt = get_runtime(ob)
+    if s.output is None:
+        raise ValueError("the output hair object is missing: remove the setup and add it again")
+    if s.output == ob or not s.output.furcollide.is_output:
+        raise ValueError(
+            f"'{s.output.name}' is not a FurCollide output: FurCollide only writes into "
+            "the output object it created (remove the setup and add it again)"
+        )
+    if s.output.furcollide.source != ob:
+        raise ValueError(
+            f"this object is a copy of the setup on '{_owner_name(s.output)}': "
+            "use Add FurCollide to give it its own output"
+        )
+    if rt.baking:
+        return "baking"
+    f = scene.frame_current
+    sub = scene.frame_subframe
+    if sub != 0.0:
+        # Never step on subframes (motion blur). A bake is blended between its
+        # whole frames; otherwise the output keeps the whole frame.
+        if s.is_baked and s.enabled:
+            return _baked_subframe(ob, depsgraph, f, sub)
+        return "subframe"
+    inp = read_inputs(ob, depsgraph)
+    if not _check_topology(ob, rt, inp):
+        return "topology"
+    if not s.is_baked:  # a bake checks its own curve layout first
+        _sync_output(ob, inp, depsgraph)
+
+    sig = signature(ob, scene=scene)
+    if rt.signature is not None and sig != rt.signature and not s.is_baked:
+        # Changed without an update callback (deleted collider, undo, driver).
+        invalidate(ob, from_frame=f - 1, refresh=False)
+        rt.colliders.clear()
+    rt.signature = sig
+
+    level, msg = "INFO", ""
+    if inp.warning:
+        level, msg = "WARNING", inp.warning
+    start, end = s.frame_start, s.frame_end
+
+    if not s.enabled or f < start:
+        _sync_output(ob, inp, depsgraph)
+        _write(ob, inp, inp.points, np.zeros(len(inp.offsets) - 1, np.int8))
+        rt.outdated = False
+        set_status(ob, level, msg or ("Disabled" if not s.enabled else "Before the start frame"))
+        return "passthrough"
+
+    if s.is_baked:
+        return _evaluate_baked(ob, rt, inp, f, level, msg, depsgraph)
+
+    if f > end:
+        if rt.hold is not None and rt.hold[0] == end:
+            _write(ob, inp, rt.hold[1], rt.hold[2])
+            set_status(ob, level, msg or f"After the end frame: holding frame {end}")
+            return "hold"
+        rt.outdated = True
+        set_status(ob, "WARNING", f"After the end frame and frame {end} is not cached")
+        return "outdated"
+
+    if f in rt.memory:
+        out, status, stats = rt.memory.get(f, inp.points, inp.offsets)
+        if rt.hold is None and f == max(rt.memory.frames):
+            rt.hold = (f, out, status)
+        _write(ob, inp, out, status)
+        rt.stats = dict(stats, source="cache")
+        rt.outdated = False
+        set_status(ob, level, msg)
+        return "cache"
+
+    if f != start and (f - 1) not in rt.memory:
+        return _hold(ob, rt, inp, f)
+    solver = _ensure_solver(ob, rt, inp)  # a mode change resets it: state unknown
+    if f == start:
+        solver.reset()
+        rt.memory.clear()
+        rt.memory.start = start
+        rt.memory.limit = int(s.memory_limit * 1024 * 1024)
+    elif rt.solver_frame != f - 1:
+        state = rt.memory.state(f - 1)
+        if state is None:
+            return _hold(ob, rt, inp, f)
+        try:
+            solver.state = state
+        except ValueError as exc:  # saved with another mode
+            rt.solver_frame = None
+            return _hold(ob, rt, inp, f, reason=str(exc))
+    res = _step(ob, rt, solver, inp, depsgraph)
+    stats = _stats(res, f)
+    rt.memory.put(f, inp.points, res.points, res.status, inp.offsets, solver.state, stats)
+    rt.solver_frame = f
+    if rt.hold is None or f >= rt.hold[0]:
+        rt.hold = (f, res.points, res.status)
+    _write(ob, inp, res.points, res.status)
+    rt.stats = stats
+    rt.error = ""
+    rt.outdated = False
+    set_status(ob, level, msg)
+    return "reset" if f == start else "step"
+
+
+def _step(ob, rt, solver, inp, depsgraph):
+    cols = _collider_list(ob, rt, depsgraph)
+    growth = _growth(ob, rt, solver.settings, depsgraph)
+    return solver.step(inp.points, cols, growth=growth, enabled=inp.enabled)
+
+
+def _hold(ob, rt, inp, f, reason=""):
+    """Jump ahead past the cache: hold the newest cached frame, mark outdated."""
+    rt.outdated = True
+    k = rt.memory.newest_before(f)
+    if rt.hold is not None and rt.hold[0] == k:
+        _write(ob, inp, rt.hold[1], rt.hold[2])
+        held = f"holding frame {k}"
+    else:
+        held = "showing the last result"
+    start = ob.furcollide.frame_start
+    if rt.error:
+        set_status(ob, "ERROR", f"{rt.error} (frame {f} not solved: fix it, then go back to "
+                   f"frame {start})")
+        return "outdated"
+    why = f" ({reason})" if reason else ""
+    set_status(
+        ob,
+        "WARNING",
+        f"Frame {f} is not cached{why}: {held}. Play from frame {start} or bake.",
+    )
+    return "outdated"
+
+
+def _evaluate_baked(ob, rt, inp, f, level, msg, depsgraph):
+    s = ob.furcollide
+    directory = bpy.path.abspath(s.bake_path)
+    fe = min(f, s.frame_end)
+    if not os.path.exists(cache.frame_path(directory, fe)):
+        frames = [k for k in cache.list_frames(directory) if k < fe]
+        rt.outdated = True
+        if frames:
+            fe = frames[-1]
+        else:
+            set_status(ob, "ERROR", f"Bake files are missing in {directory}")
+            return "outdated"
+    points, status, offsets, _state = cache.read_frame(directory, fe)
+    if not np.array_equal(offsets, inp.offsets):
+        set_status(
+            ob,
+            "ERROR",
+            "The bake was made for other curves (the source changed): output keeps its "
+            "last result. Free Bake to simulate the new curves.",
+        )
+        return "topology"
+    _sync_output(ob, inp, depsgraph)
+    _write(ob, inp, points, status)
+    rt.stats = {
+        "frame": int(fe),
+        "colliding": int(np.count_nonzero(status == 1)),
+        "recovering": int(np.count_nonzero(status == 2)),
+        "pinched": int(np.count_nonzero(status == 3)),
+        "unresolved": int(np.count_nonzero(status == 4)),
+        "disabled": int(np.count_nonzero(status == 5)),
+        "solve_ms": 0.0,
+        "source": "bake",
+    }
+    if fe == min(f, s.frame_end):
+        rt.outdated = False
+        set_status(ob, level, msg)
+    else:
+        set_status(ob, "WARNING", f"Frame {f} is missing from the bake: holding frame {fe}")
+    return "bake"
+
+
+def _owner_name(out) -> str:
+    src = out.furcollide.source
+    return src.name if src is not None else "?"
+
+
+def _baked_subframe(ob, depsgraph, f, sub):
+    s = ob.furcollide
+    directory = bpy.path.abspath(s.bake_path)
+    a, b = f, f + 1
+    if not (s.frame_start <= a and b <= s.frame_end):
+        return "subframe"
+    if not (os.path.exists(cache.frame_path(directory, a)) and os.path.exists(
+        cache.frame_path(directory, b)
+    )):
+        return "subframe"
+    pa, status, offs, _ = cache.read_frame(directory, a)
+    pb = cache.read_frame(directory, b)[0]
+    data = s.output.data
+    if pa.shape != pb.shape or len(data.points) != len(pa):
+        return "subframe"
+    w = np.float32(sub)
+    points = pa + (pb - pa) * w
+    inp = Inputs(points, offs, cache.topology_key(offs),
+                 np.linalg.inv(bridge.matrix(s.output.evaluated_get(depsgraph))), None, "")
+    _write(ob, inp, points, status)
+    return "subframe"
+
+
+# -------------------------------------------------------------------- bake
+def settings_fingerprint(ob) -> str:
+    """What a bake file must match to be resumed from."""
+    return signature(ob, stable=True)
+
+
+def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
+    """Solve frame ``f`` of a bake and write it to ``directory``.
+
+    Parameters
+    ----------
+    scene, depsgraph : Blender scene and its evaluated depsgraph at ``f``.
+    ob : bpy.types.Object
+        Source hair object of the setup.
+    f : int
+        Frame to solve (``frame_start`` resets the solver).
+    directory : str
+        Absolute bake directory.
+    trust_solver : bool
+        The solver's state is frame ``f - 1``'s (just solved by this bake);
+        otherwise that state is read from ``f - 1``'s file.
+
+    Returns
+    -------
+    dict
+        The frame's stats (curve counts per status, ``solve_ms``).
+    """
+    s = ob.furcollide
+    rt = get_runtime(ob)
+    inp = read_inputs(ob, depsgraph)
+    if rt.topology is not None and rt.topology != inp.key:
+        rt.forget_solver()
+    rt.topology, rt.offsets = inp.key, inp.offsets
+    _sync_output(ob, inp, depsgraph)
+    solver = _ensure_solver(ob, rt, inp)
+    if f == s.frame_start:
+        solver.reset()
+    elif not trust_solver:
+        _p, _st, offsets, stored = cache.read_frame(directory, f - 1)
+        if not np.array_equal(offsets, inp.offsets):
+            raise ValueError(f"bake frame {f - 1} was made for other curves")
+        solver.state = cache.decode_state(stored, rt.memory.sparse)
+    res = _step(ob, rt, solver, inp, depsgraph)
+    fp = np.frombuffer(settings_fingerprint(ob).encode(), np.uint8)
+    state = solver.state
+    state["fingerprint"] = fp
+    cache.write_frame(directory, f, res.points, res.status, inp.offsets, state, rt.memory.sparse)
+    _write(ob, inp, res.points, res.status)
+    rt.solver_frame = f
+    rt.stats = _stats(res, f, "bake")
+    return rt.stats
+
+
+def resume_frame(ob, directory) -> int | None:
+    """Last frame of a contiguous, matching partial bake (None: start over)."""
+    s = ob.furcollide
+    have = set(cache.list_frames(directory))
+    fp = settings_fingerprint(ob)
+    last = None
+    f = s.frame_start
+    while f in have and f <= s.frame_end:
+        try:
+            with np.load(cache.frame_path(directory, f), allow_pickle=False) as z:
+                key = next((k for k in z.files if k.endswith("__fingerprint")), None)
+                ok = key is not None and z[key].tobytes().decode() == fp
+        except (OSError, ValueError, KeyError):
+            ok = False
+        if not ok:
+            break
+        last = f
+        f += 1
+    return last
+
+
+# ---------------------------------------------------------------- handlers
+@persistent
+def on_frame_change_post(scene, depsgraph=None):
+    """Evaluate every setup of ``scene``; never raises."""
+    global _busy
+    if _busy or depsgraph is None:
+        return
+    _busy = True
+    try:
+        for ob in setups(scene):
+            try:
+                evaluate(scene, depsgraph, ob)
+            except Exception as exc:  # noqa: BLE001 - the handler must never raise
+                rt = get_runtime(ob)
+                if rt is not None:
+                    rt.error = _describe(exc)
+                set_status(ob, "ERROR", _describe(exc))
+                if os.environ.get("FURCOLLIDE_DEBUG"):
+                    traceback.print_exc()
+    finally:
+        _busy = False
+
+
+@persistent
+def on_depsgraph_update_post(scene, depsgraph=None):
+    """Invalidate (never write) when colliders or the source were edited."""
+    if _busy or depsgraph is None or getattr(depsgraph, "mode", "VIEWPORT") == "RENDER":
+        return
+    try:
+        edited = set()
+        for u in depsgraph.updates:
+            if (u.is_updated_geometry or u.is_updated_transform) and isinstance(
+                u.id, bpy.types.Object
+            ):
+                edited.add(u.id.original.name)
+        if not edited and not any(True for _ in setups(scene)):
+            return
+        for ob in setups(scene):
+            rt = get_runtime(ob, create=False)
+            if rt is None or rt.baking or ob.furcollide.is_baked:
+                continue
+            inputs = {ob.name} | {o.name for o, _ds, _off in collider_objects(ob, scene)}
+            if ob.data.surface is not None:
+                inputs.add(ob.data.surface.name)
+            if edited & inputs and len(rt.memory):
+                invalidate(ob, reason="source or collider edited")
+            elif rt.signature is not None and signature(ob, scene=scene) != rt.signature:
+                invalidate(ob, reason="colliders changed", colliders=True)
+    except Exception as exc:  # noqa: BLE001
+        print(f"FurCollide: depsgraph update check failed: {exc}")
+
+
+@persistent
+def on_load_post(*_args):
+    """A new file: forget every runtime (caches belong to the old file)."""
+    registry.clear()
+
+
+def _describe(exc: Exception) -> str:
+    core = None
+    try:
+        core = _core()
+    except ImportError:
+        pass
+    if core is not None and isinstance(exc, core.FurCollideError | ImportError):
+        return str(exc)
+    if isinstance(exc, ValueError | RuntimeError | bridge.BridgeError):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"
+
+
+_HANDLERS = (
+    ("frame_change_post", on_frame_change_post),
+    ("depsgraph_update_post", on_depsgraph_update_post),
+    ("load_post", on_load_post),
+)
+
+
+def register():
+    for name, fn in _HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        for h in list(lst):  # survive "Reload Scripts"
+            if getattr(h, "__name__", "") == fn.__name__ and "furcollide" in getattr(
+                h, "__module__", ""
+            ):
+                lst.remove(h)
+        lst.append(fn)
+
+
+def unregister():
+    for name, fn in _HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        if fn in lst:
+            lst.remove(fn)
+    registry.clear()
+

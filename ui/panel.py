@@ -1,0 +1,291 @@
+"""View3D > Sidebar > FurCollide: the panel, its sub-panels and the colliders list."""
+
+import bpy
+from bpy.types import Panel, UIList
+
+from ..operators import bake, cache, runtime
+from ..operators.setup import active_setup, backend_message
+
+
+class FURCOLLIDE_UL_colliders(UIList):
+    """Colliders of a setup: mesh, enabled, double-sided."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
+        row = layout.row(align=True)
+        missing = item.object is not None and not runtime.in_scene(item.object, context.scene)
+        row.alert = missing
+        row.prop(item, "object", text="", emboss=False, icon="ERROR" if missing else "MESH_DATA")
+        row.prop(item, "double_sided", text="", icon="MOD_SOLIDIFY", emboss=item.double_sided)
+        icon = "CHECKBOX_HLT" if item.enabled else "CHECKBOX_DEHLT"
+        row.prop(item, "enabled", text="", icon=icon)
+
+
+class _Sub:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "FurCollide"
+    bl_parent_id = "FURCOLLIDE_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return active_setup(context) is not None
+
+    def settings(self, context):
+        return active_setup(context).furcollide
+
+    def prepare(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        s = self.settings(context)
+        layout.enabled = not s.is_baked
+        return layout, s
+
+
+class FURCOLLIDE_PT_main(Panel):
+    """FurCollide: collide the active hair with meshes."""
+
+    bl_label = "FurCollide"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "FurCollide"
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.object
+        return ob is not None and ob.type == "CURVES"
+
+    def draw_header_preset(self, context):
+        if active_setup(context) is not None:
+            FURCOLLIDE_PT_presets.draw_panel_header(self.layout)
+
+    def draw(self, context):
+        layout = self.layout
+        msg = backend_message()
+        if msg:
+            box = layout.box()
+            box.label(text="Ray tracer unavailable", icon="ERROR")
+            for line in _wrap(msg, 40):
+                box.label(text=line)
+        src = active_setup(context)
+        if src is None:
+            layout.operator("furcollide.add", icon="MOD_PHYSICS")
+            layout.label(text="Select the hair, then Shift-select colliders", icon="INFO")
+            return
+        s = src.furcollide
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column()
+        col.prop(s, "enabled")
+        col.prop(s, "show_result")
+        row = col.row()
+        row.enabled = False
+        row.prop(s, "output")
+        level, message = runtime.status_for(src)
+        if message:
+            icon = {"ERROR": "ERROR", "WARNING": "ERROR"}.get(level, "INFO")
+            box = layout.box()
+            for i, line in enumerate(_wrap(message, 44)):
+                box.label(text=line, icon=icon if i == 0 else "BLANK1")
+        if not context.scene.render.use_lock_interface:
+            box = layout.box()
+            box.label(text="Enable Render > Lock Interface", icon="ERROR")
+            box.label(text="so renders cannot crash while hair updates", icon="BLANK1")
+            box.prop(context.scene.render, "use_lock_interface")
+        layout.operator("furcollide.remove", icon="X")
+
+
+class FURCOLLIDE_PT_colliders(_Sub, Panel):
+    bl_label = "Colliders"
+    bl_options = set()
+
+    def draw(self, context):
+        layout, s = self.prepare(context)
+        layout.use_property_split = False
+        row = layout.row()
+        row.template_list(
+            "FURCOLLIDE_UL_colliders", "", s, "colliders", s, "collider_index", rows=3
+        )
+        col = row.column(align=True)
+        col.operator("furcollide.collider_add", icon="ADD", text="")
+        col.operator("furcollide.collider_remove", icon="REMOVE", text="")
+        if 0 <= s.collider_index < len(s.colliders):
+            item = s.colliders[s.collider_index]
+            col = layout.column()
+            col.use_property_split = True
+            col.prop(item, "double_sided")
+            col.prop(item, "use_offset")
+            sub = col.column()
+            sub.active = item.use_offset
+            sub.prop(item, "collision_offset")
+        col = layout.column()
+        col.use_property_split = True
+        col.prop(s, "collider_collection")
+        sub = col.column()
+        sub.active = s.collider_collection is not None
+        sub.prop(s, "collection_double_sided", text="Double Sided")
+
+
+class FURCOLLIDE_PT_resolution(_Sub, Panel):
+    bl_label = "Resolution"
+    bl_options = set()
+
+    def draw(self, context):
+        layout, s = self.prepare(context)
+        col = layout.column()
+        col.prop(s, "mode")
+        col.prop(s, "rotation_precision")
+        col.prop(s, "max_angle")
+        sub = col.column()
+        sub.active = s.mode == "soft"
+        sub.prop(s, "affected_connected_cvs")
+        sub.prop(s, "cv_falloff")
+        col.prop(s, "attract_to_growth_surface")
+        col.prop(s, "collision_offset")
+        col.prop(s, "threads")
+
+
+class FURCOLLIDE_PT_shrink(_Sub, Panel):
+    bl_label = "Shrink"
+
+    def draw_header(self, context):
+        s = self.settings(context)
+        self.layout.enabled = not s.is_baked
+        self.layout.prop(s, "shrink", text="")
+
+    def draw(self, context):
+        layout, s = self.prepare(context)
+        col = layout.column()
+        col.active = s.shrink and s.mode != "soft"
+        col.prop(s, "scale_minimum")
+        col.prop(s, "scale_angle")
+        if s.mode == "soft":
+            layout.label(text="Shrink works in Stiff and Bend modes", icon="INFO")
+
+
+class FURCOLLIDE_PT_recovery(_Sub, Panel):
+    bl_label = "Recovery & Plasticity"
+
+    def draw(self, context):
+        layout, s = self.prepare(context)
+        col = layout.column()
+        col.prop(s, "recovery_rate")
+        col.prop(s, "plasticity")
+
+
+class FURCOLLIDE_PT_pinch(_Sub, Panel):
+    bl_label = "Pinch"
+
+    def draw(self, context):
+        layout, s = self.prepare(context)
+        col = layout.column()
+        col.prop(s, "pinch_resolution", text="Resolution")
+        col.prop(s, "recover_pinched")
+
+
+class FURCOLLIDE_PT_enable(_Sub, Panel):
+    bl_label = "Per-Curve Enable"
+
+    def draw(self, context):
+        layout, s = self.prepare(context)
+        layout.prop(s, "enable_attribute", text="Attribute")
+
+
+class FURCOLLIDE_PT_cache(_Sub, Panel):
+    bl_label = "Cache"
+    bl_options = set()
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        src = active_setup(context)
+        s = src.furcollide
+        col = layout.column(align=True)
+        col.enabled = not s.is_baked
+        col.prop(s, "frame_start", text="Frame Start")
+        col.prop(s, "frame_end", text="End")
+        col = layout.column()
+        col.enabled = not s.is_baked
+        col.prop(s, "cache_directory", text="Directory")
+        col.prop(s, "memory_limit", text="Memory (MB)")
+        running = bake.PROGRESS.get(context.scene.name)
+        if running and hasattr(layout, "progress"):
+            done, of = running
+            layout.progress(factor=done / of, type="BAR", text=f"Baking {done} / {of} (Esc)")
+        total = max(0, s.frame_end - s.frame_start + 1)
+        n, where = cached_count(src)
+        layout.label(text=f"{n} of {total} frames {where}", icon="FILE_CACHE")
+        if s.is_outdated:
+            layout.label(text="Outdated: play from the start frame or bake", icon="ERROR")
+        row = layout.row(align=True)
+        if s.is_baked:
+            row.operator("furcollide.free_bake", icon="TRASH")
+        else:
+            row.operator("furcollide.bake", icon="REC")
+            if s.bake_path:
+                row.operator("furcollide.free_bake", text="Free Partial", icon="TRASH")
+        row = layout.row(align=True)
+        row.operator("furcollide.bake_all")
+        row.operator("furcollide.free_bake_all")
+        layout.operator("furcollide.reset", icon="FILE_REFRESH")
+
+
+class FURCOLLIDE_PT_stats(_Sub, Panel):
+    bl_label = "Last Frame"
+
+    def draw(self, context):
+        layout = self.layout
+        s = self.settings(context)
+        col = layout.column(align=True)
+        col.label(text=f"Frame {s.stat_frame}")
+        col.label(text=f"Colliding: {s.stat_colliding}")
+        col.label(text=f"Recovering: {s.stat_recovering}")
+        col.label(text=f"Pinched: {s.stat_pinched}")
+        col.label(text=f"Unresolved: {s.stat_unresolved}")
+        col.label(text=f"Disabled: {s.stat_disabled}")
+        col.label(text=f"Solve: {s.stat_solve_ms:.1f} ms")
+
+
+def cached_count(src) -> tuple[int, str]:
+    """(number of frames, 'baked' / 'on disk' / 'cached') for the panel."""
+    s = src.furcollide
+    if s.is_baked or s.bake_path:
+        try:
+            frames = cache.list_frames(bpy.path.abspath(s.bake_path))
+        except OSError:
+            frames = []
+        n = sum(1 for f in frames if s.frame_start <= f <= s.frame_end)
+        return n, "baked" if s.is_baked else "on disk (partial bake)"
+    rt = runtime.get_runtime(src, create=False)
+    return (len(rt.memory) if rt else 0), "cached"
+
+
+def _wrap(text, width):
+    words, lines, cur = text.split(), [], ""
+    for w in words:
+        if cur and len(cur) + 1 + len(w) > width:
+            lines.append(cur)
+            cur = w
+        else:
+            cur = f"{cur} {w}".strip()
+    if cur:
+        lines.append(cur)
+    return lines
+
+
+from .presets import FURCOLLIDE_PT_presets  # noqa: E402  (avoid a cycle at import)
+
+classes = (
+    FURCOLLIDE_UL_colliders,
+    FURCOLLIDE_PT_main,
+    FURCOLLIDE_PT_colliders,
+    FURCOLLIDE_PT_resolution,
+    FURCOLLIDE_PT_shrink,
+    FURCOLLIDE_PT_recovery,
+    FURCOLLIDE_PT_pinch,
+    FURCOLLIDE_PT_enable,
+    FURCOLLIDE_PT_cache,
+    FURCOLLIDE_PT_stats,
+)
