@@ -108,7 +108,7 @@ def _check_offsets(offsets) -> np.ndarray:
     return off
 
 
-def _gallop_bisect(n, test, k_max, lo=None, hi=None, width=4):
+def _gallop_bisect(n, test, k_max, lo=None, hi=None, width=4, stride=None):
     """Smallest integer ``k`` in ``(lo, k_max]`` with ``test`` true, per item.
 
     A ``width``-ary gallop-then-bisect: each round probes ``width`` values
@@ -132,6 +132,8 @@ def _gallop_bisect(n, test, k_max, lo=None, hi=None, width=4):
         Known good ``k`` (-1 = unknown: gallop first).
     width : int
         Probes per item per round.
+    stride : (n,) int, optional
+        First gallop stride (default 1).
 
     Returns
     -------
@@ -140,7 +142,7 @@ def _gallop_bisect(n, test, k_max, lo=None, hi=None, width=4):
     """
     lo = np.zeros(n, np.int64) if lo is None else np.asarray(lo, np.int64).copy()
     hi = np.full(n, -1, np.int64) if hi is None else np.asarray(hi, np.int64).copy()
-    stride = np.ones(n, np.int64)
+    stride = np.ones(n, np.int64) if stride is None else np.maximum(stride, 1).astype(np.int64)
     k_max = np.broadcast_to(np.asarray(k_max, np.int64), (n,))
     ladder = 2 ** np.arange(width)
     frac = np.arange(1, width + 1) / (width + 1)
@@ -236,6 +238,7 @@ class Solver:
         C, S = self.n_curves, len(self._seg_start)
         self._angle = np.zeros(C)  # radians (stiff/bend)
         self._angle_max = np.zeros(C)
+        self._push = np.zeros(C)  # last frame's collision increment (search prediction)
         self._axis_lo = np.zeros((C, 3))
         self._frame = np.zeros((C, 3, 3))
         self._active = np.zeros(C, bool)  # has a non-identity local state
@@ -247,7 +250,8 @@ class Solver:
         self._steps = 0
 
     _STATE_KEYS = {
-        "angle": ("C",), "angle_max": ("C",), "axis": ("C", 3), "frame": ("C", 3, 3),
+        "angle": ("C",), "angle_max": ("C",), "push": ("C",), "axis": ("C", 3),
+        "frame": ("C", 3, 3),
         "active": ("C",), "hold": ("C",), "pinched": ("C",), "stiff": ("C",), "quat": ("S", 4),
         "quat_max": ("S", 4), "meta": (4,),
     }
@@ -263,6 +267,7 @@ class Solver:
         mode = ("stiff", "bend", "soft").index(self._settings.mode)
         return {
             "angle": self._angle.copy(), "angle_max": self._angle_max.copy(),
+            "push": self._push.copy(),
             "axis": self._axis_lo.copy(), "frame": self._frame.copy(),
             "active": self._active.copy(), "hold": self._hold.copy(),
             "pinched": self._pinched.copy(), "stiff": self._stiff.copy(),
@@ -295,6 +300,7 @@ class Solver:
             raise InputError("state was saved with another mode")
         self._angle = arrs["angle"].astype(np.float64).copy()
         self._angle_max = arrs["angle_max"].astype(np.float64).copy()
+        self._push = arrs["push"].astype(np.float64).copy()
         self._axis_lo = arrs["axis"].astype(np.float64).copy()
         self._frame = arrs["frame"].astype(np.float64).copy()
         self._active = arrs["active"].astype(bool).copy()
@@ -515,6 +521,8 @@ class _StepContext:
         sv = self.sv_
         self.angle = sv._angle.copy()
         self.angle_max = sv._angle_max.copy()
+        self.push = np.zeros(sv.n_curves)
+        self.guess = sv._push.copy()
         self.axis = np.zeros((sv.n_curves, 3))
         if self.soft:
             self.quat = sv._quat.copy()
@@ -562,6 +570,7 @@ class _StepContext:
         B = self.B
         sv._angle = self.angle
         sv._angle_max = self.angle_max
+        sv._push = self.push
         sv._active = self.active
         axis_lo = np.zeros_like(self.axis)
         if len(idx):
@@ -752,9 +761,15 @@ class _StepContext:
             self.solve_rigid(idx, status)
 
     def new_axes(self, idx, o, d, rep, starts):
-        """Rotation axes for curves starting a contact (paper 3.2.1)."""
+        """Rotation axes for curves starting a contact (paper 3.2.1).
+
+        Also sets ``self.guess`` for them: the rotation that lifts every CV
+        above the collider's tangent plane at the hit (a first probe for the
+        angle search, nothing more).
+        """
         k, point, push = self.first_hit_details(idx, o, d, rep, starts)
         c = point - self.roots[idx]
+        normal = push
         if self.s.attract_to_growth_surface:
             mid = self._midpoints(idx, o, d, starts)
             cp, _ = self.growth.closest_points(mid)
@@ -764,7 +779,23 @@ class _StepContext:
                 np.linalg.norm(c, axis=1) * np.linalg.norm(toward, axis=1), 1e-300
             )
             push = np.where(ok[:, None], rot.normalize(toward), push)
-        return rot.rotation_axis(c, push)
+        axis = rot.rotation_axis(c, push)
+        self.guess[idx] = self._plane_guess(idx, o + d, rep, starts, point, normal, axis)
+        return axis
+
+    def _plane_guess(self, idx, ends, rep, starts, point, normal, axis):
+        """Angle lifting each curve's CVs above the plane (point, normal)."""
+        depth = -rot.dot(ends - point[rep], normal[rep])
+        v = ends - self.roots[idx][rep]
+        ax = axis[rep]
+        radius = np.linalg.norm(v - ax * rot.dot(v, ax)[:, None], axis=1)
+        lift = np.arcsin(np.clip(depth / np.maximum(radius, 1e-300), 0.0, 1.0))
+        if self.s.mode == "bend":  # a CV turns by about the mean weight up to it
+            j = np.arange(len(rep)) - starts[rep]
+            n = self.sv_._nseg[idx][rep]
+            w = np.where(self.sv_._stiff[idx][rep], 1.0, (j + 2) / (2.0 * n))
+            lift = lift / w
+        return np.maximum.reduceat(lift, starts) if len(lift) else lift
 
     def _midpoints(self, idx, o, d, starts):
         nseg = self.sv_._nseg[idx]
@@ -800,6 +831,12 @@ class _StepContext:
             self.active[cn] = True
 
         # 2. Collision: the smallest clearing angle above the current one.
+        cc = act[hit_act]
+        if len(cc):  # first probe: lift the current shape above the tangent plane
+            o, d, _, rep, starts = self.deform(cc, angle=angle[cc], axis=self.axis[cc])
+            k, point, push = self.first_hit_details(cc, o, d, rep, starts)
+            g = self._plane_guess(cc, o + d, rep, starts, point, push, self.axis[cc])
+            self.guess[cc] = np.where(k >= 0, g, self.guess[cc])
         self.collide(batch, np.flatnonzero(hit_act), status)
         if len(cn):
             self.collide(_RigidBatch(self, cn), np.arange(len(cn)), status)
@@ -817,7 +854,7 @@ class _StepContext:
         p, angle = self.prec, self.angle
         c = batch.curves[items]
         th0 = angle[c]
-        k = self.search_angles(batch, items, th0)
+        k = self.search_angles(batch, items, th0, self.guess[c])
         if self.s.mode == "bend":
             # Bending turns the root segment by only 1/n of the angle: curves
             # hit near the root that bending cannot clear turn at the root (as
@@ -835,6 +872,7 @@ class _StepContext:
         ok = k >= 0
         res = c[ok]
         angle[res] = np.minimum(th0[ok] + k[ok] * p, self.max_angle)
+        self.push[res] = angle[res] - th0[ok]
         self.angle_max[res] = np.maximum(self.angle_max[res], angle[res])
         status[res] = Status.COLLIDING
         bad = c[~ok]
@@ -881,8 +919,12 @@ class _StepContext:
                       np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE))
         status[rec] = np.maximum(status[rec], st)
 
-    def search_angles(self, batch, items, th0):
+    def search_angles(self, batch, items, th0, guess=None):
         """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
+
+        ``guess`` (radians, per item) is last frame's increment: colliders move
+        smoothly, so the steps ``k - 1`` and ``k`` around it are probed first
+        (one round); the search continues from whatever bracket that gives.
 
         Returns
         -------
@@ -891,12 +933,33 @@ class _StepContext:
             angle up to ``max_angle`` clears the curve.
         """
         p = self.prec
+        n = len(items)
         kmax = np.maximum(np.ceil((self.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
 
         def test(it, ks):
             return ~batch.hits(items[it], np.minimum(th0[it] + ks * p, self.max_angle))
 
-        return _gallop_bisect(len(items), test, kmax)
+        lo = np.zeros(n, np.int64)
+        hi = np.full(n, -1, np.int64)
+        stride = None
+        if guess is not None:
+            # One round of probes spread around the guess; it leaves a bracket
+            # to bisect, or a floor to gallop on from with a guess-sized stride.
+            kg = np.clip(np.rint(guess / p).astype(np.int64), 1, np.maximum(kmax, 1))
+            it = np.flatnonzero(kmax >= 1)
+            spread = np.array([0.8, 1.0, 1.25, 1.6])
+            probes = np.clip(np.rint(kg[it][:, None] * spread).astype(np.int64), 1,
+                             kmax[it][:, None])
+            probes = np.maximum.accumulate(probes, axis=1)
+            good = test(np.repeat(it, len(spread)), probes.ravel()).reshape(probes.shape)
+            anyg = good.any(axis=1)
+            first = np.argmax(good, axis=1)
+            rows = np.arange(len(it))
+            hi[it[anyg]] = probes[rows, first][anyg]
+            lo[it[anyg]] = np.where(first > 0, probes[rows, np.maximum(first - 1, 0)], 0)[anyg]
+            lo[it[~anyg]] = probes[~anyg, -1]
+            stride = np.maximum(kg // 2, 1)
+        return _gallop_bisect(n, test, kmax, lo=lo, hi=hi, stride=stride)
 
     def _release(self, idx):
         """Curves back at exactly their input shape drop their local state."""
