@@ -373,18 +373,23 @@ class Collider:
         V = self._V.astype(np.float64) - self._center
         F = self._F
         if off_lo > 0:
+            # Face blocks, m faces each: [outer shell, (inner shell,) surface].
+            # Double-sided: shells at +-offset (the inner one faces inward).
+            # Open single-sided: the offset is kept on the front only. Except
+            # for closed single-sided solids the real surface stays in too, so
+            # a curve slipping in between the shells from a rim still collides.
             vn = self._vertex_normals()
+            n = len(self._V)
+            blocks_V = [V + off_lo * vn]
+            blocks_F = [F]
             if self.double_sided:
-                V = np.concatenate([V + off_lo * vn, V - off_lo * vn])
-                F = np.concatenate([F, F[:, ::-1] + len(self._V)])
-            elif self.closed:
-                V = V + off_lo * vn
-            else:
-                # An open single-sided sheet keeps the offset on its front; the
-                # sheet itself stays in, so curves coming from the back still
-                # collide with it (the second copy shares the face normals).
-                V = np.concatenate([V + off_lo * vn, V])
-                F = np.concatenate([F, F + len(self._V)])
+                blocks_V.append(V - off_lo * vn)
+                blocks_F.append(F[:, ::-1] + n)
+            if self.double_sided or not self.closed:
+                blocks_V.append(V)
+                blocks_F.append(F + n * len(blocks_F))
+            V = np.concatenate(blocks_V)
+            F = np.concatenate(blocks_F)
         backend = make_backend(self._backend_name, V, F)
         self.build_count += 1
         self._built = (key, backend, len(self._F))
@@ -408,8 +413,8 @@ class Collider:
         return apply(A, o_wo) + b, apply(A, d_wo)
 
     def _normals_world(self, prim, n_front):
-        idx = np.where(prim >= n_front, prim - n_front, prim)
-        flip = self.double_sided & (prim >= n_front)  # the inner shell faces inward
+        idx = prim % n_front
+        flip = self.double_sided & (prim // n_front == 1)  # the inner shell faces inward
         n_lo = self._face_normals(idx) * np.where(flip, -1.0, 1.0)[:, None]
         n_wo = apply(self._Minv[:3, :3].T, n_lo)  # inverse-transpose for normals
         ln = np.linalg.norm(n_wo, axis=1, keepdims=True)
@@ -545,7 +550,7 @@ class Collider:
                 prim, t = be.hit_details(o[active], d[active], 1.0)
                 hit = prim >= 0
                 active, prim, t = active[hit], prim[hit], t[hit]
-                fn = self._face_normals(np.where(prim >= n_front, prim - n_front, prim))
+                fn = self._face_normals(prim % n_front)
                 front = rot_dot(fn, dirn) < 0
                 balance[active] += np.where(front, -1, 1)
                 o[active] = o[active] + (t * far + step)[:, None] * dirn

@@ -97,7 +97,10 @@ def quat_slerp(p, q, t):
     a = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / np.where(small, 1.0, s))
     b = np.where(small, t, np.sin(t * theta) / np.where(small, 1.0, s))
     out = p * a[:, None] + q * b[:, None]
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    # Exact at the ends: t = 0 is p and t = 1 is q, bit for bit.
+    out = np.where((t == 0)[:, None], p, out)
+    return np.where((t == 1)[:, None], q, out)
 
 
 def rotation_axis(c, d):
