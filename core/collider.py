@@ -506,8 +506,9 @@ class Collider:
         if self._occ_inside_key != (self._version, offset_wo):
             inside[:] = -1
             self._occ_inside_key = (self._version, offset_wo)
-        near = self.near_surface(p_wo, 2.0 * h * float(np.linalg.norm(self._M[:3, :3], 2)),
-                                 offset_wo)
+        # near_surface pads by h + max_edge: a point it calls far has no vertex
+        # within max_edge of its own cell, so no triangle crosses that cell.
+        near = self.near_surface(p_wo, 0.0, offset_wo)
         A, b = self.local_map()
         cell = np.floor((apply(A, p_wo) + b - lo) / h).astype(np.int64)
         in_grid = ((cell >= 0) & (cell < dims)).all(axis=1)

@@ -100,7 +100,7 @@ class BakeJob:
                 )
             except Exception as exc:  # noqa: BLE001 - becomes a report
                 raise BakeError(
-                    f"'{ob.name}' frame {f}: {runtime._describe(exc)} (frames before {f} "
+                    f"'{ob.name}' frame {f}: {runtime.describe(exc)} (frames before {f} "
                     f"are kept; bake again to resume)"
                 ) from exc
             job[3] = f

@@ -26,21 +26,16 @@ from . import runtime
 # ------------------------------------------------------------------ updates
 
 
-def _source_of(self):
-    ob = self.id_data
-    return ob
-
-
 def _invalidate(self, context):
-    runtime.invalidate(_source_of(self), reason="settings changed")
+    runtime.invalidate(self.id_data, reason="settings changed")
 
 
 def _invalidate_colliders(self, context):
-    runtime.invalidate(_source_of(self), reason="colliders changed", colliders=True)
+    runtime.invalidate(self.id_data, reason="colliders changed", colliders=True)
 
 
 def _invalidate_range(self, context):
-    ob = _source_of(self)
+    ob = self.id_data
     s = ob.furcollide
     if s.frame_end < s.frame_start:
         s.frame_end = s.frame_start
@@ -54,13 +49,13 @@ def _invalidate_range(self, context):
 
 
 def _set_memory_limit(self, context):
-    rt = runtime.get_runtime(_source_of(self), create=False)
+    rt = runtime.get_runtime(self.id_data, create=False)
     if rt is not None:
         rt.memory.limit = int(self.memory_limit * 1024 * 1024)
 
 
 def _toggle_result(self, context):
-    runtime.apply_visibility(_source_of(self))
+    runtime.apply_visibility(self.id_data)
 
 
 def _is_mesh(self, ob):
@@ -71,11 +66,54 @@ def _is_hair(self, ob):
     return ob.type == "CURVES"
 
 
-def _stat(name, default=0):
-    def get(self):
-        return runtime.stats_for(self.id_data).get(name, default)
+# ------------------------------------------------------ property factories
+# The solver settings share a few shapes; each factory fixes the shape and
+# leaves the name, default and the artist-facing tooltip to the call.
 
-    return get
+
+def _toggle(name, default, description, update=_invalidate):
+    return BoolProperty(name=name, default=default, update=update, description=description)
+
+
+def _factor(name, default, description):
+    """A 0..1 slider."""
+    return FloatProperty(
+        name=name, default=default, min=0.0, max=1.0, subtype="FACTOR",
+        update=_invalidate, description=description,
+    )
+
+
+def _degrees(name, default, description, **limits):
+    """An angle in degrees (the unit of :class:`core.Settings`)."""
+    limits = {"min": 0.01, "max": 360.0, **limits}
+    return FloatProperty(
+        name=name, default=default, update=_invalidate, description=description, **limits
+    )
+
+
+def _offset(description, update):
+    """A collision offset (world distance)."""
+    return FloatProperty(
+        name="Collision Offset", default=0.0, min=0.0, soft_max=0.1, subtype="DISTANCE",
+        unit="LENGTH", update=update, description=description,
+    )
+
+
+def _hidden(prop, name, default):
+    """Internal bookkeeping, never drawn."""
+    return prop(name=name, default=default, options={"HIDDEN"},
+                description=f"{name} (set by FurCollide, not meant to be edited)")
+
+
+def _stat(name, key, description, prop=IntProperty, **kw):
+    """A read-only statistic of the last frame, served by the runtime registry."""
+
+    default = 0.0 if prop is FloatProperty else 0
+
+    def get(self):
+        return runtime.stats_for(self.id_data).get(key, default)
+
+    return prop(name=name, get=get, description=description, **kw)
 
 
 # ----------------------------------------------------------------- groups
@@ -90,35 +128,24 @@ class FurCollideCollider(PropertyGroup):
         description="Mesh the hair must not pass through. Its evaluated shape is used "
         "every frame, so armatures, shape keys, modifiers and cloth all count",
     )
-    enabled: BoolProperty(
-        name="Enabled",
-        default=True,
+    enabled: _toggle(
+        "Enabled", True,
+        "Collide with this mesh. Turn off to let the hair pass through it",
         update=_invalidate_colliders,
-        description="Collide with this mesh. Turn off to let the hair pass through it",
     )
-    double_sided: BoolProperty(
-        name="Double Sided",
-        default=False,
+    double_sided: _toggle(
+        "Double Sided", False,
+        "Treat the mesh as a thin sheet that blocks hair from both sides (cloth, leaves). "
+        "Off: a closed body with an inside; hair rooted inside it counts as pinched",
         update=_invalidate_colliders,
-        description="Treat the mesh as a thin sheet that blocks hair from both sides "
-        "(cloth, leaves). Off: a closed body with an inside; hair rooted inside it "
-        "counts as pinched",
     )
-    use_offset: BoolProperty(
-        name="Own Offset",
-        default=False,
+    use_offset: _toggle(
+        "Own Offset", False,
+        "Use this collider's own Collision Offset instead of the setup's",
         update=_invalidate_colliders,
-        description="Use this collider's own Collision Offset instead of the setup's",
     )
-    collision_offset: FloatProperty(
-        name="Collision Offset",
-        default=0.0,
-        min=0.0,
-        soft_max=0.1,
-        subtype="DISTANCE",
-        unit="LENGTH",
-        update=_invalidate_colliders,
-        description="Gap kept between the hair and this mesh (needs Own Offset)",
+    collision_offset: _offset(
+        "Gap kept between the hair and this mesh (needs Own Offset)", _invalidate_colliders
     )
 
 
@@ -126,9 +153,9 @@ class FurCollideSettings(PropertyGroup):
     """A FurCollide setup on a source hair object (or the link on its output)."""
 
     # ---------------------------------------------------------- identity
-    is_setup: BoolProperty(name="Is Setup", default=False, options={"HIDDEN"})
-    is_output: BoolProperty(name="Is Output", default=False, options={"HIDDEN"})
-    uid: StringProperty(name="Setup ID", default="", options={"HIDDEN"})
+    is_setup: _hidden(BoolProperty, "Is Setup", False)
+    is_output: _hidden(BoolProperty, "Is Output", False)
+    uid: _hidden(StringProperty, "Setup ID", "")
     source: PointerProperty(
         name="Source",
         type=bpy.types.Object,
@@ -143,24 +170,29 @@ class FurCollideSettings(PropertyGroup):
         description="Hair object that receives the collided curves every frame. "
         "You may add your own modifiers to it (e.g. Interpolate Hair Curves)",
     )
-    enabled: BoolProperty(
-        name="Enabled",
-        default=True,
-        update=_invalidate,
-        description="Solve collisions for this hair. Off: the output simply follows "
-        "the source",
+    enabled: _toggle(
+        "Enabled", True,
+        "Solve collisions for this hair. Off: the output simply follows the source",
     )
-    show_result: BoolProperty(
-        name="Show Result",
-        default=True,
+    show_result: _toggle(
+        "Show Result", True,
+        "Show the collided output in the viewport (on) or the original source hair (off). "
+        "Rendering always uses the output",
         update=_toggle_result,
-        description="Show the collided output in the viewport (on) or the original "
-        "source hair (off). Rendering always uses the output",
     )
 
     # ---------------------------------------------------------- colliders
-    colliders: CollectionProperty(type=FurCollideCollider, name="Colliders")
-    collider_index: IntProperty(name="Active Collider", default=0, min=0)
+    colliders: CollectionProperty(
+        type=FurCollideCollider,
+        name="Colliders",
+        description="Meshes this hair collides with, each with its own options",
+    )
+    collider_index: IntProperty(
+        name="Active Collider",
+        default=0,
+        min=0,
+        description="The collider selected in the list (its options are shown below it)",
+    )
     collider_collection: PointerProperty(
         name="Collider Collection",
         type=bpy.types.Collection,
@@ -168,12 +200,11 @@ class FurCollideSettings(PropertyGroup):
         description="Every mesh in this collection also collides (with the setup's "
         "Collision Offset and the option below)",
     )
-    collection_double_sided: BoolProperty(
-        name="Collection Double Sided",
-        default=False,
+    collection_double_sided: _toggle(
+        "Collection Double Sided", False,
+        "Treat the meshes of the collider collection as thin sheets that block hair from "
+        "both sides",
         update=_invalidate_colliders,
-        description="Treat the meshes of the collider collection as thin sheets "
-        "that block hair from both sides",
     )
 
     # ---------------------------------------------------------- resolution
@@ -191,26 +222,16 @@ class FurCollideSettings(PropertyGroup):
         update=_invalidate,
         description="How a colliding curve is turned out of the mesh",
     )
-    rotation_precision: FloatProperty(
-        name="Rotation Precision",
-        default=0.25,
-        min=0.001,
-        max=45.0,
-        soft_min=0.05,
-        soft_max=5.0,
-        precision=3,
-        update=_invalidate,
-        description="Angle step (degrees) used to search the smallest turn that frees "
-        "a curve. Smaller is more exact and slower",
+    rotation_precision: _degrees(
+        "Rotation Precision", 0.25,
+        "Angle step (degrees) used to search the smallest turn that frees a curve. "
+        "Smaller is more exact and slower",
+        min=0.001, max=45.0, soft_min=0.05, soft_max=5.0, precision=3,
     )
-    max_angle: FloatProperty(
-        name="Max Angle",
-        default=180.0,
-        min=0.01,
-        max=360.0,
-        update=_invalidate,
-        description="Largest turn (degrees) a curve may take. Curves that would need "
-        "more keep their last collision-free shape and are flagged unresolved",
+    max_angle: _degrees(
+        "Max Angle", 180.0,
+        "Largest turn (degrees) a curve may take. Curves that would need more keep their "
+        "last collision-free shape and are flagged unresolved",
     )
     affected_connected_cvs: IntProperty(
         name="Affected Connected CVs",
@@ -219,37 +240,21 @@ class FurCollideSettings(PropertyGroup):
         max=10000,
         soft_max=10,
         update=_invalidate,
-        description="Soft mode: how many points after a colliding segment follow its "
-        "turn",
+        description="Soft mode: how many points after a colliding segment follow its turn",
     )
-    cv_falloff: FloatProperty(
-        name="CV Falloff",
-        default=0.5,
-        min=0.0,
-        max=1.0,
-        subtype="FACTOR",
-        update=_invalidate,
-        description="Soft mode: how quickly the following points stop turning along "
+    cv_falloff: _factor(
+        "CV Falloff", 0.5,
+        "Soft mode: how quickly the following points stop turning along "
         "(0 = they turn fully, 1 = only the colliding segment turns)",
     )
-    attract_to_growth_surface: BoolProperty(
-        name="Attract to Growth Surface",
-        default=False,
-        update=_invalidate,
-        description="Push colliding hair down toward the skin it grows from (pats fur "
-        "or grass flat) instead of away along the collider's surface. Needs the "
-        "hair's Surface object",
+    attract_to_growth_surface: _toggle(
+        "Attract to Growth Surface", False,
+        "Push colliding hair down toward the skin it grows from (pats fur or grass flat) "
+        "instead of away along the collider's surface. Needs the hair's Surface object",
     )
-    collision_offset: FloatProperty(
-        name="Collision Offset",
-        default=0.0,
-        min=0.0,
-        soft_max=0.1,
-        subtype="DISTANCE",
-        unit="LENGTH",
-        update=_invalidate,
-        description="Gap kept between the hair and every collider (a collider may use "
-        "its own)",
+    collision_offset: _offset(
+        "Gap kept between the hair and every collider (a collider may use its own)",
+        _invalidate,
     )
     threads: IntProperty(
         name="Threads",
@@ -262,12 +267,10 @@ class FurCollideSettings(PropertyGroup):
     )
 
     # -------------------------------------------------------------- shrink
-    shrink: BoolProperty(
-        name="Shrink",
-        default=False,
-        update=_invalidate,
-        description="Shorten colliding curves as they turn (Stiff and Bend only); "
-        "reduces fur crossing at very different angles",
+    shrink: _toggle(
+        "Shrink", False,
+        "Shorten colliding curves as they turn (Stiff and Bend only); reduces fur "
+        "crossing at very different angles",
     )
     scale_minimum: FloatProperty(
         name="Scale Minimum",
@@ -278,35 +281,21 @@ class FurCollideSettings(PropertyGroup):
         update=_invalidate,
         description="Shortest a curve may become (fraction of its length)",
     )
-    scale_angle: FloatProperty(
-        name="Scale Angle",
-        default=90.0,
-        min=0.01,
-        max=360.0,
-        update=_invalidate,
-        description="Turn (degrees) at which a curve reaches Scale Minimum; it shrinks "
-        "gradually up to that angle",
+    scale_angle: _degrees(
+        "Scale Angle", 90.0,
+        "Turn (degrees) at which a curve reaches Scale Minimum; it shrinks gradually up "
+        "to that angle",
     )
 
     # ---------------------------------------------------- recovery, plasticity
-    recovery_rate: FloatProperty(
-        name="Recovery Rate",
-        default=0.2,
-        min=0.0,
-        max=1.0,
-        subtype="FACTOR",
-        update=_invalidate,
-        description="How fast freed hair springs back to its groomed shape, per frame "
+    recovery_rate: _factor(
+        "Recovery Rate", 0.2,
+        "How fast freed hair springs back to its groomed shape, per frame "
         "(1 = at once, 0 = never). Recovery stops where it would collide again",
     )
-    plasticity: FloatProperty(
-        name="Plasticity",
-        default=0.0,
-        min=0.0,
-        max=1.0,
-        subtype="FACTOR",
-        update=_invalidate,
-        description="How much of the deepest push the hair keeps after contact "
+    plasticity: _factor(
+        "Plasticity", 0.0,
+        "How much of the deepest push the hair keeps after contact "
         "(0 = recovers fully, 1 = keeps the imprint, like trampled grass)",
     )
 
@@ -324,12 +313,10 @@ class FurCollideSettings(PropertyGroup):
         description="What hair does when its root is trapped inside a closed collider "
         "(e.g. an arm pressed into the body)",
     )
-    recover_pinched: BoolProperty(
-        name="Recover Pinched Fur",
-        default=True,
-        update=_invalidate,
-        description="Let hair recover once it is no longer pinched. Off: it keeps the "
-        "shape it had when the pinch ended",
+    recover_pinched: _toggle(
+        "Recover Pinched Fur", True,
+        "Let hair recover once it is no longer pinched. Off: it keeps the shape it had "
+        "when the pinch ended",
     )
 
     # ------------------------------------------------------ per-curve enable
@@ -372,63 +359,43 @@ class FurCollideSettings(PropertyGroup):
         description="Megabytes of RAM the playback cache of this setup may use. Past "
         "it, old frames are dropped (bake to keep everything)",
     )
-    is_baked: BoolProperty(name="Baked", default=False, options={"HIDDEN"})
-    bake_path: StringProperty(name="Bake Path", default="", options={"HIDDEN"})
+    is_baked: _hidden(BoolProperty, "Baked", False)
+    bake_path: _hidden(StringProperty, "Bake Path", "")
 
     # --------------------------------------------------- read-only statistics
-    stat_frame: IntProperty(name="Frame", get=_stat("frame"), description="Frame of the stats")
-    stat_colliding: IntProperty(
-        name="Colliding", get=_stat("colliding"), description="Curves turned out of a collider"
+    stat_frame: _stat("Frame", "frame", "Frame the statistics below belong to")
+    stat_colliding: _stat("Colliding", "colliding", "Curves turned out of a collider")
+    stat_recovering: _stat("Recovering", "recovering", "Curves springing back to their groom")
+    stat_pinched: _stat("Pinched", "pinched", "Curves whose root is trapped inside a collider")
+    stat_unresolved: _stat(
+        "Unresolved", "unresolved", "Curves that could not be freed within Max Angle"
     )
-    stat_recovering: IntProperty(
-        name="Recovering", get=_stat("recovering"), description="Curves springing back"
-    )
-    stat_pinched: IntProperty(
-        name="Pinched", get=_stat("pinched"), description="Curves whose root is trapped"
-    )
-    stat_unresolved: IntProperty(
-        name="Unresolved",
-        get=_stat("unresolved"),
-        description="Curves that could not be freed within Max Angle",
-    )
-    stat_disabled: IntProperty(
-        name="Disabled", get=_stat("disabled"), description="Curves switched off"
-    )
-    stat_solve_ms: FloatProperty(
-        name="Solve Time",
-        get=_stat("solve_ms", 0.0),
-        precision=1,
-        description="Milliseconds the last solved frame took",
+    stat_disabled: _stat("Disabled", "disabled", "Curves switched off by the enable attribute")
+    stat_solve_ms: _stat(
+        "Solve Time", "solve_ms", "Milliseconds the last solved frame took",
+        prop=FloatProperty, precision=1,
     )
     status_message: StringProperty(
-        name="Status", get=lambda self: runtime.status_for(self.id_data)[1]
+        name="Status",
+        get=lambda self: runtime.status_for(self.id_data)[1],
+        description="What FurCollide did on the last frame, or what went wrong",
     )
     is_outdated: BoolProperty(
-        name="Outdated", get=lambda self: runtime.is_outdated(self.id_data)
+        name="Outdated",
+        get=lambda self: runtime.is_outdated(self.id_data),
+        description="The shown frame could not be solved from the previous one: play from "
+        "the start frame or bake",
     )
 
     def to_core_kwargs(self) -> dict:
         """Keyword arguments of :class:`core.Settings` for these properties."""
-        return {
-            "mode": self.mode,
-            "rotation_precision": float(self.rotation_precision),
-            "max_angle": float(self.max_angle),
-            "affected_connected_cvs": int(self.affected_connected_cvs),
-            "cv_falloff": float(self.cv_falloff),
-            "attract_to_growth_surface": bool(self.attract_to_growth_surface),
-            "shrink": bool(self.shrink),
-            "scale_minimum": float(self.scale_minimum),
-            "scale_angle": float(self.scale_angle),
-            "recovery_rate": float(self.recovery_rate),
-            "plasticity": float(self.plasticity),
-            "pinch_resolution": self.pinch_resolution,
-            "recover_pinched": bool(self.recover_pinched),
-            "collision_offset": float(self.collision_offset),
-            "threads": int(self.threads) or None,
-        }
+        kw = {name: getattr(self, name) for name in SOLVER_PROPERTIES}
+        kw["threads"] = self.threads or None
+        return kw
 
 
-#: Names of the solver properties (presets store exactly these).
+#: Names of the :class:`core.Settings` fields stored here (presets store exactly
+#: these; ``threads`` is a machine setting, not part of a look).
 SOLVER_PROPERTIES = (
     "mode",
     "rotation_precision",
@@ -436,7 +403,6 @@ SOLVER_PROPERTIES = (
     "affected_connected_cvs",
     "cv_falloff",
     "attract_to_growth_surface",
-    "collision_offset",
     "shrink",
     "scale_minimum",
     "scale_angle",
@@ -444,6 +410,7 @@ SOLVER_PROPERTIES = (
     "plasticity",
     "pinch_resolution",
     "recover_pinched",
+    "collision_offset",
 )
 
 classes = (FurCollideCollider, FurCollideSettings)

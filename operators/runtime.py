@@ -223,7 +223,7 @@ def _schedule_refresh(name: str) -> None:
         try:
             evaluate(scene, bpy.context.evaluated_depsgraph_get(), ob)
         except Exception as exc:  # noqa: BLE001
-            set_status(ob, "ERROR", _describe(exc))
+            set_status(ob, "ERROR", describe(exc))
         finally:
             _busy = False
         return None
@@ -323,6 +323,11 @@ def apply_visibility(ob) -> None:
             pass
 
 
+def dependency_group_name(ob) -> str:
+    """Name of the node group of the output's dependency modifier."""
+    return f".FurCollide Inputs {ob.furcollide.uid[:8]}"
+
+
 def update_dependencies(ob) -> None:
     """(Re)build the output's pass-through dependency modifier.
 
@@ -337,7 +342,7 @@ def update_dependencies(ob) -> None:
     out = s.output
     if out is None:
         return
-    name = f".FurCollide Inputs {s.uid[:8]}"
+    name = dependency_group_name(ob)
     ng = bpy.data.node_groups.get(name)
     if ng is None or ng.bl_idname != "GeometryNodeTree":
         ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
@@ -847,8 +852,8 @@ def on_frame_change_post(scene, depsgraph=None):
             except Exception as exc:  # noqa: BLE001 - the handler must never raise
                 rt = get_runtime(ob)
                 if rt is not None:
-                    rt.error = _describe(exc)
-                set_status(ob, "ERROR", _describe(exc))
+                    rt.error = describe(exc)
+                set_status(ob, "ERROR", describe(exc))
                 if os.environ.get("FURCOLLIDE_DEBUG"):
                     traceback.print_exc()
     finally:
@@ -890,7 +895,7 @@ def on_load_post(*_args):
     registry.clear()
 
 
-def _describe(exc: Exception) -> str:
+def describe(exc: Exception) -> str:
     core = None
     try:
         core = _core()
