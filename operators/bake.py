@@ -16,7 +16,14 @@ import bpy
 from bpy.types import Operator
 
 from . import cache, runtime
-from .setup import active_setup, backend_message
+from .base import (
+    SetupOperator,
+    active_setup,
+    backend_message,
+    refresh,
+    refuse,
+    reports_errors,
+)
 
 #: Running interactive bakes: scene name -> (frames done, total). Drawn by the panel.
 PROGRESS: dict = {}
@@ -115,6 +122,20 @@ class BakeJob:
         self.frames_done += 1
         self.frame += 1
 
+    def run(self) -> list:
+        """Bake every frame now; returns the baked sources.
+
+        A failed frame keeps every finished frame (the next bake resumes)
+        and re-raises its :class:`BakeError`.
+        """
+        try:
+            while not self.done:
+                self.step()
+        except BakeError:
+            self.finish(cancelled=True)
+            raise
+        return self.finish()
+
     def finish(self, cancelled=False) -> list:
         """Mark finished setups baked, restore the frame; returns the baked sources."""
         baked = []
@@ -154,23 +175,21 @@ class _BakeBase:
     def _start(self, context, verbose):
         try:
             self._job = BakeJob(context.scene, self.sources(context), verbose=verbose)
-        except BakeError as exc:
-            self.report({"ERROR"}, str(exc))
+        except Exception as exc:  # noqa: BLE001 - BakeError or unexpected: a report
+            self.report({"ERROR"}, runtime.describe(exc))
             return False
         return True
 
+    @reports_errors
     def execute(self, context):
         if not self._start(context, verbose=True):
             return {"CANCELLED"}
         job = self._job
         try:
-            while not job.done:
-                job.step()
+            baked = job.run()
         except BakeError as exc:
-            job.finish(cancelled=True)
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        baked = job.finish()
         self.report(
             {"INFO"},
             f"FurCollide: baked {', '.join(o.name for o in baked)} "
@@ -230,7 +249,7 @@ class _BakeBase:
         return self._job.finish(cancelled=cancelled)
 
 
-class FURCOLLIDE_OT_bake(_BakeBase, Operator):
+class FURCOLLIDE_OT_bake(_BakeBase, SetupOperator, Operator):
     """Solve the setup's frame range in order and write it to the disk cache next to the
     saved .blend file. A cancelled or crashed bake resumes from its last finished frame"""
 
@@ -239,22 +258,12 @@ class FURCOLLIDE_OT_bake(_BakeBase, Operator):
     bl_options = {"REGISTER"}
 
     @classmethod
-    def poll(cls, context):
-        src = active_setup(context)
-        if src is None:
-            cls.poll_message_set("Active object has no FurCollide setup")
-            return False
+    def refusal(cls, context, src):
         if src.furcollide.is_baked:
-            cls.poll_message_set("Already baked: Free Bake first")
-            return False
+            return "Already baked: Free Bake first"
         if not src.furcollide.enabled:
-            cls.poll_message_set("The setup is disabled: enable it to bake")
-            return False
-        msg = backend_message()
-        if msg:
-            cls.poll_message_set(msg)
-            return False
-        return True
+            return "The setup is disabled: enable it to bake"
+        return backend_message()
 
     def sources(self, context):
         return [active_setup(context)]
@@ -270,13 +279,9 @@ class FURCOLLIDE_OT_bake_all(_BakeBase, Operator):
     @classmethod
     def poll(cls, context):
         if context.scene is None or not _bakeable(context):
-            cls.poll_message_set("No unbaked FurCollide setup in this scene")
-            return False
+            return refuse(cls, "No unbaked FurCollide setup in this scene")
         msg = backend_message()
-        if msg:
-            cls.poll_message_set(msg)
-            return False
-        return True
+        return refuse(cls, msg) if msg else True
 
     def sources(self, context):
         return _bakeable(context)
@@ -299,7 +304,7 @@ def _has_bake(ob) -> bool:
     return bool(s.is_baked or s.bake_path)
 
 
-class FURCOLLIDE_OT_free_bake(Operator):
+class FURCOLLIDE_OT_free_bake(SetupOperator, Operator):
     """Delete this setup's bake files (only the files FurCollide wrote) so it can be
     changed and simulated again"""
 
@@ -308,20 +313,14 @@ class FURCOLLIDE_OT_free_bake(Operator):
     bl_options = {"REGISTER"}
 
     @classmethod
-    def poll(cls, context):
-        src = active_setup(context)
-        if src is None:
-            cls.poll_message_set("Active object has no FurCollide setup")
-            return False
-        if not _has_bake(src):
-            cls.poll_message_set("Nothing baked")
-            return False
-        return True
+    def refusal(cls, context, src):
+        return "" if _has_bake(src) else "Nothing baked"
 
+    @reports_errors
     def execute(self, context):
         src = active_setup(context)
         n = free_bake(src)
-        _reevaluate(context)
+        refresh(context)
         self.report({"INFO"}, f"FurCollide: freed the bake of '{src.name}' ({n} files)")
         return {"FINISHED"}
 
@@ -336,10 +335,10 @@ class FURCOLLIDE_OT_free_bake_all(Operator):
     @classmethod
     def poll(cls, context):
         if context.scene is None or not any(_has_bake(o) for o in runtime.setups(context.scene)):
-            cls.poll_message_set("No baked FurCollide setup in this scene")
-            return False
+            return refuse(cls, "No baked FurCollide setup in this scene")
         return True
 
+    @reports_errors
     def execute(self, context):
         n = 0
         names = []
@@ -347,14 +346,9 @@ class FURCOLLIDE_OT_free_bake_all(Operator):
             if _has_bake(ob):
                 n += free_bake(ob)
                 names.append(ob.name)
-        _reevaluate(context)
+        refresh(context)
         self.report({"INFO"}, f"FurCollide: freed {', '.join(names)} ({n} files)")
         return {"FINISHED"}
-
-
-def _reevaluate(context):
-    scene = context.scene
-    scene.frame_set(scene.frame_current, subframe=scene.frame_subframe)
 
 
 classes = (

@@ -118,13 +118,10 @@ def run(argv) -> int:
     try:
         job = bake.BakeJob(scene, todo, verbose=True)
         try:
-            while not job.done:
-                job.step()
+            baked = job.run()
         except bake.BakeError:
-            job.finish(cancelled=True)
             _save(args)  # keep bake_path so the next run resumes
             raise
-        baked = job.finish()
     except bake.BakeError as exc:
         print(f"furcollide: bake failed: {exc}", file=sys.stderr)
         return EXIT_FAILED

@@ -13,8 +13,8 @@ from bl_operators.presets import AddPresetBase
 from bl_ui.utils import PresetPanel
 from bpy.types import Menu, Operator, Panel
 
+from ..operators.base import SetupOperator
 from ..operators.properties import SOLVER_PROPERTIES
-from ..operators.setup import active_setup
 
 PRESET_SUBDIR = "furcollide"
 SHIPPED_DIR = os.path.join(os.path.dirname(__file__), "preset_files")
@@ -36,7 +36,7 @@ class FURCOLLIDE_PT_presets(PresetPanel, Panel):
     preset_add_operator = "furcollide.preset_add"
 
 
-class FURCOLLIDE_OT_preset_add(AddPresetBase, Operator):
+class FURCOLLIDE_OT_preset_add(AddPresetBase, SetupOperator, Operator):
     """Add or remove a FurCollide preset from the current solver settings"""
 
     bl_idname = "furcollide.preset_add"
@@ -48,13 +48,6 @@ class FURCOLLIDE_OT_preset_add(AddPresetBase, Operator):
         "settings = fc.source.furcollide if fc.is_output and fc.source else fc",
     ]
     preset_values = [f"settings.{name}" for name in SOLVER_PROPERTIES]
-
-    @classmethod
-    def poll(cls, context):
-        if active_setup(context) is None:
-            cls.poll_message_set("Active object has no FurCollide setup")
-            return False
-        return True
 
 
 def install_shipped_presets() -> list[str]:
