@@ -1061,16 +1061,22 @@ class _RigidBatch:
             self.w = np.ones(len(seg))
         self.length = np.sqrt(rot.dot(v, v))
         self.root = ctx.root_mask(len(seg), starts)
+        # Uniform CV counts (the usual groom): keep (curves, segments, 3) blocks.
+        ns = int(self.cnt[0]) if len(curves) else 0
+        self.ns = ns if len(curves) and (self.cnt == ns).all() else 0
         self.per_col = []
         for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
             m = cand[curves]
             if not m.any():
                 continue
             A, b = c.local_map()
-            self.per_col.append(
-                (c, off, m, rot.apply(A, ctx.roots[curves]) + b, rot.apply(A, Y),
-                 rot.apply(A, V0), rot.apply(A, X))
-            )
+            terms = [rot.apply(A, x) for x in (Y, V0, X)]
+            if self.ns:
+                terms = [x.reshape(-1, self.ns, 3) for x in terms]
+            self.per_col.append((c, off, m, rot.apply(A, ctx.roots[curves]) + b, *terms))
+        if self.ns:
+            self.w = self.w.reshape(-1, self.ns)
+            self.length = self.length.reshape(-1, self.ns)
 
     def hits(self, items, theta):
         """Does curve ``curves[items[i]]`` turned by ``theta[i]`` hit a collider.
@@ -1081,6 +1087,8 @@ class _RigidBatch:
         hit = np.zeros(n, bool)
         if n == 0:
             return hit
+        if self.ns:
+            return self._hits_uniform(items, theta, hit)
         ctx = self.ctx
         cnt = self.cnt[items]
         first = np.cumsum(cnt) - cnt
@@ -1115,6 +1123,42 @@ class _RigidBatch:
                                             ctx.threads)
             ctx.n_rays += int(rays.sum())
             hit |= np.logical_or.reduceat(h, first)
+        return hit
+
+    def _hits_uniform(self, items, theta, hit):
+        """:meth:`hits` for curves that all have ``self.ns`` segments."""
+        ctx = self.ctx
+        ns = self.ns
+        a = theta[:, None] * self.w[items]  # (n, ns)
+        cos, sin = np.cos(a)[..., None], np.sin(a)[..., None]
+        length = self.length[items]
+        scale = None
+        if ctx.s.shrink:
+            scale = 1.0 - (1.0 - ctx.s.scale_minimum) * np.minimum(
+                a / np.deg2rad(ctx.s.scale_angle), 1.0)
+            length = length * scale
+        ext = ctx.eps_abs / np.maximum(length, 1e-300)
+        back = ext.copy()
+        back[:, 0] = 0.0  # roots never move: the root segment is not grown backward
+        grow = (1.0 + back + ext)[..., None]
+        back = back[..., None]
+        for c, off, m, root_lo, Y, V0, X in self.per_col:
+            mi = m[items]
+            if not mi.any():
+                continue
+            it = items if mi.all() else items[mi]
+            sub = slice(None) if mi.all() else mi
+            d = Y[it] + V0[it] * cos[sub] + X[it] * sin[sub]
+            if scale is not None:
+                d *= scale[sub][..., None]
+            o = np.cumsum(d, axis=1)
+            o -= d
+            o += root_lo[it][:, None, :]
+            o -= back[sub] * d
+            d *= grow[sub]
+            h = c.segment_hits_local(o.reshape(-1, 3), d.reshape(-1, 3), off, ctx.threads)
+            ctx.n_rays += len(h)
+            hit[sub] |= h.reshape(-1, ns).any(axis=1)
         return hit
 
 

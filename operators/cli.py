@@ -55,6 +55,14 @@ def _frames(text):
 def run(argv) -> int:
     """Entry point of the CLI command; returns the process exit code."""
     try:
+        return _run(argv)
+    except Exception as exc:  # noqa: BLE001 - a farm needs an exit code, not a traceback
+        print(f"furcollide: failed: {runtime.describe(exc)}", file=sys.stderr)
+        return EXIT_FAILED
+
+
+def _run(argv) -> int:
+    try:
         args = _parser().parse_args(list(argv))
     except SystemExit as exc:  # argparse exits on --help / errors
         return EXIT_OK if exc.code == 0 else EXIT_USAGE

@@ -8,6 +8,7 @@ Read-only statistics are computed properties (``get=``) served by the
 runtime registry, so the frame handler never writes RNA data on the source.
 """
 
+import functools
 
 import bpy
 from bpy.props import (
@@ -24,16 +25,32 @@ from bpy.types import PropertyGroup
 from . import runtime
 
 # ------------------------------------------------------------------ updates
+# Update callbacks run inside Blender's UI: like the frame handler, they never
+# raise (a failure is one console line; the next frame re-checks everything).
 
 
+def _never_raises(update):
+    @functools.wraps(update)
+    def wrapper(self, context):
+        try:
+            update(self, context)
+        except Exception as exc:  # noqa: BLE001
+            print(f"FurCollide: {update.__name__.strip('_')} failed: {runtime.describe(exc)}")
+
+    return wrapper
+
+
+@_never_raises
 def _invalidate(self, context):
     runtime.invalidate(self.id_data, reason="settings changed")
 
 
+@_never_raises
 def _invalidate_colliders(self, context):
     runtime.invalidate(self.id_data, reason="colliders changed", colliders=True)
 
 
+@_never_raises
 def _invalidate_range(self, context):
     ob = self.id_data
     s = ob.furcollide
@@ -48,12 +65,14 @@ def _invalidate_range(self, context):
         runtime.invalidate(ob, reason="frame range changed", from_frame=s.frame_start - 1)
 
 
+@_never_raises
 def _set_memory_limit(self, context):
     rt = runtime.get_runtime(self.id_data, create=False)
     if rt is not None:
         rt.memory.limit = int(self.memory_limit * 1024 * 1024)
 
 
+@_never_raises
 def _toggle_result(self, context):
     runtime.apply_visibility(self.id_data)
 

@@ -222,8 +222,8 @@ def _schedule_refresh(name: str) -> None:
         _busy = True
         try:
             evaluate(scene, bpy.context.evaluated_depsgraph_get(), ob)
-        except Exception as exc:  # noqa: BLE001
-            set_status(ob, "ERROR", describe(exc))
+        except Exception as exc:  # noqa: BLE001 - a timer must never raise either
+            record_error(ob, exc)
         finally:
             _busy = False
         return None
@@ -396,31 +396,41 @@ def read_inputs(ob, depsgraph) -> Inputs:
     return Inputs(Pw, offs, key, m_out_inv, mask, warning)
 
 
+def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> ColliderEntry:
+    """The core Collider of mesh object ``o`` at this frame.
+
+    ``entry`` (from the previous frame) is kept while the evaluated mesh has the
+    same topology and options: only its vertices and matrix are updated, so a
+    rigid collider never rebuilds its BVH. Otherwise a new entry is built.
+    """
+    oe = o.evaluated_get(depsgraph)
+    me = oe.data
+    key = bridge.mesh_topology_key(me)
+    V = bridge.mesh_vertices(me)
+    M = bridge.matrix(oe)
+    if (
+        entry is None
+        or entry.key != key
+        or entry.double_sided != double_sided
+        or entry.offset != offset
+    ):
+        col = _core().Collider(
+            V, bridge.mesh_triangles(me), double_sided=double_sided, matrix=M,
+            offset=offset, drop_degenerate=True, name=o.name,
+        )
+        return ColliderEntry(col, key, double_sided, offset)
+    entry.collider.vertices = V
+    entry.collider.matrix = M
+    return entry
+
+
 def _collider_list(ob, rt, depsgraph):
-    core = _core()
-    cols, alive = [], set()
+    cols = {}
     for o, ds, off in collider_objects(ob, depsgraph.scene):
-        oe = o.evaluated_get(depsgraph)
-        me = oe.data
-        key = bridge.mesh_topology_key(me)
-        V = bridge.mesh_vertices(me)
-        M = bridge.matrix(oe)
         uid = o.session_uid
-        alive.add(uid)
-        e = rt.colliders.get(uid)
-        if e is None or e.key != key or e.double_sided != ds or e.offset != off:
-            F = bridge.mesh_triangles(me)
-            col = core.Collider(
-                V, F, double_sided=ds, matrix=M, offset=off, drop_degenerate=True, name=o.name
-            )
-            rt.colliders[uid] = e = ColliderEntry(col, key, ds, off)
-        else:
-            e.collider.vertices = V
-            e.collider.matrix = M
-        cols.append(e.collider)
-    for uid in set(rt.colliders) - alive:
-        del rt.colliders[uid]
-    return cols
+        cols[uid] = _sync_collider(rt.colliders.get(uid), o, depsgraph, ds, off)
+    rt.colliders = cols  # forgets deleted colliders
+    return [e.collider for e in cols.values()]
 
 
 def _growth(ob, rt, settings, depsgraph):
@@ -432,20 +442,8 @@ def _growth(ob, rt, settings, depsgraph):
             "Attract to Growth Surface / Put to Growth Surface need the hair's Surface "
             "object (Object Data > Surface)"
         )
-    oe = surf.evaluated_get(depsgraph)
-    me = oe.data
-    key = bridge.mesh_topology_key(me)
-    V = bridge.mesh_vertices(me)
-    M = bridge.matrix(oe)
-    e = rt.growth
-    if e is None or e.key != key:
-        F = bridge.mesh_triangles(me)
-        col = _core().Collider(V, F, matrix=M, drop_degenerate=True, name=surf.name)
-        rt.growth = e = ColliderEntry(col, key, False, None)
-    else:
-        e.collider.vertices = V
-        e.collider.matrix = M
-    return e.collider
+    rt.growth = _sync_collider(rt.growth, surf, depsgraph)
+    return rt.growth.collider
 
 
 def _ensure_solver(ob, rt, inp):
@@ -464,18 +462,15 @@ def _ensure_solver(ob, rt, inp):
     return rt.solver
 
 
-def _stats(res, frame, source="solved") -> dict:
-    st = res.status
-    return {
-        "frame": int(frame),
-        "colliding": int(np.count_nonzero(st == 1)),
-        "recovering": int(np.count_nonzero(st == 2)),
-        "pinched": int(np.count_nonzero(st == 3)),
-        "unresolved": int(np.count_nonzero(st == 4)),
-        "disabled": int(np.count_nonzero(st == 5)),
-        "solve_ms": float(res.timings.get("total", 0.0)),
-        "source": source,
-    }
+#: Panel statistics: curve counts per core Status code (0 = free is not counted).
+_STATUS_NAMES = ("colliding", "recovering", "pinched", "unresolved", "disabled")
+
+
+def _stats(status, frame, solve_ms=0.0, source="solved") -> dict:
+    counts = np.bincount(status.astype(np.intp, copy=False), minlength=6)
+    stats = {name: int(counts[code]) for code, name in enumerate(_STATUS_NAMES, 1)}
+    stats.update(frame=int(frame), solve_ms=float(solve_ms), source=source)
+    return stats
 
 
 def _write(ob, inp, points_world, status) -> None:
@@ -652,7 +647,7 @@ def evaluate(scene, depsgraph, ob) -> str:
             rt.solver_frame = None
             return _hold(ob, rt, inp, f, reason=str(exc))
     res = _step(ob, rt, solver, inp, depsgraph)
-    stats = _stats(res, f)
+    stats = _stats(res.status, f, res.timings.get("total", 0.0))
     rt.memory.put(f, inp.points, res.points, res.status, inp.offsets, solver.state, stats)
     rt.solver_frame = f
     if rt.hold is None or f >= rt.hold[0]:
@@ -717,16 +712,7 @@ def _evaluate_baked(ob, rt, inp, f, level, msg, depsgraph):
         return "topology"
     _sync_output(ob, inp, depsgraph)
     _write(ob, inp, points, status)
-    rt.stats = {
-        "frame": int(fe),
-        "colliding": int(np.count_nonzero(status == 1)),
-        "recovering": int(np.count_nonzero(status == 2)),
-        "pinched": int(np.count_nonzero(status == 3)),
-        "unresolved": int(np.count_nonzero(status == 4)),
-        "disabled": int(np.count_nonzero(status == 5)),
-        "solve_ms": 0.0,
-        "source": "bake",
-    }
+    rt.stats = _stats(status, fe, source="bake")
     if fe == min(f, s.frame_end):
         rt.outdated = False
         set_status(ob, level, msg)
@@ -812,7 +798,7 @@ def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
     cache.write_frame(directory, f, res.points, res.status, inp.offsets, state, rt.memory.sparse)
     _write(ob, inp, res.points, res.status)
     rt.solver_frame = f
-    rt.stats = _stats(res, f, "bake")
+    rt.stats = _stats(res.status, f, res.timings.get("total", 0.0), "bake")
     return rt.stats
 
 
@@ -850,14 +836,22 @@ def on_frame_change_post(scene, depsgraph=None):
             try:
                 evaluate(scene, depsgraph, ob)
             except Exception as exc:  # noqa: BLE001 - the handler must never raise
-                rt = get_runtime(ob)
-                if rt is not None:
-                    rt.error = describe(exc)
-                set_status(ob, "ERROR", describe(exc))
-                if os.environ.get("FURCOLLIDE_DEBUG"):
-                    traceback.print_exc()
+                record_error(ob, exc)
+    except Exception as exc:  # noqa: BLE001 - not even while listing the setups
+        print(f"FurCollide: frame handler failed: {describe(exc)}", flush=True)
     finally:
         _busy = False
+
+
+def record_error(ob, exc: Exception) -> None:
+    """A failed frame of the setup on ``ob``: its status message plus one console line
+    (a traceback too with ``FURCOLLIDE_DEBUG`` set)."""
+    rt = get_runtime(ob)
+    if rt is not None:
+        rt.error = describe(exc)
+    set_status(ob, "ERROR", describe(exc))
+    if os.environ.get("FURCOLLIDE_DEBUG"):
+        traceback.print_exception(exc)
 
 
 @persistent

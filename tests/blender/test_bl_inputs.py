@@ -70,8 +70,6 @@ def _generator_modifier(hair):
     resample.inputs["Count"].default_value = 6
     inst = ng.nodes.new("GeometryNodeInstanceOnPoints")
     real = ng.nodes.new("GeometryNodeRealizeInstances")
-    to_hair = ng.nodes.new("GeometryNodeCurveToMesh")  # placeholder, unused
-    ng.nodes.remove(to_hair)
     ng.links.new(line.outputs[0], resample.inputs[0])
     ng.links.new(grid.outputs[0], inst.inputs["Points"])
     ng.links.new(resample.outputs[0], inst.inputs["Instance"])
