@@ -1,0 +1,211 @@
+"""Shared helpers of the fur pipeline: input checks and curve layout.
+
+Curves use Blender's layout: ``points`` (P, 3) and ``offsets`` (C+1,) int,
+curve ``i`` is ``points[offsets[i]:offsets[i + 1]]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ColliderError, InputError
+
+
+def check_curves(points, offsets, name="points"):
+    """Validate and return ``(points float64 (P, 3), offsets int64 (C+1,))``.
+
+    Raises
+    ------
+    InputError
+        Malformed arrays; the message names the curve or point at fault.
+    """
+    try:
+        off = np.asarray(offsets)
+    except Exception as exc:
+        raise InputError(f"offsets must be a 1-D integer array: {exc}") from None
+    if off.ndim != 1 or len(off) < 1:
+        raise InputError(f"offsets must be a 1-D array of C+1 integers, got shape {off.shape}")
+    if not np.issubdtype(off.dtype, np.integer):
+        raise InputError(f"offsets must be integers, got dtype {off.dtype}")
+    off = off.astype(np.int64)
+    if off[0] != 0:
+        raise InputError(f"offsets must start at 0, got {int(off[0])}")
+    sizes = np.diff(off)
+    if (sizes < 2).any():
+        i = int(np.argmax(sizes < 2))
+        raise InputError(f"curve {i} has {int(sizes[i])} points; every curve needs at least 2")
+    pts = as_points(points, name)
+    if len(pts) != off[-1]:
+        raise InputError(f"{name} has {len(pts)} rows but offsets describe {int(off[-1])} points")
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        c = int(np.searchsorted(off, i, "right") - 1)
+        raise InputError(f"{name}: point {i} (curve {c}) is not finite: {pts[i].tolist()}")
+    return pts, off
+
+
+def as_points(points, name="points"):
+    """(k, 3) float64 array (no finiteness check)."""
+    try:
+        pts = np.asarray(points)
+    except Exception as exc:
+        raise InputError(f"{name} must be a (k, 3) float array: {exc}") from None
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise InputError(f"{name} must have shape (k, 3), got {pts.shape}")
+    if not (np.issubdtype(pts.dtype, np.floating) or np.issubdtype(pts.dtype, np.integer)):
+        raise InputError(f"{name} must be numeric, got dtype {pts.dtype}")
+    return pts.astype(np.float64)
+
+
+def check_finite(a, name, off=None):
+    a = np.asarray(a, np.float64)
+    bad = ~np.isfinite(a.reshape(len(a), -1)).all(axis=1) if a.ndim > 1 else ~np.isfinite(a)
+    if bad.any():
+        i = int(np.argmax(bad))
+        where = f"row {i}"
+        if off is not None:
+            where += f" (curve {int(np.searchsorted(off, i, 'right') - 1)})"
+        raise InputError(f"{name}: {where} is not finite")
+    return a
+
+
+def check_surface(V, F, name="surface"):
+    """Validate a triangle mesh; return ``(V float64 (n, 3), F int64 (m, 3))``.
+
+    Raises
+    ------
+    ColliderError
+        Empty, non-finite or malformed mesh, indices out of range.
+    """
+    try:
+        V = np.asarray(V, np.float64)
+        F = np.asarray(F)
+    except Exception as exc:
+        raise ColliderError(f"{name} must be (n, 3) vertices and (m, 3) faces: {exc}") from None
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ColliderError(f"{name} vertices must have shape (n, 3), got {V.shape}")
+    if F.size == 0:
+        raise ColliderError(f"{name} has no triangle")
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise ColliderError(f"{name} faces must have shape (m, 3) (triangles), got {F.shape}")
+    if not np.issubdtype(F.dtype, np.integer):
+        raise ColliderError(f"{name} faces must be integers, got dtype {F.dtype}")
+    bad = ~np.isfinite(V).all(axis=1)
+    if bad.any():
+        raise ColliderError(f"{name}: vertex {int(np.argmax(bad))} is not finite")
+    F = F.astype(np.int64)
+    bad = ((F < 0) | (F >= len(V))).any(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ColliderError(
+            f"{name}: face {i} {F[i].tolist()} indexes a vertex out of range "
+            f"(the mesh has {len(V)} vertices)"
+        )
+    return V, F
+
+
+def triangle_areas(V, F):
+    """(m,) float64 triangle areas."""
+    a = V[F[:, 0]]
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - a, V[F[:, 2]] - a), axis=1)
+
+
+def degenerate_faces(V, F, rel=1e-12):
+    """(m,) bool: zero-area (relative to the mesh's size) or repeated-vertex faces."""
+    diag = float(np.linalg.norm(V.max(0) - V.min(0))) or 1.0
+    rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    return rep | (triangle_areas(V, F) <= rel * diag**2)
+
+
+def layout(off):
+    """Per-point indices of the layout.
+
+    Returns
+    -------
+    curve : (P,) int64
+        Curve of each point.
+    index : (P,) int64
+        Index of each point within its curve (0 = root).
+    seg_start : (S,) int64
+        First point of each segment (every point but the tips).
+    """
+    P = int(off[-1])
+    sizes = np.diff(off)
+    curve = np.repeat(np.arange(len(sizes)), sizes)
+    index = np.arange(P) - off[curve]
+    is_tip = np.zeros(P, bool)
+    is_tip[off[1:] - 1] = True
+    return curve, index, np.flatnonzero(~is_tip)
+
+
+def segmented_cumsum(x, off):
+    """Cumulative sum of rows of ``x`` restarting at every curve (inclusive).
+
+    ``x`` is per point (P, ...); the result at point j of a curve is
+    ``x[root] + ... + x[j]`` of that curve. Computed on a padded
+    (C, max_len, ...) array so rounding never carries across curves.
+    """
+    sizes = np.diff(off)
+    C = len(sizes)
+    if C == 0:
+        return np.zeros_like(x, dtype=np.float64)
+    curve = np.repeat(np.arange(C), sizes)
+    index = np.arange(len(x)) - off[curve]
+    pad = np.zeros((C, int(sizes.max())) + x.shape[1:])
+    pad[curve, index] = x
+    return np.cumsum(pad, axis=1)[curve, index]
+
+
+def arc_length(points, off):
+    """Normalized arc length per point: 0 at roots, 1 at tips.
+
+    Returns
+    -------
+    s : (P,) float64
+    seg_len : (P,) float64
+        Length of the segment ending at each point (0 at roots).
+    """
+    P = len(points)
+    seg_len = np.zeros(P)
+    d = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    seg_len[1:] = d
+    seg_len[off[:-1]] = 0.0
+    cum = segmented_cumsum(seg_len, off)
+    total = cum[off[1:] - 1]
+    sizes = np.diff(off)
+    tot = np.repeat(total, sizes)
+    _, index, _ = layout(off)
+    n = np.repeat(sizes - 1, sizes)
+    # zero-length curves: fall back to the CV index
+    s = np.where(tot > 0, cum / np.where(tot > 0, tot, 1.0), index / np.maximum(n, 1))
+    return s, seg_len
+
+
+def rechain(points, off, moved):
+    """Keep every segment's length: re-chain the moved segment directions from the root.
+
+    Segment j of the result has the direction of ``moved[j+1] - moved[j]``
+    and the length of ``points[j+1] - points[j]``; roots are ``points``'
+    roots. A moved segment of zero length keeps its original direction.
+
+    Parameters
+    ----------
+    points, moved : (P, 3) float64
+    off : (C+1,) int64
+
+    Returns
+    -------
+    (P, 3) float64
+    """
+    P = len(points)
+    v0 = np.zeros((P, 3))
+    v1 = np.zeros((P, 3))
+    v0[1:] = np.diff(points, axis=0)
+    v1[1:] = np.diff(moved, axis=0)
+    L0 = np.linalg.norm(v0, axis=1)
+    L1 = np.linalg.norm(v1, axis=1)
+    ok = L1 > 1e-300
+    v = np.where(ok[:, None], v1 * (L0 / np.where(ok, L1, 1.0))[:, None], v0)
+    v[off[:-1]] = points[off[:-1]]  # the root itself starts the chain
+    return segmented_cumsum(v, off)

@@ -1,0 +1,315 @@
+"""Stiff and Bend (paper 3.2.1), Shrink (3.2.2), Recovery and Plasticity (3.2.3-4).
+
+A Stiff or Bend curve carries one angle about one axis (kept in the curve's
+local frame from its first hit until it has recovered); these functions
+update that angle for all curves of a step at once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import rotations as rot
+from . import tolerances as tol
+from .search import gallop_bisect
+from .status import Status
+
+
+def solve(ctx, idx, status):
+    """Stiff and Bend: one angle per curve about its kept axis."""
+    angle = ctx.angle
+    near = idx[ctx.cand_any[idx]]
+    far = idx[~ctx.cand_any[idx]]
+    act = near[ctx.active[near]]  # rotated curves near a collider
+    new = near[~ctx.active[near]]  # unrotated: their segments are the input's
+    # 1. Every near curve in its current state: one ray query each.
+    batch = RigidBatch(ctx, act)
+    hit_act = batch.hits(np.arange(len(act)), angle[act])
+    hit_new = np.zeros(len(new), bool)
+    if len(new):
+        o, d, seg, rep, starts = ctx.input_rays(new)
+        hit_new = np.logical_or.reduceat(
+            ctx.hits(new, o, d, rep, ctx.root_mask(len(o), starts)), starts
+        )
+    cn = new[hit_new]
+    if len(cn):  # first hit: choose the axis (kept until recovered)
+        ctx.axis[cn] = ctx.new_axes(cn, *ctx.input_rays(cn)[:2],
+                                      *ctx.segments(cn)[1:])
+        ctx.active[cn] = True
+
+    # 2. Collision: the smallest clearing angle above the current one.
+    cc = act[hit_act]
+    if len(cc):  # first probe: lift the current shape above the tangent plane
+        o, d, _, rep, starts = ctx.deform(cc, angle=angle[cc], axis=ctx.axis[cc])
+        k, point, push = ctx.first_hit_details(cc, o, d, rep, starts)
+        g = ctx._plane_guess(cc, o + d, rep, starts, point, push, ctx.axis[cc])
+        ctx.guess[cc] = np.where(k >= 0, g, ctx.guess[cc])
+    collide(ctx, batch, np.flatnonzero(hit_act), status)
+    if len(cn):
+        collide(ctx, RigidBatch(ctx, cn), np.arange(len(cn)), status)
+
+    # 3. Recovery toward the (plasticity) target, stopping before contact.
+    items = np.flatnonzero(~hit_act)
+    recover(ctx, act[items], status, batch, items)
+    recover(ctx, far[ctx.active[far]], status, None, None)
+    release(ctx, idx)
+
+
+def collide(ctx, batch, items, status):
+    """Resolve colliding curves ``batch.curves[items]`` (paper 3.2.1)."""
+    if len(items) == 0:
+        return
+    p, angle = ctx.prec, ctx.angle
+    c = batch.curves[items]
+    th0 = angle[c]
+    k = search_angles(ctx, batch, items, th0, ctx.guess[c])
+    if ctx.s.mode == "bend":
+        # Bending turns the root segment by only 1/n of the angle: curves
+        # hit near the root that bending cannot clear turn at the root (as
+        # Stiff) instead, until they have recovered.
+        retry = np.flatnonzero((k < 0) & ~ctx.sv_._stiff[c])
+        if len(retry):
+            cr = c[retry]
+            ctx.sv_._stiff[cr] = True
+            k2 = search_angles(ctx, RigidBatch(ctx, cr), np.arange(len(cr)),
+                                    np.zeros(len(cr)))
+            ctx.sv_._stiff[cr[k2 < 0]] = False
+            ok2 = k2 >= 0
+            k[retry[ok2]] = k2[ok2]
+            th0[retry[ok2]] = 0.0
+    ok = k >= 0
+    res = c[ok]
+    angle[res] = np.minimum(th0[ok] + k[ok] * p, ctx.max_angle)
+    ctx.push[res] = angle[res] - th0[ok]
+    ctx.angle_max[res] = np.maximum(ctx.angle_max[res], angle[res])
+    status[res] = Status.COLLIDING
+    bad = c[~ok]
+    status[bad] = Status.UNRESOLVED
+    # Fallback: the state of the previous frame (last collision-free).
+    angle[bad] = th0[~ok]
+    fresh = bad[ctx.sv_._angle[bad] == 0]
+    ctx.active[fresh] = ctx.sv_._active[fresh]
+
+
+def recover(ctx, rec, status, batch, items):
+    """Turn clear curves ``rec`` back toward their target (paper 3.2.3-4).
+
+    ``batch.curves[items]`` are ``rec`` when they are near a collider (the
+    step is checked and, if it would collide, bisected back); ``batch`` is
+    None for curves far from every collider.
+    """
+    if len(rec) == 0:
+        return
+    p = ctx.prec
+    th0 = ctx.angle[rec]
+    frac = ctx.target_fraction(rec)
+    target = np.where(np.isnan(frac), th0, np.nan_to_num(frac) * ctx.angle_max[rec])
+    target = np.minimum(target, th0)
+    th1 = th0 - ctx.s.recovery_rate * (th0 - target)
+    th1 = np.where(th1 - target < tol.SNAP_FRACTION * p, target, th1)
+    th1 = np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
+    blocked = np.zeros(len(rec), bool)
+    if batch is not None:
+        check = np.flatnonzero(th1 < th0)
+        blocked[check] = batch.hits(items[check], th1[check])
+        b = np.flatnonzero(blocked)
+        if len(b):
+            lo_th, hi_th = th1[b], th0[b]
+            K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
+
+            def test(it, ks):
+                return ~batch.hits(items[b[it]], np.minimum(lo_th[it] + ks * p, hi_th[it]))
+
+            k = gallop_bisect(len(b), test, K, lo=np.zeros(len(b)), hi=K)
+            th1[b] = np.minimum(lo_th + k * p, hi_th)
+    ctx.angle[rec] = th1
+    # Back at exactly the input shape counts as FREE, not RECOVERING.
+    st = np.where(blocked, Status.COLLIDING,
+                  np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE))
+    status[rec] = np.maximum(status[rec], st)
+
+
+def search_angles(ctx, batch, items, th0, guess=None):
+    """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
+
+    ``guess`` (radians, per item) is last frame's increment: colliders move
+    smoothly, so the steps ``k - 1`` and ``k`` around it are probed first
+    (one round); the search continues from whatever bracket that gives.
+
+    Returns
+    -------
+    (n,) int
+        Steps ``k`` (angle ``min(th0 + k p, max_angle)``), -1 where no
+        angle up to ``max_angle`` clears the curve.
+    """
+    p = ctx.prec
+    n = len(items)
+    kmax = np.maximum(np.ceil((ctx.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
+
+    def test(it, ks):
+        return ~batch.hits(items[it], np.minimum(th0[it] + ks * p, ctx.max_angle))
+
+    lo = np.zeros(n, np.int64)
+    hi = np.full(n, -1, np.int64)
+    stride = None
+    if guess is not None:
+        # One round of probes spread around the guess; it leaves a bracket
+        # to bisect, or a floor to gallop on from with a guess-sized stride.
+        kg = np.clip(np.rint(guess / p).astype(np.int64), 1, np.maximum(kmax, 1))
+        it = np.flatnonzero(kmax >= 1)
+        spread = np.array([0.8, 1.0, 1.25, 1.6])
+        probes = np.clip(np.rint(kg[it][:, None] * spread).astype(np.int64), 1,
+                         kmax[it][:, None])
+        probes = np.maximum.accumulate(probes, axis=1)
+        good = test(np.repeat(it, len(spread)), probes.ravel()).reshape(probes.shape)
+        anyg = good.any(axis=1)
+        first = np.argmax(good, axis=1)
+        rows = np.arange(len(it))
+        hi[it[anyg]] = probes[rows, first][anyg]
+        lo[it[anyg]] = np.where(first > 0, probes[rows, np.maximum(first - 1, 0)], 0)[anyg]
+        lo[it[~anyg]] = probes[~anyg, -1]
+        stride = np.maximum(kg // 2, 1)
+    return gallop_bisect(n, test, kmax, lo=lo, hi=hi, stride=stride)
+
+
+def release(ctx, idx):
+    """Curves back at exactly their input shape drop their local state."""
+    if ctx.soft:
+        return
+    done = idx[ctx.active[idx] & (ctx.angle[idx] == 0)]
+    ctx.active[done] = False
+    ctx.sv_._stiff[done] = False
+    ctx.axis[done] = 0.0
+    ctx.angle_max[done] = 0.0
+
+# ------------------------------------------------------------ pinch
+
+
+class RigidBatch:
+    """Stiff/Bend curves under search, with all angle-independent work done once.
+
+    Rodrigues' rotation of a segment ``v`` about the curve's axis ``a`` is
+    ``Y + V0 cos(t) + X sin(t)`` with ``Y = a (a.v)``, ``V0 = v - Y`` and
+    ``X = a x v``; the map into a collider's space is affine, so ``Y``, ``V0``,
+    ``X`` and the roots are moved into each collider's space once. A probe
+    round then costs a gather, a cos/sin, a cumulative sum and the ray query.
+    Rays are grown by ``tol.RAY_EXTEND_ULPS`` as in :meth:`core.step.StepContext.hits`.
+    """
+
+    def __init__(self, ctx, curves):
+        self.ctx = ctx
+        self.curves = curves
+        sv = ctx.sv_
+        seg, rep, starts = ctx.segments(curves)
+        self.cnt = sv._nseg[curves]
+        self.starts = starts
+        v = ctx.seg_in(seg)
+        ax = ctx.axis[curves][rep]
+        Y = ax * rot.dot(ax, v)[:, None]
+        X = np.cross(ax, v)
+        V0 = v - Y
+        if ctx.s.mode == "bend":
+            self.w = np.where(sv._stiff[curves][rep], 1.0, sv._w_bend[seg])
+        else:
+            self.w = np.ones(len(seg))
+        self.length = np.sqrt(rot.dot(v, v))
+        self.root = ctx.root_mask(len(seg), starts)
+        # Uniform CV counts (the usual groom): keep (curves, segments, 3) blocks.
+        ns = int(self.cnt[0]) if len(curves) else 0
+        self.ns = ns if len(curves) and (self.cnt == ns).all() else 0
+        self.per_col = []
+        for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
+            m = cand[curves]
+            if not m.any():
+                continue
+            A, b = c.local_map()
+            terms = [rot.apply(A, x) for x in (Y, V0, X)]
+            if self.ns:
+                terms = [x.reshape(-1, self.ns, 3) for x in terms]
+            self.per_col.append((c, off, m, rot.apply(A, ctx.roots[curves]) + b, *terms))
+        if self.ns:
+            self.w = self.w.reshape(-1, self.ns)
+            self.length = self.length.reshape(-1, self.ns)
+
+    def hits(self, items, theta):
+        """Does curve ``curves[items[i]]`` turned by ``theta[i]`` hit a collider.
+
+        ``items`` may repeat (several angles of one curve in one query).
+        """
+        n = len(items)
+        hit = np.zeros(n, bool)
+        if n == 0:
+            return hit
+        if self.ns:
+            return self._hits_uniform(items, theta, hit)
+        ctx = self.ctx
+        cnt = self.cnt[items]
+        first = np.cumsum(cnt) - cnt
+        rep = np.repeat(np.arange(n), cnt)
+        sel = self.starts[items][rep] + (np.arange(len(rep)) - first[rep])
+        a = theta[rep] * self.w[sel]
+        cos, sin = np.cos(a)[:, None], np.sin(a)[:, None]
+        scale = None
+        if ctx.s.shrink:
+            ramp = np.minimum(a / np.deg2rad(ctx.s.scale_angle), 1.0)
+            scale = 1.0 - (1.0 - ctx.s.scale_minimum) * ramp
+        length = self.length[sel] if scale is None else self.length[sel] * scale
+        ext = ctx.eps_abs / np.maximum(length, 1e-300)
+        grow = (1.0 + np.where(self.root[sel], 0.0, ext) + ext)[:, None]
+        back = np.where(self.root[sel], 0.0, ext)[:, None]
+        for c, off, m, root_lo, Y, V0, X in self.per_col:
+            mi = m[items]
+            if not mi.any():
+                continue
+            d = Y[sel] + V0[sel] * cos + X[sel] * sin
+            if scale is not None:
+                d *= scale[:, None]
+            cs = np.cumsum(d, axis=0)
+            o = cs - d + (root_lo[items] - (cs[first] - d[first]))[rep]
+            rays = mi[rep]
+            if rays.all():
+                h = c.segment_hits_local(o - back * d, d * grow, off, ctx.threads)
+            else:
+                w = np.flatnonzero(rays)
+                h = np.zeros(len(rep), bool)
+                h[w] = c.segment_hits_local(o[w] - back[w] * d[w], d[w] * grow[w], off,
+                                            ctx.threads)
+            ctx.n_rays += int(rays.sum())
+            hit |= np.logical_or.reduceat(h, first)
+        return hit
+
+    def _hits_uniform(self, items, theta, hit):
+        """:meth:`hits` for curves that all have ``self.ns`` segments."""
+        ctx = self.ctx
+        ns = self.ns
+        a = theta[:, None] * self.w[items]  # (n, ns)
+        cos, sin = np.cos(a)[..., None], np.sin(a)[..., None]
+        length = self.length[items]
+        scale = None
+        if ctx.s.shrink:
+            scale = 1.0 - (1.0 - ctx.s.scale_minimum) * np.minimum(
+                a / np.deg2rad(ctx.s.scale_angle), 1.0)
+            length = length * scale
+        ext = ctx.eps_abs / np.maximum(length, 1e-300)
+        back = ext.copy()
+        back[:, 0] = 0.0  # roots never move: the root segment is not grown backward
+        grow = (1.0 + back + ext)[..., None]
+        back = back[..., None]
+        for c, off, m, root_lo, Y, V0, X in self.per_col:
+            mi = m[items]
+            if not mi.any():
+                continue
+            it = items if mi.all() else items[mi]
+            sub = slice(None) if mi.all() else mi
+            d = Y[it] + V0[it] * cos[sub] + X[it] * sin[sub]
+            if scale is not None:
+                d *= scale[sub][..., None]
+            o = np.cumsum(d, axis=1)
+            o -= d
+            o += root_lo[it][:, None, :]
+            o -= back[sub] * d
+            d *= grow[sub]
+            h = c.segment_hits_local(o.reshape(-1, 3), d.reshape(-1, 3), off, ctx.threads)
+            ctx.n_rays += len(h)
+            hit[sub] |= h.reshape(-1, ns).any(axis=1)
+        return hit

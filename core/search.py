@@ -1,0 +1,75 @@
+"""Rotation Precision: the batched search for the smallest clearing angle.
+
+Every round of the search is one batched ray query for all curves still
+searching, which is what keeps the solver fast (see ``gallop_bisect``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def gallop_bisect(n, test, k_max, lo=None, hi=None, width=4, stride=None):
+    """Smallest integer ``k`` in ``(lo, k_max]`` with ``test`` true, per item.
+
+    A ``width``-ary gallop-then-bisect: each round probes ``width`` values
+    per unsettled item (galloping: ``lo + stride * 1, 2, 4, ...``; once a good
+    probe is known: evenly inside the bracket) and calls ``test`` once for all
+    of them, i.e. one batched ray query per round. Where ``test`` is monotone
+    the result is exactly the first good ``k``; otherwise it is a good ``k``
+    right after a bad one.
+
+    Parameters
+    ----------
+    n : int
+        Number of items.
+    test : callable(items (m,) int, ks (m,) int) -> (m,) bool
+        ``items`` may repeat (several probes of one item).
+    k_max : (n,) int
+        Largest admissible ``k``.
+    lo : (n,) int, optional
+        Known bad ``k`` (default 0).
+    hi : (n,) int, optional
+        Known good ``k`` (-1 = unknown: gallop first).
+    width : int
+        Probes per item per round.
+    stride : (n,) int, optional
+        First gallop stride (default 1).
+
+    Returns
+    -------
+    (n,) int
+        The good ``k`` found, -1 where none up to ``k_max``.
+    """
+    lo = np.zeros(n, np.int64) if lo is None else np.asarray(lo, np.int64).copy()
+    hi = np.full(n, -1, np.int64) if hi is None else np.asarray(hi, np.int64).copy()
+    stride = np.ones(n, np.int64) if stride is None else np.maximum(stride, 1).astype(np.int64)
+    k_max = np.broadcast_to(np.asarray(k_max, np.int64), (n,))
+    ladder = 2 ** np.arange(width)
+    frac = np.arange(1, width + 1) / (width + 1)
+    for _ in range(128):  # bounded: each round multiplies the stride or divides the bracket
+        gallop = (hi < 0) & (lo < k_max)
+        bisect = (hi >= 0) & (hi - lo > 1)
+        items = np.flatnonzero(gallop | bisect)
+        if len(items) == 0:
+            break
+        g = gallop[items][:, None]
+        l, h = lo[items][:, None], hi[items][:, None]
+        probes = np.where(
+            g,
+            np.minimum(l + stride[items][:, None] * ladder, k_max[items][:, None]),
+            np.clip(l + np.ceil((h - l) * frac).astype(np.int64), l + 1, h),
+        )
+        good = test(np.repeat(items, width), probes.ravel()).reshape(len(items), width)
+        anyg = good.any(axis=1)
+        first = np.argmax(good, axis=1)
+        rows = np.arange(len(items))
+        k_first = probes[rows, first]
+        k_before = np.where(first > 0, probes[rows, np.maximum(first - 1, 0)], lo[items])
+        hit_i = items[anyg]
+        hi[hit_i] = k_first[anyg]
+        lo[hit_i] = k_before[anyg]
+        miss_i = items[~anyg]
+        lo[miss_i] = probes[~anyg, -1]
+        stride[miss_i] *= 2**width
+    return hi

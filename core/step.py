@@ -1,0 +1,417 @@
+"""One solver step's working state and the machinery all modes share.
+
+:class:`StepContext` holds a frame's inputs and the per-curve state in
+world space while the step runs: candidate selection, local frames,
+deformation, batched ray queries, first hits and push directions, Put to
+Growth Surface, and writing the output. The modes live in :mod:`.rigid`
+(Stiff, Bend) and :mod:`.soft`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import rigid
+from . import rotations as rot
+from . import tolerances as tol
+from .errors import InputError
+from .rays import default_threads
+from .soft import SoftSolve
+
+
+class StepContext:
+    """Everything one step needs; methods are the phases of the step."""
+
+    def __init__(self, solver, points, cols, growth):
+        self.sv_ = solver
+        self.s = s = solver.settings
+        self.points = points  # the input, its own dtype (never modified)
+        out_dtype = points.dtype
+        self.cols = cols
+        self.growth = growth
+        self.threads = s.threads or default_threads()
+        self.prec = np.deg2rad(s.rotation_precision)
+        self.max_angle = np.deg2rad(s.max_angle)
+        self.out_dtype = out_dtype
+        self.timings = {}
+        self.n_rays = 0
+        # Point differences in the input dtype: contiguous and cheap. Entry i is
+        # the segment starting at point i (entries at curve ends are unused).
+        self.D = np.diff(points, axis=0)
+        L = np.sqrt(np.einsum("ij,ij->i", self.D, self.D))
+        L[solver._curve_end] = 0
+        self.curve_len = np.add.reduceat(L, solver._off[:-1]).astype(np.float64)
+        L[solver._curve_end] = np.inf
+        shortest = np.minimum.reduceat(L, solver._off[:-1])
+        bad = shortest <= tol.ZERO_SEGMENT_REL * self.curve_len
+        if bad.any():
+            c = int(np.argmax(bad))
+            a, b = int(solver._off[c]), int(solver._off[c + 1])
+            k = a + int(np.argmin(L[a : b - 1]))
+            raise InputError(
+                f"curve {c} has a zero-length segment between points {k} and {k + 1}"
+            )
+        self.roots = points[solver._off[:-1]].astype(np.float64)
+        # Ray growth (tol.RAY_EXTEND_ULPS): float32 ulps at the size of the
+        # largest collider (where embree works, centred), plus the output
+        # dtype's rounding at the colliders' distance from the origin. It
+        # depends on the colliders only, so a curve's result does not depend
+        # on which other curves are solved with it.
+        size = mag = 0.0
+        for c, _ in cols:
+            lo, hi = c.bounds_world()
+            size = max(size, float(np.linalg.norm(hi - lo)))
+            mag = max(mag, float(np.abs(lo).max()), float(np.abs(hi).max()))
+        self.eps_abs = tol.RAY_EXTEND_ULPS * (
+            float(np.finfo(np.float32).eps) * size + float(np.finfo(points.dtype).eps) * mag
+        )
+        # Candidate curves per collider: the ball a curve can sweep about its
+        # root (any rotation, scale <= 1) meets the collider's bounds, then
+        # comes near one of its vertices (Collider.near_surface).
+        self.cand = []
+        self.boxes = []
+        for c, off in cols:
+            lo, hi = c.bounds_world(off)
+            self.boxes.append((lo, hi))
+            gap = np.maximum(lo - self.roots, 0) + np.maximum(self.roots - hi, 0)
+            cand = np.einsum("ij,ij->i", gap, gap) <= self.curve_len**2
+            w = np.flatnonzero(cand)
+            cand[w] = c.near_surface(self.roots[w], self.curve_len[w], off)
+            self.cand.append(cand)
+        if self.cand:
+            self.cand_any = np.logical_or.reduce(self.cand)
+        else:
+            self.cand_any = np.zeros(solver.n_curves, bool)
+        self.soft = s.mode == "soft"
+
+    def root_in_box(self, box):
+        lo, hi = box
+        return np.all((self.roots >= lo) & (self.roots <= hi), axis=1)
+
+    # ------------------------------------------------------------ frames
+    def load_state(self):
+        sv = self.sv_
+        self.angle = sv._angle.copy()
+        self.angle_max = sv._angle_max.copy()
+        self.push = np.zeros(sv.n_curves)
+        self.guess = sv._push.copy()
+        self.axis = np.zeros((sv.n_curves, 3))
+        if self.soft:
+            self.quat = sv._quat.copy()
+            self.quat_max = sv._quat_max.copy()
+        self.active = sv._active.copy()
+        idx = np.flatnonzero(self.active)
+        self.B = np.zeros((sv.n_curves, 3, 3))  # this step's frames (rows in use only)
+        self.ref = None
+        if len(idx):
+            B, self.ref = self._frames(idx, sv._frame[idx])
+            self.B[idx] = B
+            self.axis[idx] = np.einsum("kji,kj->ki", B, sv._axis_lo[idx])
+            if self.soft:
+                seg, rep, _ = self.segments(idx)
+                self.quat[seg] = self._quat_to(B[rep], self.quat[seg], to_world=True)
+                self.quat_max[seg] = self._quat_to(B[rep], self.quat_max[seg], to_world=True)
+
+    @staticmethod
+    def _quat_to(B, q, to_world):
+        v = q[:, 1:]
+        v = np.einsum("kji,kj->ki", B, v) if to_world else np.einsum("kij,kj->ki", B, v)
+        return np.concatenate([q[:, :1], v], axis=1)
+
+    def _frames(self, idx, prev):
+        sv = self.sv_
+        first = sv._soff[idx]
+        t = rot.normalize(self.seg_in(first))
+        chord = self.points[sv._off[idx + 1] - 1] - self.roots[idx]
+        u = chord - rot.dot(chord, t)[:, None] * t
+        ratio = np.linalg.norm(u, axis=1) / self.curve_len[idx]
+        return rot.curve_frames(t, u, ratio, prev)
+
+    def store_state(self):
+        sv = self.sv_
+        idx = np.flatnonzero(self.active)
+        frame = sv._frame  # the transported references (see rot.curve_frames)
+        old = np.flatnonzero(sv._active)
+        if len(old):
+            frame[old] = self.ref
+        dropped = old[~self.active[old]]
+        frame[dropped] = 0.0
+        fresh = idx[~sv._active[idx]]
+        if len(fresh):
+            self.B[fresh], frame[fresh] = self._frames(fresh, None)
+        B = self.B
+        sv._angle = self.angle
+        sv._angle_max = self.angle_max
+        sv._push = self.push
+        sv._active = self.active
+        axis_lo = np.zeros_like(self.axis)
+        if len(idx):
+            axis_lo[idx] = np.einsum("kij,kj->ki", B[idx], self.axis[idx])
+        sv._axis_lo = axis_lo
+        sv._hold &= self.active
+        if self.soft:
+            q = np.tile([1.0, 0.0, 0.0, 0.0], (len(self.quat), 1))
+            qm = q.copy()
+            if len(idx):
+                seg, rep, _ = self.segments(idx)
+                q[seg] = self._quat_to(B[idx][rep], self.quat[seg], to_world=False)
+                qm[seg] = self._quat_to(B[idx][rep], self.quat_max[seg], to_world=False)
+            sv._quat, sv._quat_max = q, qm
+
+    # ----------------------------------------------------------- geometry
+    def segments(self, idx):
+        """Segments of curves ``idx``: (seg ids, owner position in idx, starts)."""
+        sv = self.sv_
+        cnt = sv._nseg[idx]
+        starts = np.cumsum(cnt) - cnt
+        rep = np.repeat(np.arange(len(idx)), cnt)
+        seg = sv._soff[idx][rep] + (np.arange(int(cnt.sum())) - starts[rep])
+        return seg, rep, starts
+
+    def rigid_rotations(self, idx, angle, axis, seg, rep):
+        """Per-segment (angle, axis) of stiff/bend curves ``idx``."""
+        if self.s.mode == "bend":
+            w = np.where(self.sv_._stiff[idx][rep], 1.0, self.sv_._w_bend[seg])
+        else:
+            w = 1.0
+        return angle[rep] * w, axis[rep]
+
+    def deform(self, idx, angle=None, axis=None, quat=None):
+        """Deformed segments of curves ``idx``.
+
+        Returns
+        -------
+        o, d : (k, 3) segment starts and vectors, world space
+        seg, rep, starts : see :meth:`segments`
+        """
+        seg, rep, starts = self.segments(idx)
+        v = self.seg_in(seg)
+        if quat is not None:
+            v = rot.quat_rotate(quat, v)
+        else:
+            a_seg, ax_seg = self.rigid_rotations(idx, angle, axis, seg, rep)
+            v = rot.rotate(v, ax_seg, a_seg)
+            if self.s.shrink:
+                ramp = np.minimum(a_seg / np.deg2rad(self.s.scale_angle), 1.0)
+                v = v * (1.0 - (1.0 - self.s.scale_minimum) * ramp)[:, None]
+        cs = np.cumsum(v, axis=0)
+        base = self.roots[idx] - (cs[starts] - v[starts])
+        # Round to the output dtype so the segments tested are exactly the
+        # segments written out (float32 rounding must not re-open a contact).
+        end = (cs + base[rep]).astype(self.out_dtype).astype(np.float64)
+        o = np.empty_like(end)
+        o[1:] = end[:-1]
+        o[starts] = self.roots[idx]
+        return o, end - o, seg, rep, starts
+
+    def extend(self, o, d, root):
+        """Segments grown by a few float32 ulps (see ``tol.RAY_EXTEND_ULPS``).
+
+        ``root`` marks root segments, which are not grown backward: roots
+        never move, so a root resting on a collider is a pinch, not a contact.
+        """
+        L = np.sqrt(np.einsum("ij,ij->i", d, d))
+        e = self.eps_abs / np.maximum(L, 1e-300)
+        back = np.where(root, 0.0, e)
+        return o - back[:, None] * d, d * (1.0 + back + e)[:, None]
+
+    def hits(self, idx, o, d, rep, root):
+        """Per segment: does it hit any collider (segments of curves ``idx``).
+
+        Parameters
+        ----------
+        rep : (k,) int  owner of each segment (position in ``idx``)
+        root : (k,) bool  which segments are root segments
+        """
+        o, d = self.extend(o, d, root)
+        hit = np.zeros(len(o), bool)
+        for (c, off), cand in zip(self.cols, self.cand, strict=True):
+            m = cand[idx][rep]
+            if m.all():
+                hit |= c.segment_hits(o, d, off, self.threads)
+                self.n_rays += len(o)
+            elif m.any():
+                w = np.flatnonzero(m)
+                hit[w] |= c.segment_hits(o[w], d[w], off, self.threads)
+                self.n_rays += len(w)
+        return hit
+
+    def curve_hits(self, idx, **deformation):
+        if len(idx) == 0:
+            return np.zeros(0, bool)
+        o, d, seg, rep, starts = self.deform(idx, **deformation)
+        root = self.root_mask(len(o), starts)
+        return np.logical_or.reduceat(self.hits(idx, o, d, rep, root), starts)
+
+    @staticmethod
+    def root_mask(k, starts):
+        m = np.zeros(k, bool)
+        m[starts] = True
+        return m
+
+    def first_hit_details(self, idx, o, d, rep, starts):
+        """First hit (root to tip) of each curve: segment, point, push direction.
+
+        Returns
+        -------
+        k : (n,) int  index into o/d of the first hitting segment (-1: none)
+        point : (n, 3)  hit point
+        push : (n, 3)  unit direction away from the collider (paper 3.2.1)
+        """
+        n = len(idx)
+        root = self.root_mask(len(o), starts)
+        hit = self.hits(idx, o, d, rep, root)
+        k = np.full(n, -1, np.int64)
+        w = np.flatnonzero(hit)
+        if len(w):
+            owners, first = np.unique(rep[w], return_index=True)
+            k[owners] = w[first]
+        point = np.zeros((n, 3))
+        push = np.zeros((n, 3))
+        has = np.flatnonzero(k >= 0)
+        if len(has) == 0:
+            return k, point, push
+        ks = k[has]
+        o, d = self.extend(o[ks], d[ks], root[ks])
+        best_t = np.full(len(has), np.inf)
+        best_n = np.zeros((len(has), 3))
+        double = np.zeros(len(has), bool)
+        for (c, off), cand in zip(self.cols, self.cand, strict=True):
+            m = np.flatnonzero(cand[idx[has]])
+            if len(m) == 0:
+                continue
+            h, t, nrm = c.segment_hit_details(o[m], d[m], off)
+            better = h & (t < best_t[m])
+            mm = m[better]
+            best_t[mm] = t[better]
+            best_n[mm] = nrm[better]
+            double[mm] = c.double_sided
+        best_t = np.where(np.isfinite(best_t), best_t, 0.0)
+        pt = o + d * best_t[:, None]
+        # Single-sided: along the normal, or its inverse when a back face is
+        # crossed. Double-sided: toward the side the root is on.
+        side = -np.sign(rot.dot(d, best_n))
+        root_side = np.sign(rot.dot(self.roots[idx[has]] - pt, best_n))
+        side = np.where(double & (root_side != 0), root_side, side)
+        side = np.where(side == 0, 1.0, side)
+        point[has] = pt
+        push[has] = best_n * side[:, None]
+        return k, point, push
+
+    # ----------------------------------------------------------- solving
+    def target_fraction(self, idx):
+        """Recovery target as a fraction of the maximum rotation (plasticity)."""
+        return np.where(self.sv_._hold[idx], np.nan, self.s.plasticity)
+
+    def solve(self, idx, status):
+        if self.soft:
+            SoftSolve(self).run(idx, status)
+        else:
+            rigid.solve(self, idx, status)
+
+    def new_axes(self, idx, o, d, rep, starts):
+        """Rotation axes for curves starting a contact (paper 3.2.1).
+
+        Also sets ``self.guess`` for them: the rotation that lifts every CV
+        above the collider's tangent plane at the hit (a first probe for the
+        angle search, nothing more).
+        """
+        k, point, push = self.first_hit_details(idx, o, d, rep, starts)
+        c = point - self.roots[idx]
+        normal = push
+        if self.s.attract_to_growth_surface:
+            mid = self._midpoints(idx, o, d, starts)
+            cp, _ = self.growth.closest_points(mid)
+            toward = cp - mid
+            a = np.cross(c, toward)
+            ok = np.linalg.norm(a, axis=1) > tol.PARALLEL_EPS * np.maximum(
+                np.linalg.norm(c, axis=1) * np.linalg.norm(toward, axis=1), 1e-300
+            )
+            push = np.where(ok[:, None], rot.normalize(toward), push)
+        axis = rot.rotation_axis(c, push)
+        self.guess[idx] = self._plane_guess(idx, o + d, rep, starts, point, normal, axis)
+        return axis
+
+    def _plane_guess(self, idx, ends, rep, starts, point, normal, axis):
+        """Angle lifting each curve's CVs above the plane (point, normal)."""
+        depth = -rot.dot(ends - point[rep], normal[rep])
+        v = ends - self.roots[idx][rep]
+        ax = axis[rep]
+        radius = np.linalg.norm(v - ax * rot.dot(v, ax)[:, None], axis=1)
+        lift = np.arcsin(np.clip(depth / np.maximum(radius, 1e-300), 0.0, 1.0))
+        if self.s.mode == "bend":  # a CV turns by about the mean weight up to it
+            j = np.arange(len(rep)) - starts[rep]
+            n = self.sv_._nseg[idx][rep]
+            w = np.where(self.sv_._stiff[idx][rep], 1.0, (j + 2) / (2.0 * n))
+            lift = lift / w
+        return np.maximum.reduceat(lift, starts) if len(lift) else lift
+
+    def _midpoints(self, idx, o, d, starts):
+        nseg = self.sv_._nseg[idx]
+        j = starts + nseg // 2
+        return o[j] + np.where((nseg % 2 == 1)[:, None], 0.5 * d[j], 0.0)
+
+    def input_rays(self, idx):
+        """Segments of the *input* curves ``idx`` (float64), like :meth:`deform`."""
+        seg, rep, starts = self.segments(idx)
+        ss = self.sv_._seg_start[seg]
+        return self.points[ss].astype(np.float64), self.seg_in(seg), seg, rep, starts
+
+    def put_to_growth_surface(self, pin):
+        """Rotate pinched curves down onto the growth surface (paper 3.2.5)."""
+        _, n_g = self.growth.closest_points(self.roots[pin])
+        chord = self.points[self.sv_._off[pin + 1] - 1] - self.roots[pin]
+        down = -n_g
+        axis = rot.rotation_axis(chord, down)
+        # Elevation of the deformed chord over the tangent plane, bisected on
+        # the angle so the same works for every mode's deformation.
+        lo = np.zeros(len(pin))
+        hi = np.full(len(pin), np.pi)
+        for _ in range(24):
+            mid = 0.5 * (lo + hi)
+            o, d, seg, rep, starts = self._deform_mode(pin, mid, axis)
+            tip = o[starts + self.sv_._nseg[pin] - 1] + d[starts + self.sv_._nseg[pin] - 1]
+            above = rot.dot(tip - self.roots[pin], n_g) > 0
+            lo = np.where(above, mid, lo)
+            hi = np.where(above, hi, mid)
+        ang = np.where(rot.dot(chord, n_g) > 0, hi, 0.0)
+        self._set_uniform(pin, ang, axis)
+
+    def _deform_mode(self, idx, angle, axis):
+        if self.soft:
+            seg, rep, _ = self.segments(idx)
+            q = rot.quat_from_axis_angle(axis[rep], angle[rep])
+            return self.deform(idx, quat=q)
+        return self.deform(idx, angle=angle, axis=axis)
+
+    def _set_uniform(self, idx, angle, axis):
+        if self.soft:
+            seg, rep, _ = self.segments(idx)
+            q = rot.quat_from_axis_angle(axis[rep], angle[rep])
+            self.quat[seg] = q
+            grow = rot.quat_angle(q) > rot.quat_angle(self.quat_max[seg])
+            self.quat_max[seg[grow]] = q[grow]
+        else:
+            self.angle[idx] = angle
+            self.axis[idx] = axis
+            self.angle_max[idx] = np.maximum(self.angle_max[idx], angle)
+        self.active[idx] = angle > 0
+
+    # ------------------------------------------------------------ output
+    def output(self):
+        out = self.points.copy()
+        idx = np.flatnonzero(self.active)
+        if len(idx):
+            if self.soft:
+                seg, _, _ = self.segments(idx)
+                o, d, seg, rep, starts = self.deform(idx, quat=self.quat[seg])
+            else:
+                o, d, seg, rep, starts = self.deform(
+                    idx, angle=self.angle[idx], axis=self.axis[idx]
+                )
+            out[self.sv_._seg_start[seg] + 1] = o + d
+        return out
+
+    def seg_in(self, seg):
+        """Input segment vectors (float64) of segment ids ``seg``."""
+        return self.D[self.sv_._seg_start[seg]].astype(np.float64)
