@@ -284,10 +284,13 @@ class Collider:
         """Area-weighted unit vertex normals (only offsets need them)."""
         fa = self._face_normals(np.arange(len(self._F)), unit=False)
         n = len(self._V)
-        vn = np.stack([
-            sum(np.bincount(self._F[:, k], weights=fa[:, i], minlength=n) for k in range(3))
-            for i in range(3)
-        ], axis=1)
+        vn = np.stack(
+            [
+                sum(np.bincount(self._F[:, k], weights=fa[:, i], minlength=n) for k in range(3))
+                for i in range(3)
+            ],
+            axis=1,
+        )
         lv = np.linalg.norm(vn, axis=1, keepdims=True)
         return np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
 
@@ -352,8 +355,16 @@ class Collider:
         i1 = np.clip(i1, 0, dims - 1) + 1
         x0, y0, z0 = i0.T
         x1, y1, z1 = i1.T
-        total = (sat[x1, y1, z1] - sat[x0, y1, z1] - sat[x1, y0, z1] - sat[x1, y1, z0]
-                 + sat[x0, y0, z1] + sat[x0, y1, z0] + sat[x1, y0, z0] - sat[x0, y0, z0])
+        total = (
+            sat[x1, y1, z1]
+            - sat[x0, y1, z1]
+            - sat[x1, y0, z1]
+            - sat[x1, y1, z0]
+            + sat[x0, y0, z1]
+            + sat[x0, y1, z0]
+            + sat[x1, y0, z0]
+            - sat[x0, y0, z0]
+        )
         return (total > 0) & ~outside
 
     def _scale(self) -> float:
@@ -398,8 +409,9 @@ class Collider:
     def bounds_world(self, offset_wo: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """World-space axis-aligned bounds (lo, hi), grown by the offset."""
         lo, hi = self._geometry()
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                            for z in (lo[2], hi[2])])
+        corners = np.array(
+            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        )
         c_wo = corners @ self._M[:3, :3].T + self._M[:3, 3]
         pad = offset_wo * 1.01 + 1e-6 * (float(np.abs(c_wo).max()) + 1.0)
         return c_wo.min(0) - pad, c_wo.max(0) + pad
@@ -522,7 +534,8 @@ class Collider:
                 centre_lo = lo + (unknown + 0.5) * h + self._center
                 centre_wo = apply(self._M[:3, :3], centre_lo) + self._M[:3, 3]
                 inside[unknown[:, 0], unknown[:, 1], unknown[:, 2]] = self._parity(
-                    centre_wo, offset_wo)
+                    centre_wo, offset_wo
+                )
                 val = inside[c[:, 0], c[:, 1], c[:, 2]]
             out[far] = val > 0
         traced = np.flatnonzero(near)  # (off the grid and not near: outside)

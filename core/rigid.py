@@ -33,8 +33,7 @@ def solve(ctx, idx, status):
         )
     cn = new[hit_new]
     if len(cn):  # first hit: choose the axis (kept until recovered)
-        ctx.axis[cn] = ctx.new_axes(cn, *ctx.input_rays(cn)[:2],
-                                      *ctx.segments(cn)[1:])
+        ctx.axis[cn] = ctx.new_axes(cn, *ctx.input_rays(cn)[:2], *ctx.segments(cn)[1:])
         ctx.active[cn] = True
 
     # 2. Collision: the smallest clearing angle above the current one.
@@ -71,8 +70,7 @@ def collide(ctx, batch, items, status):
         if len(retry):
             cr = c[retry]
             ctx.sv_._stiff[cr] = True
-            k2 = search_angles(ctx, RigidBatch(ctx, cr), np.arange(len(cr)),
-                                    np.zeros(len(cr)))
+            k2 = search_angles(ctx, RigidBatch(ctx, cr), np.arange(len(cr)), np.zeros(len(cr)))
             ctx.sv_._stiff[cr[k2 < 0]] = False
             ok2 = k2 >= 0
             k[retry[ok2]] = k2[ok2]
@@ -124,8 +122,9 @@ def recover(ctx, rec, status, batch, items):
             th1[b] = np.minimum(lo_th + k * p, hi_th)
     ctx.angle[rec] = th1
     # Back at exactly the input shape counts as FREE, not RECOVERING.
-    st = np.where(blocked, Status.COLLIDING,
-                  np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE))
+    st = np.where(
+        blocked, Status.COLLIDING, np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE)
+    )
     status[rec] = np.maximum(status[rec], st)
 
 
@@ -158,8 +157,7 @@ def search_angles(ctx, batch, items, th0, guess=None):
         kg = np.clip(np.rint(guess / p).astype(np.int64), 1, np.maximum(kmax, 1))
         it = np.flatnonzero(kmax >= 1)
         spread = np.array([0.8, 1.0, 1.25, 1.6])
-        probes = np.clip(np.rint(kg[it][:, None] * spread).astype(np.int64), 1,
-                         kmax[it][:, None])
+        probes = np.clip(np.rint(kg[it][:, None] * spread).astype(np.int64), 1, kmax[it][:, None])
         probes = np.maximum.accumulate(probes, axis=1)
         good = test(np.repeat(it, len(spread)), probes.ravel()).reshape(probes.shape)
         anyg = good.any(axis=1)
@@ -181,6 +179,7 @@ def release(ctx, idx):
     ctx.sv_._stiff[done] = False
     ctx.axis[done] = 0.0
     ctx.angle_max[done] = 0.0
+
 
 # ------------------------------------------------------------ pinch
 
@@ -272,8 +271,7 @@ class RigidBatch:
             else:
                 w = np.flatnonzero(rays)
                 h = np.zeros(len(rep), bool)
-                h[w] = c.segment_hits_local(o[w] - back[w] * d[w], d[w] * grow[w], off,
-                                            ctx.threads)
+                h[w] = c.segment_hits_local(o[w] - back[w] * d[w], d[w] * grow[w], off, ctx.threads)
             ctx.n_rays += int(rays.sum())
             hit |= np.logical_or.reduceat(h, first)
         return hit
@@ -288,7 +286,8 @@ class RigidBatch:
         scale = None
         if ctx.s.shrink:
             scale = 1.0 - (1.0 - ctx.s.scale_minimum) * np.minimum(
-                a / np.deg2rad(ctx.s.scale_angle), 1.0)
+                a / np.deg2rad(ctx.s.scale_angle), 1.0
+            )
             length = length * scale
         ext = ctx.eps_abs / np.maximum(length, 1e-300)
         back = ext.copy()

@@ -156,8 +156,13 @@ class SoftSolve:
             def test_rev(items, ks):
                 return test(items, levels - ks)
 
-            kr = gallop_bisect(len(b), test_rev, np.full(len(b), levels),
-                                lo=np.zeros(len(b)), hi=np.full(len(b), levels))
+            kr = gallop_bisect(
+                len(b),
+                test_rev,
+                np.full(len(b), levels),
+                lo=np.zeros(len(b)),
+                hi=np.full(len(b), levels),
+            )
             sseg, srep, _ = ctx.segments(rec[b])
             pos = np.searchsorted(seg, sseg)
             lamk = ((levels - kr) / levels * s.recovery_rate)[srep]
@@ -165,8 +170,9 @@ class SoftSolve:
         ctx.quat[seg] = q1
         changed = np.logical_or.reduceat(~np.all(q1 == q0, axis=1), starts)
         identity = np.logical_and.reduceat(np.all(q1 == ident, axis=1), starts)
-        st = np.where(blocked, Status.COLLIDING,
-                      np.where(changed & ~identity, Status.RECOVERING, Status.FREE))
+        st = np.where(
+            blocked, Status.COLLIDING, np.where(changed & ~identity, Status.RECOVERING, Status.FREE)
+        )
         status[rec] = np.maximum(status[rec], st)
         # Back exactly at the input shape: drop the state.
         done = rec[identity]

@@ -149,10 +149,18 @@ class Solver:
         self._steps = 0
 
     _STATE_KEYS = {
-        "angle": ("C",), "angle_max": ("C",), "push": ("C",), "axis": ("C", 3),
+        "angle": ("C",),
+        "angle_max": ("C",),
+        "push": ("C",),
+        "axis": ("C", 3),
         "frame": ("C", 3, 3),
-        "active": ("C",), "hold": ("C",), "pinched": ("C",), "stiff": ("C",), "quat": ("S", 4),
-        "quat_max": ("S", 4), "meta": (4,),
+        "active": ("C",),
+        "hold": ("C",),
+        "pinched": ("C",),
+        "stiff": ("C",),
+        "quat": ("S", 4),
+        "quat_max": ("S", 4),
+        "meta": (4,),
     }
 
     @property
@@ -165,11 +173,15 @@ class Solver:
         """
         mode = ("stiff", "bend", "soft").index(self._settings.mode)
         return {
-            "angle": self._angle.copy(), "angle_max": self._angle_max.copy(),
+            "angle": self._angle.copy(),
+            "angle_max": self._angle_max.copy(),
             "push": self._push.copy(),
-            "axis": self._axis_lo.copy(), "frame": self._frame.copy(),
-            "active": self._active.copy(), "hold": self._hold.copy(),
-            "pinched": self._pinched.copy(), "stiff": self._stiff.copy(),
+            "axis": self._axis_lo.copy(),
+            "frame": self._frame.copy(),
+            "active": self._active.copy(),
+            "hold": self._hold.copy(),
+            "pinched": self._pinched.copy(),
+            "stiff": self._stiff.copy(),
             "quat": self._quat.copy(),
             "quat_max": self._quat_max.copy(),
             "meta": np.array([_STATE_VERSION, self.n_curves, self.n_points, mode], np.int64),
@@ -191,9 +203,11 @@ class Solver:
                 raise InputError(f"state['{k}'] has shape {a.shape}, expected {want}")
             arrs[k] = a
         meta = arrs["meta"]
-        if int(meta[0]) != _STATE_VERSION or int(meta[1]) != self.n_curves or int(
-            meta[2]
-        ) != self.n_points:
+        if (
+            int(meta[0]) != _STATE_VERSION
+            or int(meta[1]) != self.n_curves
+            or int(meta[2]) != self.n_points
+        ):
             raise InputError("state was saved for other curves (curve/point count differs)")
         if int(meta[3]) != ("stiff", "bend", "soft").index(self._settings.mode):
             raise InputError("state was saved with another mode")

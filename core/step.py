@@ -48,9 +48,7 @@ class StepContext:
             c = int(np.argmax(bad))
             a, b = int(solver._off[c]), int(solver._off[c + 1])
             k = a + int(np.argmin(L[a : b - 1]))
-            raise InputError(
-                f"curve {c} has a zero-length segment between points {k} and {k + 1}"
-            )
+            raise InputError(f"curve {c} has a zero-length segment between points {k} and {k + 1}")
         self.roots = points[solver._off[:-1]].astype(np.float64)
         # Ray growth (tol.RAY_EXTEND_ULPS): float32 ulps at the size of the
         # largest collider (where embree works, centred), plus the output
