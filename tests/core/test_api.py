@@ -1,0 +1,60 @@
+"""The documented public surface of ``core``."""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+import scenes
+
+import core
+from core import Collider, Settings, Solver, Status
+from core.errors import ColliderError, InputError, SettingsError
+
+
+def test_status_values():
+    assert issubclass(Status, enum.IntEnum)
+    assert [(s.name, int(s)) for s in Status] == [
+        ("FREE", 0), ("COLLIDING", 1), ("RECOVERING", 2), ("PINCHED", 3),
+        ("UNRESOLVED", 4), ("DISABLED", 5)]
+
+
+def test_exports():
+    for name in ("Collider", "Settings", "Solver", "Status"):
+        assert hasattr(core, name)
+    for E in (InputError, ColliderError, SettingsError):
+        assert issubclass(E, ValueError)
+
+
+def test_step_result_and_defaults():
+    pts, offs = scenes.pack([scenes.straight_curve([0, 0, 0], [0, 0, 1], 1.0, 4)])
+    V, F = scenes.uv_sphere([0.05, 0, 0.8], 0.3, 16, 8)
+    col = Collider(V, F)
+    assert col.closed
+    solver = Solver(offs, Settings())
+    res = solver.step(pts, [col])
+    assert isinstance(res.points, np.ndarray) and res.points.shape == pts.shape
+    assert res.status.dtype == np.int8
+    assert res.status[0] == Status.COLLIDING
+    # Settings() is the default
+    res2 = Solver(offs).step(pts, [col])
+    assert np.array_equal(res.points, res2.points)
+    # colliders may be any iterable; a tuple works
+    res3 = Solver(offs, Settings()).step(pts, (col,))
+    assert np.array_equal(res.points, res3.points)
+
+
+def test_collider_properties_roundtrip():
+    V, F = scenes.box()
+    M = scenes.translation([1, 2, 3])
+    col = Collider(V, F, matrix=M)
+    np.testing.assert_array_equal(np.asarray(col.vertices, float), V)
+    np.testing.assert_array_equal(np.asarray(col.matrix, float), M)
+    assert isinstance(col.build_count, int)
+    # getters hand out copies (or read-only views): mutating them is harmless
+    v = np.asarray(col.vertices)
+    try:
+        v[0] = 99.0
+    except ValueError:
+        pass
+    np.testing.assert_array_equal(np.asarray(col.vertices, float), V)

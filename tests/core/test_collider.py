@@ -1,0 +1,184 @@
+"""Collider: closedness, lazy rebuilds, rigid motion through the matrix,
+deformation through vertices, several colliders at once."""
+
+from __future__ import annotations
+
+import geom
+import numpy as np
+import oracle
+import scenes
+
+from core import Collider, Settings, Solver, Status
+
+
+def test_closed_flag():
+    for V, F in (scenes.uv_sphere(), scenes.icosphere(), scenes.box()):
+        assert Collider(V, F).closed
+        assert Collider(V, F, double_sided=True).closed  # topology only
+        assert not Collider(V, F[1:]).closed  # a hole
+        F2 = F.copy()
+        F2[0] = F2[0, ::-1]  # one face flipped: inconsistent
+        assert not Collider(V, F2).closed
+    V, F = scenes.grid()
+    assert not Collider(V, F).closed
+    # two disjoint closed boxes are closed
+    V1, F1 = scenes.box([0, 0, 0], [1, 1, 1])
+    V2, F2 = scenes.box([2, 0, 0], [3, 1, 1])
+    assert Collider(np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)])).closed
+    # a non-manifold edge (three faces) is not closed
+    V3 = np.vstack([V1, [[0.5, 0.5, 3.0]]])
+    F3 = np.vstack([F1, [[0, 1, 8]]])
+    assert not Collider(V3, F3).closed
+
+
+def _one_curve():
+    return scenes.pack([scenes.curly_curve([0, 0, 0], [0, 0, 1], 1.0, 6, 0.1)])
+
+
+def test_matrix_moves_collider_without_rebuild():
+    pts, offs = _one_curve()
+    V, F = scenes.uv_sphere([0, 0, 0], 0.3, 24, 12)
+    col = Collider(V, F, matrix=scenes.translation([3, 0, 0.8]))
+    solver = Solver(offs, Settings(mode="stiff", recovery_rate=1.0))
+    r = solver.step(pts, [col])
+    assert np.asarray(r.status)[0] == Status.FREE
+    assert col.build_count == 1 or col.build_count == 0
+    count = max(col.build_count, 1)
+    for x in (0.5, 0.2, 0.05, 1.0, 3.0):
+        M = scenes.affine(scenes.rotation_matrix([1, 2, 3], x), t=[x, 0, 0.8])
+        col.matrix = M
+        r = solver.step(pts, [col])
+        geom.assert_no_intersection(r.points, offs, r.status, [(oracle.transform(V, M), F)])
+    assert col.build_count == count
+    assert np.asarray(r.status)[0] == Status.FREE and np.array_equal(r.points, pts)
+
+
+def test_vertices_rebuild_only_when_changed():
+    pts, offs = _one_curve()
+    V, F = scenes.uv_sphere([0.1, 0, 0.8], 0.3, 24, 12)
+    col = Collider(V, F)
+    solver = Solver(offs, Settings(mode="bend"))
+    solver.step(pts, [col])
+    assert col.build_count == 1
+    col.vertices = V.copy()  # identical values, new array
+    solver.step(pts, [col])
+    assert col.build_count == 1
+    col.vertices = V * 1.0
+    col.matrix = scenes.translation([0.01, 0, 0])
+    solver.step(pts, [col])
+    assert col.build_count == 1
+    V2 = V.copy()
+    V2[3] += 1e-3
+    col.vertices = V2
+    col.vertices = V2 * 1.0  # two sets before a query: one rebuild at most
+    solver.step(pts, [col])
+    assert col.build_count == 2
+    solver.step(pts, [col])
+    assert col.build_count == 2
+    # in-place mutation of the caller's array must not leak into the collider
+    V2[:] += 5.0
+    r = solver.step(pts, [col])
+    assert col.build_count == 2
+    assert np.asarray(r.status)[0] != Status.FREE
+
+
+def test_deforming_collider_is_respected():
+    """A sphere inflating frame by frame (vertices change, same topology)."""
+    rng = np.random.default_rng(3)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=25, curly=0.2, extent=0.6, n_cvs=(3, 8))
+    V0, F = scenes.uv_sphere([0, 0, 0], 1.0, 24, 12)
+    center = np.array([0.0, 0.0, 1.1])
+    col = Collider(V0 * 0.3 + center, F)
+    solver = Solver(offs, Settings(mode="bend", recovery_rate=0.3))
+    builds = []
+    for f in range(8):
+        r = 0.3 + 0.04 * f
+        Vw = V0 * r + center
+        col.vertices = Vw
+        res = solver.step(pts, [col])
+        builds.append(col.build_count)
+        geom.assert_no_intersection(res.points, offs, res.status, [(Vw, F)])
+        geom.assert_roots_exact(pts, res.points, offs)
+        geom.assert_lengths_kept(pts, res.points, offs, rtol=1e-9)
+    assert builds == list(range(1, 9))
+
+
+def test_multiple_colliders_single_and_double_sided():
+    """A closed single-sided sphere and an open double-sided plane."""
+    rng = np.random.default_rng(8)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=40, curly=0.2, extent=0.8, n_cvs=(3, 10))
+    Vs, Fs = scenes.uv_sphere([0.3, 0.2, 0.8], 0.35, 24, 12)
+    Vp, Fp = scenes.quad([-1.5, -1.5, 0.75], [3, 0, -0.3], [0, 3, 0.2])
+    cols = [Collider(Vs, Fs), Collider(Vp, Fp, double_sided=True)]
+    for mode in ("stiff", "bend", "soft"):
+        res = Solver(offs, Settings(mode=mode)).step(pts, cols)
+        status = np.asarray(res.status)
+        assert np.count_nonzero(status == Status.COLLIDING) >= 10
+        geom.assert_no_intersection(res.points, offs, status, [(Vs, Fs), (Vp, Fp)])
+        # order of colliders does not matter
+        res2 = Solver(offs, Settings(mode=mode)).step(pts, cols[::-1])
+        assert np.array_equal(res.points, res2.points)
+        assert np.array_equal(status, np.asarray(res2.status))
+
+
+def test_same_collider_object_used_by_two_solvers():
+    pts, offs = _one_curve()
+    V, F = scenes.uv_sphere([0.1, 0, 0.8], 0.3, 24, 12)
+    col = Collider(V, F)
+    a = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+    b = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+    assert np.array_equal(a.points, b.points)
+    assert col.build_count == 1
+
+
+def test_same_collider_twice_in_the_list():
+    rng = np.random.default_rng(2)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=30, extent=0.6)
+    V, F = scenes.uv_sphere([0, 0, 0.8], 0.4, 24, 12)
+    col = Collider(V, F)
+    for mode in ("stiff", "bend", "soft"):
+        a = Solver(offs, Settings(mode=mode)).step(pts, [col])
+        b = Solver(offs, Settings(mode=mode)).step(pts, [col, col])
+        assert np.array_equal(a.points, b.points)
+        assert np.array_equal(np.asarray(a.status), np.asarray(b.status))
+
+
+def test_sheared_and_scaled_matrices():
+    """Non-orthogonal collider matrices (shear, non-uniform scale)."""
+    rng = np.random.default_rng(4)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=40, extent=0.8, curly=0.2)
+    V, F = scenes.uv_sphere([0, 0, 0], 1.0, 24, 12)
+    A = np.array([[0.5, 0.3, 0.0], [0.0, 0.25, 0.1], [0.1, 0.0, 0.35]])
+    M = scenes.affine(A, t=[0.1, -0.1, 0.8])
+    for mode in ("stiff", "bend", "soft"):
+        res = Solver(offs, Settings(mode=mode)).step(pts, [Collider(V, F, matrix=M)])
+        status = np.asarray(res.status)
+        assert np.count_nonzero(status == Status.COLLIDING) >= 3
+        geom.assert_no_intersection(res.points, offs, status, [(oracle.transform(V, M), F)])
+    # roots inside the sheared ellipsoid are pinched, others not
+    M2 = scenes.affine(A * 2.0, t=[0.0, 0.0, 0.0])
+    Vw = oracle.transform(V, M2)
+    inside = oracle.points_inside_closed_mesh(pts[offs[:-1]], Vw, F)
+    res = Solver(offs, Settings()).step(pts, [Collider(V, F, matrix=M2)])
+    assert inside.any() and not inside.all()
+    assert np.array_equal(np.asarray(res.status) == Status.PINCHED, inside)
+
+
+def test_collider_copies_its_inputs():
+    """Mutating the caller's arrays after handing them over changes nothing."""
+    pts, offs = _one_curve()
+    V, F = scenes.uv_sphere([0.1, 0, 0.8], 0.3, 24, 12)
+    M = np.eye(4)
+    ref = Solver(offs, Settings(mode="stiff")).step(pts, [Collider(V, F)])
+    V2, F2, M2 = V.copy(), F.copy(), M.copy()
+    col = Collider(V2, F2, matrix=M2)
+    V2 += 10.0
+    F2[:] = F2[:, ::-1]
+    M2[:3, 3] = [5, 5, 5]
+    r = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+    assert np.array_equal(r.points, ref.points)
+    M3 = np.eye(4)
+    col.matrix = M3
+    M3[:3, 3] = [5, 5, 5]
+    r = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+    assert np.array_equal(r.points, ref.points)

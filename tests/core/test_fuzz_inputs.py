@@ -1,0 +1,90 @@
+"""Fuzzed inputs: the core either rejects them with a FurCollide ValueError
+or returns a finite, well-shaped result. Never another exception, never NaN."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scenes
+from geom import FAST
+from hypothesis import given
+from hypothesis import strategies as st
+
+from core import Collider, Settings, Solver
+from core.errors import FurCollideError
+
+CORRUPTIONS = [
+    "none", "nan_point", "inf_point", "dup_point", "swap_offsets", "short_offsets",
+    "long_offsets", "nan_vertex", "bad_face", "neg_face", "degenerate_face", "empty_mesh",
+    "huge_coords", "tiny_curve", "enabled_len", "float32", "single_point_curve",
+]
+
+
+@pytest.mark.parametrize("kind", CORRUPTIONS)
+@FAST
+@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(["stiff", "bend", "soft"]))
+def test_fuzzed_input_is_rejected_cleanly_or_solved(seed, kind, mode):
+    rng = np.random.default_rng(seed)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=int(rng.integers(1, 8)), extent=0.5)
+    V, F = scenes.uv_sphere([0, 0, 0.8], 0.35, 12, 6)
+    enabled = None
+    i = int(rng.integers(len(pts)))
+    if kind == "nan_point":
+        pts[i, int(rng.integers(3))] = np.nan
+    elif kind == "inf_point":
+        pts[i, int(rng.integers(3))] = np.inf
+    elif kind == "dup_point" and i + 1 < len(pts):
+        pts[i + 1] = pts[i]
+    elif kind == "swap_offsets" and len(offs) > 2:
+        offs = offs.copy()
+        offs[1], offs[2] = offs[2], offs[1]
+    elif kind == "short_offsets":
+        offs = offs.copy()
+        offs[-1] -= 1
+    elif kind == "long_offsets":
+        offs = offs.copy()
+        offs[-1] += 1
+    elif kind == "nan_vertex":
+        V = V.copy()
+        V[int(rng.integers(len(V)))] = np.nan
+    elif kind == "bad_face":
+        F = F.copy()
+        F[int(rng.integers(len(F))), int(rng.integers(3))] = len(V) + int(rng.integers(5))
+    elif kind == "neg_face":
+        F = F.copy()
+        F[int(rng.integers(len(F))), int(rng.integers(3))] = -1
+    elif kind == "degenerate_face":
+        F = F.copy()
+        j = int(rng.integers(len(F)))
+        F[j, 1] = F[j, 0]
+    elif kind == "empty_mesh":
+        V, F = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+    elif kind == "huge_coords":
+        pts = pts * 1e6
+        V = V * 1e6
+    elif kind == "tiny_curve":
+        pts = pts * 1e-9
+        V = V * 1e-9
+    elif kind == "enabled_len":
+        enabled = np.ones(len(offs) - 1 + int(rng.integers(1, 3)), bool)
+    elif kind == "float32":
+        pts = pts.astype(np.float32)
+    elif kind == "single_point_curve":
+        pts = np.vstack([pts, pts[-1:] + 1.0])
+        offs = np.append(offs, len(pts))
+    try:
+        col = Collider(V, F)
+        solver = Solver(offs, Settings(mode=mode))
+        res = solver.step(pts, [col], enabled=enabled)
+    except FurCollideError as e:
+        assert str(e)  # a message for the user
+        return
+    assert res.points.shape == pts.shape
+    assert res.points.dtype == pts.dtype
+    assert np.all(np.isfinite(res.points))
+    assert np.asarray(res.status).shape == (len(offs) - 1,)
+    assert np.array_equal(res.points[offs[:-1]], pts[offs[:-1]])
+    # these must have been rejected
+    assert kind not in ("nan_point", "inf_point", "short_offsets", "long_offsets",
+                        "nan_vertex", "bad_face", "neg_face", "degenerate_face",
+                        "enabled_len", "single_point_curve"), f"{kind} accepted"

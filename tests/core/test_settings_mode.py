@@ -1,0 +1,193 @@
+"""Settings.mode: stiff keeps the shape, bend bends uniformly, soft is local."""
+
+from __future__ import annotations
+
+import geom
+import numpy as np
+import oracle
+import scenes
+from geom import FAST
+from hypothesis import given
+from hypothesis import strategies as st
+
+from core import Collider, Settings, Solver, Status
+
+
+def _scene(seed, n_curves=20, curly=0.25, n_cvs=(3, 10)):
+    rng = np.random.default_rng(seed)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=n_curves, curly=curly, n_cvs=n_cvs,
+                                    extent=0.6)
+    r = rng.uniform(0.25, 0.5)
+    c = np.array([rng.uniform(-0.4, 0.4), rng.uniform(-0.4, 0.4), rng.uniform(0.75, 1.1)])
+    V, F = scenes.uv_sphere(c, r, 24, 12)
+    return pts, offs, V, F
+
+
+@FAST
+@given(seed=st.integers(0, 2**31 - 1))
+def test_stiff_is_a_rigid_rotation_about_the_root(seed):
+    pts, offs, V, F = _scene(seed)
+    res = Solver(offs, Settings(mode="stiff")).step(pts, [Collider(V, F)])
+    status = np.asarray(res.status)
+    seg_in = scenes.segment_vectors(pts, offs)
+    seg_out = scenes.segment_vectors(res.points, offs)
+    for c in np.nonzero(status == Status.COLLIDING)[0]:
+        R, resid = geom.fit_rotation(seg_in[c], seg_out[c])
+        L = np.linalg.norm(seg_in[c], axis=1).sum()
+        assert resid <= 1e-9 * L + 1e-12, f"curve {c} changed shape (rms {resid})"
+        assert geom.rotation_angle(R) > 0
+        # one axis, one angle: every segment rotated by the same R
+        np.testing.assert_allclose(seg_in[c] @ R.T, seg_out[c], atol=1e-9 * L)
+
+
+@FAST
+@given(seed=st.integers(0, 2**31 - 1))
+def test_bend_is_a_uniform_bend_about_one_axis(seed):
+    pts, offs, V, F = _scene(seed)
+    res = Solver(offs, Settings(mode="bend")).step(pts, [Collider(V, F)])
+    status = np.asarray(res.status)
+    seg_in = scenes.segment_vectors(pts, offs)
+    seg_out = scenes.segment_vectors(res.points, offs)
+    for c in np.nonzero(status == Status.COLLIDING)[0]:
+        n = len(seg_in[c])
+        axis, ang, ok = geom.common_axis_angles(seg_in[c], seg_out[c])
+        assert axis is not None, f"curve {c} COLLIDING but unchanged"
+        if not ok[-1]:
+            continue  # tip segment (nearly) along the axis: angle ill-defined
+        theta = ang[-1]
+        # uniform bend theta * (j + 1) / n -- or, for curves that bending
+        # cannot clear, the documented fallback: a rigid turn at the root
+        bend = theta * np.arange(1, n + 1) / n
+        stiff = np.full(n, theta)
+        expected = bend if np.allclose(ang[ok], bend[ok], atol=1e-7) else stiff
+        np.testing.assert_allclose(ang[ok], expected[ok], atol=1e-7,
+                                   err_msg=f"curve {c}: neither a uniform bend nor rigid")
+        # and the rotation really is about that one axis, for every segment
+        for j in range(n):
+            Rj = scenes.rotation_matrix(axis, expected[j])
+            np.testing.assert_allclose(Rj @ seg_in[c][j], seg_out[c][j], atol=1e-7)
+
+
+def test_bend_straight_curve_angles_ramp_root_to_tip():
+    """A straight vertical curve through a tilted open plane: segment j's
+    angle to its input is theta * (j + 1) / n."""
+    n = 8
+    pts, offs = scenes.pack([scenes.straight_curve([0, 0, 0], [0, 0, 1], 1.0, n + 1)])
+    V, F = scenes.quad([-1, -1, 0.6], [2, 0, 0.4], [0, 2, 0])
+    res = Solver(offs, Settings(mode="bend")).step(pts, [Collider(V, F)])
+    assert np.asarray(res.status)[0] == Status.COLLIDING
+    a = geom.angle_between(np.diff(pts, axis=0), np.diff(res.points, axis=0))
+    assert a[-1] > np.radians(1)
+    np.testing.assert_allclose(a, a[-1] * np.arange(1, n + 1) / n, rtol=1e-7, atol=1e-9)
+    assert not oracle.segments_hit_mesh(res.points, offs, V, F)[0]
+
+
+def test_rotation_direction_follows_hit_normal():
+    """Paper 3.2.1: rotate along the hit normal, or its inverse when the
+    segment cuts through a back face. Plane normal = cross(u, v) points up
+    and toward -x (it rises toward +x)."""
+    V, F = scenes.quad([-1, -1, 0.6], [2, 0, 0.4], [0, 2, 0])
+    nrm = np.cross([2, 0, 0.4], [0, 2, 0])
+    assert nrm[0] < 0 < nrm[2]
+    for mode in ("stiff", "bend", "soft"):
+        for double_sided in (False, True):
+            col = Collider(V, F, double_sided=double_sided)
+            # from below: back face -> inverse normal, toward +x
+            up, offs = scenes.pack([scenes.straight_curve([0, 0, 0], [0, 0, 1], 1.0, 6)])
+            r = Solver(offs, Settings(mode=mode)).step(up, [col])
+            assert np.asarray(r.status)[0] == Status.COLLIDING
+            assert r.points[-1, 0] > 0.05, (mode, double_sided, r.points[-1])
+            # from above: front face -> normal, toward -x
+            down, offs = scenes.pack([scenes.straight_curve([0, 0, 1.3], [0, 0, -1], 1.0, 6)])
+            r = Solver(offs, Settings(mode=mode)).step(down, [col])
+            assert np.asarray(r.status)[0] == Status.COLLIDING
+            assert r.points[-1, 0] < -0.05, (mode, double_sided, r.points[-1])
+
+
+def test_modes_differ_on_the_same_input():
+    pts, offs = scenes.pack([scenes.curly_curve([0, 0, 0], [0, 0, 1], 1.0, 9, 0.1)])
+    V, F = scenes.uv_sphere([0.15, 0.0, 0.85], 0.3, 24, 12)
+    outs = {m: Solver(offs, Settings(mode=m)).step(pts, [Collider(V, F)]).points
+            for m in ("stiff", "bend", "soft")}
+    assert not np.allclose(outs["stiff"], outs["bend"])
+    assert not np.allclose(outs["bend"], outs["soft"])
+    assert not np.allclose(outs["stiff"], outs["soft"])
+
+
+@FAST
+@given(seed=st.integers(0, 2**31 - 1))
+def test_soft_keeps_segments_before_first_contact(seed):
+    pts, offs, V, F = _scene(seed, curly=0.3, n_cvs=(4, 12))
+    first = oracle.first_hit_segment(pts, offs, V, F, eps=oracle.MAYBE)
+    first_sure = oracle.first_hit_segment(pts, offs, V, F, eps=oracle.SURE)
+    res = Solver(offs, Settings(mode="soft")).step(pts, [Collider(V, F)])
+    status = np.asarray(res.status)
+    for c in np.nonzero(status == Status.COLLIDING)[0]:
+        k = first[c]
+        if k < 0 or k != first_sure[c]:
+            continue  # borderline first contact
+        s = offs[c]
+        # CVs 0..k (the root of the first colliding segment) do not move
+        np.testing.assert_allclose(res.points[s:s + k + 1], pts[s:s + k + 1], rtol=0,
+                                   atol=1e-12, err_msg=f"curve {c}: moved before contact {k}")
+        assert not np.allclose(res.points[s + k + 1], pts[s + k + 1]), (
+            f"curve {c}: first colliding segment {k} not rotated")
+
+
+def test_soft_lengths_kept():
+    rng = np.random.default_rng(7)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=30, curly=0.3, n_cvs=(4, 12), extent=0.6)
+    V, F = scenes.uv_sphere([0, 0, 0.9], 0.45, 24, 12)
+    res = Solver(offs, Settings(mode="soft")).step(pts, [Collider(V, F)])
+    assert np.count_nonzero(np.asarray(res.status) == Status.COLLIDING) >= 5
+    geom.assert_lengths_kept(pts, res.points, offs, rtol=1e-9)
+
+
+def test_two_cv_curves_bend_equals_stiff():
+    """With one segment, bend's theta * (j + 1) / n is theta: same as stiff."""
+    rng = np.random.default_rng(5)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=40, n_cvs=(2, 2), extent=0.6)
+    V, F = scenes.uv_sphere([0, 0, 0.8], 0.4, 24, 12)
+    a = Solver(offs, Settings(mode="stiff")).step(pts, [Collider(V, F)])
+    b = Solver(offs, Settings(mode="bend")).step(pts, [Collider(V, F)])
+    assert np.count_nonzero(np.asarray(a.status) == Status.COLLIDING) >= 5
+    assert np.array_equal(np.asarray(a.status), np.asarray(b.status))
+    np.testing.assert_allclose(a.points, b.points, rtol=0, atol=1e-14)
+
+
+@FAST
+@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(["stiff", "bend", "soft"]))
+def test_long_curves_many_cvs(seed, mode):
+    rng = np.random.default_rng(seed)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=10, n_cvs=(20, 40), extent=0.5,
+                                    length=(1.0, 2.0), curly=0.3)
+    V, F = scenes.uv_sphere([0, 0, 1.2], 0.45, 24, 12)
+    res = Solver(offs, Settings(mode=mode)).step(pts, [Collider(V, F)])
+    geom.assert_no_intersection(res.points, offs, res.status, [(V, F)])
+    geom.assert_roots_exact(pts, res.points, offs)
+    geom.assert_lengths_kept(pts, res.points, offs, rtol=1e-9)
+
+
+def test_bend_falls_back_to_stiff_when_bending_cannot_clear():
+    """A wide obstacle just above the root: bending turns the root segment by
+    only 1/n of the angle and cannot clear it; the curve turns at the root
+    (rigidly) instead, and is collision free."""
+    n = 4
+    pts, offs = scenes.pack([scenes.straight_curve([0.013, 0.021, 0], [0, 0, 1], 1.0, n + 1)])
+    V, F = scenes.quad([-0.5, -0.5, 0.08], [1.0, 0, 0.04], [0, 1.0, 0])
+    res = Solver(offs, Settings(mode="bend")).step(pts, [Collider(V, F)])
+    assert np.asarray(res.status)[0] == Status.COLLIDING
+    assert not oracle.segments_hit_mesh(res.points, offs, V, F)[0]
+    a = geom.angle_between(np.diff(pts, axis=0), np.diff(res.points, axis=0))
+    np.testing.assert_allclose(a, a[0], atol=1e-9)  # rigid: same angle everywhere
+    assert np.degrees(a[0]) > 180 / n  # more than bending could give the root segment
+    # it stays rigid until recovered, then recovers exactly
+    solver = Solver(offs, Settings(mode="bend", recovery_rate=0.5))
+    solver.step(pts, [Collider(V, F)])
+    for _ in range(100):
+        r = solver.step(pts, [])
+        a = geom.angle_between(np.diff(pts, axis=0), np.diff(r.points, axis=0))
+        np.testing.assert_allclose(a, a[0], atol=1e-9)
+        if np.array_equal(r.points, pts):
+            break
+    assert np.array_equal(r.points, pts)
