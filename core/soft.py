@@ -60,18 +60,16 @@ class SoftSolve:
             axis = rot.rotation_axis(d[k], push)
             last = sv._soff[todo + 1]  # one past the curve's last segment
 
-            def test(items, ks, seg_hit=seg_hit, axis=axis, todo=todo, last=last):
-                c = todo[items]  # may repeat: several angles of one curve
-                owner, sel, q = self._rotated(seg_hit[items], last[items], axis[items], ks * p)
-                # Only the solved segment needs testing: segments before it
-                # did not move, segments after it are the next rounds' job.
-                sseg, srep, sst = ctx.segments(c)
-                qq = ctx.quat[sseg]
-                qq[sst[owner] + (sel - sv._soff[c][owner])] = q
-                o2, d2, _, r2, st2 = ctx.deform(c, quat=qq)
-                j = st2 + (seg_hit[items] - sv._soff[c])
-                root = seg_hit[items] == sv._soff[c]
-                return ~ctx.hits(c, o2[j], d2[j], np.arange(len(c)), root)
+            # Only the solved segment needs testing: segments before it do not
+            # move (so neither does its start), segments after it are the next
+            # rounds' job; its direction is its current one turned by phi.
+            o_k, d_k = o[k], d[k]
+            root_k = k == starts[hit]
+
+            def test(items, ks, o_k=o_k, d_k=d_k, axis=axis, root_k=root_k, todo=todo):
+                dd = rot.rotate(d_k[items], axis[items], ks * p)
+                n = len(items)
+                return ~ctx.hits(todo[items], o_k[items], dd, np.arange(n), root_k[items])
 
             kmax = np.full(len(todo), int(np.ceil(ctx.max_angle / p - 1e-9)))
             kk = gallop_bisect(len(todo), test, kmax)

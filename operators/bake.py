@@ -16,7 +16,7 @@ import bpy
 from bpy.types import Operator
 
 from . import cache, runtime
-from .base import (
+from .setup import (
     SetupOperator,
     active_setup,
     backend_message,

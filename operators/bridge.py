@@ -56,17 +56,23 @@ def matrix(ob) -> np.ndarray:
     return np.array(ob.matrix_world, dtype=np.float64)
 
 
+def is_identity(M: np.ndarray) -> bool:
+    """Is the 4x4 ``M`` exactly the identity?"""
+    return np.array_equal(M, _IDENTITY)
+
+
 def transform(P: np.ndarray, M: np.ndarray) -> np.ndarray:
     """Apply the affine 4x4 ``M`` to points ``P`` (n, 3); returns float32.
 
-    Identity matrices return a float32 copy bit for bit; otherwise the
-    product is computed in float32 (Blender's own precision).
+    An identity matrix returns ``P`` itself when it already is float32 (no
+    copy; callers never write into the result); otherwise the product is
+    computed in float32 (Blender's own precision).
     """
     P = np.asarray(P, np.float32)
-    if np.array_equal(M, _IDENTITY):
-        return P.copy()
+    if is_identity(M):
+        return P
     M32 = np.asarray(M, np.float32)
-    out = P @ M32[:3, :3].T
+    out = P @ np.ascontiguousarray(M32[:3, :3].T)
     out += M32[:3, 3]
     return out
 

@@ -65,10 +65,24 @@ def curve_point_mask(offsets: np.ndarray, curves: np.ndarray) -> np.ndarray:
     return base + np.arange(int(sizes.sum()))
 
 
+_UINT = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
+
+
 def rows_differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Bool per row (first axis): does any element of ``a`` differ from ``b``?"""
+    """Bool per row (first axis): does any element of ``a`` differ from ``b``?
+
+    Compares bit patterns (``-0.0`` differs from ``0.0``, a NaN equals
+    itself), so what is stored as "unchanged" really is identical.
+    """
     n = len(a)
-    d = (a != b).reshape(n, -1)
+    size = a.dtype.itemsize
+    if a.dtype == b.dtype and size in _UINT and a.flags.c_contiguous and b.flags.c_contiguous:
+        d = a.view(_UINT[size]) != b.view(_UINT[size])
+    else:
+        d = a != b
+    d = d.reshape(n, -1)
+    if d.shape[1] in _UINT:  # a row of 1/2/4/8 flags is one integer
+        return d.view(_UINT[d.shape[1]]).reshape(n) != 0
     m = d[:, 0].copy()
     for j in range(1, d.shape[1]):
         m |= d[:, j]
@@ -162,7 +176,7 @@ class MemoryCache:
             del self.frames[k]
         return len(gone)
 
-    def put(self, f, inp, out, status, offsets, state, stats) -> None:
+    def put(self, f, inp, out, status, offsets, state, stats, changed=None) -> None:
         """Store frame ``f`` (lossless, sparse).
 
         Parameters
@@ -179,13 +193,17 @@ class MemoryCache:
             ``Solver.state`` after the frame (encoded against ``self.sparse``).
         stats : dict
             Panel statistics kept with the frame.
+        changed : (P,) bool ndarray, optional
+            ``rows_differ(out, inp)`` when the caller has it already.
         """
         C = len(offsets) - 1
         P = len(inp)
         if out.shape != inp.shape:
             raise ValueError("cache: output and input positions differ in shape")
         if P and C:
-            pt_changed = rows_differ(out, inp).view(np.uint8)
+            if changed is None:
+                changed = rows_differ(out, inp)
+            pt_changed = changed.view(np.uint8)
             # A curve changed when any of its points did.
             curve_changed = np.maximum.reduceat(pt_changed, offsets[:-1]).astype(bool)
         else:

@@ -375,9 +375,12 @@ class Inputs:
     points: np.ndarray  # world (P, 3) float32
     offsets: np.ndarray
     key: tuple
-    m_out_inv: np.ndarray
+    m_out_inv: np.ndarray  # world -> output's local space
     enabled: np.ndarray | None
     warning: str
+    #: The source's own local positions when the output has the same world matrix
+    #: (the usual case): unchanged points are written back from here, untouched.
+    local: np.ndarray | None = None
 
 
 def read_inputs(ob, depsgraph) -> Inputs:
@@ -389,11 +392,12 @@ def read_inputs(ob, depsgraph) -> Inputs:
     data = src.data
     offs = bridge.curve_offsets(data)
     key = cache.topology_key(offs)
-    Pw = bridge.transform(bridge.get_positions(data), bridge.matrix(src))
-    out = s.output.evaluated_get(depsgraph)
-    m_out_inv = np.linalg.inv(bridge.matrix(out))
+    P = bridge.get_positions(data)
+    M = bridge.matrix(src)
+    M_out = bridge.matrix(s.output.evaluated_get(depsgraph))
     mask, warning = bridge.read_curve_mask(data, s.enable_attribute, len(offs) - 1)
-    return Inputs(Pw, offs, key, m_out_inv, mask, warning)
+    local = P if np.array_equal(M, M_out) else None
+    return Inputs(bridge.transform(P, M), offs, key, np.linalg.inv(M_out), mask, warning, local)
 
 
 def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> ColliderEntry:
@@ -419,7 +423,8 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> Coll
             offset=offset, drop_degenerate=True, name=o.name,
         )
         return ColliderEntry(col, key, double_sided, offset)
-    entry.collider.vertices = V
+    if not np.array_equal(V, entry.collider.vertices):  # deforming: the core refits
+        entry.collider.vertices = V
     entry.collider.matrix = M
     return entry
 
@@ -473,11 +478,30 @@ def _stats(status, frame, solve_ms=0.0, source="solved") -> dict:
     return stats
 
 
-def _write(ob, inp, points_world, status) -> None:
-    out = ob.furcollide.output
-    data = out.data
-    local = bridge.transform(points_world, inp.m_out_inv)
-    bridge.set_positions(data, local)
+def _output_local(inp, points_world, changed=None) -> np.ndarray:
+    """``points_world`` in the output's local space.
+
+    When the output sits where the source sits, the points the solver left
+    alone (``changed`` False; computed when not given) are the source's own
+    local positions, exactly; only the others are transformed.
+    """
+    if inp.local is None:  # the output was moved away from the source
+        return bridge.transform(points_world, inp.m_out_inv)
+    if bridge.is_identity(inp.m_out_inv):  # both at the world origin
+        return points_world
+    if changed is None:
+        changed = cache.rows_differ(points_world, inp.points)
+    local = inp.local.copy()
+    idx = np.flatnonzero(changed)
+    if len(idx):
+        local[idx] = bridge.transform(points_world[idx], inp.m_out_inv)
+    return local
+
+
+def _write(ob, inp, points_world, status, changed=None) -> None:
+    """Write world positions and status codes into the output's original data."""
+    data = ob.furcollide.output.data
+    bridge.set_positions(data, _output_local(inp, points_world, changed))
     rt = get_runtime(ob)
     last = rt.written_status
     attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
@@ -648,11 +672,14 @@ def evaluate(scene, depsgraph, ob) -> str:
             return _hold(ob, rt, inp, f, reason=str(exc))
     res = _step(ob, rt, solver, inp, depsgraph)
     stats = _stats(res.status, f, res.timings.get("total", 0.0))
-    rt.memory.put(f, inp.points, res.points, res.status, inp.offsets, solver.state, stats)
+    changed = cache.rows_differ(res.points, inp.points)  # points the solver moved
+    rt.memory.put(
+        f, inp.points, res.points, res.status, inp.offsets, solver.state, stats, changed
+    )
     rt.solver_frame = f
     if rt.hold is None or f >= rt.hold[0]:
         rt.hold = (f, res.points, res.status)
-    _write(ob, inp, res.points, res.status)
+    _write(ob, inp, res.points, res.status, changed)
     rt.stats = stats
     rt.error = ""
     rt.outdated = False

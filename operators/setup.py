@@ -1,27 +1,99 @@
-"""Operators that create, edit and remove FurCollide setups."""
+"""Operators that create, edit and remove FurCollide setups, and what every
+FurCollide operator shares: finding the setup, poll messages, error reports and
+refreshing the current frame after an edit."""
 
 from __future__ import annotations
+
+import functools
 
 import bpy
 from bpy.props import BoolProperty
 from bpy.types import Operator
 
 from . import bridge, runtime
-from .base import (
-    SetupOperator,
-    active_setup,
-    backend_message,
-    evaluate_now,
-    redraw,
-    refresh,
-    refuse,
-    reports_errors,
-)
 
-# Re-exported for the panel and older imports.
-__all__ = ["active_setup", "backend_message", "classes"]
+NO_SETUP = "Active object has no FurCollide setup"
 
 
+def backend_message() -> str:
+    """Non-empty when the ray tracer (embreex) cannot be used here."""
+    try:
+        from .. import core
+    except ImportError as exc:  # pragma: no cover - depends on the platform
+        return f"FurCollide's core could not be loaded: {exc}"
+    return "" if core.embree_available() else core.embree_error()
+
+
+def active_setup(context):
+    """Source object of the setup of the active object (source or output)."""
+    return runtime.source_of(getattr(context, "object", None))
+
+
+def refuse(cls, message: str) -> bool:
+    """``poll`` helper: show ``message`` as the reason and return False."""
+    cls.poll_message_set(message)
+    return False
+
+
+class SetupOperator:
+    """Mixin of the operators that act on the active object's setup.
+
+    ``poll`` refuses with :data:`NO_SETUP` when there is no setup, or with
+    the reason :meth:`refusal` returns for it.
+    """
+
+    @classmethod
+    def refusal(cls, context, src) -> str:
+        """Why the operator cannot run on the setup of ``src`` ('' = it can)."""
+        return ""
+
+    @classmethod
+    def poll(cls, context):
+        src = active_setup(context)
+        message = NO_SETUP if src is None else cls.refusal(context, src)
+        return refuse(cls, message) if message else True
+
+
+def reports_errors(execute):
+    """Decorate ``execute``: an unexpected error becomes a report, not a traceback."""
+
+    @functools.wraps(execute)
+    def wrapper(self, context):
+        try:
+            return execute(self, context)
+        except Exception as exc:  # noqa: BLE001 - reported to the artist
+            self.report({"ERROR"}, f"FurCollide: {runtime.describe(exc)}")
+            return {"CANCELLED"}
+
+    return wrapper
+
+
+def evaluate_now(context, src) -> str:
+    """Solve the current frame of the setup on ``src``; returns an error or ''."""
+    try:
+        runtime.evaluate(context.scene, context.evaluated_depsgraph_get(), src)
+    except Exception as exc:  # noqa: BLE001 - the caller reports it
+        return runtime.describe(exc)
+    return ""
+
+
+def refresh(context) -> None:
+    """Re-run the frame handler on the current frame (after an edit)."""
+    scene = context.scene
+    scene.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+
+
+def redraw(context) -> None:
+    """Redraw the 3D views and property editors (the panel shows new state)."""
+    screen = getattr(context, "screen", None)
+    if screen is None:
+        return
+    for area in screen.areas:
+        if area.type in {"VIEW_3D", "PROPERTIES"}:
+            area.tag_redraw()
+
+
+# ---------------------------------------------------------------- operators
 def _selected_meshes(context, exclude=()):
     """Selected mesh objects, in selection order, minus ``exclude``."""
     return [o for o in context.selected_objects if o.type == "MESH" and o not in exclude]

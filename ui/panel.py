@@ -4,7 +4,7 @@ import bpy
 from bpy.types import Panel, UIList
 
 from ..operators import bake, cache, runtime
-from ..operators.base import active_setup, backend_message
+from ..operators.setup import active_setup, backend_message
 
 
 class FURCOLLIDE_UL_colliders(UIList):

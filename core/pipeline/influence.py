@@ -78,9 +78,6 @@ def region_of_influence(points, offsets, displaced, distance, margin=0.99):
     L = np.linalg.norm(u, axis=1)
     limit = margin * d
     over = L > limit
-    if margin == 1.0:
-        over |= (L == limit) & (L > 0) & np.isfinite(limit)  # strictly less than D
-        limit = np.nextafter(limit, 0)
     scale = np.where(over, limit / np.where(over, L, 1.0), 1.0)
     out = pts + u * scale[:, None]
     out[off[:-1]] = pts[off[:-1]]
