@@ -102,10 +102,11 @@ class Solver:
         is_last = np.zeros(self.n_points, bool)
         is_last[off[1:] - 1] = True
         self._seg_start = np.flatnonzero(~is_last)
-        self._curve_end = off[1:-1] - 1  # point-difference rows that span two curves
         self._seg_curve = np.repeat(np.arange(C), nseg)
         seg_j = np.arange(len(self._seg_start)) - self._soff[self._seg_curve]
         self._w_bend = (seg_j + 1) / nseg[self._seg_curve]
+        # Uniform CV count (the usual groom): lets the step work in blocks.
+        self._ns = int(nseg[0]) if C and (nseg == nseg[0]).all() else 0
         self._seg_j = seg_j
         self._settings = Settings() if settings is None else self._check_settings(settings)
         self.reset()

@@ -35,19 +35,24 @@ class StepContext:
         self.out_dtype = out_dtype
         self.timings = {}
         self.n_rays = 0
-        # Point differences in the input dtype: contiguous and cheap. Entry i is
-        # the segment starting at point i (entries at curve ends are unused).
-        self.D = np.diff(points, axis=0)
-        L = np.sqrt(np.einsum("ij,ij->i", self.D, self.D))
-        L[solver._curve_end] = 0
-        self.curve_len = np.add.reduceat(L, solver._off[:-1]).astype(np.float64)
-        L[solver._curve_end] = np.inf
-        shortest = np.minimum.reduceat(L, solver._off[:-1])
+        # Input segment vectors (S, 3) in the input dtype, segment-major.
+        ns = solver._ns
+        if ns:  # uniform CV count: (curves, segments, 3) blocks, no gathers
+            D3 = np.diff(points.reshape(-1, ns + 1, 3), axis=1)
+            self.Dseg = D3.reshape(-1, 3)
+            L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg)).reshape(-1, ns)
+            self.curve_len = L.sum(axis=1, dtype=np.float64)
+            shortest = L.min(axis=1)
+        else:
+            self.Dseg = np.diff(points, axis=0)[solver._seg_start]
+            L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg))
+            self.curve_len = np.add.reduceat(L, solver._soff[:-1], dtype=np.float64)
+            shortest = np.minimum.reduceat(L, solver._soff[:-1])
         bad = shortest <= tol.ZERO_SEGMENT_REL * self.curve_len
         if bad.any():
             c = int(np.argmax(bad))
-            a, b = int(solver._off[c]), int(solver._off[c + 1])
-            k = a + int(np.argmin(L[a : b - 1]))
+            a, b = int(solver._soff[c]), int(solver._soff[c + 1])
+            k = int(solver._seg_start[a + int(np.argmin(L.ravel()[a:b]))])
             raise InputError(f"curve {c} has a zero-length segment between points {k} and {k + 1}")
         self.roots = points[solver._off[:-1]].astype(np.float64)
         # Ray growth (tol.RAY_EXTEND_ULPS): float32 ulps at the size of the
@@ -182,6 +187,8 @@ class StepContext:
         o, d : (k, 3) segment starts and vectors, world space
         seg, rep, starts : see :meth:`segments`
         """
+        if self.sv_._ns:
+            return self._deform_uniform(idx, angle, axis, quat)
         seg, rep, starts = self.segments(idx)
         v = self.seg_in(seg)
         if quat is not None:
@@ -201,6 +208,34 @@ class StepContext:
         o[1:] = end[:-1]
         o[starts] = self.roots[idx]
         return o, end - o, seg, rep, starts
+
+    def _deform_uniform(self, idx, angle, axis, quat):
+        """:meth:`deform` for curves that all have ``ns`` segments (blocks)."""
+        ns, n = self.sv_._ns, len(idx)
+        v = self.Dseg.reshape(-1, ns, 3)[idx].astype(np.float64)
+        if quat is not None:
+            v = rot.quat_rotate(quat, v.reshape(-1, 3)).reshape(n, ns, 3)
+        else:
+            if self.s.mode == "bend":
+                w = np.where(self.sv_._stiff[idx][:, None], 1.0, (np.arange(ns) + 1.0) / ns)
+            else:
+                w = np.ones((1, ns))
+            a = angle[:, None] * w
+            cos, sin = np.cos(a)[..., None], np.sin(a)[..., None]
+            ax = axis[:, None, :]
+            along = np.einsum("nkj,nj->nk", v, axis)[..., None]
+            v = v * cos + np.cross(ax, v) * sin + ax * (along * (1.0 - cos))
+            if self.s.shrink:
+                ramp = np.minimum(a / np.deg2rad(self.s.scale_angle), 1.0)
+                v *= (1.0 - (1.0 - self.s.scale_minimum) * ramp)[..., None]
+        root = self.roots[idx][:, None, :]
+        end = (np.cumsum(v, axis=1) + root).astype(self.out_dtype).astype(np.float64)
+        o = np.empty_like(end)
+        o[:, :1] = root
+        o[:, 1:] = end[:, :-1]
+        seg = (idx[:, None] * ns + np.arange(ns)).ravel()
+        rep = np.repeat(np.arange(n), ns)
+        return o.reshape(-1, 3), (end - o).reshape(-1, 3), seg, rep, np.arange(n) * ns
 
     def extend(self, o, d, root):
         """Segments grown by a few float32 ulps (see ``tol.RAY_EXTEND_ULPS``).
@@ -412,4 +447,4 @@ class StepContext:
 
     def seg_in(self, seg):
         """Input segment vectors (float64) of segment ids ``seg``."""
-        return self.D[self.sv_._seg_start[seg]].astype(np.float64)
+        return self.Dseg[seg].astype(np.float64)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .cache import curve_point_mask
+
 #: Per-curve status attribute written on the output (core ``Status`` codes).
 STATUS_ATTRIBUTE = "furcollide_status"
 #: Point colour attribute for the viewport's *Attribute* colour mode.
@@ -154,8 +156,27 @@ def _ensure_attribute(curves, name, kind, domain):
     return attr
 
 
-def write_status(curves, status: np.ndarray, offsets: np.ndarray) -> None:
-    """Write per-curve ``furcollide_status`` and the per-point status colour."""
+def status_colors(status, offsets, previous=None, colors=None) -> np.ndarray:
+    """Per-point RGBA (P, 4) float32 of the per-curve ``status`` codes.
+
+    Given the ``previous`` status and its ``colors``, only the curves whose
+    code changed are recoloured, in place (a few per frame, not all points).
+    """
+    codes = np.clip(status, 0, len(STATUS_COLORS) - 1).astype(np.intp)
+    if previous is None or colors is None or previous.shape != status.shape:
+        return np.repeat(STATUS_COLORS[codes], np.diff(offsets), axis=0)
+    curves = np.flatnonzero(previous != status)
+    if len(curves):
+        sizes = offsets[curves + 1] - offsets[curves]
+        colors[curve_point_mask(offsets, curves)] = np.repeat(
+            STATUS_COLORS[codes[curves]], sizes, axis=0
+        )
+    return colors
+
+
+def write_status(curves, status: np.ndarray, offsets: np.ndarray, colors=None) -> None:
+    """Write per-curve ``furcollide_status`` and the per-point status colour
+    (``colors`` from :func:`status_colors`, computed when not given)."""
     n = len(curves.curves)
     if status.shape != (n,):
         raise BridgeError(f"'{curves.name}' has {n} curves but {status.shape[0]} status codes")
@@ -164,10 +185,10 @@ def write_status(curves, status: np.ndarray, offsets: np.ndarray) -> None:
         attr.data.foreach_set("value", status.astype(np.int32))
     fresh = curves.attributes.get(COLOR_ATTRIBUTE) is None
     col = _ensure_attribute(curves, COLOR_ATTRIBUTE, "FLOAT_COLOR", "POINT")
-    codes = np.clip(status.astype(np.int64), 0, len(STATUS_COLORS) - 1)
-    per_point = np.repeat(STATUS_COLORS[codes], np.diff(offsets), axis=0)
-    if len(per_point):
-        col.data.foreach_set("color", per_point.ravel())
+    if colors is None:
+        colors = status_colors(status, offsets)
+    if len(colors):
+        col.data.foreach_set("color", colors.ravel())
     if fresh:  # make it the active attribute once (the viewport's Attribute colour)
         try:
             curves.attributes.active = col

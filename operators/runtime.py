@@ -80,7 +80,7 @@ class Runtime:
     printed: str = ""
     stats: dict = field(default_factory=dict)
     error: str = ""  # last solve error (kept visible while frames cannot be solved)
-    written_status: tuple | None = None  # (data session uid, status) last written
+    written_status: tuple | None = None  # (data session uid, status, colours) last written
 
     def forget_solver(self):
         self.solver = None
@@ -396,7 +396,8 @@ def read_inputs(ob, depsgraph) -> Inputs:
     M = bridge.matrix(src)
     M_out = bridge.matrix(s.output.evaluated_get(depsgraph))
     mask, warning = bridge.read_curve_mask(data, s.enable_attribute, len(offs) - 1)
-    local = P if np.array_equal(M, M_out) else None
+    # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
+    local = P if np.allclose(M, M_out, rtol=1e-6, atol=1e-7) else None
     return Inputs(bridge.transform(P, M), offs, key, np.linalg.inv(M_out), mask, warning, local)
 
 
@@ -503,17 +504,17 @@ def _write(ob, inp, points_world, status, changed=None) -> None:
     data = ob.furcollide.output.data
     bridge.set_positions(data, _output_local(inp, points_world, changed))
     rt = get_runtime(ob)
-    last = rt.written_status
     attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
-    if (
-        last is None
-        or attr is None
-        or last[0] != data.session_uid
-        or not np.array_equal(last[1], status)
-        or len(attr.data) != len(status)
+    last = rt.written_status  # (data, status, colours) written last
+    if last is not None and (
+        attr is None or last[0] != data.session_uid or len(attr.data) != len(status)
     ):
-        bridge.write_status(data, status, inp.offsets)
-        rt.written_status = (data.session_uid, status.copy())
+        last = None  # the output data was replaced or edited: write everything
+    if last is None or not np.array_equal(last[1], status):
+        previous, colors = (last[1], last[2]) if last is not None else (None, None)
+        colors = bridge.status_colors(status, inp.offsets, previous, colors)
+        bridge.write_status(data, status, inp.offsets, colors)
+        rt.written_status = (data.session_uid, status.copy(), colors)
 
 
 def _sync_output(ob, inp, depsgraph) -> None:

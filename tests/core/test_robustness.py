@@ -218,3 +218,29 @@ def test_tiny_scene_away_from_origin_is_resolved(mode):
     assert np.asarray(r.status)[0] == Status.COLLIDING
     assert not col.segment_hits(r.points[:-1], np.diff(r.points, axis=0)).any()
     assert not oracle.segments_hit_mesh(r.points, offs, V, F)[0]
+
+
+@FAST
+@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), attract=st.booleans())
+def test_rigid_motion_equivariance(seed, mode, attract):
+    """Rotating and moving the whole scene (fur, colliders through their
+    matrices, growth surface) rotates and moves the result with it."""
+    rng = np.random.default_rng(seed)
+    pts, offs, meshes = _scene(seed)
+    Vg, Fg = scenes.grid(size=6.0, n=6, z=0.0)
+    R = scenes.rotation_matrix(rng.normal(size=3), rng.uniform(0.1, 3.0))
+    t = rng.uniform(-2, 2, 3)
+    M = scenes.affine(R, t)
+    s = Settings(mode=mode, attract_to_growth_surface=attract)
+    ref = Solver(offs, s).step(pts, [Collider(V, F, double_sided=ds) for V, F, ds in meshes],
+                               growth=Collider(Vg, Fg))
+    moved = Solver(offs, s).step(
+        pts @ R.T + t, [Collider(V, F, double_sided=ds, matrix=M) for V, F, ds in meshes],
+        growth=Collider(Vg, Fg, matrix=M))
+    st_ref, st_mov = np.asarray(ref.status), np.asarray(moved.status)
+    assert (st_ref == st_mov).mean() >= 0.9, (st_ref, st_mov)
+    L = np.array([x.sum() for x in scenes.segment_lengths(pts, offs)])
+    d = geom.curve_max_displacement(moved.points, ref.points @ R.T + t, offs)
+    assert ((d <= 1e-5 * L) | (st_ref != st_mov)).mean() >= 0.9, (d / L).max()
+    geom.assert_no_intersection(moved.points, offs, st_mov,
+                                [(oracle.transform(V, M), F) for V, F, _ in meshes])
