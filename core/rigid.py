@@ -14,6 +14,11 @@ from . import tolerances as tol
 from .search import gallop_bisect
 from .status import Status
 
+#: Probes per curve per search round. Each probe of a Stiff/Bend curve casts
+#: all its segments: after the first (estimate-spread) round two probes per
+#: round cast fewest rays for the same main-thread time.
+_WIDTH = 2
+
 
 def solve(ctx, idx, status):
     """Stiff and Bend: one angle per curve about its kept axis."""
@@ -118,7 +123,7 @@ def recover(ctx, rec, status, batch, items):
             def test(it, ks):
                 return ~batch.hits(items[b[it]], np.minimum(lo_th[it] + ks * p, hi_th[it]))
 
-            k = gallop_bisect(len(b), test, K, lo=np.zeros(len(b)), hi=K)
+            k = gallop_bisect(len(b), test, K, lo=np.zeros(len(b)), hi=K, width=_WIDTH)
             th1[b] = np.minimum(lo_th + k * p, hi_th)
     ctx.angle[rec] = th1
     # Back at exactly the input shape counts as FREE, not RECOVERING.
@@ -167,7 +172,7 @@ def search_angles(ctx, batch, items, th0, guess=None):
         lo[it[anyg]] = np.where(first > 0, probes[rows, np.maximum(first - 1, 0)], 0)[anyg]
         lo[it[~anyg]] = probes[~anyg, -1]
         stride = np.maximum(kg // 2, 1)
-    return gallop_bisect(n, test, kmax, lo=lo, hi=hi, stride=stride)
+    return gallop_bisect(n, test, kmax, lo=lo, hi=hi, stride=stride, width=_WIDTH)
 
 
 def release(ctx, idx):
