@@ -53,9 +53,10 @@ class BridgeError(ValueError):
 
 
 # ----------------------------------------------------------------- matrices
-def matrix(ob) -> np.ndarray:
-    """World matrix of ``ob`` as a float64 (4, 4) array."""
-    return np.array(ob.matrix_world, dtype=np.float64)
+def matrix(ob, inverted=False) -> np.ndarray:
+    """World matrix of ``ob`` (or its inverse) as a float64 (4, 4) array."""
+    m = ob.matrix_world
+    return np.array(m.inverted_safe() if inverted else m, dtype=np.float64)
 
 
 def is_identity(M: np.ndarray) -> bool:

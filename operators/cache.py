@@ -89,6 +89,16 @@ def rows_differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return m
 
 
+def curves_with_any(point_flags: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Bool per curve: is any of its points flagged? (``offsets`` with C >= 1)"""
+    C = len(offsets) - 1
+    n = int(offsets[-1]) // C
+    if n * C == offsets[-1] and np.array_equal(offsets, np.arange(C + 1) * n):
+        rows = point_flags.reshape(C, n)  # every curve has n points: a fast row-wise "any"
+        return rows_differ(rows, np.zeros_like(rows[:1]))
+    return np.maximum.reduceat(point_flags.view(np.uint8), offsets[:-1]).astype(bool)
+
+
 # ------------------------------------------------------------------- memory
 @dataclass
 class Frame:
@@ -203,9 +213,7 @@ class MemoryCache:
         if P and C:
             if changed is None:
                 changed = rows_differ(out, inp)
-            pt_changed = changed.view(np.uint8)
-            # A curve changed when any of its points did.
-            curve_changed = np.maximum.reduceat(pt_changed, offsets[:-1]).astype(bool)
+            curve_changed = curves_with_any(changed, offsets)
         else:
             curve_changed = np.zeros(C, bool)
         curves = np.flatnonzero(curve_changed).astype(np.int32)

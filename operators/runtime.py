@@ -394,11 +394,13 @@ def read_inputs(ob, depsgraph) -> Inputs:
     key = cache.topology_key(offs)
     P = bridge.get_positions(data)
     M = bridge.matrix(src)
-    M_out = bridge.matrix(s.output.evaluated_get(depsgraph))
+    out = s.output.evaluated_get(depsgraph)
+    M_out = bridge.matrix(out)
     mask, warning = bridge.read_curve_mask(data, s.enable_attribute, len(offs) - 1)
     # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
     local = P if np.allclose(M, M_out, rtol=1e-6, atol=1e-7) else None
-    return Inputs(bridge.transform(P, M), offs, key, np.linalg.inv(M_out), mask, warning, local)
+    return Inputs(bridge.transform(P, M), offs, key, bridge.matrix(out, inverted=True), mask,
+                  warning, local)
 
 
 def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> ColliderEntry:
@@ -772,7 +774,7 @@ def _baked_subframe(ob, depsgraph, f, sub):
     w = np.float32(sub)
     points = pa + (pb - pa) * w
     inp = Inputs(points, offs, cache.topology_key(offs),
-                 np.linalg.inv(bridge.matrix(s.output.evaluated_get(depsgraph))), None, "")
+                 bridge.matrix(s.output.evaluated_get(depsgraph), inverted=True), None, "")
     _write(ob, inp, points, status)
     return "subframe"
 
