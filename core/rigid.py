@@ -75,7 +75,11 @@ def collide(ctx, batch, items, status):
         if len(retry):
             cr = c[retry]
             ctx.sv_._stiff[cr] = True
-            k2 = search_angles(ctx, RigidBatch(ctx, cr), np.arange(len(cr)), np.zeros(len(cr)))
+            # seed: the Stiff estimate, plus about the mean bend already taken
+            seed = ctx.guess_stiff[cr] + 0.5 * th0[retry]
+            k2 = search_angles(
+                ctx, RigidBatch(ctx, cr), np.arange(len(cr)), np.zeros(len(cr)), seed
+            )
             ctx.sv_._stiff[cr[k2 < 0]] = False
             ok2 = k2 >= 0
             k[retry[ok2]] = k2[ok2]

@@ -98,6 +98,7 @@ class StepContext:
         self.angle_max = sv._angle_max.copy()
         self.push = np.zeros(sv.n_curves)
         self.guess = sv._push.copy()
+        self.guess_stiff = np.zeros(sv.n_curves)
         self.axis = np.zeros((sv.n_curves, 3))
         if self.soft:
             self.quat = sv._quat.copy()
@@ -372,12 +373,16 @@ class StepContext:
         ax = axis[rep]
         radius = np.linalg.norm(v - ax * rot.dot(v, ax)[:, None], axis=1)
         lift = np.arcsin(np.clip(depth / np.maximum(radius, 1e-300), 0.0, 1.0))
+        if len(lift) == 0:
+            return lift
+        # As Stiff (turned at the root): kept for Bend's fall back to Stiff.
+        self.guess_stiff[idx] = np.maximum.reduceat(lift, starts)
         if self.s.mode == "bend":  # a CV turns by about the mean weight up to it
             j = np.arange(len(rep)) - starts[rep]
             n = self.sv_._nseg[idx][rep]
             w = np.where(self.sv_._stiff[idx][rep], 1.0, (j + 2) / (2.0 * n))
             lift = lift / w
-        return np.maximum.reduceat(lift, starts) if len(lift) else lift
+        return np.maximum.reduceat(lift, starts)
 
     def _midpoints(self, idx, o, d, starts):
         nseg = self.sv_._nseg[idx]
