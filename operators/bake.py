@@ -218,9 +218,9 @@ class _BakeBase:
             return {"PASS_THROUGH"}
         try:
             job.step()
-        except BakeError as exc:
+        except Exception as exc:  # noqa: BLE001 - BakeError or unexpected: a report
             self._end(context, cancelled=True)
-            self.report({"ERROR"}, str(exc))
+            self.report({"ERROR"}, runtime.describe(exc))
             return {"CANCELLED"}
         context.window_manager.progress_update(job.frames_done)
         PROGRESS[context.scene.name] = (job.frames_done, max(1, job.total))

@@ -118,6 +118,13 @@ def _offset(description, update):
     )
 
 
+def _choice(name, items, default, description):
+    """One of a few named behaviours (``items``: identifier, label, tooltip)."""
+    return EnumProperty(
+        name=name, items=items, default=default, update=_invalidate, description=description
+    )
+
+
 def _hidden(prop, name, default):
     """Internal bookkeeping, never drawn."""
     return prop(name=name, default=default, options={"HIDDEN"},
@@ -126,7 +133,6 @@ def _hidden(prop, name, default):
 
 def _stat(name, key, description, prop=IntProperty, **kw):
     """A read-only statistic of the last frame, served by the runtime registry."""
-
     default = 0.0 if prop is FloatProperty else 0
 
     def get(self):
@@ -227,9 +233,9 @@ class FurCollideSettings(PropertyGroup):
     )
 
     # ---------------------------------------------------------- resolution
-    mode: EnumProperty(
-        name="Mode",
-        items=[
+    mode: _choice(
+        "Mode",
+        [
             ("stiff", "Stiff", "Rotate the whole curve at its root, keeping its shape. "
              "Good for short fur"),
             ("bend", "Bend", "Bend the curve evenly from root to tip. Good for long fur "
@@ -237,9 +243,8 @@ class FurCollideSettings(PropertyGroup):
             ("soft", "Soft", "Let each colliding segment turn on its own and drag the "
              "next ones along. Hugs tight contacts such as cloth"),
         ],
-        default="bend",
-        update=_invalidate,
-        description="How a colliding curve is turned out of the mesh",
+        "bend",
+        "How a colliding curve is turned out of the mesh",
     )
     rotation_precision: _degrees(
         "Rotation Precision", 0.25,
@@ -319,17 +324,16 @@ class FurCollideSettings(PropertyGroup):
     )
 
     # ---------------------------------------------------------------- pinch
-    pinch_resolution: EnumProperty(
-        name="Pinch Resolution",
-        items=[
+    pinch_resolution: _choice(
+        "Pinch Resolution",
+        [
             ("stop", "Stop Solving", "Pinched hair keeps the shape it had before the "
              "pinch (no jitter trying to solve the impossible)"),
             ("growth_surface", "Put to Growth Surface", "Lay pinched hair down onto the "
              "skin it grows from (needs the hair's Surface object)"),
         ],
-        default="stop",
-        update=_invalidate,
-        description="What hair does when its root is trapped inside a closed collider "
+        "stop",
+        "What hair does when its root is trapped inside a closed collider "
         "(e.g. an arm pressed into the body)",
     )
     recover_pinched: _toggle(

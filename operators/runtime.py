@@ -201,33 +201,33 @@ def invalidate(ob, reason="", from_frame=None, colliders=False, refresh=True) ->
         _schedule_refresh(ob.name)
 
 
-_pending_refresh: set = set()
+_pending_refresh: dict = {}  # object name -> timer function
 
 
 def _schedule_refresh(name: str) -> None:
     """Re-evaluate the current frame soon (UI only: timers need an event loop)."""
     if bpy.app.background or name in _pending_refresh:
         return
-    _pending_refresh.add(name)
 
     def refresh():
-        _pending_refresh.discard(name)
-        ob = bpy.data.objects.get(name)
-        scene = bpy.context.scene
-        if ob is None or scene is None or not ob.furcollide.is_setup:
-            return None
         global _busy
         if _busy:
-            return 0.1
+            return 0.1  # the frame handler is running: try again soon
+        _pending_refresh.pop(name, None)
+        ob = None
         _busy = True
         try:
-            evaluate(scene, bpy.context.evaluated_depsgraph_get(), ob)
+            ob = bpy.data.objects.get(name)
+            scene = bpy.context.scene
+            if ob is not None and scene is not None and ob.furcollide.is_setup:
+                evaluate(scene, bpy.context.evaluated_depsgraph_get(), ob)
         except Exception as exc:  # noqa: BLE001 - a timer must never raise either
             record_error(ob, exc)
         finally:
             _busy = False
         return None
 
+    _pending_refresh[name] = refresh
     bpy.app.timers.register(refresh, first_interval=0.05)
 
 
@@ -875,11 +875,15 @@ def on_frame_change_post(scene, depsgraph=None):
 
 def record_error(ob, exc: Exception) -> None:
     """A failed frame of the setup on ``ob``: its status message plus one console line
-    (a traceback too with ``FURCOLLIDE_DEBUG`` set)."""
-    rt = get_runtime(ob)
-    if rt is not None:
-        rt.error = describe(exc)
-    set_status(ob, "ERROR", describe(exc))
+    (a traceback too with ``FURCOLLIDE_DEBUG`` set). Never raises."""
+    message = describe(exc)
+    try:
+        rt = get_runtime(ob)
+        if rt is not None:
+            rt.error = message
+        set_status(ob, "ERROR", message)
+    except Exception:  # noqa: BLE001 - the object or the add-on is gone
+        print(f"FurCollide: {message}", flush=True)
     if os.environ.get("FURCOLLIDE_DEBUG"):
         traceback.print_exception(exc)
 
@@ -955,5 +959,9 @@ def unregister():
         lst = getattr(bpy.app.handlers, name)
         if fn in lst:
             lst.remove(fn)
+    for fn in _pending_refresh.values():
+        if bpy.app.timers.is_registered(fn):
+            bpy.app.timers.unregister(fn)
+    _pending_refresh.clear()
     registry.clear()
 
