@@ -163,6 +163,11 @@ class Solver:
         "quat_max": ("S", 4),
         "meta": (4,),
     }
+    _SOFT_KEYS = ("quat", "quat_max")  # only Soft mode carries per-segment rotations
+
+    def _state_keys(self):
+        soft = self._settings.mode == "soft"
+        return {k: v for k, v in self._STATE_KEYS.items() if soft or k not in self._SOFT_KEYS}
 
     @property
     def state(self) -> dict:
@@ -170,10 +175,11 @@ class Solver:
 
         Restoring it with ``solver.state = snapshot`` makes the next step
         bit-identical to what it was after the snapshot. Only numpy arrays:
-        it can be written with ``np.savez`` and read without pickle.
+        it can be written with ``np.savez`` and read without pickle. The
+        per-segment ``quat`` arrays are only present in Soft mode.
         """
         mode = ("stiff", "bend", "soft").index(self._settings.mode)
-        return {
+        state = {
             "angle": self._angle.copy(),
             "angle_max": self._angle_max.copy(),
             "push": self._push.copy(),
@@ -183,27 +189,23 @@ class Solver:
             "hold": self._hold.copy(),
             "pinched": self._pinched.copy(),
             "stiff": self._stiff.copy(),
-            "quat": self._quat.copy(),
-            "quat_max": self._quat_max.copy(),
+            "quat": self._quat.copy() if mode == 2 else None,
+            "quat_max": self._quat_max.copy() if mode == 2 else None,
             "meta": np.array([_STATE_VERSION, self.n_curves, self.n_points, mode], np.int64),
         }
+        if mode != 2:
+            del state["quat"], state["quat_max"]
+        return state
 
     @state.setter
     def state(self, s):
         if not isinstance(s, dict) and not hasattr(s, "keys"):
             raise InputError("state must be a dict of numpy arrays (from Solver.state)")
-        missing = set(self._STATE_KEYS) - set(s.keys())
-        if missing:
-            raise InputError(f"state is missing {sorted(missing)}")
-        dims = {"C": self.n_curves, "S": len(self._seg_start)}
-        arrs = {}
-        for k, shape in self._STATE_KEYS.items():
-            a = np.asarray(s[k])
-            want = tuple(dims.get(d, d) for d in shape)
-            if a.shape != want:
-                raise InputError(f"state['{k}'] has shape {a.shape}, expected {want}")
-            arrs[k] = a
-        meta = arrs["meta"]
+        if "meta" not in s.keys():
+            raise InputError("state is missing ['meta'] (not a Solver.state snapshot)")
+        meta = np.asarray(s["meta"])
+        if meta.shape != (4,):
+            raise InputError(f"state['meta'] has shape {meta.shape}, expected (4,)")
         if (
             int(meta[0]) != _STATE_VERSION
             or int(meta[1]) != self.n_curves
@@ -212,6 +214,18 @@ class Solver:
             raise InputError("state was saved for other curves (curve/point count differs)")
         if int(meta[3]) != ("stiff", "bend", "soft").index(self._settings.mode):
             raise InputError("state was saved with another mode")
+        keys = self._state_keys()
+        missing = set(keys) - set(s.keys())
+        if missing:
+            raise InputError(f"state is missing {sorted(missing)}")
+        dims = {"C": self.n_curves, "S": len(self._seg_start)}
+        arrs = {}
+        for k, shape in keys.items():
+            a = np.asarray(s[k])
+            want = tuple(dims.get(d, d) for d in shape)
+            if a.shape != want:
+                raise InputError(f"state['{k}'] has shape {a.shape}, expected {want}")
+            arrs[k] = a
         self._angle = arrs["angle"].astype(np.float64).copy()
         self._angle_max = arrs["angle_max"].astype(np.float64).copy()
         self._push = arrs["push"].astype(np.float64).copy()
@@ -221,8 +235,12 @@ class Solver:
         self._hold = arrs["hold"].astype(bool).copy()
         self._pinched = arrs["pinched"].astype(bool).copy()
         self._stiff = arrs["stiff"].astype(bool).copy()
-        self._quat = arrs["quat"].astype(np.float64).copy()
-        self._quat_max = arrs["quat_max"].astype(np.float64).copy()
+        if "quat" in keys:
+            self._quat = arrs["quat"].astype(np.float64).copy()
+            self._quat_max = arrs["quat_max"].astype(np.float64).copy()
+        else:
+            self._quat[:] = (1.0, 0.0, 0.0, 0.0)
+            self._quat_max[:] = (1.0, 0.0, 0.0, 0.0)
 
     # --------------------------------------------------------------- input
     def _check_points(self, points):
