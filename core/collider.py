@@ -385,18 +385,18 @@ class Collider:
         F = self._F
         if off_lo > 0:
             # Face blocks, m faces each: [outer shell, (inner shell,) surface].
-            # Double-sided: shells at +-offset (the inner one faces inward).
-            # Open single-sided: the offset is kept on the front only. Except
-            # for closed single-sided solids the real surface stays in too, so
-            # a curve slipping in between the shells from a rim still collides.
+            # A closed single-sided solid is only kept at a distance from
+            # outside (inside is a pinch). Anything else (open sheets,
+            # double-sided meshes) gets shells at +-offset, the inner one
+            # facing inward, and keeps its real surface too, so a curve
+            # slipping in between the shells from a rim still collides.
             vn = self._vertex_normals()
             n = len(self._V)
             blocks_V = [V + off_lo * vn]
             blocks_F = [F]
-            if self.double_sided:
+            if self.double_sided or not self.closed:
                 blocks_V.append(V - off_lo * vn)
                 blocks_F.append(F[:, ::-1] + n)
-            if self.double_sided or not self.closed:
                 blocks_V.append(V)
                 blocks_F.append(F + n * len(blocks_F))
             V = np.concatenate(blocks_V)
@@ -426,7 +426,7 @@ class Collider:
 
     def _normals_world(self, prim, n_front):
         idx = prim % n_front
-        flip = self.double_sided & (prim // n_front == 1)  # the inner shell faces inward
+        flip = prim // n_front == 1  # the inner (-offset) shell faces inward
         n_lo = self._face_normals(idx) * np.where(flip, -1.0, 1.0)[:, None]
         n_wo = apply(self._Minv[:3, :3].T, n_lo)  # inverse-transpose for normals
         ln = np.linalg.norm(n_wo, axis=1, keepdims=True)

@@ -19,11 +19,13 @@ from ._curves import check_curves, check_surface, layout
 
 #: Segments whose search box spans more grid cells than this take the
 #: lower-bound path (they are far from the collider compared to the cells).
-_MAX_CELLS = 216
+_MAX_CELLS = 512
 #: Sub-pieces of a segment in the distance-field lower bound.
 _FAR_PIECES = 8
 #: Cells along the longest side of the lower-bound distance field, at most.
 _FIELD_DIMS = 64
+#: Extra distance fields over the mesh's box grown by these multiples of its size.
+_FIELD_PADS = (0.5, 2.0)
 #: Cell entries (segment, cell) per chunk of the exact search.
 _CHUNK_CELLS = 1_000_000
 #: Grid cells along the longest side, at most.
@@ -180,15 +182,16 @@ class _LowerBoundField:
     ``|q - p|^2 >= |q - q'|^2 + |q' - p|^2``.
     """
 
-    def __init__(self, T, h_min):
+    def __init__(self, T, h_min, box=None):
         lo, hi = T.min(1), T.max(1)
-        self.glo = lo.min(0)
-        ext = float((hi.max(0) - self.glo).max()) or 1.0
+        blo, bhi = (lo.min(0), hi.max(0)) if box is None else box
+        self.glo = blo
+        ext = float((bhi - blo).max()) or 1.0
         self.h = h = max(ext / _FIELD_DIMS, h_min)
-        self.dims = dims = np.floor((hi.max(0) - self.glo) / h).astype(np.int64) + 1
+        self.dims = dims = np.floor((bhi - blo) / h).astype(np.int64) + 1
         self.ghi = self.glo + dims * h
-        ilo = np.minimum(np.floor((lo - self.glo) / h).astype(np.int64), dims - 1)
-        ihi = np.minimum(np.floor((hi - self.glo) / h).astype(np.int64), dims - 1)
+        ilo = np.clip(np.floor((lo - self.glo) / h).astype(np.int64), 0, dims - 1)
+        ihi = np.clip(np.floor((hi - self.glo) / h).astype(np.int64), 0, dims - 1)
         cell, _ = _box_cells(ilo, ihi)
         D2 = np.full(tuple(dims), np.inf)
         D2[cell[:, 0], cell[:, 1], cell[:, 2]] = 0.0
@@ -224,8 +227,11 @@ def segment_mesh_distance(A, B, V, F):
     An expanding search over a grid of the triangles finds the exact
     distance of segments near the mesh; segments whose search box would
     span more than ``_MAX_CELLS`` grid cells (far from the mesh compared to
-    its triangles) get a conservative lower bound from a distance field of
-    the mesh's occupied cells instead (off by at most a few field cells).
+    its triangles) get a conservative lower bound from distance fields of
+    the mesh's occupied cells instead (64 cells along the mesh's box, and
+    along that box grown by 0.5 and 2 times its size on every side, where
+    the query points reach there; off by at most ~3 cells of the finest
+    field covering the point).
 
     Parameters
     ----------
@@ -249,12 +255,21 @@ def segment_mesh_distance(A, B, V, F):
     seg = np.linalg.norm(B - A, axis=1)
     h = max(float(np.median(ext)), 0.5 * float(np.median(seg)), 1e-12)
     g = _TriGrid(T, h)
-    field = _LowerBoundField(T, g.h)
-    # lower bound of every segment: pieces of it against the field
+    # lower bound of every segment: pieces of it against distance fields
     k = _FAR_PIECES
     t = (np.arange(k) + 0.5) / k
     mid = (A[:, None, :] + (B - A)[:, None, :] * t[None, :, None]).reshape(-1, 3)
-    lb = np.maximum(field(mid).reshape(S, k) - (seg / (2 * k))[:, None], 0.0).min(1)
+    lb_pt = _LowerBoundField(T, g.h)(mid)
+    # coarser fields around the mesh for the curves outside its box
+    mlo, mhi = T.min((0, 1)), T.max((0, 1))
+    size = float((mhi - mlo).max())
+    for pad in _FIELD_PADS:
+        qlo = np.maximum(mid.min(0), mlo - pad * size)
+        qhi = np.minimum(mid.max(0), mhi + pad * size)
+        if (qlo < mlo).any() or (qhi > mhi).any():
+            box = (np.minimum(qlo, mlo), np.maximum(qhi, mhi))
+            lb_pt = np.maximum(lb_pt, _LowerBoundField(T, g.h, box)(mid))
+    lb = np.maximum(lb_pt.reshape(S, k) - (seg / (2 * k))[:, None], 0.0).min(1)
     dist = lb.copy()
     exact = np.zeros(S, bool)
     # expanding exact search: radius rho, done where the best found is <= rho
