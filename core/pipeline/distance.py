@@ -30,6 +30,8 @@ _FIELD_PADS = (0.5, 2.0)
 _CHUNK_CELLS = 1_000_000
 #: Grid cells along the longest side, at most.
 _MAX_DIMS = 256
+#: Triangles spanning more grid cells than this are tested by every search.
+_BIG_CELLS = 4096
 
 
 def _dot(a, b):
@@ -131,21 +133,51 @@ def _world_mesh(col, i):
 
 
 class _TriGrid:
-    """Uniform grid of triangle bounding boxes (cell size ``h``)."""
+    """Uniform grid of triangle bounding boxes (cell size ``h``).
+
+    Triangles whose box spans more than ``_BIG_CELLS`` cells (a ground
+    plane next to a detailed character) are not registered in cells: they
+    are in :attr:`big` and every search tests them.
+    """
 
     def __init__(self, T, h):
         lo, hi = T.min(1), T.max(1)
+        self.n_tris = len(T)
         self.glo = lo.min(0)
         ext = float((hi.max(0) - self.glo).max()) or 1.0
         self.h = h = max(h, ext / _MAX_DIMS)
         self.dims = np.floor((hi.max(0) - self.glo) / h).astype(np.int64) + 1
         ilo = np.floor((lo - self.glo) / h).astype(np.int64)
         ihi = np.floor((hi - self.glo) / h).astype(np.int64)
-        cell, owner = _box_cells(ilo, ihi)
+        big = (ihi - ilo + 1).prod(1) > _BIG_CELLS
+        self.big = np.flatnonzero(big)
+        small = np.flatnonzero(~big)
+        cell, owner = _box_cells(ilo[small], ihi[small])
         keys = self.key(cell)
         order = np.argsort(keys, kind="stable")
         self.keys = keys[order]
-        self.tris = owner[order]
+        self.tris = small[owner[order]]
+
+    def candidates(self, ilo, ihi):
+        """(box, triangle) pairs of the boxes ``[ilo, ihi]`` (cells), deduplicated.
+
+        Returns
+        -------
+        box, tri : (e,) int64
+        """
+        cell, owner = _box_cells(ilo, ihi)
+        keys = self.key(cell)
+        lo = np.searchsorted(self.keys, keys, "left")
+        n = np.searchsorted(self.keys, keys, "right") - lo
+        b_of = np.repeat(owner, n)
+        t_of = self.tris[np.repeat(lo - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))]
+        if len(self.big):
+            nb = len(ilo)
+            b_of = np.concatenate([b_of, np.repeat(np.arange(nb), len(self.big))])
+            t_of = np.concatenate([t_of, np.tile(self.big, nb)])
+        m = int(self.n_tris)
+        pair = np.unique(b_of * m + t_of)
+        return pair // m, pair % m
 
     def key(self, cell):
         d = self.dims + 2
@@ -304,17 +336,8 @@ def _search(A, B, T, g, idx, ilo, ihi, best):
         stop = max(int(np.searchsorted(csum, base + _CHUNK_CELLS, "right")), start + 1)
         part = slice(start, stop)
         start = stop
-        cell, owner = _box_cells(ilo[part], ihi[part])
-        keys = g.key(cell)
-        lo = np.searchsorted(g.keys, keys, "left")
-        n = np.searchsorted(g.keys, keys, "right") - lo
-        s_of = np.repeat(owner, n)
-        first = np.repeat(lo - (np.cumsum(n) - n), n)
-        t_of = g.tris[first + np.arange(int(n.sum()))]
-        m = len(T)
-        pair = np.unique(s_of * m + t_of)
-        si = idx[part][pair // m]
-        ti = pair % m
+        box, ti = g.candidates(ilo[part], ihi[part])
+        si = idx[part][box]
         d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
         np.minimum.at(best, si, d)
 
@@ -346,10 +369,10 @@ def collider_distance(points, offsets, colliders, return_exact=False):
     distance : (P,) ndarray of float64
         ``inf`` when there is no collider. Exact (float64 rounding) for
         segments near a collider (within a few triangle sizes or segment
-        lengths); for segments farther away a lower bound from a distance
-        field of the collider (at most ~3 field cells, i.e. ~5 % of the
-        collider's size, below the truth). It never exceeds the true
-        distance.
+        lengths); for segments farther away a lower bound from distance
+        fields of the collider (typically within a few percent of the
+        collider's size below the truth, more for CVs farther away than the
+        collider's size). It never exceeds the true distance.
     exact : (P,) ndarray of bool
         Only with ``return_exact``.
 
@@ -386,3 +409,73 @@ def collider_distance(points, offsets, colliders, return_exact=False):
     if return_exact:
         return dist, exact
     return dist
+
+
+def closest_faces(V, F, Q):
+    """Exact closest point of a triangle mesh to each query, and its triangle.
+
+    An expanding search over a grid of the triangles (cell ~ the median
+    triangle size), with a brute-force fallback for queries whose search
+    box grows past ``_MAX_CELLS`` cells. Ties go to the lowest face index.
+
+    Parameters
+    ----------
+    V : (n, 3) ndarray of float64
+    F : (m, 3) ndarray of int, m >= 1
+    Q : (k, 3) ndarray of float64
+
+    Returns
+    -------
+    P : (k, 3) ndarray of float64
+        Closest points.
+    face : (k,) int64
+    """
+    Q = np.asarray(Q, np.float64)
+    k = len(Q)
+    T = V[F]
+    m = len(T)
+    if k == 0:
+        return np.zeros((0, 3)), np.zeros(0, np.int64)
+    ext = (T.max(1) - T.min(1)).max(1)
+    g = _TriGrid(T, max(float(np.median(ext)), 1e-12))
+    best = np.full(k, np.inf)
+    face = np.full(k, -1, np.int64)
+    rho = np.full(k, 0.25 * g.h)  # roots usually lie on the surface: start small
+    todo = np.arange(k)
+    while len(todo):
+        r = rho[todo][:, None]
+        ilo = np.clip(np.floor((Q[todo] - r - g.glo) / g.h), -1, g.dims).astype(np.int64)
+        ihi = np.clip(np.floor((Q[todo] + r - g.glo) / g.h), -1, g.dims).astype(np.int64)
+        ok = (ihi - ilo + 1).prod(1) <= _MAX_CELLS
+        brute = todo[~ok]
+        todo, ilo, ihi = todo[ok], ilo[ok], ihi[ok]
+        if len(brute):
+            step = max(1, _CHUNK_CELLS // m)
+            for a in range(0, len(brute), step):
+                qi = np.repeat(brute[a:a + step], m)
+                ti = np.tile(np.arange(m), len(brute[a:a + step]))
+                _point_pairs(Q, T, qi, ti, best, face)
+        if len(todo):
+            box, ti = g.candidates(ilo, ihi)
+            _point_pairs(Q, T, todo[box], ti, best, face)
+        done = best[todo] <= rho[todo]
+        todo = todo[~done]
+        rho[todo] = np.where(np.isfinite(best[todo]), best[todo], 2 * rho[todo])
+    P = closest_on_triangles(Q, T[face, 0], T[face, 1], T[face, 2])
+    return P, face
+
+
+def _point_pairs(Q, T, qi, ti, best, face):
+    """Update ``best`` / ``face`` with the (query, triangle) pairs (ties: lowest face)."""
+    if len(qi) == 0:
+        return
+    p = closest_on_triangles(Q[qi], T[ti, 0], T[ti, 1], T[ti, 2])
+    d = np.linalg.norm(p - Q[qi], axis=1)
+    o = np.lexsort((ti, d, qi))
+    qi, ti, d = qi[o], ti[o], d[o]
+    first = np.ones(len(qi), bool)
+    first[1:] = qi[1:] != qi[:-1]
+    qi, ti, d = qi[first], ti[first], d[first]
+    better = (d < best[qi]) | ((d == best[qi]) & (ti < face[qi]))
+    best[qi[better]] = d[better]
+    face[qi[better]] = ti[better]

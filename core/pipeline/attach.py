@@ -1,0 +1,226 @@
+"""Fur Attach (paper section 2): curves rigidly follow an animated growth surface.
+
+At the reference pose each curve's root is bound to its closest surface
+triangle (face index, barycentric coordinates) and its CVs are stored in
+an orthonormal frame of that triangle. Every frame, the curve is moved
+rigidly with the frame of the same triangle on the deformed surface. No UV
+map is needed; only the vertex positions may change (deforming, skinned,
+shape-keyed surfaces), not the topology.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ColliderError, InputError
+from ._curves import check_curves, check_surface, degenerate_faces
+from .distance import closest_faces
+
+
+def _frames(V, F, face):
+    """Origin-free frames of triangles ``face``: (k, 3, 3), columns (edge, bitangent, normal).
+
+    Returns
+    -------
+    R : (k, 3, 3) ndarray
+    ok : (k,) bool
+        False where the triangle is degenerate (R is then garbage).
+    """
+    a, b, c = V[F[face, 0]], V[F[face, 1]], V[F[face, 2]]
+    e = b - a
+    n = np.cross(e, c - a)
+    le = np.linalg.norm(e, axis=1)
+    ln = np.linalg.norm(n, axis=1)
+    scale = np.maximum(np.linalg.norm(c - a, axis=1), le)
+    ok = (le > 0) & (ln > 1e-12 * scale**2)
+    e = e / np.where(ok, le, 1.0)[:, None]
+    n = n / np.where(ok, ln, 1.0)[:, None]
+    t = np.cross(n, e)
+    return np.stack([e, t, n], axis=2), ok
+
+
+def _barycentric(p, a, b, c):
+    """Barycentric coordinates (k, 3) of points p in triangles (a, b, c)."""
+    v0, v1, v2 = b - a, c - a, p - a
+    d00 = np.einsum("ij,ij->i", v0, v0)
+    d01 = np.einsum("ij,ij->i", v0, v1)
+    d11 = np.einsum("ij,ij->i", v1, v1)
+    d20 = np.einsum("ij,ij->i", v2, v0)
+    d21 = np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    bary = np.stack([1 - v - w, v, w], axis=1)
+    # the closest point is on the triangle: clamp rounding and renormalize
+    bary = np.clip(bary, 0.0, 1.0)
+    return bary / bary.sum(1, keepdims=True)
+
+
+@dataclass
+class Binding:
+    """Curves bound to a growth surface (result of :func:`bind`). Arrays only.
+
+    Attributes
+    ----------
+    face : (C,) int64
+        Surface triangle of each root.
+    bary : (C, 3) float64
+        Barycentric coordinates of each root's surface point in its triangle.
+    local : (P, 3) float64
+        Every CV in its triangle's frame (edge, bitangent, normal), relative
+        to the root's surface point (roots are 0 when snapped).
+    offsets : (C+1,) int64
+    faces : (m, 3) int64
+        The surface's triangles.
+    n_vertices : int
+        The surface's vertex count (``apply`` checks it).
+    frame_ref : (C, 3, 3) float64
+        Reference frames, used where a triangle collapses later.
+    root_distance : (C,) float64
+        Distance of each root to the surface at bind time (snapped away
+        when ``snap_roots``).
+
+    Save with ``np.savez(path, **binding.arrays())`` and load with
+    ``Binding.from_arrays(np.load(path))``.
+    """
+
+    face: np.ndarray
+    bary: np.ndarray
+    local: np.ndarray
+    offsets: np.ndarray
+    faces: np.ndarray
+    n_vertices: int
+    frame_ref: np.ndarray
+    root_distance: np.ndarray
+
+    def arrays(self) -> dict:
+        """The binding as a dict of numpy arrays (for ``np.savez``)."""
+        return {
+            "face": self.face, "bary": self.bary, "local": self.local,
+            "offsets": self.offsets, "faces": self.faces,
+            "n_vertices": np.array(self.n_vertices), "frame_ref": self.frame_ref,
+            "root_distance": self.root_distance,
+        }
+
+    @classmethod
+    def from_arrays(cls, d) -> Binding:
+        """Inverse of :meth:`arrays` (accepts an ``np.load`` result)."""
+        try:
+            return cls(
+                face=np.asarray(d["face"], np.int64), bary=np.asarray(d["bary"], np.float64),
+                local=np.asarray(d["local"], np.float64),
+                offsets=np.asarray(d["offsets"], np.int64),
+                faces=np.asarray(d["faces"], np.int64), n_vertices=int(d["n_vertices"]),
+                frame_ref=np.asarray(d["frame_ref"], np.float64),
+                root_distance=np.asarray(d["root_distance"], np.float64),
+            )
+        except KeyError as exc:
+            raise InputError(f"binding arrays lack {exc}") from None
+
+    def roots(self, V_now) -> np.ndarray:
+        """(C, 3) root surface points on the surface ``V_now`` (barycentric)."""
+        V = self._check(V_now)
+        T = V[self.faces[self.face]]  # (C, 3, 3)
+        return np.einsum("ck,cki->ci", self.bary, T)
+
+    def _check(self, V_now):
+        try:
+            V = np.asarray(V_now, np.float64)
+        except Exception as exc:
+            raise ColliderError(f"surface vertices must be an (n, 3) array: {exc}") from None
+        if V.shape != (self.n_vertices, 3):
+            raise ColliderError(
+                f"surface vertices have shape {V.shape}, the binding expects "
+                f"({self.n_vertices}, 3) (same topology as at bind time)"
+            )
+        used = self.faces[self.face].ravel()
+        bad = ~np.isfinite(V[used]).all(axis=1)
+        if bad.any():
+            raise ColliderError(f"surface vertex {int(used[np.argmax(bad)])} is not finite")
+        return V
+
+    def apply(self, V_now) -> np.ndarray:
+        """Move every curve rigidly with its triangle's frame on the surface ``V_now``.
+
+        Parameters
+        ----------
+        V_now : (n, 3) array_like of float
+            The deformed growth surface (same topology as at bind time).
+
+        Returns
+        -------
+        (P, 3) ndarray of float64
+            Roots (when snapped) are exactly the barycentric points of their
+            triangles. A triangle collapsed to zero area keeps its reference
+            orientation (its curves only translate).
+        """
+        O = self.roots(V_now)
+        V = np.asarray(V_now, np.float64)
+        R, ok = _frames(V, self.faces, self.face)
+        R = np.where(ok[:, None, None], R, self.frame_ref)
+        sizes = np.diff(self.offsets)
+        curve = np.repeat(np.arange(len(sizes)), sizes)
+        return O[curve] + np.einsum("pij,pj->pi", R[curve], self.local)
+
+
+def bind(points, offsets, V_ref, F, snap_roots=True, drop_degenerate=False) -> Binding:
+    """Fur Attach: bind curves to their closest growth-surface triangles.
+
+    Parameters
+    ----------
+    points : (P, 3) array_like of float
+        Curves at the reference pose, same space as ``V_ref``.
+    offsets : (C+1,) array_like of int
+    V_ref : (n, 3) array_like of float
+        Growth surface vertices at the reference pose.
+    F : (m, 3) array_like of int
+        Its triangles.
+    snap_roots : bool, default True
+        Translate each curve so its root lies exactly on the surface (the
+        identity at the reference pose is then exact only for roots that
+        are on the surface, as Blender's are).
+    drop_degenerate : bool, default False
+        Ignore zero-area triangles instead of raising.
+
+    Returns
+    -------
+    Binding
+
+    Raises
+    ------
+    InputError
+        Malformed curves.
+    ColliderError
+        Empty surface, indices out of range, or a degenerate triangle (the
+        message names the face) unless ``drop_degenerate``.
+    """
+    pts, off = check_curves(points, offsets)
+    V, F = check_surface(V_ref, F, "growth surface")
+    bad = degenerate_faces(V, F)
+    if bad.any() and not drop_degenerate:
+        i = int(np.argmax(bad))
+        raise ColliderError(
+            f"growth surface: face {i} {F[i].tolist()} is degenerate (zero area); "
+            f"{int(bad.sum())} such faces (use drop_degenerate=True to ignore them)"
+        )
+    valid = np.flatnonzero(~bad)
+    if len(valid) == 0:
+        raise ColliderError("growth surface: every face is degenerate")
+    roots = pts[off[:-1]]
+    S, fi = closest_faces(V, F[valid], roots)
+    face = valid[fi]
+    T = V[F[face]]
+    bary = _barycentric(S, T[:, 0], T[:, 1], T[:, 2])
+    O = np.einsum("ck,cki->ci", bary, T)
+    R, _ = _frames(V, F, face)
+    sizes = np.diff(off)
+    curve = np.repeat(np.arange(len(sizes)), sizes)
+    origin = roots[curve] if snap_roots else O[curve]
+    local = np.einsum("pji,pj->pi", R[curve], pts - origin)  # R^T (x - origin)
+    if snap_roots:
+        local[off[:-1]] = 0.0
+    return Binding(face=face.astype(np.int64), bary=bary, local=local, offsets=off,
+                   faces=F, n_vertices=len(V), frame_ref=R,
+                   root_distance=np.linalg.norm(roots - S, axis=1))

@@ -1,0 +1,149 @@
+"""Brute-force numpy oracles and scenes for the pipeline tests (independent of core)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def pack(curves):
+    pts = np.concatenate(curves).astype(np.float64)
+    off = np.concatenate([[0], np.cumsum([len(c) for c in curves])]).astype(np.int64)
+    return pts, off
+
+
+def segments(points, offsets):
+    """All segments: (A, B, curve index)."""
+    A, B, cid = [], [], []
+    for i in range(len(offsets) - 1):
+        c = points[offsets[i]:offsets[i + 1]]
+        A.append(c[:-1])
+        B.append(c[1:])
+        cid += [i] * (len(c) - 1)
+    return np.concatenate(A), np.concatenate(B), np.array(cid)
+
+
+def point_segment_distance(p, a, b):
+    """(k, m) distances of points p (k, 3) to segments a, b (m, 3)."""
+    ab = b - a
+    ap = p[:, None, :] - a[None]
+    t = np.clip((ap * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300), 0, 1)
+    return np.linalg.norm(ap - t[..., None] * ab[None], axis=-1)
+
+
+def point_mesh_distance(p, V, F, chunk=2000):
+    """(k,) exact distance of points to a triangle mesh, all pairs."""
+    if len(p) > chunk:
+        return np.concatenate([point_mesh_distance(p[a:a + chunk], V, F, chunk)
+                               for a in range(0, len(p), chunk)])
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    n = np.cross(b - a, c - a)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    ap = p[:, None, :] - a[None]
+    h = (ap * n[None]).sum(-1)
+    proj = p[:, None, :] - h[..., None] * n[None]
+    inside = np.ones(h.shape, bool)
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= (np.cross(v - u, proj - u[None]) * n[None]).sum(-1) >= 0
+    d = np.where(inside, np.abs(h), np.inf)
+    for u, v in ((a, b), (b, c), (c, a)):
+        d = np.minimum(d, point_segment_distance(p, u, v))
+    return d.min(1)
+
+
+def segment_mesh_distance_sampled(A, B, V, F, n=401):
+    """(S,) upper estimate of segment-mesh distance by sampling n points per segment.
+
+    The exact distance lies in [est - |AB| / (2 (n - 1)), est].
+    """
+    t = np.linspace(0, 1, n)
+    q = (A[:, None, :] + t[None, :, None] * (B - A)[:, None, :]).reshape(-1, 3)
+    return point_mesh_distance(q, V, F).reshape(len(A), n).min(1)
+
+
+def segments_cross_mesh(A, B, V, F, eps=1e-12):
+    """(S,) bool: segment [A, B] intersects a triangle (Moller-Trumbore, all pairs)."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    e1, e2 = b - a, c - a
+    d = (B - A)[:, None, :]
+    pv = np.cross(d, e2[None])
+    det = (pv * e1[None]).sum(-1)
+    ok = np.abs(det) > 1e-300
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    tv = A[:, None, :] - a[None]
+    u = (tv * pv).sum(-1) * inv
+    qv = np.cross(tv, e1[None])
+    v = (d * qv).sum(-1) * inv
+    t = (e2[None] * qv).sum(-1) * inv
+    hit = ok & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps) & (t >= -eps) & (t <= 1 + eps)
+    return hit.any(1)
+
+
+def icosphere(center=(0, 0, 0), radius=1.0, sub=2):
+    t = (1 + 5**0.5) / 2
+    V = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t],
+         [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
+    F = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
+    V = [np.array(v, float) / np.linalg.norm(v) for v in V]
+    for _ in range(sub):
+        cache = {}
+        F2 = []
+
+        def mid(i, j, cache=cache):
+            key = (min(i, j), max(i, j))
+            if key not in cache:
+                m = V[i] + V[j]
+                V.append(m / np.linalg.norm(m))
+                cache[key] = len(V) - 1
+            return cache[key]
+
+        for a, b, c in F:
+            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+            F2 += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+        F = F2
+    return np.array(V) * radius + np.asarray(center, float), np.array(F, np.int64)
+
+
+def grid(size=2.0, n=4, z=0.0):
+    x = np.linspace(-size / 2, size / 2, n + 1)
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    V = np.stack([X.ravel(), Y.ravel(), np.full(X.size, z)], 1)
+    F = []
+    for i in range(n):
+        for j in range(n):
+            a = i * (n + 1) + j
+            b, c, d = a + n + 1, a + n + 2, a + 1
+            F += [[a, b, c], [a, c, d]]
+    return V, np.array(F, np.int64)
+
+
+def fur_on_plane(rng, n_curves=30, n_cvs=5, length=0.5, extent=1.0, tilt=0.3):
+    roots = np.c_[rng.uniform(-extent, extent, (n_curves, 2)), np.zeros(n_curves)]
+    curves = []
+    for r in roots:
+        d = np.array([*rng.normal(0, tilt, 2), 1.0])
+        d /= np.linalg.norm(d)
+        curves.append(r + np.linspace(0, length, n_cvs)[:, None] * d)
+    return pack(curves)
+
+
+def rotation(axis, angle):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def fur_on_mesh(rng, V, F, n_curves=40, n_cvs=5, length=0.3, noise=0.3):
+    """Curves rooted exactly on random points of the mesh, growing along the face normal."""
+    face = rng.integers(0, len(F), n_curves)
+    b = rng.dirichlet([1, 1, 1], n_curves)
+    T = V[F[face]]
+    roots = np.einsum("ck,cki->ci", b, T)
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    curves = []
+    for r, d in zip(roots, n, strict=True):
+        steps = d * length / (n_cvs - 1) + rng.normal(0, noise * length / n_cvs, (n_cvs - 1, 3))
+        curves.append(np.vstack([r, r + np.cumsum(steps, 0)]))
+    return pack(curves)

@@ -1,0 +1,140 @@
+"""Wind and jiggle: deterministic per frame, roots fixed, falloff, lengths kept."""
+
+from __future__ import annotations
+
+import numpy as np
+import pipe_oracle as po
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from core.errors import InputError
+from core.pipeline import jiggle, wind, wind_noise
+
+PROP = settings(max_examples=15, deadline=None, derandomize=True, database=None,
+                suppress_health_check=list(HealthCheck))
+
+
+def _fur(seed=0, n=25, cvs=6):
+    return po.fur_on_plane(np.random.default_rng(seed), n, cvs, 0.6)
+
+
+def _seg_len(p, off):
+    A, B, _ = po.segments(p, off)
+    return np.linalg.norm(B - A, axis=1)
+
+
+@PROP
+@given(frame=st.floats(-100, 1000), seed=st.integers(0, 99), turb=st.floats(0, 2),
+       falloff=st.floats(0, 4))
+def test_wind_deterministic_roots_fixed_lengths_kept(frame, seed, turb, falloff):
+    pts, off = _fur(seed)
+    kw = dict(direction=(1, 0.5, 0), strength=0.3, turbulence=turb, falloff=falloff, seed=seed)
+    a = wind(pts, off, frame, **kw)
+    b = wind(pts.copy(), off, frame, **kw)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(a[off[:-1]], pts[off[:-1]])
+    np.testing.assert_allclose(_seg_len(a, off), _seg_len(pts, off), rtol=1e-12)
+
+
+def test_zero_wind_is_identity():
+    pts, off = _fur()
+    np.testing.assert_array_equal(wind(pts, off, 12, strength=0.0), pts)
+
+
+@PROP
+@given(frame=st.floats(0, 500), falloff=st.floats(0.1, 4))
+def test_falloff_monotone_root_to_tip(frame, falloff):
+    pts, off = _fur(3)
+    out = wind(pts, off, frame, strength=0.4, falloff=falloff, preserve_length=False)
+    m = np.linalg.norm(out - pts, axis=1)
+    for i in range(len(off) - 1):
+        c = m[off[i]:off[i + 1]]
+        assert c[0] == 0
+        assert (np.diff(c) >= -1e-15).all()
+
+
+def test_wind_blows_along_direction_and_changes_over_time():
+    pts, off = _fur(4)
+    tips = off[1:] - 1
+    out = wind(pts, off, 10, direction=(0, 1, 0), strength=0.3, turbulence=0.0,
+               preserve_length=False)
+    np.testing.assert_allclose((out - pts)[tips], np.tile([0, 0.3, 0], (len(tips), 1)),
+                               atol=1e-12)
+    a = wind(pts, off, 10, strength=0.3, turbulence=1.0)
+    b = wind(pts, off, 10.5, strength=0.3, turbulence=1.0)
+    c = wind(pts, off, 40, strength=0.3, turbulence=1.0)
+    small = np.abs(a - b).max()
+    assert 0 < small < np.abs(a - c).max()  # coherent in time: half a frame moves little
+
+
+def test_noise_is_coherent_in_space():
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-2, 2, (2000, 3))
+    n0 = wind_noise(x, 1.0)
+    n1 = wind_noise(x + 0.01, 1.0)
+    n2 = wind_noise(x + 1.7, 1.0)
+    assert abs(n0.std() - 1) < 0.35
+    assert np.abs(n0 - n1).mean() < 0.1 * np.abs(n0 - n2).mean()
+
+
+def _history(C, f, pos):
+    """(N, C, 3) root history: the roots of curve i at frames f[k] are pos(f[k]) + i."""
+    return np.stack([np.tile(pos(t), (C, 1)) + np.arange(C)[:, None] * [1, 0, 0] for t in f])
+
+
+def test_jiggle_zero_for_uniform_motion():
+    pts, off = _fur(5)
+    C = len(off) - 1
+    f = np.arange(30.0)
+    hist = _history(C, f, lambda t: np.array([0.1 * t, -0.05 * t, 0.02 * t]))
+    out = jiggle(pts, off, hist, stiffness=1.5, damping=0.2)
+    np.testing.assert_allclose(out, pts, atol=1e-10)
+
+
+def test_jiggle_lags_behind_acceleration_and_overshoots():
+    pts, off = _fur(6)
+    C = len(off) - 1
+    tips = off[1:] - 1
+
+    def pos(t):  # at rest until frame 20, then constant velocity +x (a velocity step)
+        return np.array([max(t - 20.0, 0.0) * 0.05, 0, 0])
+
+    disp = []
+    for frame in (22, 26, 30, 34, 38):
+        f = np.arange(frame - 40, frame + 1, dtype=float)
+        out = jiggle(pts, off, _history(C, f, pos), stiffness=1.0, damping=0.2,
+                     preserve_length=False)
+        np.testing.assert_array_equal(out[off[:-1]], pts[off[:-1]])
+        disp.append((out - pts)[tips, 0].mean())
+    assert disp[0] < 0  # the tips lag behind the acceleration
+    assert max(disp) > 0  # and overshoot later
+    assert np.abs(disp).max() > 1e-3
+
+
+def test_jiggle_callable_equals_history_and_scrubbing():
+    pts, off = _fur(7)
+    C = len(off) - 1
+
+    def roots(t):
+        return np.tile([np.sin(t * 0.3), 0, 0.1 * np.cos(t * 0.2)], (C, 1))
+
+    for frame in (50, 13, 50):  # scrub back and forth: pure function of the frame
+        hist = np.stack([roots(frame - k) for k in range(24, -1, -1)])
+        a = jiggle(pts, off, roots, frame=frame, window=24)
+        b = jiggle(pts, off, hist)
+        np.testing.assert_array_equal(a, b)
+        assert np.abs(a - pts).max() > 1e-4
+        np.testing.assert_allclose(_seg_len(a, off), _seg_len(pts, off), rtol=1e-12)
+
+
+def test_bad_input():
+    pts, off = _fur(8)
+    with pytest.raises(InputError, match="strength"):
+        wind(pts, off, 1, strength=-1)
+    with pytest.raises(InputError, match="direction"):
+        wind(pts, off, 1, direction=(1, 0))
+    with pytest.raises(InputError, match="roots history"):
+        jiggle(pts, off, np.zeros((5, 3, 3)))
+    with pytest.raises(InputError, match="frame"):
+        jiggle(pts, off, lambda f: 0)
