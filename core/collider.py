@@ -143,7 +143,7 @@ class Collider:
         self.closed = self._is_closed(F, len(V))
         self._M, self._Minv = _as_matrix(matrix)
         self._version = 0
-        self._built = None  # (key, backend, n_front_faces)
+        self._built = []  # [(key, backend, n_front_faces)], see _backend
         self.build_count = 0
         self._geometry_cache = None
         self._recenter()
@@ -280,19 +280,42 @@ class Collider:
         ln = np.linalg.norm(n, axis=1, keepdims=True)
         return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
 
-    def _vertex_normals(self):
-        """Area-weighted unit vertex normals (only offsets need them)."""
-        fa = self._face_normals(np.arange(len(self._F)), unit=False)
+    def _offset_directions(self):
+        """Local displacement of each vertex for a world offset of 1, (n, 3).
+
+        Computed in world metric (the matrix's scale and shear included), so
+        the shell keeps the offset in world units whatever the matrix. Each
+        vertex moves along its area-weighted normal, lengthened so that every
+        face around it moves by the full offset: a box keeps the offset on
+        its faces, not offset / sqrt(3). The lengthening is capped at
+        ``tol.OFFSET_MAX_STRETCH`` (needle-sharp vertices).
+        """
+        S = self._M[:3, :3]
+        Vw = apply(S, self._V.astype(np.float64) - self._center)
+        F = self._F
+        fa = np.cross(Vw[F[:, 1]] - Vw[F[:, 0]], Vw[F[:, 2]] - Vw[F[:, 0]])
         n = len(self._V)
         vn = np.stack(
-            [
-                sum(np.bincount(self._F[:, k], weights=fa[:, i], minlength=n) for k in range(3))
-                for i in range(3)
-            ],
+            [sum(np.bincount(F[:, k], weights=fa[:, i], minlength=n) for k in range(3))
+             for i in range(3)],
             axis=1,
         )
         lv = np.linalg.norm(vn, axis=1, keepdims=True)
-        return np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
+        vn = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
+        ln = np.linalg.norm(fa, axis=1, keepdims=True)
+        fn = np.divide(fa, ln, out=np.zeros_like(fa), where=ln > 0)
+        # smallest cos(vertex normal, face normal) over the faces around each vertex
+        corner = F.T.ravel()
+        cos = np.concatenate([rot_dot(vn[F[:, k]], fn) for k in range(3)])
+        if getattr(self, "_corner_order", None) is None:
+            order = np.argsort(corner, kind="stable")
+            first = np.flatnonzero(np.r_[True, corner[order][1:] != corner[order][:-1]])
+            self._corner_order = (order, first, corner[order][first])
+        order, first, verts = self._corner_order
+        lowest = np.ones(n)
+        lowest[verts] = np.minimum.reduceat(cos[order], first)
+        stretch = 1.0 / np.clip(lowest, 1.0 / tol.OFFSET_MAX_STRETCH, 1.0)
+        return apply(self._Minv[:3, :3], vn * stretch[:, None])
 
     def _occupancy(self):
         """Vertex occupancy grid of the (centred) local space, as a summed-area table.
@@ -345,7 +368,8 @@ class Collider:
         lo, h, dims, sat, max_edge, _ = self._occupancy()
         A, b = self.local_map()
         stretch = float(np.linalg.norm(A, 2))  # largest local length of a world unit
-        r = (np.asarray(radius_wo, np.float64) + offset_wo) * stretch + max_edge + h
+        reach = np.asarray(radius_wo, np.float64) + offset_wo * tol.OFFSET_MAX_STRETCH
+        r = reach * stretch + max_edge + h
         q = apply(A, np.asarray(p_wo, np.float64)) + b - lo
         r = np.broadcast_to(r, (k,))[:, None]
         i0 = np.floor((q - r) / h).astype(np.int64)
@@ -367,35 +391,47 @@ class Collider:
         )
         return (total > 0) & ~outside
 
-    def _scale(self) -> float:
-        """Mean linear scale of the matrix (offsets are given in world units)."""
-        return float(abs(np.linalg.det(self._M[:3, :3])) ** (1.0 / 3.0))
-
     def effective_offset(self, default: float) -> float:
         """This collider's offset in world units (its own, else ``default``)."""
         return self.offset if self.offset is not None else float(default)
 
+    def _shell_key(self, offset_wo):
+        """What a shell depends on: the vertices, the offset and, for an offset,
+        the matrix's rotation-invariant stretch ``M^T M`` (quantized, so float32
+        jitter of a rigid transform never triggers a rebuild)."""
+        if offset_wo <= 0:
+            return (self._version, 0.0)
+        S = self._M[:3, :3]
+        G = S.T @ S
+        g = float(np.trace(G)) / 3.0
+        q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
+        return (self._version, float(f"{offset_wo:.9g}"), q)
+
     def _backend(self, offset_wo: float):
-        """The ray backend for the shell at ``offset_wo`` (built lazily)."""
-        off_lo = offset_wo / self._scale()
-        key = (self._version, round(off_lo, 12))
-        if self._built is not None and self._built[0] == key:
-            return self._built[1], self._built[2]
+        """The ray backend for the shell at ``offset_wo`` (built lazily).
+
+        A few shells are kept (several solvers may share one collider with
+        different offsets), newest last.
+        """
+        key = self._shell_key(offset_wo)
+        for k, be, nf in self._built:
+            if k == key:
+                return be, nf
         V = self._V.astype(np.float64) - self._center
         F = self._F
-        if off_lo > 0:
+        if offset_wo > 0:
             # Face blocks, m faces each: [outer shell, (inner shell,) surface].
             # A closed single-sided solid is only kept at a distance from
             # outside (inside is a pinch). Anything else (open sheets,
             # double-sided meshes) gets shells at +-offset, the inner one
             # facing inward, and keeps its real surface too, so a curve
             # slipping in between the shells from a rim still collides.
-            vn = self._vertex_normals()
+            disp = offset_wo * self._offset_directions()
             n = len(self._V)
-            blocks_V = [V + off_lo * vn]
+            blocks_V = [V + disp]
             blocks_F = [F]
             if self.double_sided or not self.closed:
-                blocks_V.append(V - off_lo * vn)
+                blocks_V.append(V - disp)
                 blocks_F.append(F[:, ::-1] + n)
                 blocks_V.append(V)
                 blocks_F.append(F + n * len(blocks_F))
@@ -403,7 +439,8 @@ class Collider:
             F = np.concatenate(blocks_F)
         backend = make_backend(self._backend_name, V, F)
         self.build_count += 1
-        self._built = (key, backend, len(self._F))
+        self._built = [b for b in self._built if b[0][0] == self._version][-3:]
+        self._built.append((key, backend, len(self._F)))
         return backend, len(self._F)
 
     def bounds_world(self, offset_wo: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -413,12 +450,9 @@ class Collider:
             [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
         )
         c_wo = corners @ self._M[:3, :3].T + self._M[:3, 3]
-        pad = offset_wo * 1.01 + 1e-6 * (float(np.abs(c_wo).max()) + 1.0)
+        # shell vertices move up to OFFSET_MAX_STRETCH times the offset
+        pad = offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 + 1e-6 * (float(np.abs(c_wo).max()) + 1.0)
         return c_wo.min(0) - pad, c_wo.max(0) + pad
-
-    def diagonal_world(self) -> float:
-        lo, hi = self.bounds_world()
-        return float(np.linalg.norm(hi - lo)) or 1.0
 
     def _to_local(self, o_wo, d_wo):
         A, b = self.local_map()
@@ -551,7 +585,8 @@ class Collider:
         lo, hi = self._geometry()
         diag = float(np.linalg.norm(hi - lo)) or 1.0
         step = tol.PARITY_STEP_REL * diag
-        far = 4.0 * diag + float(np.abs(p_lo).max(initial=0.0)) * 2.0
+        shell = offset_wo * tol.OFFSET_MAX_STRETCH * float(np.linalg.norm(self._Minv[:3, :3], 2))
+        far = 4.0 * (diag + 2.0 * shell) + float(np.abs(p_lo).max(initial=0.0)) * 2.0
         votes = np.zeros(k, np.int8)
         for dirn in _PARITY_DIRS:
             o = p_lo.copy()

@@ -50,3 +50,8 @@ RAY_EXTEND_ULPS = 32
 #: Cells along the longest side of a collider's vertex occupancy grid (the
 #: tight "can this curve touch the mesh" test and the inside-test cache).
 OCCUPANCY_CELLS = 64
+
+#: Collision offset shells move each vertex so that every face around it
+#: moves by the full offset (a vertex where faces meet at a sharp angle moves
+#: farther than the offset), at most this many times the offset.
+OFFSET_MAX_STRETCH = 4.0
