@@ -160,18 +160,27 @@ class Collider:
             offset = float(offset)
         except (TypeError, ValueError):
             raise ColliderError(f"collider '{self.name}': offset must be a number") from None
-        if not (np.isfinite(offset) and offset >= 0):
-            raise ColliderError(f"collider '{self.name}': offset must be >= 0, got {offset}")
+        if not (np.isfinite(offset) and 0 <= offset <= 1e6):
+            raise ColliderError(
+                f"collider '{self.name}': offset must be between 0 and 1e6, got {offset}"
+            )
         return offset
 
     def _check_faces(self, F, n):
-        F = np.asarray(F)
-        if F.size == 0:
-            return np.zeros((0, 3), np.int32)
+        try:
+            F = np.asarray(F)
+        except Exception as exc:  # ragged lists
+            raise ColliderError(
+                f"collider '{self.name}': faces must be an (m, 3) array: {exc}"
+            ) from None
         if F.ndim != 2 or F.shape[1] != 3:
+            if F.size == 0 and F.ndim == 1:
+                return np.zeros((0, 3), np.int32)
             raise ColliderError(
                 f"collider '{self.name}': faces must have shape (m, 3) (triangles), got {F.shape}"
             )
+        if F.size == 0:
+            return np.zeros((0, 3), np.int32)
         if not np.issubdtype(F.dtype, np.integer):
             if np.issubdtype(F.dtype, np.floating) and np.all(np.mod(F, 1) == 0):
                 F = F.astype(np.int64)
@@ -296,8 +305,10 @@ class Collider:
         fa = np.cross(Vw[F[:, 1]] - Vw[F[:, 0]], Vw[F[:, 2]] - Vw[F[:, 0]])
         n = len(self._V)
         vn = np.stack(
-            [sum(np.bincount(F[:, k], weights=fa[:, i], minlength=n) for k in range(3))
-             for i in range(3)],
+            [
+                sum(np.bincount(F[:, k], weights=fa[:, i], minlength=n) for k in range(3))
+                for i in range(3)
+            ],
             axis=1,
         )
         lv = np.linalg.norm(vn, axis=1, keepdims=True)
@@ -372,8 +383,9 @@ class Collider:
         r = reach * stretch + max_edge + h
         q = apply(A, np.asarray(p_wo, np.float64)) + b - lo
         r = np.broadcast_to(r, (k,))[:, None]
-        i0 = np.floor((q - r) / h).astype(np.int64)
-        i1 = np.floor((q + r) / h).astype(np.int64)
+        # clip in float first: far-away points must not overflow the int cast
+        i0 = np.floor(np.clip((q - r) / h, -1, dims + 1)).astype(np.int64)
+        i1 = np.floor(np.clip((q + r) / h, -1, dims + 1)).astype(np.int64)
         outside = ((i1 < 0) | (i0 >= dims)).any(axis=1)
         i0 = np.clip(i0, 0, dims - 1)
         i1 = np.clip(i1, 0, dims - 1) + 1
@@ -556,7 +568,7 @@ class Collider:
         # within max_edge of its own cell, so no triangle crosses that cell.
         near = self.near_surface(p_wo, 0.0, offset_wo)
         A, b = self.local_map()
-        cell = np.floor((apply(A, p_wo) + b - lo) / h).astype(np.int64)
+        cell = np.floor(np.clip((apply(A, p_wo) + b - lo) / h, -1, dims + 1)).astype(np.int64)
         in_grid = ((cell >= 0) & (cell < dims)).all(axis=1)
         out = np.zeros(k, bool)
         far = np.flatnonzero(~near & in_grid)
@@ -606,7 +618,7 @@ class Collider:
             votes += (balance > 0).astype(np.int8)
         return votes >= 2
 
-    def closest_points(self, q_wo, offset_wo=0.0):
+    def closest_points(self, q_wo):
         """Closest point on the (un-inflated) mesh to each query and its normal.
 
         Parameters

@@ -87,7 +87,6 @@ def collide(ctx, batch, items, status):
     ok = k >= 0
     res = c[ok]
     angle[res] = np.minimum(th0[ok] + k[ok] * p, ctx.max_angle)
-    ctx.push[res] = angle[res] - th0[ok]
     ctx.angle_max[res] = np.maximum(ctx.angle_max[res], angle[res])
     status[res] = Status.COLLIDING
     bad = c[~ok]
@@ -140,9 +139,10 @@ def recover(ctx, rec, status, batch, items):
 def search_angles(ctx, batch, items, th0, guess=None):
     """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
 
-    ``guess`` (radians, per item) is last frame's increment: colliders move
-    smoothly, so the steps ``k - 1`` and ``k`` around it are probed first
-    (one round); the search continues from whatever bracket that gives.
+    ``guess`` (radians, per item) is an estimate of the increment (the
+    tangent-plane estimate of :meth:`StepContext._plane_guess`): the first
+    round probes 0.8, 1, 1.25 and 1.6 times it, and the search continues
+    from the bracket that gives (bisection) or from its top (gallop).
 
     Returns
     -------
@@ -188,9 +188,6 @@ def release(ctx, idx):
     ctx.sv_._stiff[done] = False
     ctx.axis[done] = 0.0
     ctx.angle_max[done] = 0.0
-
-
-# ------------------------------------------------------------ pinch
 
 
 class RigidBatch:

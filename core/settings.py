@@ -8,9 +8,15 @@ Angles are in degrees, distances in world units (metres in Blender).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, fields, replace
 
 from .errors import SettingsError
+
+try:  # numpy booleans count as flags, not as numbers
+    from numpy import bool_ as np_bool
+except ImportError:  # pragma: no cover
+    np_bool = bool
 
 MODES = ("stiff", "bend", "soft")
 PINCH_RESOLUTIONS = ("stop", "growth_surface")
@@ -100,7 +106,7 @@ class Settings:
     def __post_init__(self):
         def num(name, lo=None, hi=None, lo_open=False):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
+            if isinstance(v, (bool, np_bool)) or not isinstance(v, numbers.Real):
                 raise SettingsError(f"Settings.{name} must be a number, got {v!r}")
             if not math.isfinite(v):
                 raise SettingsError(f"Settings.{name} must be finite, got {v!r}")
@@ -111,7 +117,7 @@ class Settings:
                 raise SettingsError(f"Settings.{name} must be <= {hi}, got {v!r}")
 
         def flag(name):
-            if not isinstance(getattr(self, name), bool):
+            if not isinstance(getattr(self, name), (bool, np_bool)):
                 raise SettingsError(f"Settings.{name} must be True or False")
 
         if self.mode not in MODES:
@@ -121,12 +127,12 @@ class Settings:
                 f"Settings.pinch_resolution must be one of {PINCH_RESOLUTIONS}, "
                 f"got {self.pinch_resolution!r}"
             )
-        num("rotation_precision", 0.0, 45.0, lo_open=True)
+        num("rotation_precision", 1e-4, 45.0)
         num("max_angle", 0.0, 360.0, lo_open=True)
         if self.max_angle < self.rotation_precision:
             raise SettingsError("Settings.max_angle must be >= rotation_precision")
-        if isinstance(self.affected_connected_cvs, bool) or not isinstance(
-            self.affected_connected_cvs, int
+        if isinstance(self.affected_connected_cvs, (bool, np_bool)) or not isinstance(
+            self.affected_connected_cvs, numbers.Integral
         ):
             raise SettingsError("Settings.affected_connected_cvs must be an integer")
         num("affected_connected_cvs", 0, 10_000)
@@ -135,11 +141,13 @@ class Settings:
         num("scale_angle", 0.0, 360.0, lo_open=True)
         num("recovery_rate", 0.0, 1.0)
         num("plasticity", 0.0, 1.0)
-        num("collision_offset", 0.0)
+        num("collision_offset", 0.0, 1e6)
         for name in ("attract_to_growth_surface", "shrink", "recover_pinched"):
             flag(name)
         if self.threads is not None:
-            if isinstance(self.threads, bool) or not isinstance(self.threads, int):
+            if isinstance(self.threads, (bool, np_bool)) or not isinstance(
+                self.threads, numbers.Integral
+            ):
                 raise SettingsError("Settings.threads must be a positive integer or None")
             num("threads", 1, 1024)
 

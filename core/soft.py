@@ -55,7 +55,7 @@ class SoftSolve:
                 mid = ctx._midpoints(todo, o, d, starts[hit])
                 cp, _ = ctx.growth.closest_points(mid)
                 pull = rot.normalize(cp - mid)
-                ok = np.linalg.norm(np.cross(d[k], pull), axis=1) > tol.PARALLEL_EPS
+                ok = np.linalg.norm(np.cross(rot.normalize(d[k]), pull), axis=1) > tol.PARALLEL_EPS
                 push = np.where(ok[:, None], pull, push)
             axis = rot.rotation_axis(d[k], push)
             last = sv._soff[todo + 1]  # one past the curve's last segment

@@ -138,7 +138,6 @@ class Solver:
         C, S = self.n_curves, len(self._seg_start)
         self._angle = np.zeros(C)  # radians (stiff/bend)
         self._angle_max = np.zeros(C)
-        self._push = np.zeros(C)  # last frame's collision increment (search prediction)
         self._axis_lo = np.zeros((C, 3))
         self._frame = np.zeros((C, 3, 3))
         self._active = np.zeros(C, bool)  # has a non-identity local state
@@ -147,12 +146,10 @@ class Solver:
         self._stiff = np.zeros(C, bool)  # Bend curves solved as Stiff (bending could not clear)
         self._quat = np.tile([1.0, 0.0, 0.0, 0.0], (S, 1))  # soft, local frame
         self._quat_max = self._quat.copy()
-        self._steps = 0
 
     _STATE_KEYS = {
         "angle": ("C",),
         "angle_max": ("C",),
-        "push": ("C",),
         "axis": ("C", 3),
         "frame": ("C", 3, 3),
         "active": ("C",),
@@ -182,7 +179,6 @@ class Solver:
         state = {
             "angle": self._angle.copy(),
             "angle_max": self._angle_max.copy(),
-            "push": self._push.copy(),
             "axis": self._axis_lo.copy(),
             "frame": self._frame.copy(),
             "active": self._active.copy(),
@@ -204,8 +200,8 @@ class Solver:
         if "meta" not in s.keys():
             raise InputError("state is missing ['meta'] (not a Solver.state snapshot)")
         meta = np.asarray(s["meta"])
-        if meta.shape != (4,):
-            raise InputError(f"state['meta'] has shape {meta.shape}, expected (4,)")
+        if meta.shape != (4,) or not np.issubdtype(meta.dtype, np.integer):
+            raise InputError("state['meta'] must be 4 integers (from Solver.state)")
         if (
             int(meta[0]) != _STATE_VERSION
             or int(meta[1]) != self.n_curves
@@ -225,10 +221,13 @@ class Solver:
             want = tuple(dims.get(d, d) for d in shape)
             if a.shape != want:
                 raise InputError(f"state['{k}'] has shape {a.shape}, expected {want}")
+            if not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+                raise InputError(f"state['{k}'] must be numeric, got dtype {a.dtype}")
+            if not np.isfinite(a).all():
+                raise InputError(f"state['{k}'] has non-finite values")
             arrs[k] = a
         self._angle = arrs["angle"].astype(np.float64).copy()
         self._angle_max = arrs["angle_max"].astype(np.float64).copy()
-        self._push = arrs["push"].astype(np.float64).copy()
         self._axis_lo = arrs["axis"].astype(np.float64).copy()
         self._frame = arrs["frame"].astype(np.float64).copy()
         self._active = arrs["active"].astype(bool).copy()
@@ -308,7 +307,9 @@ class Solver:
         s = self._settings
         points = self._check_points(points)
         enabled = self._check_enabled(enabled)
-        if isinstance(colliders, Collider):
+        if colliders is None:
+            colliders = ()
+        elif isinstance(colliders, Collider):
             colliders = [colliders]
         cols = []
         for i, c in enumerate(colliders):
@@ -372,7 +373,6 @@ class Solver:
         t0 = time.perf_counter()
         out = ctx.output()
         ctx.store_state()
-        self._steps += 1
         timings["output"] = (time.perf_counter() - t0) * 1e3
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         timings["rays"] = ctx.n_rays

@@ -15,7 +15,7 @@ class Status(IntEnum):
     COLLIDING = 1  #: in contact: rotated to clear, or recovery blocked
     RECOVERING = 2  #: clear, rotating back toward its input shape
     PINCHED = 3  #: root inside a closed collider (not solved, see pinch_resolution)
-    UNRESOLVED = 4  #: could not be cleared within max_angle: last collision-free state kept
+    UNRESOLVED = 4  #: not clearable within max_angle: keeps the previous frame's local state
     DISABLED = 5  #: switched off by ``enabled``: prior local state kept
 
 

@@ -48,6 +48,9 @@ class StepContext:
             L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg))
             self.curve_len = np.add.reduceat(L, solver._soff[:-1], dtype=np.float64)
             shortest = np.minimum.reduceat(L, solver._soff[:-1])
+        if not np.isfinite(self.curve_len).all():
+            c = int(np.argmax(~np.isfinite(self.curve_len)))
+            raise InputError(f"curve {c} is too large: its length overflows (coordinates ~1e19+)")
         bad = shortest <= tol.ZERO_SEGMENT_REL * self.curve_len
         if bad.any():
             c = int(np.argmax(bad))
@@ -96,8 +99,7 @@ class StepContext:
         sv = self.sv_
         self.angle = sv._angle.copy()
         self.angle_max = sv._angle_max.copy()
-        self.push = np.zeros(sv.n_curves)
-        self.guess = sv._push.copy()
+        self.guess = np.zeros(sv.n_curves)  # first probe of the angle search
         self.guess_stiff = np.zeros(sv.n_curves)
         self.axis = np.zeros((sv.n_curves, 3))
         if self.soft:
@@ -146,7 +148,6 @@ class StepContext:
         B = self.B
         sv._angle = self.angle
         sv._angle_max = self.angle_max
-        sv._push = self.push
         sv._active = self.active
         axis_lo = np.zeros_like(self.axis)
         if len(idx):
