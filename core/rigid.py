@@ -254,14 +254,10 @@ class RigidBatch:
         sel = self.starts[items][rep] + (np.arange(len(rep)) - first[rep])
         a = theta[rep] * self.w[sel]
         cos, sin = np.cos(a)[:, None], np.sin(a)[:, None]
-        scale = None
-        if ctx.s.shrink:
-            ramp = np.minimum(a / np.deg2rad(ctx.s.scale_angle), 1.0)
-            scale = 1.0 - (1.0 - ctx.s.scale_minimum) * ramp
+        scale = ctx.shrink_scale(a)
         length = self.length[sel] if scale is None else self.length[sel] * scale
-        ext = ctx.eps_abs / np.maximum(length, 1e-300)
-        grow = (1.0 + np.where(self.root[sel], 0.0, ext) + ext)[:, None]
-        back = np.where(self.root[sel], 0.0, ext)[:, None]
+        back, grow = ctx.ray_growth(length, self.root[sel])
+        back, grow = back[:, None], grow[:, None]
         for c, off, m, root_lo, Y, V0, X in self.per_col:
             mi = m[items]
             if not mi.any():
@@ -288,18 +284,10 @@ class RigidBatch:
         ns = self.ns
         a = theta[:, None] * self.w[items]  # (n, ns)
         cos, sin = np.cos(a)[..., None], np.sin(a)[..., None]
-        length = self.length[items]
-        scale = None
-        if ctx.s.shrink:
-            scale = 1.0 - (1.0 - ctx.s.scale_minimum) * np.minimum(
-                a / np.deg2rad(ctx.s.scale_angle), 1.0
-            )
-            length = length * scale
-        ext = ctx.eps_abs / np.maximum(length, 1e-300)
-        back = ext.copy()
-        back[:, 0] = 0.0  # roots never move: the root segment is not grown backward
-        grow = (1.0 + back + ext)[..., None]
-        back = back[..., None]
+        scale = ctx.shrink_scale(a)
+        length = self.length[items] if scale is None else self.length[items] * scale
+        back, grow = ctx.ray_growth(length, np.arange(ns) == 0)
+        back, grow = back[..., None], grow[..., None]
         for c, off, m, root_lo, Y, V0, X in self.per_col:
             mi = m[items]
             if not mi.any():

@@ -198,9 +198,9 @@ class StepContext:
         else:
             a_seg, ax_seg = self.rigid_rotations(idx, angle, axis, seg, rep)
             v = rot.rotate(v, ax_seg, a_seg)
-            if self.s.shrink:
-                ramp = np.minimum(a_seg / np.deg2rad(self.s.scale_angle), 1.0)
-                v = v * (1.0 - (1.0 - self.s.scale_minimum) * ramp)[:, None]
+            scale = self.shrink_scale(a_seg)
+            if scale is not None:
+                v = v * scale[:, None]
         cs = np.cumsum(v, axis=0)
         base = self.roots[idx] - (cs[starts] - v[starts])
         # Round to the output dtype so the segments tested are exactly the
@@ -227,9 +227,9 @@ class StepContext:
             ax = axis[:, None, :]
             along = np.einsum("nkj,nj->nk", v, axis)[..., None]
             v = v * cos + np.cross(ax, v) * sin + ax * (along * (1.0 - cos))
-            if self.s.shrink:
-                ramp = np.minimum(a / np.deg2rad(self.s.scale_angle), 1.0)
-                v *= (1.0 - (1.0 - self.s.scale_minimum) * ramp)[..., None]
+            scale = self.shrink_scale(a)
+            if scale is not None:
+                v *= scale[..., None]
         root = self.roots[idx][:, None, :]
         end = (np.cumsum(v, axis=1) + root).astype(self.out_dtype).astype(np.float64)
         o = np.empty_like(end)
@@ -239,16 +239,31 @@ class StepContext:
         rep = np.repeat(np.arange(n), ns)
         return o.reshape(-1, 3), (end - o).reshape(-1, 3), seg, rep, np.arange(n) * ns
 
-    def extend(self, o, d, root):
-        """Segments grown by a few float32 ulps (see ``tol.RAY_EXTEND_ULPS``).
+    def shrink_scale(self, a):
+        """Shrink (paper 3.2.2): segment scale for segment rotation angles ``a``
+        (radians), linear from 1 at 0 to ``scale_minimum`` at ``scale_angle``,
+        clamped beyond; None when Shrink is off."""
+        if not self.s.shrink:
+            return None
+        ramp = np.minimum(a / np.deg2rad(self.s.scale_angle), 1.0)
+        return 1.0 - (1.0 - self.s.scale_minimum) * ramp
 
-        ``root`` marks root segments, which are not grown backward: roots
-        never move, so a root resting on a collider is a pinch, not a contact.
+    def ray_growth(self, length, root):
+        """Fractions ``(back, grow)`` by which segments of ``length`` are grown.
+
+        A tested segment ``o + t d`` becomes ``(o - back d) + t (grow d)``:
+        a few float32 ulps at each end (``tol.RAY_EXTEND_ULPS``), except
+        backward for root segments (``root``): roots never move, so a root
+        resting on a collider is a pinch, not a contact.
         """
-        L = np.sqrt(np.einsum("ij,ij->i", d, d))
-        e = self.eps_abs / np.maximum(L, 1e-300)
+        e = self.eps_abs / np.maximum(length, 1e-300)
         back = np.where(root, 0.0, e)
-        return o - back[:, None] * d, d * (1.0 + back + e)[:, None]
+        return back, 1.0 + back + e
+
+    def extend(self, o, d, root):
+        """Segments grown as :meth:`ray_growth` says."""
+        back, grow = self.ray_growth(np.sqrt(np.einsum("ij,ij->i", d, d)), root)
+        return o - back[:, None] * d, d * grow[:, None]
 
     def hits(self, idx, o, d, rep, root):
         """Per segment: does it hit any collider (segments of curves ``idx``).
