@@ -6,7 +6,7 @@ this Blender session (never in bpy properties): the core ``Solver``, one
 never rebuilds a BVH), the bounded memory cache and the status/stats shown
 in the panel.
 
-Frame rules (``frame_change_post``; see docs/blender.md):
+Frame rules (``frame_change_post``; see README "Using it in Blender"):
 
 * subframes (motion blur) never step: the output keeps the whole frame;
 * ``f == frame_start``: reset the solver and solve;

@@ -1,6 +1,6 @@
 """The fur pipeline around FurCollide (paper sections 2 and 4), numpy only.
 
-Public API (paper names, see docs/pipeline.md)::
+Public API (paper names, see README "The fur pipeline")::
 
     from core.pipeline import (
         sample_guides,                                   # Fur Sampler
