@@ -91,7 +91,9 @@ def parse_args(argv=None):
         "--blas-threads",
         type=int,
         metavar="N",
-        help="set numpy's OpenBLAS thread count for the whole run (default: numpy's own)",
+        help="numpy's OpenBLAS thread count for the whole run (default 1: the core uses no"
+        " BLAS, and the untimed input generation's BLAS workers would otherwise spin"
+        " into the timed frames)",
     )
     ap.add_argument("--no-check", action="store_true", help="skip the untimed crossing check")
     ap.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
@@ -409,11 +411,11 @@ def main(argv=None):
         f"numpy {np.__version__}, embreex {emb_ver}"
     )
 
-    if args.blas_threads is not None:
-        BLAS.set(args.blas_threads)
+    BLAS.set(1 if args.blas_threads is None else args.blas_threads)
     print(
         f"  OpenBLAS threads: {BLAS.get() if BLAS.available else 'n/a'}"
-        + (" (set by --blas-threads)" if args.blas_threads is not None else " (numpy default)")
+        + (" (set by --blas-threads)" if args.blas_threads is not None else
+           " (default: the core uses no BLAS)")
     )
 
     t0 = time.perf_counter()

@@ -16,7 +16,7 @@ import numpy as np
 from . import tolerances as tol
 from .errors import ColliderError
 from .rays import make_backend
-from .rotations import apply
+from .rotations import apply, det3, inv_affine, norm_bound
 from .rotations import dot as rot_dot
 
 #: Fixed, irrational-ish unit directions for the parity (inside) test.
@@ -63,11 +63,11 @@ def _as_matrix(M) -> tuple[np.ndarray, np.ndarray]:
         raise ColliderError("collider matrix has non-finite entries")
     if not np.allclose(M[3], [0, 0, 0, 1], atol=1e-9):
         raise ColliderError("collider matrix must be affine (last row 0, 0, 0, 1)")
-    det = np.linalg.det(M[:3, :3])
+    det = det3(M[:3, :3])
     scale = np.abs(M[:3, :3]).max()
     if not abs(det) > 1e-12 * max(scale, 1e-30) ** 3:
         raise ColliderError("collider matrix is singular (zero scale on some axis)")
-    return M, np.linalg.inv(M)
+    return M, inv_affine(M)
 
 
 class Collider:
@@ -378,7 +378,7 @@ class Collider:
             return np.zeros(k, bool)
         lo, h, dims, sat, max_edge, _ = self._occupancy()
         A, b = self.local_map()
-        stretch = float(np.linalg.norm(A, 2))  # largest local length of a world unit
+        stretch = norm_bound(A)  # at least the largest local length of a world unit
         reach = np.asarray(radius_wo, np.float64) + offset_wo * tol.OFFSET_MAX_STRETCH
         r = reach * stretch + max_edge + h
         q = apply(A, np.asarray(p_wo, np.float64)) + b - lo
@@ -414,7 +414,7 @@ class Collider:
         if offset_wo <= 0:
             return (self._version, 0.0)
         S = self._M[:3, :3]
-        G = S.T @ S
+        G = np.einsum("ki,kj->ij", S, S)
         g = float(np.trace(G)) / 3.0
         q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
         return (self._version, float(f"{offset_wo:.9g}"), q)
@@ -461,7 +461,7 @@ class Collider:
         corners = np.array(
             [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
         )
-        c_wo = corners @ self._M[:3, :3].T + self._M[:3, 3]
+        c_wo = apply(self._M[:3, :3], corners) + self._M[:3, 3]
         # shell vertices move up to OFFSET_MAX_STRETCH times the offset
         pad = offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 + 1e-6 * (float(np.abs(c_wo).max()) + 1.0)
         return c_wo.min(0) - pad, c_wo.max(0) + pad
@@ -597,7 +597,7 @@ class Collider:
         lo, hi = self._geometry()
         diag = float(np.linalg.norm(hi - lo)) or 1.0
         step = tol.PARITY_STEP_REL * diag
-        shell = offset_wo * tol.OFFSET_MAX_STRETCH * float(np.linalg.norm(self._Minv[:3, :3], 2))
+        shell = offset_wo * tol.OFFSET_MAX_STRETCH * norm_bound(self._Minv[:3, :3])
         far = 4.0 * (diag + 2.0 * shell) + float(np.abs(p_lo).max(initial=0.0)) * 2.0
         votes = np.zeros(k, np.int8)
         for dirn in _PARITY_DIRS:

@@ -20,12 +20,58 @@ def dot(a, b):
     return np.einsum("...i,...i->...", a, b)
 
 
+def det3(A):
+    """Determinant of a 3x3 matrix, closed form (no LAPACK: see :func:`apply`)."""
+    return float(
+        A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+        - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+        + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0])
+    )
+
+
+def inv_affine(M):
+    """Inverse of a 4x4 affine matrix via the 3x3 adjugate (no LAPACK)."""
+    A = M[:3, :3]
+    adj = np.array(
+        [
+            [
+                A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1],
+                A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2],
+                A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1],
+            ],
+            [
+                A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2],
+                A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0],
+                A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2],
+            ],
+            [
+                A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0],
+                A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1],
+                A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0],
+            ],
+        ]
+    )
+    Ai = adj / det3(A)
+    out = np.eye(4)
+    out[:3, :3] = Ai
+    out[:3, 3] = -np.einsum("ij,j->i", Ai, M[:3, 3])
+    return out
+
+
+def norm_bound(A):
+    """An upper bound of the spectral norm of a 3x3 matrix (its Frobenius
+    norm): the largest length a unit vector can get, without an SVD."""
+    return float(np.sqrt(np.einsum("ij,ij->", A, A)))
+
+
 def apply(A, x):
     """Rows of ``x`` (k, 3) mapped by the 3x3 ``A`` (``x @ A.T``).
 
     einsum rather than ``@``: numpy's BLAS would start its own thread pool
     for these tall, thin products, spinning against the ray tracer's threads
-    for no gain.
+    for no gain. For the same reason the core calls no LAPACK routine
+    (``np.linalg.inv``, ``det``, ``svd``) in a per-frame path: OpenBLAS
+    workers woken by them spin for a while after each call.
     """
     return np.einsum("ij,kj->ki", A, x)
 
