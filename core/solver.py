@@ -43,6 +43,7 @@ import numpy as np
 
 from .collider import Collider
 from .errors import InputError, SettingsError
+from .layout import check_offsets
 from .settings import Settings
 from .status import Status, StepResult
 from .step import StepContext
@@ -50,27 +51,6 @@ from .step import StepContext
 __all__ = ["Solver", "Status", "StepResult"]
 
 _STATE_VERSION = 1
-
-
-def _check_offsets(offsets) -> np.ndarray:
-    try:
-        off = np.asarray(offsets)
-    except Exception as exc:
-        raise InputError(f"offsets must be a 1-D integer array: {exc}") from None
-    if off.ndim != 1 or len(off) < 2:
-        raise InputError(f"offsets must be a 1-D array of C+1 >= 2 integers, got shape {off.shape}")
-    if not np.issubdtype(off.dtype, np.integer):
-        raise InputError(f"offsets must be integers, got dtype {off.dtype}")
-    off = off.astype(np.int64)
-    if off[0] != 0:
-        raise InputError(f"offsets must start at 0, got {int(off[0])}")
-    sizes = np.diff(off)
-    if (sizes < 2).any():
-        i = int(np.argmax(sizes < 2))
-        if sizes[i] <= 0:
-            raise InputError(f"offsets must increase: curve {i} has {int(sizes[i])} points")
-        raise InputError(f"curve {i} has only 1 point; every curve needs at least 2")
-    return off
 
 
 class Solver:
@@ -92,7 +72,7 @@ class Solver:
     """
 
     def __init__(self, offsets, settings: Settings | None = None):
-        off = _check_offsets(offsets)
+        off = check_offsets(offsets)
         self._off = off
         self.n_curves = C = len(off) - 1
         self.n_points = int(off[-1])

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ColliderError, InputError
+from ..layout import check_offsets
 
 
 def check_curves(points, offsets, name="points"):
@@ -19,21 +20,7 @@ def check_curves(points, offsets, name="points"):
     InputError
         Malformed arrays; the message names the curve or point at fault.
     """
-    try:
-        off = np.asarray(offsets)
-    except Exception as exc:
-        raise InputError(f"offsets must be a 1-D integer array: {exc}") from None
-    if off.ndim != 1 or len(off) < 1:
-        raise InputError(f"offsets must be a 1-D array of C+1 integers, got shape {off.shape}")
-    if not np.issubdtype(off.dtype, np.integer):
-        raise InputError(f"offsets must be integers, got dtype {off.dtype}")
-    off = off.astype(np.int64)
-    if off[0] != 0:
-        raise InputError(f"offsets must start at 0, got {int(off[0])}")
-    sizes = np.diff(off)
-    if (sizes < 2).any():
-        i = int(np.argmax(sizes < 2))
-        raise InputError(f"curve {i} has {int(sizes[i])} points; every curve needs at least 2")
+    off = check_offsets(offsets, min_curves=0)
     pts = as_points(points, name)
     if len(pts) != off[-1]:
         raise InputError(f"{name} has {len(pts)} rows but offsets describe {int(off[-1])} points")
