@@ -9,11 +9,12 @@ runtime     per-setup registry and the ``frame_change_post`` handler
 setup       add / remove / collider add & remove / reset operators
 bake        bake / bake all / free bake / free all operators
 cli         ``blender -b --command furcollide ...``
+pipeline    fur pipeline operators (sampler, collider distance, children)
 """
 
-from . import bake, cli, properties, runtime, setup
+from . import bake, cli, pipeline, properties, runtime, setup
 
-classes = setup.classes + bake.classes
+classes = setup.classes + bake.classes + pipeline.classes
 
 
 def register():
@@ -22,6 +23,7 @@ def register():
     properties.register()
     for cls in classes:
         bpy.utils.register_class(cls)
+    pipeline.register()
     runtime.register()
     cli.register()
 
@@ -31,6 +33,7 @@ def unregister():
 
     cli.unregister()
     runtime.unregister()
+    pipeline.unregister()
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)
     properties.unregister()
