@@ -600,10 +600,12 @@ class Collider:
         shell = offset_wo * tol.OFFSET_MAX_STRETCH * norm_bound(self._Minv[:3, :3])
         far = 4.0 * (diag + 2.0 * shell) + float(np.abs(p_lo).max(initial=0.0)) * 2.0
         votes = np.zeros(k, np.int8)
-        for dirn in _PARITY_DIRS:
+        for i, dirn in enumerate(_PARITY_DIRS):
+            # the third vote only matters where the first two disagree
+            pending = np.arange(k) if i < 2 else np.flatnonzero(votes == 1)
             o = p_lo.copy()
             balance = np.zeros(k, np.int32)  # back hits minus front hits
-            active = np.arange(k)
+            active = pending
             d = np.broadcast_to(dirn * far, (k, 3))
             for _ in range(tol.PARITY_MAX_HITS):
                 if len(active) == 0:

@@ -463,7 +463,11 @@ class StepContext:
                 o, d, seg, rep, starts = self.deform(
                     idx, angle=self.angle[idx], axis=self.axis[idx]
                 )
-            out[self.sv_._seg_start[seg] + 1] = o + d
+            ns = self.sv_._ns
+            if ns:  # uniform CV count: write whole curves as blocks
+                out.reshape(-1, ns + 1, 3)[idx, 1:] = (o + d).reshape(-1, ns, 3)
+            else:
+                out[self.sv_._seg_start[seg] + 1] = o + d
         return out
 
     def seg_in(self, seg):

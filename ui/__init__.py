@@ -1,8 +1,8 @@
 """Sidebar panel, colliders list and presets (thin glue around :mod:`..operators`)."""
 
-from . import panel, presets
+from . import panel, pipeline_panel, presets
 
-classes = presets.classes + panel.classes
+classes = presets.classes + panel.classes + pipeline_panel.classes
 
 
 def register():
