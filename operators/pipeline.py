@@ -1,0 +1,540 @@
+"""Fur pipeline operators (paper sections 2 and 4): thin glue around :mod:`..core.pipeline`.
+
+* ``furcollide.fur_sampler``: a new guide hair object from a (possibly
+  generated) render groom, with :func:`core.pipeline.sample_guides`.
+* ``furcollide.collider_distance``: the per-point attribute
+  ``furcollide_collider_distance`` on a setup's output, with
+  :func:`core.pipeline.collider_distance`.
+* ``furcollide.children_from_guides``: Blender's own *Interpolate Hair
+  Curves* node group on a setup's output (render children from the
+  collided guides).
+
+Every computation is in world space.
+"""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+import numpy as np
+from bpy.props import (
+    BoolProperty,
+    FloatProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
+from bpy.types import Operator, PropertyGroup
+
+from . import bridge, cache, runtime
+from .setup import SetupOperator, active_setup, redraw, refuse, reports_errors
+
+#: Per-point attribute written by ``furcollide.collider_distance``.
+DISTANCE_ATTRIBUTE = "furcollide_collider_distance"
+#: Blender's bundled hair node-group assets (blender-facts 2.6).
+HAIR_ASSETS = os.path.join("assets", "nodes", "procedural_hair_node_assets.blend")
+INTERPOLATE_GROUP = "Interpolate Hair Curves"
+#: Name of the modifier ``furcollide.children_from_guides`` adds.
+CHILDREN_MODIFIER = "FurCollide Children"
+NO_SURFACE_HAIR = "Active object must be a hair Curves object with a Surface"
+#: Curve attributes carried over to the guides (kept curves only).
+_GUIDE_ATTRIBUTES = {
+    "surface_uv_coordinate": ("vector", np.float32, 2),
+    "surface_normal": ("vector", np.float32, 3),
+    "radius": ("value", np.float32, 1),
+}
+
+
+def _core_pipeline():
+    from ..core import pipeline
+
+    return pipeline
+
+
+# ------------------------------------------------------------------ helpers
+def surface_mesh_world(ob, depsgraph):
+    """Evaluated mesh object ``ob``: world vertices (n, 3) float64, triangles (m, 3)."""
+    oe = ob.evaluated_get(depsgraph)
+    me = oe.data
+    V = bridge.mesh_vertices(me).astype(np.float64)
+    M = bridge.matrix(oe)
+    return V @ M[:3, :3].T + M[:3, 3], bridge.mesh_triangles(me).astype(np.int64)
+
+
+def surface_weights(surf, me, name):
+    """Per-vertex weights (n,) float64 of the evaluated mesh ``me`` of ``surf`` from
+    vertex group ``name`` (or else a POINT attribute ``name``); ValueError if neither."""
+    n = len(me.vertices)
+    vg = surf.vertex_groups.get(name)
+    if vg is not None:
+        w = np.zeros(n)
+        gi = vg.index
+        for v in me.vertices:
+            for g in v.groups:
+                if g.group == gi:
+                    w[v.index] = g.weight
+        return w
+    attr = me.attributes.get(name)
+    kinds = {"FLOAT": np.float32, "INT": np.int32, "INT8": np.int32, "BOOLEAN": bool}
+    if attr is None or attr.domain != "POINT" or attr.data_type not in kinds:
+        raise ValueError(
+            f"The Surface '{surf.name}' has no vertex group or float point attribute '{name}'"
+        )
+    return _read(attr, "value", kinds[attr.data_type], 1).astype(np.float64)
+
+
+def root_weights(V, F, w, roots):
+    """Weights ``w`` of the surface vertices interpolated at the closest surface point
+    of each root (barycentric on its closest triangle)."""
+    P, face = _core_pipeline().closest_faces(V, F, roots)
+    a, b, c = (V[F[face, k]] for k in range(3))
+    v0, v1, v2 = b - a, c - a, P - a
+    d00 = np.einsum("ij,ij->i", v0, v0)
+    d01 = np.einsum("ij,ij->i", v0, v1)
+    d11 = np.einsum("ij,ij->i", v1, v1)
+    d20 = np.einsum("ij,ij->i", v2, v0)
+    d21 = np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    den = np.where(np.abs(den) > 1e-30, den, 1.0)
+    bv = (d11 * d20 - d01 * d21) / den
+    bw = (d00 * d21 - d01 * d20) / den
+    bu = 1.0 - bv - bw
+    tri = w[F[face]]
+    return bu * tri[:, 0] + bv * tri[:, 1] + bw * tri[:, 2]
+
+
+def _read(attr, key, dtype, width):
+    n = len(attr.data)
+    buf = np.empty(n * width, dtype)
+    if n:
+        attr.data.foreach_get(key, buf)
+    return buf.reshape(n, width) if width > 1 else buf
+
+
+def selected_curves(curves, offsets):
+    """Per-curve selection (C,) bool of a Curves data-block, or None when it has none.
+
+    The hidden ``.selection`` attribute is on the POINT or CURVE domain; a curve
+    counts as selected when any of its points is.
+    """
+    attr = curves.attributes.get(".selection")
+    if attr is None:
+        return None
+    C = len(offsets) - 1
+    vals = _read(attr, "value", bool if attr.data_type == "BOOLEAN" else np.float32, 1)
+    sel = vals > 0.5 if vals.dtype != bool else vals
+    if attr.domain == "CURVE" and len(sel) == C:
+        return sel
+    if attr.domain == "POINT" and len(sel) == offsets[-1]:
+        if C == 0:
+            return np.zeros(0, bool)
+        return np.logical_or.reduceat(sel, offsets[:-1]) & (np.diff(offsets) > 0)
+    return None
+
+
+def _copy_curve_attribute(src, dst, name, idx):
+    """Copy CURVE attribute ``name`` of the curves ``idx`` of ``src`` to ``dst``."""
+    attr = src.attributes.get(name)
+    spec = _GUIDE_ATTRIBUTES.get(name)
+    if attr is None or spec is None or attr.domain != "CURVE":
+        return False
+    key, dtype, width = spec
+    vals = _read(attr, key, dtype, width)[idx]
+    out = dst.attributes.new(name, attr.data_type, "CURVE")
+    if len(out.data) != len(vals):
+        raise bridge.BridgeError(f"attribute '{name}': {len(out.data)} != {len(vals)}")
+    if len(vals):
+        out.data.foreach_set(key, np.ascontiguousarray(vals, dtype).ravel())
+    return True
+
+
+def _copy_point_attribute(src, dst, name, point_idx):
+    attr = src.attributes.get(name)
+    spec = _GUIDE_ATTRIBUTES.get(name)
+    if attr is None or spec is None or attr.domain != "POINT":
+        return False
+    key, dtype, width = spec
+    vals = _read(attr, key, dtype, width)[point_idx]
+    out = dst.attributes.new(name, attr.data_type, "POINT")
+    if len(vals):
+        out.data.foreach_set(key, np.ascontiguousarray(vals, dtype).ravel())
+    return True
+
+
+def new_guides_object(src, data_eval, keep, context):
+    """New hair object with the curves ``keep`` of ``data_eval`` (the evaluated
+    data of ``src``) as original data, placed and parented like ``src``."""
+    offs = bridge.curve_offsets(data_eval)
+    sizes = np.diff(offs)
+    P = bridge.get_positions(data_eval)
+    hc = bpy.data.hair_curves.new(f"{src.data.name} Guides")
+    try:
+        if len(keep):
+            hc.add_curves(sizes[keep].tolist())
+        point_idx = cache.curve_point_mask(offs, np.asarray(keep, np.int64))
+        bridge.set_positions(hc, P[point_idx])
+        for name in _GUIDE_ATTRIBUTES:
+            if not _copy_curve_attribute(data_eval, hc, name, keep):
+                _copy_point_attribute(data_eval, hc, name, point_idx)
+    except Exception:
+        bpy.data.hair_curves.remove(hc)
+        raise
+    for mat in src.data.materials:
+        hc.materials.append(mat)
+    hc.surface = src.data.surface
+    hc.surface_uv_map = src.data.surface_uv_map
+    ob = bpy.data.objects.new(f"{src.name} Guides", hc)
+    for coll in list(src.users_collection) or [context.scene.collection]:
+        coll.objects.link(ob)
+    ob.parent = src.parent
+    ob.parent_type = src.parent_type
+    ob.parent_bone = src.parent_bone
+    ob.matrix_parent_inverse = src.matrix_parent_inverse.copy()
+    ob.matrix_basis = src.matrix_basis.copy()
+    return ob
+
+
+def hair_assets_path() -> str:
+    """Path of Blender's bundled hair node-group assets ('' when not found)."""
+    roots = []
+    try:
+        roots.append(bpy.utils.system_resource("DATAFILES"))
+    except (ValueError, TypeError):
+        pass
+    for kind in ("LOCAL", "SYSTEM"):
+        try:
+            roots.append(os.path.join(bpy.utils.resource_path(kind), "datafiles"))
+        except (ValueError, TypeError):
+            pass
+    for root in roots:
+        if root:
+            path = os.path.join(root, HAIR_ASSETS)
+            if os.path.isfile(path):
+                return path
+    return ""
+
+
+def interpolate_group():
+    """Blender's 'Interpolate Hair Curves' node group (appended once from the
+    bundled assets); raises FileNotFoundError when the assets are missing."""
+    for ng in bpy.data.node_groups:
+        if ng.get("furcollide_asset") == INTERPOLATE_GROUP and ng.bl_idname == "GeometryNodeTree":
+            return ng
+    path = hair_assets_path()
+    if not path:
+        raise FileNotFoundError(
+            "Blender's hair node assets (datafiles/" + HAIR_ASSETS.replace(os.sep, "/")
+            + ") were not found in this Blender installation"
+        )
+    with bpy.data.libraries.load(path, link=False) as (src, dst):
+        if INTERPOLATE_GROUP not in src.node_groups:
+            raise FileNotFoundError(f"'{INTERPOLATE_GROUP}' is not in {path}")
+        dst.node_groups = [INTERPOLATE_GROUP]
+    ng = dst.node_groups[0]
+    if ng is None:
+        raise FileNotFoundError(f"could not load '{INTERPOLATE_GROUP}' from {path}")
+    ng["furcollide_asset"] = INTERPOLATE_GROUP
+    return ng
+
+
+def group_inputs(ng) -> dict:
+    """``{(name, socket_type): identifier}`` of a node group's input sockets."""
+    out = {}
+    for item in ng.interface.items_tree:
+        if item.item_type == "SOCKET" and item.in_out == "INPUT":
+            out.setdefault((item.name, item.socket_type), item.identifier)
+    return out
+
+
+# ---------------------------------------------------------------- settings
+class FURCOLLIDE_PG_pipeline(PropertyGroup):
+    """Fur pipeline settings of the scene (shown in the Fur Pipeline panel)."""
+
+    fraction: FloatProperty(
+        name="Fraction",
+        default=0.15,
+        min=0.001,
+        max=1.0,
+        subtype="FACTOR",
+        description="Share of the groom's curves kept as guides (0.15 keeps 15 %)",
+    )
+    seed: IntProperty(
+        name="Seed",
+        default=0,
+        min=0,
+        description="Random seed of the sampler: the same seed gives the same guides",
+    )
+    use_selection: BoolProperty(
+        name="Only Selected",
+        default=False,
+        description="Pick guides only among the selected curves of the groom (sculpt mode "
+        "selection), when it has one",
+    )
+    area: StringProperty(
+        name="Area of Interest",
+        default="",
+        description="Vertex group (or float point attribute) of the Surface: guides are "
+        "picked only where its weight is at least 0.5 (empty: everywhere)",
+    )
+    density: FloatProperty(
+        name="Density",
+        default=10.0,
+        min=0.0,
+        soft_max=10000.0,
+        description="Child curves per unit of surface area created around the guides",
+    )
+    guides: IntProperty(
+        name="Interpolation Guides",
+        default=4,
+        min=1,
+        soft_max=16,
+        description="Number of nearest guides each child curve interpolates",
+    )
+
+
+# ---------------------------------------------------------------- operators
+class FURCOLLIDE_OT_fur_sampler(Operator):
+    """Fur Sampler: create a new guide hair object from a uniform, well-spaced subset
+    of the active groom's curves (also works on generated hair such as Quick Fur)"""
+
+    bl_idname = "furcollide.fur_sampler"
+    bl_label = "Fur Sampler"
+    bl_options = {"REGISTER", "UNDO"}
+
+    fraction: FloatProperty(
+        name="Fraction",
+        default=0.15,
+        min=0.001,
+        max=1.0,
+        subtype="FACTOR",
+        description="Share of the groom's curves kept as guides (0.15 keeps 15 %)",
+    )
+    seed: IntProperty(
+        name="Seed",
+        default=0,
+        min=0,
+        description="Random seed of the sampler: the same seed gives the same guides",
+    )
+    use_selection: BoolProperty(
+        name="Only Selected",
+        default=False,
+        description="Pick guides only among the selected curves of the groom (sculpt mode "
+        "selection), when it has one",
+    )
+    area: StringProperty(
+        name="Area of Interest",
+        default="",
+        description="Vertex group (or float point attribute) of the Surface: guides are "
+        "picked only where its weight is at least 0.5 (empty: everywhere)",
+    )
+
+    @classmethod
+    def poll(cls, context):
+        ob = getattr(context, "active_object", None)
+        if ob is None or ob.type != "CURVES":
+            return refuse(cls, NO_SURFACE_HAIR)
+        surf = ob.data.surface
+        if surf is None or surf.type != "MESH":
+            return refuse(cls, NO_SURFACE_HAIR)
+        return True
+
+    @reports_errors
+    def execute(self, context):
+        src = context.active_object
+        surf = src.data.surface
+        if surf is None or surf.type != "MESH":
+            self.report({"ERROR"}, f"'{src.name}' has no Surface mesh (Object Data > Surface)")
+            return {"CANCELLED"}
+        dg = context.evaluated_depsgraph_get()
+        src_eval = src.evaluated_get(dg)
+        data = src_eval.data
+        offs = bridge.curve_offsets(data)
+        C = len(offs) - 1
+        if C == 0:
+            self.report({"ERROR"}, f"'{src.name}' has no curves to sample")
+            return {"CANCELLED"}
+        V, F = surface_mesh_world(surf, dg)
+        if len(F) == 0:
+            self.report({"ERROR"}, f"The Surface '{surf.name}' has no faces")
+            return {"CANCELLED"}
+        P = bridge.get_positions(data)
+        M = bridge.matrix(src_eval)
+        roots = P[offs[:-1]].astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+        mask = None
+        if self.use_selection:
+            mask = selected_curves(data, offs)
+            if mask is None and len(src.data.curves) == C:
+                mask = selected_curves(src.data, offs)
+            if mask is None:
+                self.report({"WARNING"}, f"'{src.name}' has no curve selection: using all curves")
+            elif not mask.any():
+                self.report({"ERROR"}, f"No curve of '{src.name}' is selected")
+                return {"CANCELLED"}
+        if self.area:
+            w = surface_weights(surf, surf.evaluated_get(dg).data, self.area)
+            inside = root_weights(V, F, w, roots) >= 0.5
+            mask = inside if mask is None else (mask & inside)
+            if not mask.any():
+                self.report({"ERROR"}, f"No curve root lies in the area '{self.area}'")
+                return {"CANCELLED"}
+        keep = _core_pipeline().sample_guides(roots, V, F, self.fraction, self.seed, mask)
+        ob = new_guides_object(src, data, keep, context)
+        for o in context.selected_objects:
+            o.select_set(False)
+        try:
+            ob.select_set(True)
+            context.view_layer.objects.active = ob
+        except RuntimeError:  # not in the active view layer
+            pass
+        self.report({"INFO"}, f"Fur Sampler: created {len(keep)} guides from {C} curves "
+                              f"of '{src.name}' in '{ob.name}'")
+        redraw(context)
+        return {"FINISHED"}
+
+
+class _OutputOperator(SetupOperator):
+    @classmethod
+    def refusal(cls, context, src):
+        out = src.furcollide.output
+        if out is None or out.type != "CURVES":
+            return "The FurCollide setup has no output hair object"
+        return ""
+
+
+class FURCOLLIDE_OT_collider_distance(_OutputOperator, Operator):
+    """Fur Collider Distance: store on the output, for every point, the closest distance
+    of its segments to the enabled colliders (attribute furcollide_collider_distance)"""
+
+    bl_idname = "furcollide.collider_distance"
+    bl_label = "Collider Distance"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @reports_errors
+    def execute(self, context):
+        src = active_setup(context)
+        out = src.furcollide.output
+        dg = context.evaluated_depsgraph_get()
+        objs = [o for o, _ds, _off in runtime.collider_objects(src, context.scene)]
+        cols = [surface_mesh_world(o, dg) for o in objs]
+        cols = [c for c in cols if len(c[1])]
+        if not cols:
+            self.report({"ERROR"}, f"The setup of '{src.name}' has no enabled collider")
+            return {"CANCELLED"}
+        data = out.data
+        offs = bridge.curve_offsets(data)
+        if len(offs) < 2:
+            self.report({"ERROR"}, f"The output '{out.name}' has no curves")
+            return {"CANCELLED"}
+        P = bridge.get_positions(data).astype(np.float64)
+        M = bridge.matrix(out)
+        Pw = P @ M[:3, :3].T + M[:3, 3]
+        d = _core_pipeline().collider_distance(Pw, offs, cols)
+        attr = data.attributes.get(DISTANCE_ATTRIBUTE)
+        if attr is not None and (attr.data_type != "FLOAT" or attr.domain != "POINT"):
+            data.attributes.remove(attr)
+            attr = None
+        if attr is None:
+            attr = data.attributes.new(DISTANCE_ATTRIBUTE, "FLOAT", "POINT")
+        if len(attr.data) != len(d):
+            raise bridge.BridgeError(
+                f"'{out.name}' has {len(attr.data)} points but {len(d)} distances were computed"
+            )
+        attr.data.foreach_set("value", d.astype(np.float32))
+        data.update_tag()
+        self.report({"INFO"}, f"Collider distance on '{out.name}': min {d.min():.4g}, "
+                              f"max {d.max():.4g} ({len(d)} points)")
+        return {"FINISHED"}
+
+
+class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
+    """Children from Guides: add Blender's Interpolate Hair Curves to the output, so
+    dense render children grow on the source's Surface and follow the collided guides"""
+
+    bl_idname = "furcollide.children_from_guides"
+    bl_label = "Children from Guides"
+    bl_options = {"REGISTER", "UNDO"}
+
+    density: FloatProperty(
+        name="Density",
+        default=10.0,
+        min=0.0,
+        soft_max=10000.0,
+        description="Child curves per unit of surface area created around the guides",
+    )
+    guides: IntProperty(
+        name="Interpolation Guides",
+        default=4,
+        min=1,
+        soft_max=16,
+        description="Number of nearest guides each child curve interpolates",
+    )
+
+    @classmethod
+    def refusal(cls, context, src):
+        msg = super().refusal(context, src)
+        if msg:
+            return msg
+        surf = src.data.surface
+        if surf is None or surf.type != "MESH":
+            return "The source hair has no Surface mesh (Object Data > Surface)"
+        return ""
+
+    @reports_errors
+    def execute(self, context):
+        src = active_setup(context)
+        out = src.furcollide.output
+        surf = src.data.surface
+        try:
+            ng = interpolate_group()
+        except FileNotFoundError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        ids = group_inputs(ng)
+        surface_id = ids.get(("Surface", "NodeSocketObject"))
+        if surface_id is None:
+            self.report({"ERROR"}, f"'{ng.name}' has no Surface object input")
+            return {"CANCELLED"}
+        mod = out.modifiers.get(CHILDREN_MODIFIER)
+        if mod is None or mod.type != "NODES":
+            mod = out.modifiers.new(CHILDREN_MODIFIER, "NODES")
+        mod.node_group = ng
+        mod[surface_id] = surf
+        values = {
+            ("Density", "NodeSocketFloat"): float(self.density),
+            ("Interpolation Guides", "NodeSocketInt"): int(self.guides),
+        }
+        for key, value in values.items():
+            if key in ids:
+                mod[ids[key]] = value
+        uv_id = ids.get(("Surface UV Map", "NodeSocketVector"))
+        uv_name = src.data.surface_uv_map or out.data.surface_uv_map
+        if uv_id is not None and uv_name and f"{uv_id}_attribute_name" in mod.keys():
+            mod[f"{uv_id}_use_attribute"] = True
+            mod[f"{uv_id}_attribute_name"] = uv_name
+        out.data.surface = surf
+        if uv_name:
+            out.data.surface_uv_map = uv_name
+        out.update_tag()
+        self.report({"INFO"}, f"Children from guides on '{out.name}' (surface '{surf.name}', "
+                              f"density {self.density:g})")
+        redraw(context)
+        return {"FINISHED"}
+
+
+classes = (
+    FURCOLLIDE_PG_pipeline,
+    FURCOLLIDE_OT_fur_sampler,
+    FURCOLLIDE_OT_collider_distance,
+    FURCOLLIDE_OT_children_from_guides,
+)
+
+
+def register():
+    """Add ``Scene.furcollide_pipeline`` (after the classes are registered)."""
+    bpy.types.Scene.furcollide_pipeline = PointerProperty(type=FURCOLLIDE_PG_pipeline)
+
+
+def unregister():
+    if hasattr(bpy.types.Scene, "furcollide_pipeline"):
+        del bpy.types.Scene.furcollide_pipeline

@@ -1,0 +1,370 @@
+"""Fur pipeline operators: Fur Sampler, Collider Distance, Children from Guides."""
+
+import sys
+
+import bpy
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.blender
+
+
+def _pipeline():
+    return sys.modules["bl_ext.fcdev.furcollide.core.pipeline"]
+
+
+def make_surface(name="Skin", half=1.0, n=8, z=0.0):
+    """A subdivided square (n x n quads) on z, with a UV map, as growth surface."""
+    xs = np.linspace(-half, half, n + 1)
+    verts = [(x, y, z) for y in xs for x in xs]
+    faces = [
+        (j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+        for j in range(n) for i in range(n)
+    ]
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.uv_layers.new(name="UVMap")
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def groom(fc, nx=10, ny=10, uv=True):
+    """Hair grid (roots on z = 0) attached to a surface, with surface UVs."""
+    hair = fc.make_scene(nx=nx, ny=ny, animate=False)[0]
+    surf = make_surface()
+    hair.data.surface = surf
+    hair.data.surface_uv_map = "UVMap"
+    if uv:
+        C = len(hair.data.curves)
+        uvs = np.random.default_rng(3).random((C, 2)).astype(np.float32)
+        hair.data.attributes.new("surface_uv_coordinate", "FLOAT2", "CURVE").data.foreach_set(
+            "vector", uvs.ravel()
+        )
+    return hair, surf
+
+
+def _activate(ob):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    ob.select_set(True)
+    bpy.context.view_layer.objects.active = ob
+
+
+def _roots(ob):
+    d = ob.data
+    offs = np.empty(len(d.curves) + 1, np.int32)
+    d.curve_offset_data.foreach_get("value", offs)
+    P = np.empty(len(d.points) * 3, np.float32)
+    d.position_data.foreach_get("vector", P)
+    return P.reshape(-1, 3)[offs[:-1]], offs
+
+
+def _sample(ob, **kw):
+    _activate(ob)
+    assert bpy.ops.furcollide.fur_sampler(**kw) == {"FINISHED"}
+    guides = bpy.context.view_layer.objects.active
+    assert guides != ob and guides.type == "CURVES"
+    return guides
+
+
+# ------------------------------------------------------------ Fur Sampler
+def test_sampler_count_surface_and_source_untouched(fc):
+    hair, surf = groom(fc)
+    C = len(hair.data.curves)
+    before = fc.positions(hair).copy()
+    guides = _sample(hair, fraction=0.2, seed=7)
+    assert len(guides.data.curves) == round(0.2 * C)
+    # the source is untouched
+    assert len(hair.data.curves) == C
+    assert np.array_equal(fc.positions(hair), before)
+    # guides are curves of the groom, roots on the surface (z = 0, inside the square)
+    roots, offs = _roots(guides)
+    assert np.allclose(roots[:, 2], 0.0, atol=1e-6)
+    assert (np.abs(roots[:, :2]) <= 1.0 + 1e-6).all()
+    src_P = before.reshape(-1, 5, 3)
+    got = fc.positions(guides).reshape(-1, 5, 3)
+    src_roots = src_P[:, 0]
+    idx = [int(np.argmin(np.linalg.norm(src_roots - r, axis=1))) for r in got[:, 0]]
+    assert np.array_equal(got, src_P[idx])
+    # surface, UV map, UV coordinates of the kept curves, placement
+    assert guides.data.surface == surf and guides.data.surface_uv_map == "UVMap"
+    uv_src = np.empty(C * 2, np.float32)
+    hair.data.attributes["surface_uv_coordinate"].data.foreach_get("vector", uv_src)
+    uv = np.empty(len(guides.data.curves) * 2, np.float32)
+    guides.data.attributes["surface_uv_coordinate"].data.foreach_get("vector", uv)
+    assert np.array_equal(uv.reshape(-1, 2), uv_src.reshape(-1, 2)[idx])
+    assert guides.parent == hair.parent
+    assert np.allclose(np.array(guides.matrix_world), np.array(hair.matrix_world))
+    assert guides.users_collection[0] == hair.users_collection[0]
+
+
+def test_sampler_deterministic_and_matches_core(fc):
+    hair, surf = groom(fc)
+    a = fc.positions(_sample(hair, fraction=0.15, seed=3))
+    b = fc.positions(_sample(hair, fraction=0.15, seed=3))
+    c = fc.positions(_sample(hair, fraction=0.15, seed=4))
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, c)
+    # equals core.pipeline.sample_guides on the same (world) inputs
+    roots, _ = _roots(hair)
+    me = surf.data
+    V = np.array([v.co for v in me.vertices])
+    me.calc_loop_triangles()
+    F = np.array([t.vertices[:] for t in me.loop_triangles])
+    keep = _pipeline().sample_guides(roots, V, F, 0.15, 3)
+    assert np.array_equal(a.reshape(-1, 5, 3), fc.positions(hair).reshape(-1, 5, 3)[keep])
+
+
+def test_sampler_world_space_transform(fc):
+    hair, surf = groom(fc, uv=False)
+    parent = bpy.data.objects.new("Rig", None)
+    bpy.context.scene.collection.objects.link(parent)
+    parent.location = (3, 0, 1)
+    hair.parent = parent
+    surf.parent = parent
+    bpy.context.view_layer.update()
+    guides = _sample(hair, fraction=0.1, seed=1)
+    assert guides.parent == parent
+    assert len(guides.data.curves) == 10
+    assert "surface_uv_coordinate" not in guides.data.attributes
+    M = np.array(guides.matrix_world)
+    roots, _ = _roots(guides)
+    world = roots @ M[:3, :3].T + M[:3, 3]
+    assert np.allclose(world[:, 2], 1.0, atol=1e-5)
+
+
+def test_sampler_selection(fc):
+    hair, _ = groom(fc)
+    C = len(hair.data.curves)
+    sel = np.zeros(C, bool)
+    sel[:40] = True
+    hair.data.selection_domain = "CURVE"
+    attr = hair.data.attributes.get(".selection") or hair.data.attributes.new(
+        ".selection", "BOOLEAN", "CURVE"
+    )
+    attr.data.foreach_set("value", sel)
+    guides = _sample(hair, fraction=0.25, seed=0, use_selection=True)
+    assert len(guides.data.curves) == 10
+    src = fc.positions(hair).reshape(-1, 5, 3)[:40, 0]
+    for r in _roots(guides)[0]:
+        assert np.linalg.norm(src - r, axis=1).min() < 1e-6
+
+
+def test_sampler_area_of_interest(fc):
+    hair, surf = groom(fc)
+    vg = surf.vertex_groups.new(name="Back")
+    vg.add([v.index for v in surf.data.vertices if v.co.x < -1e-6], 1.0, "REPLACE")
+    guides = _sample(hair, fraction=0.25, seed=5, area="Back")
+    roots, _ = _roots(guides)
+    assert (roots[:, 0] < 0).all()
+    # roots at x = -0.9 .. -0.3 are inside (weight 1); x = -0.1 interpolates to 0.4
+    assert len(guides.data.curves) == round(0.25 * 40)
+    # a float point attribute of the surface works as well
+    a = surf.data.attributes.new("front", "FLOAT", "POINT")
+    a.data.foreach_set("value", np.array([v.co.x > 1e-6 for v in surf.data.vertices], np.float32))
+    roots = _roots(_sample(hair, fraction=0.5, seed=5, area="front"))[0]
+    assert (roots[:, 0] > 0).all() and len(roots) == 20
+    _activate(hair)
+    with pytest.raises(RuntimeError, match="no vertex group or float point attribute"):
+        bpy.ops.furcollide.fur_sampler(area="Nope")
+
+
+def test_sampler_generated_hair(fc):
+    """Quick Fur: the original data has (almost) no curves, the evaluated one many."""
+    surf = make_surface(n=4)
+    _activate(surf)
+    assert bpy.ops.object.quick_fur(density="LOW") == {"FINISHED"}
+    fur = bpy.context.active_object
+    dg = bpy.context.evaluated_depsgraph_get()
+    C = len(fur.evaluated_get(dg).data.curves)
+    assert C > 10 * len(fur.data.curves)
+    guides = _sample(fur, fraction=0.05, seed=2)
+    assert len(guides.data.curves) == round(0.05 * C)
+    assert guides.data.surface == surf
+    assert "surface_uv_coordinate" in guides.data.attributes
+    assert guides.parent == fur.parent
+    # the guides are evaluated curves of the groom, at its evaluated pose
+    ev = fur.evaluated_get(dg).data
+    offs = np.empty(len(ev.curves) + 1, np.int32)
+    ev.curve_offset_data.foreach_get("value", offs)
+    P = np.empty(len(ev.points) * 3, np.float32)
+    ev.position_data.foreach_get("vector", P)
+    src_roots = P.reshape(-1, 3)[offs[:-1]]
+    roots, _ = _roots(guides)
+    near = [np.linalg.norm(src_roots - r, axis=1).min() for r in roots]
+    assert max(near) < 1e-6
+    assert np.abs(roots[:, 2]).max() < 0.01  # Quick Fur's noise moves roots slightly
+    assert not guides.modifiers  # plain original data
+
+
+def test_sampler_poll_and_errors(fc):
+    hair, _ = groom(fc)
+    hair.data.surface = None
+    _activate(hair)
+    with pytest.raises(RuntimeError, match="must be a hair Curves object with a Surface"):
+        bpy.ops.furcollide.fur_sampler()
+    mesh = make_surface("Other")
+    _activate(mesh)
+    with pytest.raises(RuntimeError, match="must be a hair Curves object with a Surface"):
+        bpy.ops.furcollide.fur_sampler()
+    # a surface without faces: reported, nothing created
+    empty = bpy.data.objects.new("Empty", bpy.data.meshes.new("Empty"))
+    bpy.context.scene.collection.objects.link(empty)
+    hair.data.surface = empty
+    _activate(hair)
+    n = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="has no faces"):
+        bpy.ops.furcollide.fur_sampler()
+    assert len(bpy.data.objects) == n
+
+
+# ------------------------------------------------------- Collider Distance
+def test_collider_distance(fc):
+    hair, box = fc.make_scene(animate=False)
+    out = fc.setup(hair, [box])
+    _activate(box)
+    with pytest.raises(RuntimeError, match="no FurCollide setup"):
+        bpy.ops.furcollide.collider_distance()
+    _activate(out)
+    assert bpy.ops.furcollide.collider_distance() == {"FINISHED"}
+    attr = out.data.attributes["furcollide_collider_distance"]
+    assert attr.domain == "POINT" and attr.data_type == "FLOAT"
+    d = np.empty(len(out.data.points), np.float32)
+    assert len(attr.data) == len(d)
+    attr.data.foreach_get("value", d)
+    assert (d >= 0).all() and np.isfinite(d).all()
+    # equals the core computed directly (world space)
+    offs = np.empty(len(out.data.curves) + 1, np.int32)
+    out.data.curve_offset_data.foreach_get("value", offs)
+    M = np.array(out.matrix_world)
+    P = fc.positions(out).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+    Mb = np.array(box.matrix_world)
+    V = np.array([v.co for v in box.data.vertices]) @ Mb[:3, :3].T + Mb[:3, 3]
+    box.data.calc_loop_triangles()
+    F = np.array([t.vertices[:] for t in box.data.loop_triangles])
+    ref = _pipeline().collider_distance(P, offs, [(V, F)])
+    assert np.allclose(d, ref, rtol=1e-5, atol=1e-6)
+    assert d.min() < 0.3  # hairs under the box get close to it
+
+
+def test_collider_distance_needs_a_collider(fc):
+    hair, box = fc.make_scene(animate=False)
+    fc.setup(hair, [box])
+    hair.furcollide.colliders[0].enabled = False
+    _activate(hair)
+    with pytest.raises(RuntimeError, match="no enabled collider"):
+        bpy.ops.furcollide.collider_distance()
+    assert "furcollide_collider_distance" not in hair.furcollide.output.data.attributes
+
+
+# ----------------------------------------------------- Children from Guides
+def test_children_from_guides(fc):
+    hair, surf = groom(fc, nx=6, ny=6)
+    box = bpy.data.objects["Box"]  # made by fc.make_scene
+    out = fc.setup(hair, [box])
+    _activate(hair)
+    assert bpy.ops.furcollide.children_from_guides(density=100.0) == {"FINISHED"}
+    mod = out.modifiers["FurCollide Children"]
+    assert mod.type == "NODES" and mod.node_group is not None
+    assert out.modifiers[0].name == fc.runtime.DEPENDENCY_MODIFIER
+    ids = {(i.name, i.socket_type): i.identifier for i in mod.node_group.interface.items_tree
+           if i.item_type == "SOCKET" and i.in_out == "INPUT"}
+    assert mod[ids[("Surface", "NodeSocketObject")]] == surf
+    dg = bpy.context.evaluated_depsgraph_get()
+    n_eval = len(out.evaluated_get(dg).data.curves)
+    assert n_eval > len(out.data.curves) == 36
+    # running it again reuses the modifier and the node group
+    groups = len(bpy.data.node_groups)
+    assert bpy.ops.furcollide.children_from_guides(density=50.0) == {"FINISHED"}
+    assert len([m for m in out.modifiers if m.name.startswith("FurCollide Children")]) == 1
+    assert len(bpy.data.node_groups) == groups
+    # the frame handler still writes the guides
+    bpy.context.scene.frame_set(2)
+    assert hair.furcollide.status_message == ""
+
+
+def test_children_needs_surface_and_assets(fc, monkeypatch):
+    hair, box = fc.make_scene(animate=False)
+    fc.setup(hair, [box])
+    _activate(hair)
+    with pytest.raises(RuntimeError, match="no Surface"):
+        bpy.ops.furcollide.children_from_guides()
+    hair.data.surface = make_surface()
+    mod = sys.modules["bl_ext.fcdev.furcollide.operators.pipeline"]
+    monkeypatch.setattr(mod, "HAIR_ASSETS", "assets/nodes/missing.blend")
+    with pytest.raises(RuntimeError, match="were not found"):
+        bpy.ops.furcollide.children_from_guides()
+    assert "FurCollide Children" not in hair.furcollide.output.modifiers
+
+
+# ------------------------------------------------------------------ panel
+def test_pipeline_panel_and_settings(fc):
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    assert panel.bl_parent_id == "FURCOLLIDE_PT_main"
+    hair, _ = groom(fc)
+    _activate(hair)
+    assert panel.poll(bpy.context)
+    s = bpy.context.scene.furcollide_pipeline
+    assert s.fraction == pytest.approx(0.15) and s.guides == 4
+    for prop in s.bl_rna.properties:
+        if prop.identifier not in {"rna_type", "name"}:
+            assert len(prop.description) > 15, prop.identifier
+
+
+class _Layout:
+    """Records what a panel draws (panels cannot be drawn headless)."""
+
+    def __init__(self, log):
+        self.log = log
+        self.use_property_split = self.use_property_decorate = self.enabled = None
+
+    def _child(self, *args, **kw):
+        return _Layout(self.log)
+
+    box = row = column = _child
+
+    def prop(self, data, name, **kw):
+        assert hasattr(data, name), name
+        self.log.append(("prop", name))
+
+    def operator(self, idname, **kw):
+        mod, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, mod), name), idname
+        self.log.append(("operator", idname))
+        return type("Props", (), {})()
+
+    def prop_search(self, data, name, search_data, search_name, **kw):
+        assert hasattr(data, name) and hasattr(search_data, search_name), name
+        self.log.append(("prop", name))
+
+    def label(self, **kw):
+        self.log.append(("label", kw.get("text")))
+
+    def separator(self, **kw):
+        pass
+
+
+def _draw(panel):
+    log = []
+    panel.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
+    return log
+
+
+def test_pipeline_panel_draws(fc):
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    hair, _ = groom(fc)
+    box = bpy.data.objects["Box"]
+    _activate(hair)
+    log = _draw(panel)
+    assert ("operator", "furcollide.fur_sampler") in log
+    assert ("operator", "furcollide.collider_distance") not in log
+    fc.setup(hair, [box])
+    _activate(hair)
+    log = _draw(panel)
+    for idname in ("furcollide.fur_sampler", "furcollide.collider_distance",
+                   "furcollide.children_from_guides"):
+        assert ("operator", idname) in log
+    for name in ("fraction", "seed", "use_selection", "area", "density", "guides"):
+        assert ("prop", name) in log

@@ -1,0 +1,70 @@
+"""View3D > Sidebar > FurCollide > Fur Pipeline: sampler, collider distance, children."""
+
+from bpy.types import Panel
+
+from ..operators.pipeline import NO_SURFACE_HAIR
+from ..operators.setup import active_setup
+from .panel import FURCOLLIDE_PT_main
+
+
+class FURCOLLIDE_PT_pipeline(Panel):
+    """Fur pipeline around FurCollide: guides from a groom, collider distance, children."""
+
+    bl_label = "Fur Pipeline"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "FurCollide"
+    bl_parent_id = FURCOLLIDE_PT_main.__name__
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.object
+        return ob is not None and ob.type == "CURVES"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        s = context.scene.furcollide_pipeline
+        ob = context.object
+
+        box = layout.box()
+        box.label(text="Guides from Groom", icon="CURVES_DATA")
+        col = box.column()
+        col.prop(s, "fraction")
+        col.prop(s, "seed")
+        col.prop(s, "use_selection")
+        surf = ob.data.surface
+        if surf is not None and surf.type == "MESH":
+            col.prop_search(s, "area", surf, "vertex_groups")
+        else:
+            col.prop(s, "area")
+        row = col.row()
+        row.enabled = ob.data.surface is not None
+        op = row.operator("furcollide.fur_sampler", icon="PARTICLE_POINT")
+        op.fraction, op.seed, op.use_selection = s.fraction, s.seed, s.use_selection
+        op.area = s.area
+        if ob.data.surface is None:
+            col.label(text=NO_SURFACE_HAIR, icon="INFO")
+
+        src = active_setup(context)
+        box = layout.box()
+        box.label(text="Collided Output", icon="MOD_PHYSICS")
+        col = box.column()
+        if src is None:
+            col.label(text="Needs a FurCollide setup", icon="INFO")
+            return
+        col.operator("furcollide.collider_distance", icon="DRIVER_DISTANCE")
+        col.separator()
+        col.prop(s, "density")
+        col.prop(s, "guides")
+        row = col.row()
+        row.enabled = src.data.surface is not None
+        op = row.operator("furcollide.children_from_guides", icon="OUTLINER_DATA_CURVES")
+        op.density, op.guides = s.density, s.guides
+        if src.data.surface is None:
+            col.label(text="Children need the source's Surface", icon="INFO")
+
+
+classes = (FURCOLLIDE_PT_pipeline,)
