@@ -84,26 +84,6 @@ def surface_weights(surf, me, name):
     return _read(attr, "value", kinds[attr.data_type], 1).astype(np.float64)
 
 
-def root_weights(V, F, w, roots):
-    """Weights ``w`` of the surface vertices interpolated at the closest surface point
-    of each root (barycentric on its closest triangle)."""
-    P, face = _core_pipeline().closest_faces(V, F, roots)
-    a, b, c = (V[F[face, k]] for k in range(3))
-    v0, v1, v2 = b - a, c - a, P - a
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
-    den = d00 * d11 - d01 * d01
-    den = np.where(np.abs(den) > 1e-30, den, 1.0)
-    bv = (d11 * d20 - d01 * d21) / den
-    bw = (d00 * d21 - d01 * d20) / den
-    bu = 1.0 - bv - bw
-    tri = w[F[face]]
-    return bu * tri[:, 0] + bv * tri[:, 1] + bw * tri[:, 2]
-
-
 def _read(attr, key, dtype, width):
     n = len(attr.data)
     buf = np.empty(n * width, dtype)
@@ -224,7 +204,8 @@ def interpolate_group():
     path = hair_assets_path()
     if not path:
         raise FileNotFoundError(
-            "Blender's hair node assets (datafiles/" + HAIR_ASSETS.replace(os.sep, "/")
+            "Blender's hair node assets (datafiles/"
+            + HAIR_ASSETS.replace(os.sep, "/")
             + ") were not found in this Blender installation"
         )
     with bpy.data.libraries.load(path, link=False) as (src, dst):
@@ -248,10 +229,10 @@ def group_inputs(ng) -> dict:
 
 
 # ---------------------------------------------------------------- settings
-class FURCOLLIDE_PG_pipeline(PropertyGroup):
-    """Fur pipeline settings of the scene (shown in the Fur Pipeline panel)."""
-
-    fraction: FloatProperty(
+# Each setting is declared once: the scene settings group shows it in the panel and
+# the operators take it as an argument (Adjust Last Operation, scripts).
+def _prop_fraction():
+    return FloatProperty(
         name="Fraction",
         default=0.15,
         min=0.001,
@@ -259,38 +240,64 @@ class FURCOLLIDE_PG_pipeline(PropertyGroup):
         subtype="FACTOR",
         description="Share of the groom's curves kept as guides (0.15 keeps 15 %)",
     )
-    seed: IntProperty(
+
+
+def _prop_seed():
+    return IntProperty(
         name="Seed",
         default=0,
         min=0,
         description="Random seed of the sampler: the same seed gives the same guides",
     )
-    use_selection: BoolProperty(
+
+
+def _prop_use_selection():
+    return BoolProperty(
         name="Only Selected",
         default=False,
         description="Pick guides only among the selected curves of the groom (sculpt mode "
         "selection), when it has one",
     )
-    area: StringProperty(
+
+
+def _prop_area():
+    return StringProperty(
         name="Area of Interest",
         default="",
         description="Vertex group (or float point attribute) of the Surface: guides are "
         "picked only where its weight is at least 0.5 (empty: everywhere)",
     )
-    density: FloatProperty(
+
+
+def _prop_density():
+    return FloatProperty(
         name="Density",
         default=10.0,
         min=0.0,
         soft_max=10000.0,
         description="Child curves per unit of surface area created around the guides",
     )
-    guides: IntProperty(
+
+
+def _prop_guides():
+    return IntProperty(
         name="Interpolation Guides",
         default=4,
         min=1,
         soft_max=16,
         description="Number of nearest guides each child curve interpolates",
     )
+
+
+class FURCOLLIDE_PG_pipeline(PropertyGroup):
+    """Fur pipeline settings of the scene (shown in the Fur Pipeline panel)."""
+
+    fraction: _prop_fraction()
+    seed: _prop_seed()
+    use_selection: _prop_use_selection()
+    area: _prop_area()
+    density: _prop_density()
+    guides: _prop_guides()
 
 
 # ---------------------------------------------------------------- operators
@@ -302,32 +309,10 @@ class FURCOLLIDE_OT_fur_sampler(Operator):
     bl_label = "Fur Sampler"
     bl_options = {"REGISTER", "UNDO"}
 
-    fraction: FloatProperty(
-        name="Fraction",
-        default=0.15,
-        min=0.001,
-        max=1.0,
-        subtype="FACTOR",
-        description="Share of the groom's curves kept as guides (0.15 keeps 15 %)",
-    )
-    seed: IntProperty(
-        name="Seed",
-        default=0,
-        min=0,
-        description="Random seed of the sampler: the same seed gives the same guides",
-    )
-    use_selection: BoolProperty(
-        name="Only Selected",
-        default=False,
-        description="Pick guides only among the selected curves of the groom (sculpt mode "
-        "selection), when it has one",
-    )
-    area: StringProperty(
-        name="Area of Interest",
-        default="",
-        description="Vertex group (or float point attribute) of the Surface: guides are "
-        "picked only where its weight is at least 0.5 (empty: everywhere)",
-    )
+    fraction: _prop_fraction()
+    seed: _prop_seed()
+    use_selection: _prop_use_selection()
+    area: _prop_area()
 
     @classmethod
     def poll(cls, context):
@@ -373,7 +358,7 @@ class FURCOLLIDE_OT_fur_sampler(Operator):
                 return {"CANCELLED"}
         if self.area:
             w = surface_weights(surf, surf.evaluated_get(dg).data, self.area)
-            inside = root_weights(V, F, w, roots) >= 0.5
+            inside = _core_pipeline().surface_values(V, F, w, roots) >= 0.5
             mask = inside if mask is None else (mask & inside)
             if not mask.any():
                 self.report({"ERROR"}, f"No curve root lies in the area '{self.area}'")
@@ -387,8 +372,11 @@ class FURCOLLIDE_OT_fur_sampler(Operator):
             context.view_layer.objects.active = ob
         except RuntimeError:  # not in the active view layer
             pass
-        self.report({"INFO"}, f"Fur Sampler: created {len(keep)} guides from {C} curves "
-                              f"of '{src.name}' in '{ob.name}'")
+        self.report(
+            {"INFO"},
+            f"Fur Sampler: created {len(keep)} guides from {C} curves "
+            f"of '{src.name}' in '{ob.name}'",
+        )
         redraw(context)
         return {"FINISHED"}
 
@@ -442,8 +430,11 @@ class FURCOLLIDE_OT_collider_distance(_OutputOperator, Operator):
             )
         attr.data.foreach_set("value", d.astype(np.float32))
         data.update_tag()
-        self.report({"INFO"}, f"Collider distance on '{out.name}': min {d.min():.4g}, "
-                              f"max {d.max():.4g} ({len(d)} points)")
+        self.report(
+            {"INFO"},
+            f"Collider distance on '{out.name}': min {d.min():.4g}, "
+            f"max {d.max():.4g} ({len(d)} points)",
+        )
         return {"FINISHED"}
 
 
@@ -455,20 +446,8 @@ class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
     bl_label = "Children from Guides"
     bl_options = {"REGISTER", "UNDO"}
 
-    density: FloatProperty(
-        name="Density",
-        default=10.0,
-        min=0.0,
-        soft_max=10000.0,
-        description="Child curves per unit of surface area created around the guides",
-    )
-    guides: IntProperty(
-        name="Interpolation Guides",
-        default=4,
-        min=1,
-        soft_max=16,
-        description="Number of nearest guides each child curve interpolates",
-    )
+    density: _prop_density()
+    guides: _prop_guides()
 
     @classmethod
     def refusal(cls, context, src):
@@ -516,8 +495,11 @@ class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
         if uv_name:
             out.data.surface_uv_map = uv_name
         out.update_tag()
-        self.report({"INFO"}, f"Children from guides on '{out.name}' (surface '{surf.name}', "
-                              f"density {self.density:g})")
+        self.report(
+            {"INFO"},
+            f"Children from guides on '{out.name}' (surface '{surf.name}', "
+            f"density {self.density:g})",
+        )
         redraw(context)
         return {"FINISHED"}
 

@@ -17,7 +17,7 @@ curve ``i`` is ``points[offsets[i]:offsets[i + 1]]``. Meshes are ``V``
 :class:`~core.errors.InputError` or :class:`~core.errors.ColliderError`.
 """
 
-from .attach import Binding, bind
+from .attach import Binding, bind, surface_values
 from .distance import (
     closest_faces,
     collider_distance,
@@ -30,6 +30,7 @@ from .motion import jiggle, spring_impulse_response, wind, wind_noise
 from .sampler import dart_throwing, neighbor_pairs, sample_guides
 
 __all__ = [
+    "surface_values",
     "Binding",
     "GroomWeights",
     "bind",

@@ -58,6 +58,39 @@ def _barycentric(p, a, b, c):
     return bary / bary.sum(1, keepdims=True)
 
 
+def surface_values(V, F, values, points):
+    """Per-vertex ``values`` interpolated at the closest surface point of each point.
+
+    Used to read a vertex group or attribute of the growth surface at the
+    hair roots (e.g. the Fur Sampler's area of interest).
+
+    Parameters
+    ----------
+    V : (n, 3) float
+        Surface vertices.
+    F : (m, 3) int
+        Surface triangles.
+    values : (n,) float
+        One value per vertex.
+    points : (k, 3) float
+        Query points (same space as ``V``).
+
+    Returns
+    -------
+    (k,) float64
+        Barycentric interpolation on each point's closest triangle.
+    """
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    values = np.asarray(values, np.float64)
+    if values.shape != (len(V),):
+        raise InputError(f"values must have one entry per vertex ({len(V)}), got {values.shape}")
+    P, face = closest_faces(V, F, np.asarray(points, np.float64))
+    tri = F[face]
+    bary = _barycentric(P, V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]])
+    return np.einsum("ij,ij->i", bary, values[tri])
+
+
 @dataclass
 class Binding:
     """Curves bound to a growth surface (result of :func:`bind`). Arrays only.
