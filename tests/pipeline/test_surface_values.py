@@ -31,8 +31,8 @@ def test_points_off_the_surface_read_their_closest_point():
     V, F = grid()
     values = np.zeros(len(V))
     values[np.argmax(V[:, 0] + V[:, 1])] = 1.0  # corner (1, 1) only
-    far_above_corner = np.array([[1.2, 1.1, 0.05], [-1.0, -1.0, 0.05]])  # beyond the rim
-    np.testing.assert_allclose(surface_values(V, F, values, far_above_corner), [1.0, 0.0],
+    near_corners = np.array([[1.2, 1.1, 0.05], [-1.0, -1.0, 0.05]])  # beyond the rim
+    np.testing.assert_allclose(surface_values(V, F, values, near_corners), [1.0, 0.0],
                                atol=1e-9)
 
 
