@@ -151,8 +151,8 @@ class Collider:
     def _recenter(self):
         # The BVH is float32: keep its coordinates centred on the mesh, so a
         # collider modelled far from the origin keeps its full precision.
-        V = self._V[self._used] if len(self._F) else self._V
-        self._center = 0.5 * (V.min(0).astype(np.float64) + V.max(0)) if len(V) else np.zeros(3)
+        lo, hi = self._geometry()
+        self._center = 0.5 * (lo + hi)
 
     # ----------------------------------------------------------------- input
     def _check_offset(self, offset):
@@ -338,7 +338,7 @@ class Collider:
         """
         if getattr(self, "_occ_key", None) != self._version:
             V = self._V.astype(np.float64)[self._used] - self._center
-            lo, hi = V.min(0), V.max(0)
+            lo, hi = (b - self._center for b in self._geometry())
             h = max(float((hi - lo).max()) / tol.OCCUPANCY_CELLS, 1e-30)
             dims = np.floor((hi - lo) / h).astype(np.int64) + 1
             cell = np.minimum(np.floor((V - lo) / h).astype(np.int64), dims - 1)
@@ -346,11 +346,12 @@ class Collider:
             occ[cell[:, 0], cell[:, 1], cell[:, 2]] = 1
             sat = np.zeros(dims + 1, np.int32)
             sat[1:, 1:, 1:] = occ.cumsum(0).cumsum(1).cumsum(2)
-            E, F = self._V, self._F
-            max_edge = max(
-                float(np.einsum("ij,ij->i", e, e).max())
-                for e in (E[F[:, k]] - E[F[:, (k + 1) % 3]] for k in range(3))
-            )
+            if getattr(self, "_edges", None) is None:  # unique edges: topology only
+                e = np.sort(np.concatenate([self._F[:, [k, (k + 1) % 3]] for k in range(3)]), 1)
+                key = np.unique(e[:, 0].astype(np.int64) * len(self._V) + e[:, 1])
+                self._edges = np.stack([key // len(self._V), key % len(self._V)], 1)
+            e = self._V[self._edges[:, 0]] - self._V[self._edges[:, 1]]
+            max_edge = float(np.einsum("ij,ij->i", e, e).max())
             # float32 edges: pad by a relative ulp margin to stay conservative
             max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
             self._occ = (lo, h, dims, sat, max_edge, np.full(dims, -1, np.int8))
