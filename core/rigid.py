@@ -27,9 +27,18 @@ def solve(ctx, idx, status):
     far = idx[~ctx.cand_any[idx]]
     act = near[ctx.active[near]]  # rotated curves near a collider
     new = near[~ctx.active[near]]  # unrotated: their segments are the input's
-    # 1. Every near curve in its current state: one ray query each.
+    # 1. Rotated curves near a collider: their recovery step is tested first
+    #    (one ray query); only those it would make collide are tested at their
+    #    current angle, to tell a blocked recovery from a new collision.
     batch = RigidBatch(ctx, act)
-    hit_act = batch.hits(np.arange(len(act)), angle[act])
+    th0 = angle[act].copy()
+    th1 = recovery_step(ctx, act)
+    moving = th1 < th0
+    hit_step = batch.hits(np.arange(len(act)), np.where(moving, th1, th0))
+    hit_act = hit_step & ~moving  # colliding at the current angle
+    again = np.flatnonzero(moving & hit_step)
+    hit_act[again] = batch.hits(again, th0[again])
+    blocked = moving & hit_step & ~hit_act
     hit_new = np.zeros(len(new), bool)
     if len(new):
         o, d, seg, rep, starts = ctx.input_rays(new)
@@ -54,8 +63,9 @@ def solve(ctx, idx, status):
 
     # 3. Recovery toward the (plasticity) target, stopping before contact.
     items = np.flatnonzero(~hit_act)
-    recover(ctx, act[items], status, batch, items)
-    recover(ctx, far[ctx.active[far]], status, None, None)
+    recover(ctx, act[items], th0[items], th1[items], blocked[items], status, batch, items)
+    rec = far[ctx.active[far]]  # far from every collider: nothing to check
+    recover(ctx, rec, angle[rec].copy(), recovery_step(ctx, rec), None, status, None, None)
     release(ctx, idx)
 
 
@@ -97,15 +107,14 @@ def collide(ctx, batch, items, status):
     ctx.active[fresh] = ctx.sv_._active[fresh]
 
 
-def recover(ctx, rec, status, batch, items):
-    """Turn clear curves ``rec`` back toward their target (paper 3.2.3-4).
+def recovery_step(ctx, rec):
+    """This frame's recovery angle of curves ``rec`` (paper 3.2.3-4).
 
-    ``batch.curves[items]`` are ``rec`` when they are near a collider (the
-    step is checked and, if it would collide, bisected back); ``batch`` is
-    None for curves far from every collider.
+    The angle moves toward the target ``plasticity * largest angle`` (or
+    stays, for curves held after a pinch) by ``recovery_rate`` of the
+    remaining difference; within half a precision step it lands on the
+    target, and below half a step on exactly zero.
     """
-    if len(rec) == 0:
-        return
     p = ctx.prec
     th0 = ctx.angle[rec]
     frac = ctx.target_fraction(rec)
@@ -113,26 +122,35 @@ def recover(ctx, rec, status, batch, items):
     target = np.minimum(target, th0)
     th1 = th0 - ctx.s.recovery_rate * (th0 - target)
     th1 = np.where(th1 - target < tol.SNAP_FRACTION * p, target, th1)
-    th1 = np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
-    blocked = np.zeros(len(rec), bool)
-    if batch is not None:
-        check = np.flatnonzero(th1 < th0)
-        blocked[check] = batch.hits(items[check], th1[check])
-        b = np.flatnonzero(blocked)
-        if len(b):
-            lo_th, hi_th = th1[b], th0[b]
-            K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
+    return np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
 
-            def test(it, ks):
-                return ~batch.hits(items[b[it]], np.minimum(lo_th[it] + ks * p, hi_th[it]))
 
-            k = gallop_bisect(len(b), test, K, lo=np.zeros(len(b)), hi=K, width=_WIDTH)
-            th1[b] = np.minimum(lo_th + k * p, hi_th)
+def recover(ctx, rec, th0, th1, blocked, status, batch, items):
+    """Turn clear curves ``rec`` from ``th0`` to their recovery step ``th1``.
+
+    Where the step would collide (``blocked``; ``batch.curves[items]`` are
+    ``rec``) the largest safe step is bisected instead: recovery stops where
+    the curve would collide again.
+    """
+    if len(rec) == 0:
+        return
+    p = ctx.prec
+    th1 = th1.copy()
+    b = np.flatnonzero(blocked) if blocked is not None else np.zeros(0, np.int64)
+    if len(b):
+        lo_th, hi_th = th1[b], th0[b]
+        K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
+
+        def test(it, ks):
+            return ~batch.hits(items[b[it]], np.minimum(lo_th[it] + ks * p, hi_th[it]))
+
+        k = gallop_bisect(len(b), test, K, lo=np.zeros(len(b)), hi=K, width=_WIDTH)
+        th1[b] = np.minimum(lo_th + k * p, hi_th)
     ctx.angle[rec] = th1
     # Back at exactly the input shape counts as FREE, not RECOVERING.
-    st = np.where(
-        blocked, Status.COLLIDING, np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE)
-    )
+    st = np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE)
+    if len(b):
+        st[b] = Status.COLLIDING
     status[rec] = np.maximum(status[rec], st)
 
 

@@ -8,6 +8,10 @@
 * ``furcollide.children_from_guides``: Blender's own *Interpolate Hair
   Curves* node group on a setup's output (render children from the
   collided guides).
+* ``furcollide.fur_attach_bind``: Fur Attach, the optional input stage of a
+  setup: binds the source's curves to its Surface at the reference frame with
+  :func:`core.pipeline.bind`; the frame handler then moves them rigidly with
+  the evaluated Surface (``use_fur_attach``).
 
 Every computation is in world space.
 """
@@ -15,6 +19,7 @@ Every computation is in world space.
 from __future__ import annotations
 
 import os
+import uuid
 
 import bpy
 import numpy as np
@@ -504,8 +509,90 @@ class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
         return {"FINISHED"}
 
 
+class FURCOLLIDE_OT_fur_attach_bind(SetupOperator, Operator):
+    """Fur Attach: tie every curve of the source to the Surface triangle under its root
+    at the reference frame; the curves then move rigidly with the animated Surface"""
+
+    bl_idname = "furcollide.fur_attach_bind"
+    bl_label = "Bind"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def refusal(cls, context, src):
+        surf = src.data.surface
+        if surf is None or surf.type != "MESH":
+            return "The source hair has no Surface mesh (Object Data > Surface)"
+        if src.furcollide.is_baked:
+            return "The setup is baked: free the bake before binding"
+        return ""
+
+    @reports_errors
+    def execute(self, context):
+        src = active_setup(context)
+        s = src.furcollide
+        surf = src.data.surface
+        msg = self.refusal(context, src) if src is not None else "No FurCollide setup"
+        if msg:
+            self.report({"ERROR"}, msg)
+            return {"CANCELLED"}
+        scene = context.scene
+        f0, sub0 = scene.frame_current, scene.frame_subframe
+        ref = int(s.attach_reference_frame)
+        move = ref != f0 or sub0 != 0.0
+        # The surface and the curves are read as evaluated at the reference frame
+        # (deformers, shape keys and armatures included). The frame handlers are
+        # held off while visiting it, and the frame is restored afterwards.
+        busy = runtime._busy
+        runtime._busy = True
+        try:
+            if move:
+                scene.frame_set(ref)
+            dg = context.evaluated_depsgraph_get()
+            V, F = surface_mesh_world(surf, dg)
+            topology = bridge.mesh_topology_key(surf.evaluated_get(dg).data)
+            src_eval = src.evaluated_get(dg)
+            offs = bridge.curve_offsets(src_eval.data)
+            P = bridge.get_positions(src_eval.data).astype(np.float64)
+            M = bridge.matrix(src_eval)
+        finally:
+            if move:
+                scene.frame_set(f0, subframe=sub0)
+            runtime._busy = busy
+        if len(F) == 0:
+            self.report({"ERROR"}, f"The Surface '{surf.name}' has no faces")
+            return {"CANCELLED"}
+        if len(offs) < 2:
+            self.report({"ERROR"}, f"'{src.name}' has no curves to bind")
+            return {"CANCELLED"}
+        Pw = P @ M[:3, :3].T + M[:3, 3]
+        binding = _core_pipeline().bind(Pw, offs, V, F, drop_degenerate=True)
+        attach_id = uuid.uuid4().hex
+        runtime.store_binding(src, binding, topology, attach_id)
+        s.attach_id = attach_id
+        s.use_fur_attach = True
+        # Every frame's input changes: drop every cached frame (see _invalidate_attach).
+        runtime.invalidate(src, reason="Fur Attach bound", from_frame=s.frame_start - 1)
+        err = ""
+        if not runtime._busy:
+            try:
+                runtime.evaluate(scene, context.evaluated_depsgraph_get(), src)
+            except Exception as exc:  # noqa: BLE001 - reported below
+                err = runtime.describe(exc)
+        far = float(binding.root_distance.max()) if len(binding.root_distance) else 0.0
+        self.report(
+            {"INFO"},
+            f"Fur Attach: bound {len(offs) - 1} curves of '{src.name}' to '{surf.name}' "
+            f"at frame {ref} (farthest root {far:.4g} from the surface)",
+        )
+        if err:
+            self.report({"WARNING"}, f"FurCollide: {err}")
+        redraw(context)
+        return {"FINISHED"}
+
+
 classes = (
     FURCOLLIDE_PG_pipeline,
+    FURCOLLIDE_OT_fur_attach_bind,
     FURCOLLIDE_OT_fur_sampler,
     FURCOLLIDE_OT_collider_distance,
     FURCOLLIDE_OT_children_from_guides,

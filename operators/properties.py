@@ -66,6 +66,15 @@ def _invalidate_range(self, context):
 
 
 @_never_raises
+def _invalidate_attach(self, context):
+    # Fur Attach changes the input of every frame. The memory cache stores only the
+    # curves the solver changed (the rest is rebuilt from the current input), so
+    # earlier frames would mix old results with the new input: drop them all.
+    ob = self.id_data
+    runtime.invalidate(ob, reason="Fur Attach changed", from_frame=ob.furcollide.frame_start - 1)
+
+
+@_never_raises
 def _set_memory_limit(self, context):
     rt = runtime.get_runtime(self.id_data, create=False)
     if rt is not None:
@@ -383,6 +392,21 @@ class FurCollideSettings(PropertyGroup):
         "it, old frames are dropped (bake to keep everything)",
     )
     is_baked: _hidden(BoolProperty, "Baked", False)
+
+    # ------------------------------------------------------------ Fur Attach
+    use_fur_attach: _toggle(
+        "Fur Attach", False,
+        "Move the source's curves rigidly with the evaluated growth surface from the "
+        "reference frame, instead of using the source's own animation (press Bind first)",
+        update=_invalidate_attach,
+    )
+    attach_reference_frame: IntProperty(
+        name="Reference Frame",
+        default=1,
+        description="Frame whose surface and curves Bind uses: each curve is tied to the "
+        "surface triangle under its root there. Press Bind again after changing it",
+    )
+    attach_id: _hidden(StringProperty, "Attach ID", "")
     bake_path: _hidden(StringProperty, "Bake Path", "")
 
     # --------------------------------------------------- read-only statistics

@@ -22,6 +22,7 @@ one console line, and the output keeps its last good result.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
@@ -81,6 +82,7 @@ class Runtime:
     stats: dict = field(default_factory=dict)
     error: str = ""  # last solve error (kept visible while frames cannot be solved)
     written_status: tuple | None = None  # (data session uid, status, colours) last written
+    attach: tuple | None = None  # (attach_id, core Binding, surface topology key): Fur Attach
 
     def forget_solver(self):
         self.solver = None
@@ -304,7 +306,10 @@ def signature(ob, stable=False, scene=None) -> str:
     kw = s.to_core_kwargs()
     kw.pop("threads", None)
     surface = ob.data.surface.name if ob.data.surface else ""
-    return json.dumps([cols, kw, s.enable_attribute, s.frame_start, surface, bool(s.enabled)])
+    parts = [cols, kw, s.enable_attribute, s.frame_start, surface, bool(s.enabled)]
+    if s.use_fur_attach:  # only when on: signatures (and bakes) without it are unchanged
+        parts.append(["fur_attach", s.attach_id])
+    return json.dumps(parts)
 
 
 def apply_visibility(ob) -> None:
@@ -369,6 +374,95 @@ def update_dependencies(ob) -> None:
     mod.node_group = ng
 
 
+# -------------------------------------------------------------- Fur Attach
+#: Custom property (bytes of an ``np.savez`` file) on the source object holding the
+#: Fur Attach binding (``core.pipeline.Binding.arrays()`` plus the surface topology
+#: key). Saved with the .blend file; the leading underscore hides it in the UI.
+ATTACH_PROPERTY = "_furcollide_attach"
+
+
+def store_binding(ob, binding, topology_key, attach_id) -> None:
+    """Persist ``binding`` on the source ``ob`` and keep it in its runtime."""
+    buf = io.BytesIO()
+    np.savez(buf, topology_key=np.asarray(topology_key, np.int64), **binding.arrays())
+    ob[ATTACH_PROPERTY] = buf.getvalue()
+    rt = get_runtime(ob)
+    if rt is not None:
+        rt.attach = (attach_id, binding, tuple(int(k) for k in topology_key))
+
+
+def has_binding(ob) -> bool:
+    """Does the source ``ob`` hold a Fur Attach binding?"""
+    try:
+        return ATTACH_PROPERTY in ob.keys()
+    except (TypeError, AttributeError):
+        return False
+
+
+def clear_binding(ob) -> None:
+    """Forget the Fur Attach binding of the source ``ob``."""
+    if has_binding(ob):
+        del ob[ATTACH_PROPERTY]
+    rt = get_runtime(ob, create=False)
+    if rt is not None:
+        rt.attach = None
+
+
+def load_binding(ob):
+    """(Binding, surface topology key) of the source ``ob`` (cached in its runtime).
+
+    Raises ValueError when the setup has no binding.
+    """
+    s = ob.furcollide
+    rt = get_runtime(ob)
+    if rt.attach is not None and rt.attach[0] == s.attach_id:
+        return rt.attach[1], rt.attach[2]
+    if not has_binding(ob):
+        raise ValueError(
+            "Fur Attach is on but the curves are not bound to the Surface: "
+            "press Bind (Fur Pipeline > Fur Attach)"
+        )
+    from ..core.pipeline import Binding
+
+    raw = ob[ATTACH_PROPERTY]
+    if not isinstance(raw, bytes):
+        raw = bytes(raw)
+    with np.load(io.BytesIO(raw), allow_pickle=False) as d:
+        binding = Binding.from_arrays(d)
+        key = tuple(int(k) for k in d["topology_key"])
+    rt.attach = (s.attach_id, binding, key)
+    return binding, key
+
+
+def attached_points(ob, depsgraph, offsets) -> np.ndarray:
+    """Fur Attach input stage: the bound curves moved rigidly with the evaluated
+    Surface of the source ``ob`` (world space, (P, 3) float64)."""
+    binding, key = load_binding(ob)
+    surf = ob.data.surface
+    if surf is None or surf.type != "MESH":
+        raise ValueError(
+            "Fur Attach needs the hair's Surface mesh (Object Data > Surface)"
+        )
+    if not np.array_equal(binding.offsets, offsets):
+        C, P = len(binding.offsets) - 1, int(binding.offsets[-1])
+        raise ValueError(
+            f"Fur Attach: the source hair has {len(offsets) - 1} curves / {int(offsets[-1])} "
+            f"points but was bound with {C} / {P}: press Bind again"
+        )
+    se = surf.evaluated_get(depsgraph)
+    me = se.data
+    now = bridge.mesh_topology_key(me)
+    if now != key:
+        raise ValueError(
+            f"Fur Attach: the Surface '{surf.name}' changed topology since binding "
+            f"({now[0]} vertices / {now[1]} faces, bound: {key[0]} / {key[1]}): "
+            "press Bind again"
+        )
+    V = bridge.mesh_vertices(me).astype(np.float64)
+    M = bridge.matrix(se)
+    return binding.apply(V @ M[:3, :3].T + M[:3, 3])
+
+
 # ---------------------------------------------------------------- inputs
 @dataclass
 class Inputs:
@@ -397,10 +491,13 @@ def read_inputs(ob, depsgraph) -> Inputs:
     out = s.output.evaluated_get(depsgraph)
     M_out = bridge.matrix(out)
     mask, warning = bridge.read_curve_mask(data, s.enable_attribute, len(offs) - 1)
+    M_out_inv = bridge.matrix(out, inverted=True)
+    if s.use_fur_attach:  # the input stage: curves follow the evaluated growth surface
+        world = np.asarray(attached_points(ob, depsgraph, offs), np.float32)
+        return Inputs(world, offs, key, M_out_inv, mask, warning, None)
     # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
     local = P if np.allclose(M, M_out, rtol=1e-6, atol=1e-7) else None
-    return Inputs(bridge.transform(P, M), offs, key, bridge.matrix(out, inverted=True), mask,
-                  warning, local)
+    return Inputs(bridge.transform(P, M), offs, key, M_out_inv, mask, warning, local)
 
 
 def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> ColliderEntry:

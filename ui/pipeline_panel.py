@@ -1,7 +1,9 @@
-"""View3D > Sidebar > FurCollide > Fur Pipeline: sampler, collider distance, children."""
+"""View3D > Sidebar > FurCollide > Fur Pipeline: sampler, attach, collider distance,
+children."""
 
 from bpy.types import Panel
 
+from ..operators import runtime
 from ..operators.pipeline import NO_SURFACE_HAIR
 from ..operators.setup import active_setup
 from .panel import FURCOLLIDE_PT_main
@@ -49,12 +51,16 @@ class FURCOLLIDE_PT_pipeline(Panel):
             col.label(text=NO_SURFACE_HAIR, icon="INFO")
 
         src = active_setup(context)
+        if src is None:
+            box = layout.box()
+            box.label(text="Collided Output", icon="MOD_PHYSICS")
+            box.column().label(text="Needs a FurCollide setup", icon="INFO")
+            return
+        self.draw_attach(layout, src)
+
         box = layout.box()
         box.label(text="Collided Output", icon="MOD_PHYSICS")
         col = box.column()
-        if src is None:
-            col.label(text="Needs a FurCollide setup", icon="INFO")
-            return
         col.operator("furcollide.collider_distance", icon="DRIVER_DISTANCE")
         col.separator()
         col.prop(s, "density")
@@ -65,6 +71,27 @@ class FURCOLLIDE_PT_pipeline(Panel):
         op.density, op.guides = s.density, s.guides
         if src.data.surface is None:
             col.label(text="Children need the source's Surface", icon="INFO")
+
+    @staticmethod
+    def draw_attach(layout, src):
+        """Fur Attach: the setup's optional input stage."""
+        s = src.furcollide
+        box = layout.box()
+        box.label(text="Fur Attach (Input)", icon="SNAP_FACE")
+        col = box.column()
+        has_surface = src.data.surface is not None and src.data.surface.type == "MESH"
+        bound = runtime.has_binding(src)
+        row = col.row()
+        row.enabled = bound or s.use_fur_attach
+        row.prop(s, "use_fur_attach")
+        col.prop(s, "attach_reference_frame")
+        row = col.row()
+        row.enabled = has_surface and not s.is_baked
+        row.operator("furcollide.fur_attach_bind", icon="LINKED")
+        if not has_surface:
+            col.label(text="Fur Attach needs the source's Surface", icon="INFO")
+        elif not bound:
+            col.label(text="Not bound: press Bind", icon="INFO")
 
 
 classes = (FURCOLLIDE_PT_pipeline,)
