@@ -584,6 +584,14 @@ class FURCOLLIDE_OT_fur_attach_bind(SetupOperator, Operator):
             f"Fur Attach: bound {len(offs) - 1} curves of '{src.name}' to '{surf.name}' "
             f"at frame {ref} (farthest root {far:.4g} from the surface)",
         )
+        size = float(np.linalg.norm(V.max(0) - V.min(0))) or 1.0
+        off = binding.root_distance > 1e-4 * size
+        if off.any():
+            self.report(
+                {"WARNING"},
+                f"Fur Attach: {int(off.sum())} roots were not on the Surface at frame {ref} "
+                f"(up to {far:.4g} away): those curves were moved onto it",
+            )
         if err:
             self.report({"WARNING"}, f"FurCollide: {err}")
         redraw(context)

@@ -83,6 +83,7 @@ class Runtime:
     error: str = ""  # last solve error (kept visible while frames cannot be solved)
     written_status: tuple | None = None  # (data session uid, status, colours) last written
     attach: tuple | None = None  # (attach_id, core Binding, surface topology key): Fur Attach
+    attach_state: tuple | None = None  # (use_fur_attach, attach_id) seen last
 
     def forget_solver(self):
         self.solver = None
@@ -712,6 +713,12 @@ def evaluate(scene, depsgraph, ob) -> str:
     if not s.is_baked:  # a bake checks its own curve layout first
         _sync_output(ob, inp, depsgraph)
 
+    att = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
+    if rt.attach_state is not None and att != rt.attach_state and not s.is_baked:
+        # Fur Attach toggled or rebound without its update callback (undo, driver):
+        # every frame's input changed, so no cached frame is valid.
+        invalidate(ob, from_frame=s.frame_start - 1, refresh=False)
+    rt.attach_state = att
     sig = signature(ob, scene=scene)
     if rt.signature is not None and sig != rt.signature and not s.is_baked:
         # Changed without an update callback (deleted collider, undo, driver).

@@ -9,6 +9,27 @@ from ..operators.setup import active_setup
 from .panel import FURCOLLIDE_PT_main
 
 
+def draw_attach(layout, src):
+    """Fur Attach: the setup's optional input stage."""
+    s = src.furcollide
+    box = layout.box()
+    box.label(text="Fur Attach (Input)", icon="SNAP_FACE")
+    col = box.column()
+    has_surface = src.data.surface is not None and src.data.surface.type == "MESH"
+    bound = runtime.has_binding(src)
+    row = col.row()
+    row.enabled = bound or s.use_fur_attach
+    row.prop(s, "use_fur_attach")
+    col.prop(s, "attach_reference_frame")
+    row = col.row()
+    row.enabled = has_surface and not s.is_baked
+    row.operator("furcollide.fur_attach_bind", icon="LINKED")
+    if not has_surface:
+        col.label(text="Fur Attach needs the source's Surface", icon="INFO")
+    elif not bound:
+        col.label(text="Not bound: press Bind", icon="INFO")
+
+
 class FURCOLLIDE_PT_pipeline(Panel):
     """Fur pipeline around FurCollide: guides from a groom, collider distance, children."""
 
@@ -56,7 +77,7 @@ class FURCOLLIDE_PT_pipeline(Panel):
             box.label(text="Collided Output", icon="MOD_PHYSICS")
             box.column().label(text="Needs a FurCollide setup", icon="INFO")
             return
-        self.draw_attach(layout, src)
+        draw_attach(layout, src)
 
         box = layout.box()
         box.label(text="Collided Output", icon="MOD_PHYSICS")
@@ -71,27 +92,6 @@ class FURCOLLIDE_PT_pipeline(Panel):
         op.density, op.guides = s.density, s.guides
         if src.data.surface is None:
             col.label(text="Children need the source's Surface", icon="INFO")
-
-    @staticmethod
-    def draw_attach(layout, src):
-        """Fur Attach: the setup's optional input stage."""
-        s = src.furcollide
-        box = layout.box()
-        box.label(text="Fur Attach (Input)", icon="SNAP_FACE")
-        col = box.column()
-        has_surface = src.data.surface is not None and src.data.surface.type == "MESH"
-        bound = runtime.has_binding(src)
-        row = col.row()
-        row.enabled = bound or s.use_fur_attach
-        row.prop(s, "use_fur_attach")
-        col.prop(s, "attach_reference_frame")
-        row = col.row()
-        row.enabled = has_surface and not s.is_baked
-        row.operator("furcollide.fur_attach_bind", icon="LINKED")
-        if not has_surface:
-            col.label(text="Fur Attach needs the source's Surface", icon="INFO")
-        elif not bound:
-            col.label(text="Not bound: press Bind", icon="INFO")
 
 
 classes = (FURCOLLIDE_PT_pipeline,)

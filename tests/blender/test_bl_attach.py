@@ -1,0 +1,352 @@
+"""Fur Attach: the optional input stage of a setup (operator furcollide.fur_attach_bind)."""
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+from conftest import make_box, make_hair
+
+pytestmark = pytest.mark.blender
+
+
+def make_surface(name="Skin", half=1.0, n=6, z=0.0):
+    """A subdivided square (n x n quads) on z (no UV map: Fur Attach needs none)."""
+    xs = np.linspace(-half, half, n + 1)
+    verts = [(x, y, z) for y in xs for x in xs]
+    faces = [
+        (j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+        for j in range(n) for i in range(n)
+    ]
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def _linear(ob):
+    ad = ob.animation_data
+    act = ad.action if ad else None
+    for fcu in getattr(act, "fcurves", []) if act is not None else []:
+        for k in fcu.keyframe_points:
+            k.interpolation = "LINEAR"
+
+
+def animate_transform(surf, frames=(1, 8)):
+    """Keyframed location + rotation of the surface object."""
+    surf.location, surf.rotation_euler = (0, 0, 0), (0, 0, 0)
+    surf.keyframe_insert("location", frame=frames[0])
+    surf.keyframe_insert("rotation_euler", frame=frames[0])
+    surf.location = (0.4, -0.2, 0.3)
+    surf.rotation_euler = (0.5, -0.3, 0.8)
+    surf.keyframe_insert("location", frame=frames[1])
+    surf.keyframe_insert("rotation_euler", frame=frames[1])
+    _linear(surf)
+
+
+def animate_shape_key(surf, frames=(1, 8)):
+    """A shape key bending the surface (z = 0.4 sin(2x) + 0.2 y^2), value 0 -> 1."""
+    surf.shape_key_add(name="Basis")
+    key = surf.shape_key_add(name="Bend")
+    for i, v in enumerate(surf.data.vertices):
+        x, y, _z = v.co
+        key.data[i].co = (x, y, 0.4 * math.sin(2 * x) + 0.2 * y * y)
+    key.value = 0.0
+    key.keyframe_insert("value", frame=frames[0])
+    key.value = 1.0
+    key.keyframe_insert("value", frame=frames[1])
+    _linear(surf.data.shape_keys)
+
+
+def attached_scene(fc, colliders=(), frames=(1, 8), before_setup=None):
+    """Hair grid with roots on a Surface plane, a FurCollide setup on it."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = frames
+    scene.frame_set(frames[0])
+    hair = make_hair(nx=5, ny=5)
+    surf = make_surface()
+    hair.data.surface = surf
+    if before_setup is not None:
+        before_setup(surf)
+    scene.frame_set(frames[0])
+    out = fc.setup(hair, list(colliders))
+    hair.furcollide.frame_start, hair.furcollide.frame_end = frames
+    return hair, surf, out
+
+
+def _activate(ob):
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    ob.select_set(True)
+    bpy.context.view_layer.objects.active = ob
+
+
+def bind(hair, frame=1):
+    _activate(hair)
+    hair.furcollide.attach_reference_frame = frame
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    assert hair.furcollide.use_fur_attach
+
+
+def surface_world(surf):
+    dg = bpy.context.evaluated_depsgraph_get()
+    se = surf.evaluated_get(dg)
+    me = se.data
+    V = np.empty(len(me.vertices) * 3, np.float32)
+    me.attributes["position"].data.foreach_get("vector", V)
+    M = np.array(se.matrix_world)
+    return V.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+
+
+def output_world(fc, out):
+    M = np.array(out.matrix_world)
+    return fc.positions(out).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+
+
+def offsets_of(ob):
+    d = ob.data
+    offs = np.empty(len(d.curves) + 1, np.int32)
+    d.curve_offset_data.foreach_get("value", offs)
+    return offs
+
+
+def seg_lengths(P, offs):
+    d = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    keep = np.ones(len(d), bool)
+    keep[offs[1:-1] - 1] = False  # no segment between two curves
+    return d[keep]
+
+
+def check_follows(fc, hair, surf, out, frames):
+    """Every frame: roots exactly at their bound barycentric points, rigid curves."""
+    binding, _key = fc.runtime.load_binding(hair)
+    offs = offsets_of(out)
+    ref = seg_lengths(output_world(fc, out), offs)
+    moved = 0.0
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        assert fc.runtime.status_for(hair)[0] == "INFO", fc.runtime.status_for(hair)
+        V = surface_world(surf)
+        P = output_world(fc, out)
+        np.testing.assert_allclose(P[offs[:-1]], binding.roots(V), atol=1e-5)
+        np.testing.assert_allclose(P, binding.apply(V), atol=1e-5)  # nothing collides
+        np.testing.assert_allclose(seg_lengths(P, offs), ref, atol=1e-5)
+        moved = max(moved, float(np.abs(P - fc.positions(hair)).max()))
+    assert moved > 0.1  # the surface animation did move the curves
+
+
+def test_attach_follows_transform_animation(fc):
+    hair, surf, out = attached_scene(fc)
+    animate_transform(surf)
+    bpy.context.scene.frame_set(1)
+    bind(hair)
+    check_follows(fc, hair, surf, out, range(1, 9))
+
+
+def test_attach_follows_shape_key_and_modifier(fc):
+    hair, surf, out = attached_scene(fc)
+    animate_shape_key(surf)
+    mod = surf.modifiers.new("Twist", "SIMPLE_DEFORM")  # a deforming modifier on top
+    mod.deform_method, mod.deform_axis, mod.angle = "TWIST", "X", 0.3
+    bpy.context.scene.frame_set(1)
+    bind(hair)
+    check_follows(fc, hair, surf, out, range(1, 9))
+
+
+def test_bind_at_another_reference_frame_restores_the_frame(fc):
+    hair, surf, out = attached_scene(fc)
+    animate_transform(surf)
+    scene = bpy.context.scene
+    scene.frame_set(1)
+    # the hair sits on the surface's pose at frame 5
+    bpy.context.scene.frame_set(5)
+    M = np.array(surf.matrix_world)
+    P = fc.positions(hair).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+    hair.data.position_data.foreach_set("vector", P.astype(np.float32).ravel())
+    hair.data.update_tag()
+    scene.frame_set(1)
+    bind(hair, frame=5)
+    assert scene.frame_current == 1
+    binding, _ = fc.runtime.load_binding(hair)
+    assert binding.root_distance.max() < 1e-5
+    for f in range(1, 6):  # play up to the reference frame
+        scene.frame_set(f)
+    np.testing.assert_allclose(output_world(fc, out), P, atol=1e-5)  # identity at ref
+    check_follows(fc, hair, surf, out, range(1, 9))
+
+
+def _inside_box(P, center, half):
+    return (np.abs(P - np.asarray(center)) < half - 1e-4).all(axis=1)
+
+
+def _densify(P, offs, n=8):
+    t = np.linspace(0, 1, n)[:, None, None]
+    a, b = P[:-1], P[1:]
+    keep = np.ones(len(a), bool)
+    keep[offs[1:-1] - 1] = False
+    return (a[keep][None] * (1 - t) + b[keep][None] * t).reshape(-1, 3)
+
+
+def test_attached_curves_still_collide(fc):
+    box = make_box("Wall", size=0.5, location=(0.75, 0.0, 0.6))
+    hair, surf, out = attached_scene(fc, colliders=[box])
+    surf.location = (0, 0, 0)
+    surf.keyframe_insert("location", frame=1)
+    surf.location = (0.5, 0, 0)
+    surf.keyframe_insert("location", frame=8)
+    _linear(surf)
+    bpy.context.scene.frame_set(1)
+    bind(hair)
+    offs = offsets_of(out)
+    binding, _ = fc.runtime.load_binding(hair)
+    penetrating_input = 0
+    for f in range(1, 9):
+        bpy.context.scene.frame_set(f)
+        assert fc.runtime.status_for(hair)[0] != "ERROR", fc.runtime.status_for(hair)
+        V = surface_world(surf)
+        P = output_world(fc, out)
+        np.testing.assert_allclose(P[offs[:-1]], binding.roots(V), atol=1e-5)
+        assert not _inside_box(_densify(P, offs), box.location, 0.25).any(), f
+        penetrating_input += int(_inside_box(_densify(binding.apply(V), offs), box.location,
+                                             0.25).any())
+    assert penetrating_input > 0  # the attached input did run into the wall
+
+
+def _play(fc, out, frames):
+    res = []
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        res.append(fc.positions(out).copy())
+    return res
+
+
+def test_option_off_is_the_previous_behaviour(fc):
+    box = make_box("Wall", size=0.5, location=(-0.6, 0.0, 0.6))
+    box.keyframe_insert("location", frame=1)
+    box.location = (0.6, 0, 0.6)
+    box.keyframe_insert("location", frame=8)
+    _linear(box)
+    hair, surf, out = attached_scene(fc, colliders=[box], before_setup=animate_transform)
+    sig = fc.runtime.signature(hair)
+    before = _play(fc, out, range(1, 9))
+    bpy.context.scene.frame_set(1)
+    bind(hair)
+    attached = _play(fc, out, range(1, 9))
+    assert max(np.abs(a - b).max() for a, b in zip(attached, before, strict=True)) > 0.1
+    hair.furcollide.use_fur_attach = False
+    assert fc.runtime.signature(hair) == sig
+    after = _play(fc, out, range(1, 9))
+    for a, b in zip(after, before, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_save_reload_keeps_the_binding(fc, tmp_path):
+    hair, surf, out = attached_scene(fc)
+    animate_shape_key(surf)
+    bpy.context.scene.frame_set(1)
+    bind(hair)
+    expected = fc.runtime.load_binding(hair)[0].arrays()
+    path = str(tmp_path / "attach.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    hair = bpy.data.objects["Fur"]
+    assert hair.furcollide.use_fur_attach and fc.runtime.has_binding(hair)
+    got = fc.runtime.load_binding(hair)[0].arrays()
+    for k, v in expected.items():
+        np.testing.assert_array_equal(got[k], v)
+    check_follows(fc, hair, bpy.data.objects["Skin"], hair.furcollide.output, range(1, 9))
+
+
+def test_poll_and_errors(fc):
+    hair, box = fc.make_scene(nx=3, ny=3)
+    _activate(box)
+    with pytest.raises(RuntimeError, match="no FurCollide setup"):
+        bpy.ops.furcollide.fur_attach_bind()
+    fc.setup(hair, [box])
+    _activate(hair)
+    with pytest.raises(RuntimeError, match="no Surface mesh"):
+        bpy.ops.furcollide.fur_attach_bind()
+    # option on without a binding: a clear error, the output keeps its result
+    hair.furcollide.use_fur_attach = True
+    bpy.context.scene.frame_set(2)
+    level, msg = fc.runtime.status_for(hair)
+    assert level == "ERROR" and "press Bind" in msg
+
+
+def test_surface_topology_change_is_an_error(fc):
+    hair, surf, out = attached_scene(fc)
+    animate_transform(surf)
+    bpy.context.scene.frame_set(1)
+    bind(hair)
+    bpy.context.scene.frame_set(2)
+    held = fc.positions(out).copy()
+    surf.modifiers.new("Subdivide", "SUBSURF").levels = 1
+    bpy.context.scene.frame_set(3)
+    level, msg = fc.runtime.status_for(hair)
+    assert level == "ERROR" and "changed topology" in msg and "Bind again" in msg
+    np.testing.assert_array_equal(fc.positions(out), held)  # holds the last result
+    # binding again on the new topology works
+    bpy.context.scene.frame_set(1)
+    bind(hair)
+    check_follows(fc, hair, surf, out, range(1, 5))
+
+
+def test_panel_draws_attach(fc):
+    from test_bl_pipeline import _draw
+
+    hair, surf, out = attached_scene(fc)
+    s = hair.furcollide
+    assert s.use_fur_attach is False and s.attach_reference_frame == 1  # off by default
+    assert not fc.runtime.has_binding(hair)
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    _activate(hair)
+    log = _draw(panel)
+    assert ("operator", "furcollide.fur_attach_bind") in log
+    assert ("prop", "use_fur_attach") in log and ("prop", "attach_reference_frame") in log
+    assert ("label", "Not bound: press Bind") in log
+    bind(hair)
+    _activate(out)  # the output shows its source's setup
+    log = _draw(panel)
+    assert ("operator", "furcollide.fur_attach_bind") in log
+    assert ("label", "Not bound: press Bind") not in log
+
+
+def test_bake_with_fur_attach(fc, tmp_path):
+    hair, surf, out = attached_scene(fc, before_setup=animate_transform)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "shot.blend"))
+    bind(hair)
+    live = _play(fc, out, range(1, 9))
+    bpy.context.scene.frame_set(1)
+    _activate(hair)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert hair.furcollide.is_baked
+    with pytest.raises(RuntimeError, match="free the bake"):
+        bpy.ops.furcollide.fur_attach_bind()
+    for f in (8, 3, 1):
+        bpy.context.scene.frame_set(f)
+        np.testing.assert_array_equal(fc.positions(out), live[f - 1])
+
+
+def test_roots_off_the_surface_are_snapped_with_a_warning(fc, capsys):
+    hair, surf, out = attached_scene(fc, before_setup=animate_transform)
+    surf.location.z = -0.05  # every root 0.05 above the surface at frame 1
+    surf.keyframe_insert("location", frame=1)
+    bpy.context.scene.frame_set(1)
+    bind(hair)
+    assert "25 roots were not on the Surface" in capsys.readouterr().out
+    check_follows(fc, hair, surf, out, range(1, 9))
+
+
+def test_rebinding_without_callback_drops_the_cache(fc):
+    """Undo or a driver can change the binding without an update callback."""
+    hair, surf, out = attached_scene(fc, before_setup=animate_transform)
+    bind(hair)
+    _play(fc, out, range(1, 6))
+    rt = fc.runtime.get_runtime(hair)
+    assert len(rt.memory) == 5
+    hair.furcollide.attach_id = "rebound elsewhere"  # hidden: no update callback
+    bpy.context.scene.frame_set(5)
+    assert len(rt.memory) == 0 and fc.runtime.is_outdated(hair)
+    check_follows(fc, hair, surf, out, range(1, 9))
