@@ -33,7 +33,14 @@ from bpy.props import (
 from bpy.types import Operator, PropertyGroup
 
 from . import bridge, cache, runtime
-from .setup import SetupOperator, active_setup, redraw, refuse, reports_errors
+from .setup import (
+    SetupOperator,
+    active_setup,
+    new_hair_object_like,
+    redraw,
+    refuse,
+    reports_errors,
+)
 
 #: Per-point attribute written by ``furcollide.collider_distance``.
 DISTANCE_ATTRIBUTE = "furcollide_collider_distance"
@@ -118,30 +125,18 @@ def selected_curves(curves, offsets):
     return None
 
 
-def _copy_curve_attribute(src, dst, name, idx):
-    """Copy CURVE attribute ``name`` of the curves ``idx`` of ``src`` to ``dst``."""
+def _copy_attribute(src, dst, name, domain, idx):
+    """Copy attribute ``name`` of ``src`` to ``dst`` for the items ``idx`` of
+    ``domain`` ('CURVE' or 'POINT'); False when ``src`` has no such attribute."""
     attr = src.attributes.get(name)
     spec = _GUIDE_ATTRIBUTES.get(name)
-    if attr is None or spec is None or attr.domain != "CURVE":
+    if attr is None or spec is None or attr.domain != domain:
         return False
     key, dtype, width = spec
     vals = _read(attr, key, dtype, width)[idx]
-    out = dst.attributes.new(name, attr.data_type, "CURVE")
+    out = dst.attributes.new(name, attr.data_type, domain)
     if len(out.data) != len(vals):
         raise bridge.BridgeError(f"attribute '{name}': {len(out.data)} != {len(vals)}")
-    if len(vals):
-        out.data.foreach_set(key, np.ascontiguousarray(vals, dtype).ravel())
-    return True
-
-
-def _copy_point_attribute(src, dst, name, point_idx):
-    attr = src.attributes.get(name)
-    spec = _GUIDE_ATTRIBUTES.get(name)
-    if attr is None or spec is None or attr.domain != "POINT":
-        return False
-    key, dtype, width = spec
-    vals = _read(attr, key, dtype, width)[point_idx]
-    out = dst.attributes.new(name, attr.data_type, "POINT")
     if len(vals):
         out.data.foreach_set(key, np.ascontiguousarray(vals, dtype).ravel())
     return True
@@ -153,31 +148,17 @@ def new_guides_object(src, data_eval, keep, context):
     offs = bridge.curve_offsets(data_eval)
     sizes = np.diff(offs)
     P = bridge.get_positions(data_eval)
-    hc = bpy.data.hair_curves.new(f"{src.data.name} Guides")
-    try:
+
+    def fill(hc):
         if len(keep):
             hc.add_curves(sizes[keep].tolist())
         point_idx = cache.curve_point_mask(offs, np.asarray(keep, np.int64))
         bridge.set_positions(hc, P[point_idx])
         for name in _GUIDE_ATTRIBUTES:
-            if not _copy_curve_attribute(data_eval, hc, name, keep):
-                _copy_point_attribute(data_eval, hc, name, point_idx)
-    except Exception:
-        bpy.data.hair_curves.remove(hc)
-        raise
-    for mat in src.data.materials:
-        hc.materials.append(mat)
-    hc.surface = src.data.surface
-    hc.surface_uv_map = src.data.surface_uv_map
-    ob = bpy.data.objects.new(f"{src.name} Guides", hc)
-    for coll in list(src.users_collection) or [context.scene.collection]:
-        coll.objects.link(ob)
-    ob.parent = src.parent
-    ob.parent_type = src.parent_type
-    ob.parent_bone = src.parent_bone
-    ob.matrix_parent_inverse = src.matrix_parent_inverse.copy()
-    ob.matrix_basis = src.matrix_basis.copy()
-    return ob
+            if not _copy_attribute(data_eval, hc, name, "CURVE", keep):
+                _copy_attribute(data_eval, hc, name, "POINT", point_idx)
+
+    return new_hair_object_like(src, "Guides", context.scene, fill)
 
 
 def hair_assets_path() -> str:

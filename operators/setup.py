@@ -99,12 +99,13 @@ def _selected_meshes(context, exclude=()):
     return [o for o in context.selected_objects if o.type == "MESH" and o not in exclude]
 
 
-def _new_output(src, src_eval, scene):
-    """Create the output hair object of ``src``: evaluated topology, the source's
-    materials, surface, parent and transform, linked where the source is."""
-    hc = bpy.data.hair_curves.new(f"{src.data.name} FurCollide")
+def new_hair_object_like(src, suffix, scene, fill):
+    """New hair object "<src> <suffix>" placed, parented and linked like ``src``,
+    with its materials, surface and UV map. ``fill(curves_data)`` writes the
+    curves; if it raises, the half-made data is removed again."""
+    hc = bpy.data.hair_curves.new(f"{src.data.name} {suffix}")
     try:
-        bridge.copy_topology(src_eval.data, hc)
+        fill(hc)
     except Exception:
         bpy.data.hair_curves.remove(hc)
         raise
@@ -112,14 +113,23 @@ def _new_output(src, src_eval, scene):
         hc.materials.append(mat)
     hc.surface = src.data.surface
     hc.surface_uv_map = src.data.surface_uv_map
-    out = bpy.data.objects.new(f"{src.name} FurCollide", hc)
+    ob = bpy.data.objects.new(f"{src.name} {suffix}", hc)
     for coll in list(src.users_collection) or [scene.collection]:
-        coll.objects.link(out)
-    out.parent = src.parent
-    out.parent_type = src.parent_type
-    out.parent_bone = src.parent_bone
-    out.matrix_parent_inverse = src.matrix_parent_inverse.copy()
-    out.matrix_basis = src.matrix_basis.copy()
+        coll.objects.link(ob)
+    ob.parent = src.parent
+    ob.parent_type = src.parent_type
+    ob.parent_bone = src.parent_bone
+    ob.matrix_parent_inverse = src.matrix_parent_inverse.copy()
+    ob.matrix_basis = src.matrix_basis.copy()
+    return ob
+
+
+def _new_output(src, src_eval, scene):
+    """Create the output hair object of ``src``: evaluated topology, the source's
+    materials, surface, parent and transform, linked where the source is."""
+    out = new_hair_object_like(
+        src, "FurCollide", scene, lambda hc: bridge.copy_topology(src_eval.data, hc)
+    )
     for i, slot in enumerate(src.material_slots):
         if slot.link == "OBJECT" and i < len(out.material_slots):
             out.material_slots[i].link = "OBJECT"
