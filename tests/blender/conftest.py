@@ -98,6 +98,25 @@ def make_hair(name="Fur", nx=6, ny=6, npts=5, length=1.0, spacing=0.2):
     return ob
 
 
+def make_surface(name="Skin", half=1.0, n=8, z=0.0, uv=True):
+    """A subdivided square (n x n quads) on z, as a growth surface; ``uv``: with a
+    UV map named UVMap (Fur Attach needs none)."""
+    xs = np.linspace(-half, half, n + 1)
+    verts = [(x, y, z) for y in xs for x in xs]
+    faces = [
+        (j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+        for j in range(n) for i in range(n)
+    ]
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    if uv:
+        me.uv_layers.new(name="UVMap")
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
 def make_box(name="Box", size=0.5, location=(0, 0, 0.6)):
     """A closed cube mesh object (12 triangles) of edge ``size``."""
     h = size / 2

@@ -5,25 +5,9 @@ import math
 import bpy
 import numpy as np
 import pytest
-from conftest import make_box, make_hair
+from conftest import make_box, make_hair, make_surface
 
 pytestmark = pytest.mark.blender
-
-
-def make_surface(name="Skin", half=1.0, n=6, z=0.0):
-    """A subdivided square (n x n quads) on z (no UV map: Fur Attach needs none)."""
-    xs = np.linspace(-half, half, n + 1)
-    verts = [(x, y, z) for y in xs for x in xs]
-    faces = [
-        (j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
-        for j in range(n) for i in range(n)
-    ]
-    me = bpy.data.meshes.new(name)
-    me.from_pydata(verts, [], faces)
-    me.update()
-    ob = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
 
 
 def _linear(ob):
@@ -66,7 +50,7 @@ def attached_scene(fc, colliders=(), frames=(1, 8), before_setup=None):
     scene.frame_start, scene.frame_end = frames
     scene.frame_set(frames[0])
     hair = make_hair(nx=5, ny=5)
-    surf = make_surface()
+    surf = make_surface(n=6, uv=False)
     hair.data.surface = surf
     if before_setup is not None:
         before_setup(surf)

@@ -5,29 +5,13 @@ import sys
 import bpy
 import numpy as np
 import pytest
+from conftest import make_surface
 
 pytestmark = pytest.mark.blender
 
 
 def _pipeline():
     return sys.modules["bl_ext.fcdev.furcollide.core.pipeline"]
-
-
-def make_surface(name="Skin", half=1.0, n=8, z=0.0):
-    """A subdivided square (n x n quads) on z, with a UV map, as growth surface."""
-    xs = np.linspace(-half, half, n + 1)
-    verts = [(x, y, z) for y in xs for x in xs]
-    faces = [
-        (j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
-        for j in range(n) for i in range(n)
-    ]
-    me = bpy.data.meshes.new(name)
-    me.from_pydata(verts, [], faces)
-    me.uv_layers.new(name="UVMap")
-    me.update()
-    ob = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
 
 
 def groom(fc, nx=10, ny=10, uv=True):
