@@ -46,6 +46,7 @@ DEFAULT_MEMORY_LIMIT_MB = 512
 FRAME_FILE = "frame_{:06d}.npz"
 _FRAME_RE = re.compile(r"^frame_(-?\d{6,})\.npz$")
 _STATE_PREFIX = "state__"
+_ATTRIBUTE_PREFIX = "attr__"
 _FORMAT_VERSION = 1
 
 
@@ -110,11 +111,12 @@ class Frame:
     status_val: np.ndarray  # (s,) int8
     state: dict | None  # sparse state (see SparseState) or None when evicted
     stats: dict = field(default_factory=dict)
+    attributes: dict = field(default_factory=dict)  # name -> (P,) per-point values
 
     @property
     def nbytes(self) -> int:
         n = self.curves.nbytes + self.points.nbytes + self.status_idx.nbytes
-        n += self.status_val.nbytes
+        n += self.status_val.nbytes + sum(a.nbytes for a in self.attributes.values())
         if self.state:
             n += sum(a.nbytes for a in self.state.values())
         return n
@@ -186,7 +188,8 @@ class MemoryCache:
             del self.frames[k]
         return len(gone)
 
-    def put(self, f, inp, out, status, offsets, state, stats, changed=None) -> None:
+    def put(self, f, inp, out, status, offsets, state, stats, changed=None,
+            attributes=None) -> None:
         """Store frame ``f`` (lossless, sparse).
 
         Parameters
@@ -205,6 +208,8 @@ class MemoryCache:
             Panel statistics kept with the frame.
         changed : (P,) bool ndarray, optional
             ``rows_differ(out, inp)`` when the caller has it already.
+        attributes : dict, optional
+            Per-point attributes of the output (name -> (P,) array), kept as is.
         """
         C = len(offsets) - 1
         P = len(inp)
@@ -220,7 +225,9 @@ class MemoryCache:
         pts = out[curve_point_mask(offsets, curves)].astype(np.float32, copy=True)
         nz = np.flatnonzero(status).astype(np.int32)
         enc = self.sparse.encode(state) if (self.sparse is not None and state is not None) else None
-        self.frames[f] = Frame(curves, pts, nz, status[nz].astype(np.int8), enc, dict(stats))
+        attrs = {k: np.array(v, copy=True) for k, v in (attributes or {}).items()}
+        self.frames[f] = Frame(curves, pts, nz, status[nz].astype(np.int8), enc, dict(stats),
+                               attrs)
         self._enforce_budget(keep=f)
 
     def get(self, f, inp, offsets):
@@ -247,6 +254,11 @@ class MemoryCache:
         status = np.zeros(len(offsets) - 1, np.int8)
         status[fr.status_idx] = fr.status_val
         return out, status, fr.stats
+
+    def attributes(self, f) -> dict:
+        """Per-point attributes stored with frame ``f`` (empty when none)."""
+        fr = self.frames.get(f)
+        return dict(fr.attributes) if fr is not None else {}
 
     def state(self, f) -> dict | None:
         """Full solver state after frame ``f`` (None if unknown/evicted)."""
@@ -293,12 +305,14 @@ def list_frames(directory: str) -> list[int]:
     return sorted(frames)
 
 
-def write_frame(directory, f, points, status, offsets, state, sparse=None) -> str:
+def write_frame(directory, f, points, status, offsets, state, sparse=None,
+                attributes=None) -> str:
     """Atomically write frame ``f`` (temp file + :func:`os.replace`).
 
     With ``sparse`` (a :class:`SparseState`), the solver state is stored as
     the rows that differ from the freshly reset state (lossless; a few MB
-    instead of ~25 MB per frame at paper scale).
+    instead of ~25 MB per frame at paper scale). ``attributes`` (name -> (P,)
+    array) are per-point attributes of the output (:func:`read_attributes`).
     """
     if sparse is not None and state is not None:
         state = {k.replace(":", "__"): v for k, v in sparse.encode(state).items()}
@@ -313,6 +327,8 @@ def write_frame(directory, f, points, status, offsets, state, sparse=None) -> st
     }
     for k, v in (state or {}).items():
         arrays[_STATE_PREFIX + k] = np.asarray(v)
+    for k, v in (attributes or {}).items():
+        arrays[_ATTRIBUTE_PREFIX + k] = np.asarray(v)
     with open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
         fh.flush()
@@ -342,6 +358,13 @@ def read_frame(directory, f):
             k[len(_STATE_PREFIX) :]: z[k] for k in z.files if k.startswith(_STATE_PREFIX)
         }
     return points, status, offsets, state
+
+
+def read_attributes(directory, f) -> dict:
+    """Per-point attributes stored with frame ``f`` (name -> array; empty when none)."""
+    with np.load(frame_path(directory, f), allow_pickle=False) as z:
+        n = len(_ATTRIBUTE_PREFIX)
+        return {k[n:]: z[k] for k in z.files if k.startswith(_ATTRIBUTE_PREFIX)}
 
 
 def remove_frames(directory: str) -> int:

@@ -11,7 +11,11 @@
 * ``furcollide.fur_attach_bind``: Fur Attach, the optional input stage of a
   setup: binds the source's curves to its Surface at the reference frame with
   :func:`core.pipeline.bind`; the frame handler then moves them rigidly with
-  the evaluated Surface (``use_fur_attach``).
+  the evaluated Surface (``use_fur_attach``). ``furcollide.fur_attach_unbind``
+  forgets the binding.
+* ``furcollide.groom_bind`` / ``furcollide.groom_remove``: guide deform of an
+  existing render groom (:mod:`.stages`): binds it to the setup's guides at the
+  current frame and creates the groom output the frame handler writes into.
 
 Every computation is in world space.
 """
@@ -32,7 +36,7 @@ from bpy.props import (
 )
 from bpy.types import Operator, PropertyGroup
 
-from . import bridge, cache, runtime
+from . import bridge, cache, runtime, stages
 from .setup import (
     SetupOperator,
     active_setup,
@@ -43,7 +47,7 @@ from .setup import (
 )
 
 #: Per-point attribute written by ``furcollide.collider_distance``.
-DISTANCE_ATTRIBUTE = "furcollide_collider_distance"
+DISTANCE_ATTRIBUTE = stages.DISTANCE_ATTRIBUTE
 #: Blender's bundled hair node-group assets (blender-facts 2.6).
 HAIR_ASSETS = os.path.join("assets", "nodes", "procedural_hair_node_assets.blend")
 INTERPOLATE_GROUP = "Interpolate Hair Curves"
@@ -404,17 +408,7 @@ class FURCOLLIDE_OT_collider_distance(_OutputOperator, Operator):
         M = bridge.matrix(out)
         Pw = P @ M[:3, :3].T + M[:3, 3]
         d = _core_pipeline().collider_distance(Pw, offs, cols)
-        attr = data.attributes.get(DISTANCE_ATTRIBUTE)
-        if attr is not None and (attr.data_type != "FLOAT" or attr.domain != "POINT"):
-            data.attributes.remove(attr)
-            attr = None
-        if attr is None:
-            attr = data.attributes.new(DISTANCE_ATTRIBUTE, "FLOAT", "POINT")
-        if len(attr.data) != len(d):
-            raise bridge.BridgeError(
-                f"'{out.name}' has {len(attr.data)} points but {len(d)} distances were computed"
-            )
-        attr.data.foreach_set("value", d.astype(np.float32))
+        stages.write_attributes(data, {DISTANCE_ATTRIBUTE: d})
         data.update_tag()
         self.report(
             {"INFO"},
@@ -579,9 +573,157 @@ class FURCOLLIDE_OT_fur_attach_bind(SetupOperator, Operator):
         return {"FINISHED"}
 
 
+class FURCOLLIDE_OT_fur_attach_unbind(SetupOperator, Operator):
+    """Fur Attach: forget the binding; the setup uses the source's own curves again"""
+
+    bl_idname = "furcollide.fur_attach_unbind"
+    bl_label = "Unbind"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def refusal(cls, context, src):
+        if not runtime.has_binding(src) and not src.furcollide.use_fur_attach:
+            return "The source hair is not bound (Fur Attach)"
+        if src.furcollide.is_baked:
+            return "The setup is baked: free the bake before unbinding"
+        return ""
+
+    @reports_errors
+    def execute(self, context):
+        src = active_setup(context)
+        s = src.furcollide
+        runtime.clear_binding(src)
+        s.attach_id = ""
+        s.use_fur_attach = False  # its update drops every cached frame
+        runtime.invalidate(src, reason="Fur Attach unbound", from_frame=s.frame_start - 1)
+        err = ""
+        if not runtime._busy:
+            try:
+                runtime.evaluate(context.scene, context.evaluated_depsgraph_get(), src)
+            except Exception as exc:  # noqa: BLE001 - reported below
+                err = runtime.describe(exc)
+        self.report({"INFO"}, f"Fur Attach: unbound '{src.name}'")
+        if err:
+            self.report({"WARNING"}, f"FurCollide: {err}")
+        redraw(context)
+        return {"FINISHED"}
+
+
+def _hair_world(ob, depsgraph):
+    """Evaluated hair ``ob``: (world points (P, 3) float64, offsets (C+1,))."""
+    oe = ob.evaluated_get(depsgraph)
+    offs = bridge.curve_offsets(oe.data)
+    P = bridge.transform(bridge.get_positions(oe.data), bridge.matrix(oe))
+    return np.asarray(P, np.float64), offs
+
+
+class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
+    """Render groom follows the guides: bind the Render Groom to this setup's guides at
+    the current frame (its reference pose) and create the groom output hair object,
+    which then follows the collided guides every frame; the groom itself is untouched
+    (hidden)"""
+
+    bl_idname = "furcollide.groom_bind"
+    bl_label = "Bind Groom"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def refusal(cls, context, src):
+        g = src.furcollide.groom.groom
+        if g is None:
+            return "Choose the Render Groom (a hair object) first"
+        if g.type != "CURVES":
+            return f"'{g.name}' is not a hair Curves object"
+        if g == src or g == src.furcollide.output or g == src.furcollide.groom.output:
+            return "The Render Groom must be another hair object than the guides"
+        return ""
+
+    @reports_errors
+    def execute(self, context):
+        src = active_setup(context)
+        s = src.furcollide
+        g = s.groom
+        groom = g.groom
+        scene = context.scene
+        dg = context.evaluated_depsgraph_get()
+        render_ref, roff = _hair_world(groom, dg)
+        if len(roff) < 2:
+            self.report({"ERROR"}, f"The Render Groom '{groom.name}' has no curves")
+            return {"CANCELLED"}
+        if np.diff(roff).min() < 2:
+            i = int(np.argmax(np.diff(roff) < 2))
+            self.report({"ERROR"}, f"'{groom.name}': curve {i} has fewer than 2 points")
+            return {"CANCELLED"}
+        inp = runtime.read_inputs(src, dg)  # the guides' input (before motion) now
+        surface = None
+        surf = src.data.surface
+        if surf is not None and surf.type == "MESH" and groom.data.surface == surf:
+            # render roots stay exactly on the shared Surface (Fur Attach of the roots)
+            V, F = surface_mesh_world(surf, dg)
+            surface = (V, F, bridge.mesh_topology_key(surf.evaluated_get(dg).data))
+        arrays = stages.GroomBinding.build(
+            render_ref, roff, inp.points, inp.offsets, g.guides, surface
+        )
+        out = g.output
+        if out is None or out.type != "CURVES" or not runtime.in_scene(out, scene):
+            out = new_hair_object_like(
+                groom, "FurCollide", scene,
+                lambda hc: bridge.copy_topology(groom.evaluated_get(dg).data, hc),
+            )
+        elif not np.array_equal(bridge.curve_offsets(out.data), roff):
+            bridge.copy_topology(groom.evaluated_get(dg).data, out.data)
+        stages.store_groom(out, arrays)
+        g.output = out
+        g.bind_id = uuid.uuid4().hex
+        groom.hide_render = True
+        try:
+            groom.hide_set(True)
+        except RuntimeError:  # not in the active view layer
+            pass
+        err = ""
+        if not runtime._busy:
+            try:
+                runtime.evaluate(scene, dg, src)
+            except Exception as exc:  # noqa: BLE001 - reported below
+                err = runtime.describe(exc)
+        roots = "on the Surface" if surface is not None else "following the guides"
+        self.report(
+            {"INFO"},
+            f"Render groom: {len(roff) - 1} curves of '{groom.name}' follow "
+            f"{len(inp.offsets) - 1} guides into '{out.name}' (roots {roots})",
+        )
+        if err:
+            self.report({"WARNING"}, f"FurCollide: {err}")
+        redraw(context)
+        return {"FINISHED"}
+
+
+class FURCOLLIDE_OT_groom_remove(SetupOperator, Operator):
+    """Delete the groom output object and show the Render Groom again"""
+
+    bl_idname = "furcollide.groom_remove"
+    bl_label = "Remove Groom Output"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def refusal(cls, context, src):
+        return "" if src.furcollide.groom.output is not None else "No groom output to remove"
+
+    @reports_errors
+    def execute(self, context):
+        src = active_setup(context)
+        runtime.remove_groom(src)
+        self.report({"INFO"}, f"Removed the render groom output of '{src.name}'")
+        redraw(context)
+        return {"FINISHED"}
+
+
 classes = (
     FURCOLLIDE_PG_pipeline,
     FURCOLLIDE_OT_fur_attach_bind,
+    FURCOLLIDE_OT_fur_attach_unbind,
+    FURCOLLIDE_OT_groom_bind,
+    FURCOLLIDE_OT_groom_remove,
     FURCOLLIDE_OT_fur_sampler,
     FURCOLLIDE_OT_collider_distance,
     FURCOLLIDE_OT_children_from_guides,

@@ -34,7 +34,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, cache
+from . import bridge, cache, stages
 
 #: Name of the pass-through geometry-nodes modifier FurCollide puts first on
 #: the output. It references the source, colliders and growth surface so the
@@ -84,6 +84,10 @@ class Runtime:
     written_status: tuple | None = None  # (data session uid, status, colours) last written
     attach: tuple | None = None  # (attach_id, core Binding, surface topology key): Fur Attach
     attach_state: tuple | None = None  # (use_fur_attach, attach_id) seen last
+    history: stages.RootHistory = field(default_factory=stages.RootHistory)  # jiggle
+    groom: tuple | None = None  # (bind_id, stages.GroomBinding): render groom
+    groom_shown: tuple | None = None  # (frame, guides) the groom output shows
+    written: tuple | None = None  # (world points, depsgraph) _write wrote in this evaluate
 
     def forget_solver(self):
         self.solver = None
@@ -195,6 +199,8 @@ def invalidate(ob, reason="", from_frame=None, colliders=False, refresh=True) ->
             rt.hold = None
     if rt.solver_frame is not None and rt.solver_frame > f:
         rt.solver_frame = None
+    rt.history.drop_after(f)
+    rt.groom_shown = None
     rt.signature = None  # accept the new settings without a second drop
     if colliders:
         rt.colliders.clear()
@@ -310,6 +316,8 @@ def signature(ob, stable=False, scene=None) -> str:
     parts = [cols, kw, s.enable_attribute, s.frame_start, surface, bool(s.enabled)]
     if s.use_fur_attach:  # only when on: signatures (and bakes) without it are unchanged
         parts.append(["fur_attach", s.attach_id])
+    if s.motion.active:  # likewise
+        parts.append(["motion", s.motion.fingerprint()])
     return json.dumps(parts)
 
 
@@ -476,6 +484,24 @@ class Inputs:
     #: The source's own local positions when the output has the same world matrix
     #: (the usual case): unchanged points are written back from here, untouched.
     local: np.ndarray | None = None
+    #: The input before motion (the caches store the result relative to it, so a
+    #: cached frame never needs the motion again); ``points`` when there is none.
+    raw: np.ndarray | None = None
+    depsgraph: object = None
+
+    def __post_init__(self):
+        if self.raw is None:
+            self.raw = self.points
+
+
+def prepare_input(ob, rt, inp, scene, f) -> None:
+    """Record the roots for jiggle and apply the motion that runs before collision."""
+    if stages.needs_history(ob):
+        rt.history.record(f, inp.points[inp.offsets[:-1]], inp.key)
+    moved = stages.apply_motion(ob, "INPUT", inp.points, inp.offsets, f, scene, rt.history)
+    if moved is not None:
+        inp.points = np.asarray(moved, np.float32)
+        inp.local = None
 
 
 def read_inputs(ob, depsgraph) -> Inputs:
@@ -495,10 +521,11 @@ def read_inputs(ob, depsgraph) -> Inputs:
     M_out_inv = bridge.matrix(out, inverted=True)
     if s.use_fur_attach:  # the input stage: curves follow the evaluated growth surface
         world = np.asarray(attached_points(ob, depsgraph, offs), np.float32)
-        return Inputs(world, offs, key, M_out_inv, mask, warning, None)
+        return Inputs(world, offs, key, M_out_inv, mask, warning, None, depsgraph=depsgraph)
     # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
     local = P if np.allclose(M, M_out, rtol=1e-6, atol=1e-7) else None
-    return Inputs(bridge.transform(P, M), offs, key, M_out_inv, mask, warning, local)
+    return Inputs(bridge.transform(P, M), offs, key, M_out_inv, mask, warning, local,
+                  depsgraph=depsgraph)
 
 
 def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> ColliderEntry:
@@ -599,11 +626,15 @@ def _output_local(inp, points_world, changed=None) -> np.ndarray:
     return local
 
 
-def _write(ob, inp, points_world, status, changed=None) -> None:
-    """Write world positions and status codes into the output's original data."""
+def _write(ob, inp, points_world, status, changed=None, attributes=None) -> None:
+    """Write world positions, status codes and per-point ``attributes`` (name ->
+    (P,) array) into the output's original data."""
     data = ob.furcollide.output.data
     bridge.set_positions(data, _output_local(inp, points_world, changed))
+    if attributes:
+        stages.write_attributes(data, attributes)
     rt = get_runtime(ob)
+    rt.written = (points_world, inp.depsgraph)
     attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
     last = rt.written_status  # (data, status, colours) written last
     if last is not None and (
@@ -659,6 +690,73 @@ def _check_topology(ob, rt, inp) -> bool:
 
 # --------------------------------------------------------------- evaluate
 def evaluate(scene, depsgraph, ob) -> str:
+    """Run the frame rules (see :func:`_evaluate`), then the render groom stage."""
+    rt = get_runtime(ob)
+    rt.written = None
+    what = _evaluate(scene, depsgraph, ob)
+    if rt.written is not None and ob.furcollide.groom.output is not None:
+        try:
+            _groom_stage(ob, rt, scene.frame_current + scene.frame_subframe, *rt.written)
+        except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
+            set_status(ob, "WARNING", f"Render groom: {describe(exc)}")
+    return what
+
+
+def _groom(ob, rt):
+    """The render groom binding of the setup on ``ob`` (cached in its runtime)."""
+    g = ob.furcollide.groom
+    if rt.groom is None or rt.groom[0] != g.bind_id:
+        rt.groom = (g.bind_id, stages.load_groom(g.output))
+        rt.groom_shown = None
+    return rt.groom[1]
+
+
+def _groom_stage(ob, rt, f, guides_world, depsgraph) -> None:
+    """The render groom follows the guides just written (deform + clearance pass)."""
+    g = ob.furcollide.groom
+    out = g.output
+    if depsgraph is None or not in_scene(out, depsgraph.scene):
+        return
+    if rt.groom_shown is not None and rt.groom_shown[0] == f and np.array_equal(
+        rt.groom_shown[1], guides_world
+    ):
+        return  # the same frame again (handlers fire for repeated frames)
+    binding = _groom(ob, rt)
+    cols = _collider_list(ob, rt, depsgraph) if g.use_clearance else []
+    points, n_fixed = stages.groom_frame(ob, binding, guides_world, depsgraph, cols)
+    stages.write_groom(out, points, binding.render_offsets, depsgraph)
+    rt.groom_shown = (f, np.array(guides_world, copy=True))
+    rt.stats = dict(rt.stats, groom_fixed=n_fixed)
+
+
+def refresh_groom(ob) -> None:
+    """The groom options changed: recompute the groom on the next evaluation."""
+    ob = source_of(ob)
+    rt = get_runtime(ob, create=False) if ob is not None else None
+    if rt is not None:
+        rt.groom_shown = None
+        _schedule_refresh(ob.name)
+
+
+def remove_groom(src) -> None:
+    """Delete the setup's groom output and show its Render Groom again."""
+    g = src.furcollide.groom
+    stages.remove_groom_output(g.output)
+    g.output = None
+    g.bind_id = ""
+    if g.groom is not None:
+        g.groom.hide_render = False
+        try:
+            g.groom.hide_set(False)
+        except RuntimeError:
+            pass
+    rt = get_runtime(src, create=False)
+    if rt is not None:
+        rt.groom = rt.groom_shown = None
+
+
+
+def _evaluate(scene, depsgraph, ob) -> str:
     """Run the frame rules (module docstring) for the setup on ``ob``.
 
     Parameters
@@ -710,6 +808,7 @@ def evaluate(scene, depsgraph, ob) -> str:
     inp = read_inputs(ob, depsgraph)
     if not _check_topology(ob, rt, inp):
         return "topology"
+    prepare_input(ob, rt, inp, scene, f)
     if not s.is_baked:  # a bake checks its own curve layout first
         _sync_output(ob, inp, depsgraph)
 
@@ -751,10 +850,10 @@ def evaluate(scene, depsgraph, ob) -> str:
         return "outdated"
 
     if f in rt.memory:
-        out, status, stats = rt.memory.get(f, inp.points, inp.offsets)
+        out, status, stats = rt.memory.get(f, inp.raw, inp.offsets)
         if rt.hold is None and f == max(rt.memory.frames):
             rt.hold = (f, out, status)
-        _write(ob, inp, out, status)
+        _write(ob, inp, out, status, attributes=rt.memory.attributes(f))
         rt.stats = dict(stats, source="cache")
         rt.outdated = False
         set_status(ob, level, msg)
@@ -777,16 +876,17 @@ def evaluate(scene, depsgraph, ob) -> str:
         except ValueError as exc:  # saved with another mode
             rt.solver_frame = None
             return _hold(ob, rt, inp, f, reason=str(exc))
-    res = _step(ob, rt, solver, inp, depsgraph)
+    res, cols = _step(ob, rt, solver, inp, depsgraph)
+    points, attrs = _finish(ob, rt, inp, res, f, scene, cols)
     stats = _stats(res.status, f, res.timings.get("total", 0.0))
-    changed = cache.rows_differ(res.points, inp.points)  # points the solver moved
+    changed = cache.rows_differ(points, inp.raw)  # points the stages moved
     rt.memory.put(
-        f, inp.points, res.points, res.status, inp.offsets, solver.state, stats, changed
+        f, inp.raw, points, res.status, inp.offsets, solver.state, stats, changed, attrs
     )
     rt.solver_frame = f
     if rt.hold is None or f >= rt.hold[0]:
-        rt.hold = (f, res.points, res.status)
-    _write(ob, inp, res.points, res.status, changed)
+        rt.hold = (f, points, res.status)
+    _write(ob, inp, points, res.status, changed, attrs)
     rt.stats = stats
     rt.error = ""
     rt.outdated = False
@@ -795,9 +895,17 @@ def evaluate(scene, depsgraph, ob) -> str:
 
 
 def _step(ob, rt, solver, inp, depsgraph):
+    """Solve this frame: (core StepResult, the core Colliders used)."""
     cols = _collider_list(ob, rt, depsgraph)
     growth = _growth(ob, rt, solver.settings, depsgraph)
-    return solver.step(inp.points, cols, growth=growth, enabled=inp.enabled)
+    return solver.step(inp.points, cols, growth=growth, enabled=inp.enabled), cols
+
+
+def _finish(ob, rt, inp, res, f, scene, cols):
+    """The stages after the solver: (final world points, per-point attributes)."""
+    if not ob.furcollide.motion.active:
+        return res.points, {}
+    return stages.output_stage(ob, res.points, inp.offsets, f, scene, rt.history, cols)
 
 
 def _hold(ob, rt, inp, f, reason=""):
@@ -845,7 +953,7 @@ def _evaluate_baked(ob, rt, inp, f, level, msg, depsgraph):
         )
         return "topology"
     _sync_output(ob, inp, depsgraph)
-    _write(ob, inp, points, status)
+    _write(ob, inp, points, status, attributes=cache.read_attributes(directory, fe))
     rt.stats = _stats(status, fe, source="bake")
     if fe == min(f, s.frame_end):
         rt.outdated = False
@@ -878,7 +986,8 @@ def _baked_subframe(ob, depsgraph, f, sub):
     w = np.float32(sub)
     points = pa + (pb - pa) * w
     inp = Inputs(points, offs, cache.topology_key(offs),
-                 bridge.matrix(s.output.evaluated_get(depsgraph), inverted=True), None, "")
+                 bridge.matrix(s.output.evaluated_get(depsgraph), inverted=True), None, "",
+                 depsgraph=depsgraph)
     _write(ob, inp, points, status)
     return "subframe"
 
@@ -916,6 +1025,7 @@ def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
     if rt.topology is not None and rt.topology != inp.key:
         rt.forget_solver()
     rt.topology, rt.offsets = inp.key, inp.offsets
+    prepare_input(ob, rt, inp, scene, f)
     _sync_output(ob, inp, depsgraph)
     solver = _ensure_solver(ob, rt, inp)
     if f == s.frame_start:
@@ -925,12 +1035,14 @@ def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
         if not np.array_equal(offsets, inp.offsets):
             raise ValueError(f"bake frame {f - 1} was made for other curves")
         solver.state = cache.decode_state(stored, rt.memory.sparse)
-    res = _step(ob, rt, solver, inp, depsgraph)
+    res, cols = _step(ob, rt, solver, inp, depsgraph)
+    points, attrs = _finish(ob, rt, inp, res, f, scene, cols)
     fp = np.frombuffer(settings_fingerprint(ob).encode(), np.uint8)
     state = solver.state
     state["fingerprint"] = fp
-    cache.write_frame(directory, f, res.points, res.status, inp.offsets, state, rt.memory.sparse)
-    _write(ob, inp, res.points, res.status)
+    cache.write_frame(directory, f, points, res.status, inp.offsets, state, rt.memory.sparse,
+                      attrs)
+    _write(ob, inp, points, res.status, attributes=attrs)
     rt.solver_frame = f
     rt.stats = _stats(res.status, f, res.timings.get("total", 0.0), "bake")
     return rt.stats
@@ -939,6 +1051,8 @@ def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
 def resume_frame(ob, directory) -> int | None:
     """Last frame of a contiguous, matching partial bake (None: start over)."""
     s = ob.furcollide
+    if stages.needs_history(ob):
+        return None  # jiggle needs the roots of every frame since the start: start over
     have = set(cache.list_frames(directory))
     fp = settings_fingerprint(ob)
     last = None

@@ -223,6 +223,7 @@ class FURCOLLIDE_OT_remove(SetupOperator, Operator):
         src = active_setup(context)
         s = src.furcollide
         out = s.output
+        runtime.remove_groom(src)
         runtime.clear_runtime(src)
         if out is not None:
             if self.keep_output:

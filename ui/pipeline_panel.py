@@ -1,5 +1,5 @@
-"""View3D > Sidebar > FurCollide > Fur Pipeline: sampler, attach, collider distance,
-children."""
+"""View3D > Sidebar > FurCollide > Fur Pipeline: Fur Sampler, Fur Attach, wind and
+jiggle, Region of Influence and Fur Collider Distance, children and the render groom."""
 
 from bpy.types import Panel
 
@@ -21,13 +21,83 @@ def draw_attach(layout, src):
     row.enabled = bound or s.use_fur_attach
     row.prop(s, "use_fur_attach")
     col.prop(s, "attach_reference_frame")
-    row = col.row()
+    row = col.row(align=True)
     row.enabled = has_surface and not s.is_baked
     row.operator("furcollide.fur_attach_bind", icon="LINKED")
+    sub = row.row(align=True)
+    sub.enabled = bound or s.use_fur_attach
+    sub.operator("furcollide.fur_attach_unbind", icon="UNLINKED")
     if not has_surface:
         col.label(text="Fur Attach needs the source's Surface", icon="INFO")
     elif not bound:
         col.label(text="Not bound: press Bind", icon="INFO")
+
+
+def draw_motion(layout, src):
+    """Wind and jiggle, before or after collision."""
+    m = src.furcollide.motion
+    box = layout.box()
+    box.label(text="Wind & Jiggle", icon="FORCE_WIND")
+    col = box.column()
+    col.prop(m, "use_wind")
+    sub = col.column()
+    sub.enabled = m.use_wind
+    for name in ("wind_stage", "wind_direction", "wind_strength", "wind_frequency",
+                 "wind_turbulence", "wind_falloff", "wind_scale", "wind_seed"):
+        sub.prop(m, name)
+    col.separator()
+    col.prop(m, "use_jiggle")
+    sub = col.column()
+    sub.enabled = m.use_jiggle
+    for name in ("jiggle_stage", "jiggle_stiffness", "jiggle_damping", "jiggle_amount",
+                 "jiggle_falloff"):
+        sub.prop(m, name)
+
+
+def draw_influence(layout, src):
+    """Region of Influence and the per-frame Fur Collider Distance attribute."""
+    m = src.furcollide.motion
+    box = layout.box()
+    box.label(text="Region of Influence", icon="DRIVER_DISTANCE")
+    col = box.column()
+    after = (m.use_wind and m.wind_stage == "OUTPUT") or (
+        m.use_jiggle and m.jiggle_stage == "OUTPUT")
+    col.prop(m, "use_region_of_influence")
+    sub = col.column()
+    sub.enabled = m.use_region_of_influence
+    sub.prop(m, "roi_margin")
+    if not after:
+        col.label(text="Restricts motion After Collision (none is on)", icon="INFO")
+    elif not m.use_region_of_influence:
+        col.label(text="Motion after collision may push hair into colliders", icon="ERROR")
+    col.separator()
+    col.prop(m, "write_collider_distance")
+    sub = col.column()
+    sub.enabled = m.write_collider_distance
+    sub.prop(m, "distance_max")
+    col.operator("furcollide.collider_distance", text="Collider Distance Now",
+                 icon="DRIVER_DISTANCE")
+
+
+def draw_groom(layout, src):
+    """A dense render groom following the collided guides, with its clearance pass."""
+    s = src.furcollide
+    g = s.groom
+    box = layout.box()
+    box.label(text="Render Groom", icon="OUTLINER_OB_CURVES")
+    col = box.column()
+    col.prop(g, "groom")
+    col.prop(g, "guides")
+    col.prop(g, "use_clearance")
+    row = col.row(align=True)
+    row.operator("furcollide.groom_bind", icon="LINKED")
+    sub = row.row(align=True)
+    sub.enabled = g.output is not None
+    sub.operator("furcollide.groom_remove", text="", icon="X")
+    if g.output is not None:
+        col.label(text=f"Output: {g.output.name}", icon="OUTLINER_DATA_CURVES")
+        if g.use_clearance:
+            col.label(text=f"Render curves fixed: {s.stat_groom_fixed}", icon="CHECKMARK")
 
 
 class FURCOLLIDE_PT_pipeline(Panel):
@@ -78,12 +148,12 @@ class FURCOLLIDE_PT_pipeline(Panel):
             box.column().label(text="Needs a FurCollide setup", icon="INFO")
             return
         draw_attach(layout, src)
+        draw_motion(layout, src)
+        draw_influence(layout, src)
 
         box = layout.box()
-        box.label(text="Collided Output", icon="MOD_PHYSICS")
+        box.label(text="Children from Guides", icon="MOD_PHYSICS")
         col = box.column()
-        col.operator("furcollide.collider_distance", icon="DRIVER_DISTANCE")
-        col.separator()
         col.prop(s, "density")
         col.prop(s, "guides")
         row = col.row()
@@ -92,6 +162,7 @@ class FURCOLLIDE_PT_pipeline(Panel):
         op.density, op.guides = s.density, s.guides
         if src.data.surface is None:
             col.label(text="Children need the source's Surface", icon="INFO")
+        draw_groom(layout, src)
 
 
 classes = (FURCOLLIDE_PT_pipeline,)
