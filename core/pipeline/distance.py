@@ -253,7 +253,24 @@ def _minplus(D2):
     return out.reshape(D2.shape)
 
 
-def segment_mesh_distance(A, B, V, F):
+def _check_cap(max_distance):
+    """Validated ``max_distance``: None (no cap) or a float >= 0 (inf means no cap)."""
+    if max_distance is None:
+        return None
+    if isinstance(max_distance, (bool, np.bool_)):
+        raise InputError(f"max_distance must be a number >= 0 or None, got {max_distance!r}")
+    try:
+        cap = float(max_distance)
+    except (TypeError, ValueError):
+        raise InputError(
+            f"max_distance must be a number >= 0 or None, got {max_distance!r}"
+        ) from None
+    if np.isnan(cap) or cap < 0:
+        raise InputError(f"max_distance must be a number >= 0 or None, got {cap}")
+    return None if np.isinf(cap) else cap
+
+
+def segment_mesh_distance(A, B, V, F, max_distance=None):
     """Distance of each segment ``[A, B]`` to the triangle mesh ``(V, F)``.
 
     An expanding search over a grid of the triangles finds the exact
@@ -271,14 +288,25 @@ def segment_mesh_distance(A, B, V, F):
         Segment ends, the mesh's space.
     V : (n, 3) ndarray of float64
     F : (m, 3) ndarray of int, m >= 1
+    max_distance : float >= 0, optional
+        Cap: return ``min(distance, max_distance)``. Segments whose lower
+        bound already reaches the cap get no exact search, and the
+        expanding search stops at the cap.
 
     Returns
     -------
     dist : (S,) ndarray of float64
-        Never above the exact distance; exact (float64 rounding) where
-        ``exact``.
+        Never above the exact distance (nor above ``max_distance``); exact
+        (float64 rounding) where ``exact``.
     exact : (S,) bool
+        With a cap, ``dist == min(distance, max_distance)`` counts as exact.
+
+    Raises
+    ------
+    InputError
+        ``max_distance`` negative, NaN or not a number.
     """
+    cap = _check_cap(max_distance)
     S = len(A)
     if S == 0:
         return np.zeros(0), np.zeros(0, bool)
@@ -302,12 +330,13 @@ def segment_mesh_distance(A, B, V, F):
             box = (np.minimum(qlo, mlo), np.maximum(qhi, mhi))
             lb_pt = np.maximum(lb_pt, _LowerBoundField(T, g.h, box)(mid))
     lb = np.maximum(lb_pt.reshape(S, k) - (seg / (2 * k))[:, None], 0.0).min(1)
-    dist = lb.copy()
-    exact = np.zeros(S, bool)
+    capv = np.inf if cap is None else cap
+    dist = np.minimum(lb, capv)
+    exact = lb >= capv
     # expanding exact search: radius rho, done where the best found is <= rho
-    rho = lb + g.h
+    rho = np.minimum(lb + g.h, capv)
     best = np.full(S, np.inf)
-    todo = np.arange(S)
+    todo = np.flatnonzero(~exact)
     while len(todo):
         r = rho[todo]
         ilo = np.clip(np.floor((np.minimum(A[todo], B[todo]) - r[:, None] - g.glo) / g.h),
@@ -317,12 +346,16 @@ def segment_mesh_distance(A, B, V, F):
         ok = (ihi - ilo + 1).prod(1) <= _MAX_CELLS
         todo, ilo, ihi = todo[ok], ilo[ok], ihi[ok]
         _search(A, B, T, g, todo, ilo, ihi, best)
-        done = best[todo] <= rho[todo]
+        # every triangle within rho of a segment is in its box: best <= rho is exact,
+        # and a search at the cap that found nothing closer proves the cap
+        found = best[todo] <= rho[todo]
+        done = found | (rho[todo] >= capv)
         exact[todo[done]] = True
-        dist[todo[done]] = best[todo[done]]
+        dist[todo[done]] = np.where(found[done], best[todo[done]], capv)
         todo = todo[~done]
         # next radius: the best found so far is an upper bound (final search)
-        rho[todo] = np.where(np.isfinite(best[todo]), best[todo], 2 * rho[todo])
+        rho[todo] = np.minimum(
+            np.where(np.isfinite(best[todo]), best[todo], 2 * rho[todo]), capv)
     return dist, exact
 
 
@@ -342,7 +375,7 @@ def _search(A, B, T, g, idx, ilo, ihi, best):
         np.minimum.at(best, si, d)
 
 
-def collider_distance(points, offsets, colliders, return_exact=False):
+def collider_distance(points, offsets, colliders, return_exact=False, max_distance=None):
     """Fur Collider Distance: per CV, the distance of its segments to the colliders.
 
     The distance of CV ``j`` is the smallest distance to any collider of
@@ -363,6 +396,15 @@ def collider_distance(points, offsets, colliders, return_exact=False):
         colliders are ignored.
     return_exact : bool
         Also return which CV distances are exact.
+    max_distance : float >= 0, optional
+        Cap (e.g. the largest displacement the Region of Influence will
+        clamp): every returned distance is ``min(distance, max_distance)``
+        (``max_distance`` without colliders), still never above the true
+        distance. Segments that are provably at least ``max_distance`` from
+        every collider skip the exact search, so a small cap is much
+        faster. :func:`region_of_influence` gives the same result with
+        ``min(distance, cap)`` as with ``distance`` when no displacement is
+        longer than ``cap``. Capped values count as exact.
 
     Returns
     -------
@@ -372,34 +414,38 @@ def collider_distance(points, offsets, colliders, return_exact=False):
         lengths); for segments farther away a lower bound from distance
         fields of the collider (typically within a few percent of the
         collider's size below the truth, more for CVs farther away than the
-        collider's size). It never exceeds the true distance.
+        collider's size). It never exceeds the true distance. With
+        ``max_distance``: at most ``max_distance``.
     exact : (P,) ndarray of bool
-        Only with ``return_exact``.
+        Only with ``return_exact``. With ``max_distance``, true where the
+        distance is exactly ``min(true distance, max_distance)``.
 
     Raises
     ------
     InputError
-        Malformed curves (the message names the curve or point).
+        Malformed curves (the message names the curve or point), or
+        ``max_distance`` negative, NaN or not a number.
     ColliderError
         Malformed ``(V, F)`` collider.
     """
     pts, off = check_curves(points, offsets)
+    cap = _check_cap(max_distance)
     if isinstance(colliders, Collider):
         colliders = [colliders]
     P = len(pts)
     _, _, s0 = layout(off)
     A, B = pts[s0], pts[s0 + 1]
-    seg_d = np.full(len(s0), np.inf)
+    seg_d = np.full(len(s0), np.inf if cap is None else cap)
     seg_exact = np.ones(len(s0), bool)
     for i, col in enumerate(colliders):
         mesh = _world_mesh(col, i)
         if mesh is None:
             continue
-        d, ex = segment_mesh_distance(A, B, *mesh)
+        d, ex = segment_mesh_distance(A, B, *mesh, max_distance=cap)
         better = d < seg_d
         seg_exact = np.where(better, ex, seg_exact)
         seg_d = np.minimum(seg_d, d)
-    dist = np.full(P, np.inf)
+    dist = np.full(P, np.inf if cap is None else cap)
     exact = np.ones(P, bool)
     # segment k runs from point s0[k] to s0[k] + 1
     for end in (s0, s0 + 1):
