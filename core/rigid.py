@@ -223,8 +223,14 @@ class RigidBatch:
         self.ctx = ctx
         self.curves = curves
         sv = ctx.sv_
-        seg, rep, starts = ctx.segments(curves)
         self.cnt = sv._nseg[curves]
+        # Uniform CV counts (the usual groom): component arrays (3, ns, n),
+        # see :meth:`_hits_uniform`.
+        self.ns = ctx.sv_._ns if len(curves) else 0
+        if self.ns:
+            self._init_uniform(ctx, curves)
+            return
+        seg, rep, starts = ctx.segments(curves)
         self.starts = starts
         v = ctx.seg_in(seg)
         ax = ctx.axis[curves][rep]
@@ -237,9 +243,6 @@ class RigidBatch:
             self.w = np.ones(len(seg))
         self.length = np.sqrt(rot.dot(v, v))
         self.root = ctx.root_mask(len(seg), starts)
-        # Uniform CV counts (the usual groom): keep (curves, segments, 3) blocks.
-        ns = int(self.cnt[0]) if len(curves) else 0
-        self.ns = ns if len(curves) and (self.cnt == ns).all() else 0
         self.per_col = []
         for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
             m = cand[curves]
@@ -247,12 +250,38 @@ class RigidBatch:
                 continue
             A, b = c.local_map()
             terms = [rot.apply(A, x) for x in (Y, V0, X)]
-            if self.ns:
-                terms = [x.reshape(-1, self.ns, 3) for x in terms]
             self.per_col.append((c, off, m, rot.apply(A, ctx.roots[curves]) + b, *terms))
-        if self.ns:
-            self.w = self.w.reshape(-1, self.ns)
-            self.length = self.length.reshape(-1, self.ns)
+
+    def _init_uniform(self, ctx, curves):
+        """The terms as (3, ns, n) component arrays (same arithmetic as the
+        rows of 3 of the general case, so the same rays bit for bit)."""
+        v = ctx.seg_soa(curves)
+        ax = ctx.axis[curves]
+        a0, a1, a2 = ax.T
+        along = v[0] * a0
+        along += v[1] * a1
+        along += v[2] * a2
+        Y = np.empty_like(v)
+        X = np.empty_like(v)
+        for i, (p, q, r) in enumerate(((a1, 2, (a2, 1)), (a2, 0, (a0, 2)), (a0, 1, (a1, 0)))):
+            np.multiply(ax[:, i], along, out=Y[i])
+            np.multiply(p, v[q], out=X[i])
+            X[i] -= r[0] * v[r[1]]
+        V0 = np.subtract(v, Y)
+        self.w = np.broadcast_to(ctx.bend_weights(curves), (self.ns, len(curves)))
+        sq = v[0] * v[0]
+        sq += v[1] * v[1]
+        sq += v[2] * v[2]
+        self.length = np.sqrt(sq, out=sq)
+        self.per_col = []
+        for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
+            m = cand[curves]
+            if not m.any():
+                continue
+            A, b = c.local_map()
+            terms = [rot.apply_soa(A, x) for x in (Y, V0, X)]
+            root_lo = np.ascontiguousarray((rot.apply(A, ctx.roots[curves]) + b).T)
+            self.per_col.append((c, off, m, root_lo, *terms))
 
     def hits(self, items, theta):
         """Does curve ``curves[items[i]]`` turned by ``theta[i]`` hit a collider.
@@ -297,30 +326,49 @@ class RigidBatch:
         return hit
 
     def _hits_uniform(self, items, theta, hit):
-        """:meth:`hits` for curves that all have ``self.ns`` segments."""
+        """:meth:`hits` for curves that all have ``self.ns`` segments.
+
+        Works on (3, ns, n) component arrays (long contiguous rows, no rows
+        of 3) with the arithmetic of :meth:`hits`; the rays go to the tracer
+        segment-major (a ray's result does not depend on its batch).
+        """
         ctx = self.ctx
         ns = self.ns
-        a = theta[:, None] * self.w[items]  # (n, ns)
-        cos, sin = np.cos(a)[..., None], np.sin(a)[..., None]
+        a = self.w[:, items] * theta  # (ns, n)
+        cos, sin = np.cos(a), np.sin(a)
         scale = ctx.shrink_scale(a)
-        length = self.length[items] if scale is None else self.length[items] * scale
-        back, grow = ctx.ray_growth(length, np.arange(ns) == 0)
-        back, grow = back[..., None], grow[..., None]
+        length = self.length[:, items] if scale is None else self.length[:, items] * scale
+        back, grow = ctx.ray_growth(length, (np.arange(ns) == 0)[:, None])
         for c, off, m, root_lo, Y, V0, X in self.per_col:
             mi = m[items]
             if not mi.any():
                 continue
-            it = items if mi.all() else items[mi]
-            sub = slice(None) if mi.all() else mi
-            d = Y[it] + V0[it] * cos[sub] + X[it] * sin[sub]
+            if mi.all():
+                it, sub = items, slice(None)
+                cs, sn, bk, gr = cos, sin, back, grow
+            else:
+                it, sub = items[mi], mi
+                cs, sn, bk, gr = cos[:, mi], sin[:, mi], back[:, mi], grow[:, mi]
+            d = Y.take(it, axis=2)
+            d += V0.take(it, axis=2) * cs
+            d += X.take(it, axis=2) * sn
             if scale is not None:
-                d *= scale[sub][..., None]
-            o = np.cumsum(d, axis=1)
+                d *= scale[:, sub]
+            o = rot.cumsum_soa(d)
             o -= d
-            o += root_lo[it][:, None, :]
-            o -= back[sub] * d
-            d *= grow[sub]
-            h = c.segment_hits_local(o.reshape(-1, 3), d.reshape(-1, 3), off, ctx.threads)
+            o += root_lo[:, it][:, None, :]
+            o -= bk * d
+            d *= gr
+            k = len(it)
+            h = c.segment_hits_local(_rows32(o), _rows32(d), off, ctx.threads)
             ctx.n_rays += len(h)
-            hit[sub] |= h.reshape(-1, ns).any(axis=1)
+            hit[sub] |= h.reshape(ns, k).any(axis=0)
         return hit
+
+
+def _rows32(x):
+    """Component arrays (3, ...) as float32 rays (k, 3), in ``x[0]``'s order."""
+    out = np.empty(x.shape[1:] + (3,), np.float32)
+    for i in range(3):
+        out[..., i] = x[i]
+    return out.reshape(-1, 3)

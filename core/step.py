@@ -212,32 +212,47 @@ class StepContext:
         return o, end - o, seg, rep, starts
 
     def _deform_uniform(self, idx, angle, axis, quat):
-        """:meth:`deform` for curves that all have ``ns`` segments (blocks)."""
+        """:meth:`deform` for curves that all have ``ns`` segments (blocks).
+
+        Stiff/Bend work on component arrays (3, ns, n) (see
+        :func:`rot.rotate_soa`); the arithmetic is that of :meth:`deform`.
+        """
         ns, n = self.sv_._ns, len(idx)
-        v = self.Dseg.reshape(-1, ns, 3)[idx].astype(np.float64)
+        root = self.roots[idx]
         if quat is not None:
+            v = self.Dseg.reshape(-1, ns, 3)[idx].astype(np.float64)
             v = rot.quat_rotate(quat, v.reshape(-1, 3)).reshape(n, ns, 3)
+            end = (np.cumsum(v, axis=1) + root[:, None, :]).astype(self.out_dtype)
+            end = end.astype(np.float64)
+            o = np.empty_like(end)
+            o[:, :1] = root[:, None, :]
+            o[:, 1:] = end[:, :-1]
+            d = end - o
         else:
-            if self.s.mode == "bend":
-                w = np.where(self.sv_._stiff[idx][:, None], 1.0, (np.arange(ns) + 1.0) / ns)
-            else:
-                w = np.ones((1, ns))
-            a = angle[:, None] * w
-            cos, sin = np.cos(a)[..., None], np.sin(a)[..., None]
-            ax = axis[:, None, :]
-            along = np.einsum("nkj,nj->nk", v, axis)[..., None]
-            v = v * cos + np.cross(ax, v) * sin + ax * (along * (1.0 - cos))
+            a = self.bend_weights(idx) * angle
+            v = rot.rotate_soa(self.seg_soa(idx), axis, a)
             scale = self.shrink_scale(a)
             if scale is not None:
-                v *= scale[..., None]
-        root = self.roots[idx][:, None, :]
-        end = (np.cumsum(v, axis=1) + root).astype(self.out_dtype).astype(np.float64)
-        o = np.empty_like(end)
-        o[:, :1] = root
-        o[:, 1:] = end[:, :-1]
+                v *= scale
+            end = rot.cumsum_soa(v)
+            end += root.T[:, None, :]
+            end = end.astype(self.out_dtype).astype(np.float64)
+            o = np.empty_like(end)
+            o[:, 0] = root.T
+            o[:, 1:] = end[:, :-1]
+            d = rot.aos(np.subtract(end, o, out=end))
+            o = rot.aos(o)
         seg = (idx[:, None] * ns + np.arange(ns)).ravel()
         rep = np.repeat(np.arange(n), ns)
-        return o.reshape(-1, 3), (end - o).reshape(-1, 3), seg, rep, np.arange(n) * ns
+        return o.reshape(-1, 3), d.reshape(-1, 3), seg, rep, np.arange(n) * ns
+
+    def bend_weights(self, idx):
+        """(ns, n) fraction of a curve's angle turning each segment (uniform
+        curves): Bend ``(j + 1) / ns`` (1 for curves solved as Stiff), Stiff 1."""
+        ns = self.sv_._ns
+        if self.s.mode == "bend":
+            return np.where(self.sv_._stiff[idx], 1.0, ((np.arange(ns) + 1.0) / ns)[:, None])
+        return np.ones((ns, 1))
 
     def shrink_scale(self, a):
         """Shrink (paper 3.2.2): segment scale for segment rotation angles ``a``
@@ -468,6 +483,17 @@ class StepContext:
                 out.reshape(-1, ns + 1, 3)[idx, 1:] = (o + d).reshape(-1, ns, 3)
             else:
                 out[self.sv_._seg_start[seg] + 1] = o + d
+        return out
+
+    def seg_soa(self, idx):
+        """Input segment vectors of uniform curves ``idx`` as float64
+        components, shape (3, ns, n): elementwise work on them runs over long
+        contiguous rows instead of rows of 3."""
+        ns = self.sv_._ns
+        g = self.Dseg.reshape(-1, ns, 3)[idx]
+        out = np.empty((3, ns, len(idx)))
+        for i in range(3):
+            out[i] = g[..., i].T
         return out
 
     def seg_in(self, seg):
