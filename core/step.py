@@ -35,14 +35,33 @@ class StepContext:
         self.out_dtype = out_dtype
         self.timings = {}
         self.n_rays = 0
-        # Input segment vectors (S, 3) in the input dtype, segment-major.
+        # Input segment vectors in the input dtype: (S, 3) segment-major, or
+        # for a uniform CV count ``ns`` a (C, ns, 3) view of one flat
+        # difference of all points (no per-curve gathers or copies).
         ns = solver._ns
-        if ns:  # uniform CV count: (curves, segments, 3) blocks, no gathers
-            D3 = np.diff(points.reshape(-1, ns + 1, 3), axis=1)
-            self.Dseg = D3.reshape(-1, 3)
-            L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg)).reshape(-1, ns)
-            self.curve_len = L.sum(axis=1, dtype=np.float64)
-            shortest = L.min(axis=1)
+        if ns:
+            Df = np.empty_like(points)
+            flat = points.reshape(-1)
+            np.subtract(flat[3:], flat[:-3], out=Df.reshape(-1)[:-3])
+            Df[-1] = 0
+            self._Dflat = Df  # row c (ns + 1) + j: segment j of curve c
+            self.D3 = Df.reshape(-1, ns + 1, 3)[:, :ns]
+            self.Dseg = None
+            sq = Df[:, 0] * Df[:, 0]  # = einsum("ij,ij->i"), as separate passes
+            sq += Df[:, 1] * Df[:, 1]
+            sq += Df[:, 2] * Df[:, 2]
+            L = np.sqrt(sq, out=sq).reshape(-1, ns + 1)[:, :ns]
+            # Column passes: numpy's reductions are slow on short rows. Below
+            # 8 terms numpy sums a row sequentially, as this loop does.
+            shortest = L[:, 0].copy()
+            for j in range(1, ns):
+                np.minimum(shortest, L[:, j], out=shortest)
+            if ns < 8:
+                self.curve_len = L[:, 0].astype(np.float64)
+                for j in range(1, ns):
+                    self.curve_len += L[:, j]
+            else:
+                self.curve_len = L.sum(axis=1, dtype=np.float64)
         else:
             self.Dseg = np.diff(points, axis=0)[solver._seg_start]
             L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg))
@@ -55,9 +74,12 @@ class StepContext:
         if bad.any():
             c = int(np.argmax(bad))
             a, b = int(solver._soff[c]), int(solver._soff[c + 1])
-            k = int(solver._seg_start[a + int(np.argmin(L.ravel()[a:b]))])
+            k = int(solver._seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
             raise InputError(f"curve {c} has a zero-length segment between points {k} and {k + 1}")
-        self.roots = points[solver._off[:-1]].astype(np.float64)
+        if ns:
+            self.roots = points.reshape(-1, ns + 1, 3)[:, 0].astype(np.float64)
+        else:
+            self.roots = points[solver._off[:-1]].astype(np.float64)
         # Ray growth (tol.RAY_EXTEND_ULPS): float32 ulps at the size of the
         # largest collider (where embree works, centred), plus the output
         # dtype's rounding at the colliders' distance from the origin. It
@@ -74,25 +96,46 @@ class StepContext:
         # Candidate curves per collider: the ball a curve can sweep about its
         # root (any rotation, scale <= 1) meets the collider's bounds, then
         # comes near one of its vertices (Collider.near_surface).
+        # Roots are handled as components (3, C) here (long contiguous passes).
         self.cand = []
-        self.boxes = []
+        self._near_roots = []  # per collider: (roots in its box, their grid coords)
+        rootsT = self.roots.T
         for c, off in cols:
             lo, hi = c.bounds_world(off)
-            self.boxes.append((lo, hi))
-            gap = np.maximum(lo - self.roots, 0) + np.maximum(self.roots - hi, 0)
-            cand = np.einsum("ij,ij->i", gap, gap) <= self.curve_len**2
+            in_box = None
+            for i in range(3):
+                g = np.maximum(lo[i] - rootsT[i], 0)
+                g += np.maximum(rootsT[i] - hi[i], 0)
+                in_box = g == 0 if in_box is None else in_box & (g == 0)
+                if i == 0:
+                    gg = g * g
+                else:
+                    gg += g * g
+            cand = gg <= self.curve_len**2
             w = np.flatnonzero(cand)
-            cand[w] = c.near_surface(self.roots[w], self.curve_len[w], off)
+            q = c.grid_coords(rootsT[:, w])
+            cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
             self.cand.append(cand)
+            self._near_roots.append((w, q, in_box))
         if self.cand:
             self.cand_any = np.logical_or.reduce(self.cand)
         else:
             self.cand_any = np.zeros(solver.n_curves, bool)
         self.soft = s.mode == "soft"
 
-    def root_in_box(self, box):
-        lo, hi = box
-        return np.all((self.roots >= lo) & (self.roots <= hi), axis=1)
+    def roots_inside(self, k, enabled):
+        """Enabled curves whose root is inside collider ``k`` (paper 3.1: pinch)."""
+        c, off = self.cols[k]
+        inside = np.zeros(self.sv_.n_curves, bool)
+        if not c.detects_pinch:
+            return inside
+        w, q, in_box = self._near_roots[k]
+        # roots in the box have a gap of 0: they are among w
+        sel = np.flatnonzero((enabled & in_box)[w])
+        if len(sel):
+            r = w[sel]
+            inside[r[c.contains_grid(self.roots[r], q[:, sel], off)]] = True
+        return inside
 
     # ------------------------------------------------------------ frames
     def load_state(self):
@@ -220,7 +263,7 @@ class StepContext:
         ns, n = self.sv_._ns, len(idx)
         root = self.roots[idx]
         if quat is not None:
-            v = self.Dseg.reshape(-1, ns, 3)[idx].astype(np.float64)
+            v = self.D3[idx].astype(np.float64)
             v = rot.quat_rotate(quat, v.reshape(-1, 3)).reshape(n, ns, 3)
             end = (np.cumsum(v, axis=1) + root[:, None, :]).astype(self.out_dtype)
             end = end.astype(np.float64)
@@ -490,7 +533,7 @@ class StepContext:
         components, shape (3, ns, n): elementwise work on them runs over long
         contiguous rows instead of rows of 3."""
         ns = self.sv_._ns
-        g = self.Dseg.reshape(-1, ns, 3)[idx]
+        g = self.D3[idx]
         out = np.empty((3, ns, len(idx)))
         for i in range(3):
             out[i] = g[..., i].T
@@ -498,4 +541,7 @@ class StepContext:
 
     def seg_in(self, seg):
         """Input segment vectors (float64) of segment ids ``seg``."""
+        if self.Dseg is None:
+            ns = self.sv_._ns
+            return self._Dflat[seg + seg // ns].astype(np.float64)
         return self.Dseg[seg].astype(np.float64)
