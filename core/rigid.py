@@ -27,18 +27,7 @@ def solve(ctx, idx, status):
     far = idx[~ctx.cand_any[idx]]
     act = near[ctx.active[near]]  # rotated curves near a collider
     new = near[~ctx.active[near]]  # unrotated: their segments are the input's
-    # 1. Rotated curves near a collider: their recovery step is tested first
-    #    (one ray query); only those it would make collide are tested at their
-    #    current angle, to tell a blocked recovery from a new collision.
-    batch = RigidBatch(ctx, act)
-    th0 = angle[act].copy()
-    th1 = recovery_step(ctx, act)
-    moving = th1 < th0
-    hit_step = batch.hits(np.arange(len(act)), np.where(moving, th1, th0))
-    hit_act = hit_step & ~moving  # colliding at the current angle
-    again = np.flatnonzero(moving & hit_step)
-    hit_act[again] = batch.hits(again, th0[again])
-    blocked = moving & hit_step & ~hit_act
+    # 1. Unrotated curves near a collider: tested at their input shape.
     hit_new = np.zeros(len(new), bool)
     if len(new):
         o, d, seg, rep, starts = ctx.input_rays(new)
@@ -49,34 +38,56 @@ def solve(ctx, idx, status):
     if len(cn):  # first hit: choose the axis (kept until recovered)
         ctx.axis[cn] = ctx.new_axes(cn, *ctx.input_rays(cn)[:2], *ctx.segments(cn)[1:])
         ctx.active[cn] = True
+    # One batch for the rotated curves (items 0..len(act)-1) and the new
+    # colliding ones, so that every search below is one ray query per round.
+    batch = RigidBatch(ctx, np.concatenate([act, cn]))
+    # 2. Rotated curves near a collider: their recovery step is tested first
+    #    (one ray query); only those it would make collide are tested at their
+    #    current angle, to tell a blocked recovery from a new collision.
+    th0 = angle[act].copy()
+    th1 = recovery_step(ctx, act)
+    moving = th1 < th0
+    hit_step = batch.hits(np.arange(len(act)), np.where(moving, th1, th0))
+    hit_act = hit_step & ~moving  # colliding at the current angle
+    again = np.flatnonzero(moving & hit_step)
+    hit_act[again] = batch.hits(again, th0[again])
+    blocked = moving & hit_step & ~hit_act
 
-    # 2. Collision: the smallest clearing angle above the current one.
+    # 3. Collision: the smallest clearing angle above the current one.
     cc = act[hit_act]
     if len(cc):  # first probe: lift the current shape above the tangent plane
         o, d, _, rep, starts = ctx.deform(cc, angle=angle[cc], axis=ctx.axis[cc])
         k, point, push = ctx.first_hit_details(cc, o, d, rep, starts)
         g = ctx._plane_guess(cc, o + d, rep, starts, point, push, ctx.axis[cc])
         ctx.guess[cc] = np.where(k >= 0, g, ctx.guess[cc])
-    collide(ctx, batch, np.flatnonzero(hit_act), status)
-    if len(cn):
-        collide(ctx, RigidBatch(ctx, cn), np.arange(len(cn)), status)
-
-    # 3. Recovery toward the (plasticity) target, stopping before contact.
+    colliding = np.concatenate([np.flatnonzero(hit_act), len(act) + np.arange(len(cn))])
+    # 4. Recovery toward the (plasticity) target, stopping before contact:
+    #    blocked steps are bisected in the same search rounds as the collisions.
     items = np.flatnonzero(~hit_act)
-    recover(ctx, act[items], th0[items], th1[items], blocked[items], status, batch, items)
+    b = np.flatnonzero(blocked[items])
+    p = ctx.prec
+    lo_th, hi_th = th1[items[b]], th0[items[b]]
+    K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
+    k_rec = collide(ctx, batch, colliding, status, (items[b], lo_th, hi_th, K))
+    recover(ctx, act[items], th0[items], th1[items], b, k_rec, status)
     rec = far[ctx.active[far]]  # far from every collider: nothing to check
-    recover(ctx, rec, angle[rec].copy(), recovery_step(ctx, rec), None, status, None, None)
+    recover(ctx, rec, angle[rec].copy(), recovery_step(ctx, rec), None, None, status)
     release(ctx, idx)
 
 
-def collide(ctx, batch, items, status):
-    """Resolve colliding curves ``batch.curves[items]`` (paper 3.2.1)."""
-    if len(items) == 0:
-        return
+def collide(ctx, batch, items, status, bisect=None):
+    """Resolve colliding curves ``batch.curves[items]`` (paper 3.2.1).
+
+    ``bisect`` (batch items, low angle, high angle, steps): recovery steps to
+    bisect in the same search rounds (see :func:`search_angles`); their
+    results are returned.
+    """
     p, angle = ctx.prec, ctx.angle
     c = batch.curves[items]
     th0 = angle[c]
-    k = search_angles(ctx, batch, items, th0, ctx.guess[c])
+    k, k_rec = search_angles(ctx, batch, items, th0, ctx.guess[c], bisect)
+    if len(items) == 0:
+        return k_rec
     if ctx.s.mode == "bend":
         # Bending turns the root segment by only 1/n of the angle: curves
         # hit near the root that bending cannot clear turn at the root (as
@@ -87,7 +98,7 @@ def collide(ctx, batch, items, status):
             ctx.sv_._stiff[cr] = True
             # seed: the Stiff estimate, plus about the mean bend already taken
             seed = ctx.guess_stiff[cr] + 0.5 * th0[retry]
-            k2 = search_angles(
+            k2, _ = search_angles(
                 ctx, RigidBatch(ctx, cr), np.arange(len(cr)), np.zeros(len(cr)), seed
             )
             ctx.sv_._stiff[cr[k2 < 0]] = False
@@ -105,6 +116,7 @@ def collide(ctx, batch, items, status):
     angle[bad] = th0[~ok]
     fresh = bad[ctx.sv_._angle[bad] == 0]
     ctx.active[fresh] = ctx.sv_._active[fresh]
+    return k_rec
 
 
 def recovery_step(ctx, rec):
@@ -125,27 +137,21 @@ def recovery_step(ctx, rec):
     return np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
 
 
-def recover(ctx, rec, th0, th1, blocked, status, batch, items):
+def recover(ctx, rec, th0, th1, b, k, status):
     """Turn clear curves ``rec`` from ``th0`` to their recovery step ``th1``.
 
-    Where the step would collide (``blocked``; ``batch.curves[items]`` are
-    ``rec``) the largest safe step is bisected instead: recovery stops where
-    the curve would collide again.
+    Where the step would collide (``rec[b]``) the largest safe step, ``k``
+    precision steps above ``th1`` (bisected by :func:`collide`), is taken
+    instead: recovery stops where the curve would collide again.
     """
     if len(rec) == 0:
         return
     p = ctx.prec
     th1 = th1.copy()
-    b = np.flatnonzero(blocked) if blocked is not None else np.zeros(0, np.int64)
+    if b is None:
+        b = np.zeros(0, np.int64)
     if len(b):
-        lo_th, hi_th = th1[b], th0[b]
-        K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
-
-        def test(it, ks):
-            return ~batch.hits(items[b[it]], np.minimum(lo_th[it] + ks * p, hi_th[it]))
-
-        k = gallop_bisect(len(b), test, K, lo=np.zeros(len(b)), hi=K, width=_WIDTH)
-        th1[b] = np.minimum(lo_th + k * p, hi_th)
+        th1[b] = np.minimum(th1[b] + k * p, th0[b])
     ctx.angle[rec] = th1
     # Back at exactly the input shape counts as FREE, not RECOVERING.
     st = np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE)
@@ -154,7 +160,7 @@ def recover(ctx, rec, th0, th1, blocked, status, batch, items):
     status[rec] = np.maximum(status[rec], st)
 
 
-def search_angles(ctx, batch, items, th0, guess=None):
+def search_angles(ctx, batch, items, th0, guess=None, bisect=None):
     """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
 
     ``guess`` (radians, per item) is an estimate of the increment (the
@@ -162,23 +168,32 @@ def search_angles(ctx, batch, items, th0, guess=None):
     round probes 0.8, 1, 1.25 and 1.6 times it, and the search continues
     from the bracket that gives (bisection) or from its top (gallop).
 
+    ``bisect`` (items ``bi``, angles ``lo``, ``hi``, steps ``K``): largest
+    clear angle ``min(lo + k p, hi)``, ``k`` in ``[0, K]``, of
+    ``batch.curves[bi]`` (``lo`` colliding, ``hi`` clear): a bisection run
+    in the same rounds (one ray query per round for both).
+
     Returns
     -------
-    (n,) int
+    k : (n,) int
         Steps ``k`` (angle ``min(th0 + k p, max_angle)``), -1 where no
         angle up to ``max_angle`` clears the curve.
+    k_bisect : (m,) int
+        The bisected steps (empty without ``bisect``).
     """
     p = ctx.prec
     n = len(items)
     kmax = np.maximum(np.ceil((ctx.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
+    base, cap = th0, np.full(n, ctx.max_angle)
 
     def test(it, ks):
-        return ~batch.hits(items[it], np.minimum(th0[it] + ks * p, ctx.max_angle))
+        return ~batch.hits(all_items[it], np.minimum(base[it] + ks * p, cap[it]))
 
+    all_items = items
     lo = np.zeros(n, np.int64)
     hi = np.full(n, -1, np.int64)
     stride = None
-    if guess is not None:
+    if guess is not None and n:
         # One round of probes spread around the guess; it leaves a bracket
         # to bisect, or a floor to gallop on from with a guess-sized stride.
         kg = np.clip(np.rint(guess / p).astype(np.int64), 1, np.maximum(kmax, 1))
@@ -194,7 +209,19 @@ def search_angles(ctx, batch, items, th0, guess=None):
         lo[it[anyg]] = np.where(first > 0, probes[rows, np.maximum(first - 1, 0)], 0)[anyg]
         lo[it[~anyg]] = probes[~anyg, -1]
         stride = np.maximum(kg // 2, 1)
-    return gallop_bisect(n, test, kmax, lo=lo, hi=hi, stride=stride, width=_WIDTH)
+    if bisect is not None and len(bisect[0]):
+        bi, lo_th, hi_th, K = bisect
+        m = len(bi)
+        all_items = np.concatenate([items, bi])
+        base = np.concatenate([th0, lo_th])
+        cap = np.concatenate([cap, hi_th])
+        kmax = np.concatenate([kmax, K])
+        lo = np.concatenate([lo, np.zeros(m, np.int64)])
+        hi = np.concatenate([hi, K])
+        stride = np.concatenate([np.ones(n, np.int64) if stride is None else stride,
+                                 np.ones(m, np.int64)])
+    k = gallop_bisect(len(all_items), test, kmax, lo=lo, hi=hi, stride=stride, width=_WIDTH)
+    return k[:n], k[n:]
 
 
 def release(ctx, idx):
