@@ -28,13 +28,7 @@ def solve(ctx, idx, status):
     act = near[ctx.active[near]]  # rotated curves near a collider
     new = near[~ctx.active[near]]  # unrotated: their segments are the input's
     # 1. Unrotated curves near a collider: tested at their input shape.
-    hit_new = np.zeros(len(new), bool)
-    if len(new):
-        o, d, seg, rep, starts = ctx.input_rays(new)
-        hit_new = np.logical_or.reduceat(
-            ctx.hits(new, o, d, rep, ctx.root_mask(len(o), starts)), starts
-        )
-    cn = new[hit_new]
+    cn = new[ctx.input_hits(new)]
     if len(cn):  # first hit: choose the axis (kept until recovered)
         ctx.axis[cn] = ctx.new_axes(cn, *ctx.input_rays(cn)[:2], *ctx.segments(cn)[1:])
         ctx.active[cn] = True
@@ -387,15 +381,8 @@ class RigidBatch:
             o -= bk * d
             d *= gr
             k = len(it)
-            h = c.segment_hits_local(_rows32(o), _rows32(d), off, ctx.threads)
+            h = c.segment_hits_local(rot.rows32(o), rot.rows32(d), off, ctx.threads)
             ctx.n_rays += len(h)
             hit[sub] |= h.reshape(ns, k).any(axis=0)
         return hit
 
-
-def _rows32(x):
-    """Component arrays (3, ...) as float32 rays (k, 3), in ``x[0]``'s order."""
-    out = np.empty(x.shape[1:] + (3,), np.float32)
-    for i in range(3):
-        out[..., i] = x[i]
-    return out.reshape(-1, 3)

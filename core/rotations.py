@@ -151,6 +151,15 @@ def aos(v, out=None):
     return out
 
 
+def rows32(x):
+    """Component arrays (3, ...) as float32 rows (k, 3) (rays for the tracer),
+    in the order of ``x[0]``'s elements."""
+    out = np.empty(x.shape[1:] + (3,), np.float32)
+    for i in range(3):
+        out[..., i] = x[i]
+    return out.reshape(-1, 3)
+
+
 def rotate_between(v, a, b):
     """Apply the minimal rotation taking unit ``a`` to unit ``b`` to ``v`` (rows)."""
     w = np.cross(a, b)

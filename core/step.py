@@ -469,6 +469,59 @@ class StepContext:
         ss = self.sv_._seg_start[seg]
         return self.points[ss].astype(np.float64), self.seg_in(seg), seg, rep, starts
 
+    def input_hits(self, idx):
+        """Does the *input* curve ``idx`` hit a collider (per curve)?
+
+        The same rays as :meth:`hits` on :meth:`input_rays`; for uniform CV
+        counts built as (3, ns, n) components straight in each collider's
+        space, and only for curves whose input points come near its surface
+        (a ball about their bounding box, :meth:`Collider.near_surface`:
+        curves it leaves out cannot touch the mesh).
+        """
+        ns, n = self.sv_._ns, len(idx)
+        if not ns or n == 0:
+            if n == 0:
+                return np.zeros(0, bool)
+            o, d, seg, rep, starts = self.input_rays(idx)
+            return np.logical_or.reduceat(
+                self.hits(idx, o, d, rep, self.root_mask(len(o), starts)), starts
+            )
+        P = self.points.reshape(-1, ns + 1, 3)[idx]  # (n, ns + 1, 3), input dtype
+        p = np.empty((3, ns + 1, n))
+        for i in range(3):
+            p[i] = P[..., i].T
+        d = self.seg_soa(idx)  # the input dtype's differences, as in seg_in
+        o = p[:, :ns]
+        sq = d[0] * d[0]
+        sq += d[1] * d[1]
+        sq += d[2] * d[2]
+        back, grow = self.ray_growth(np.sqrt(sq, out=sq), (np.arange(ns) == 0)[:, None])
+        o = o - back * d
+        d *= grow
+        # bounding balls of the input curves (world)
+        lo, hi = p.min(axis=1), p.max(axis=1)
+        centre = 0.5 * (lo + hi)
+        half = hi - lo
+        radius = 0.5 * np.sqrt(half[0] ** 2 + half[1] ** 2 + half[2] ** 2)
+        radius = radius * (1.0 + 1e-6) + 2.0 * self.eps_abs
+        hit = np.zeros(n, bool)
+        for (c, off), cand in zip(self.cols, self.cand, strict=True):
+            w = np.flatnonzero(cand[idx])
+            if len(w) == 0:
+                continue
+            w = w[c.near_surface_grid(c.grid_coords(centre[:, w]), radius[w], off)]
+            self.n_rays += len(w) * ns
+            if len(w) == 0:
+                continue
+            A, b = c.local_map()
+            o_lo = rot.apply_soa(A, o[:, :, w])
+            for i in range(3):
+                o_lo[i] += b[i]
+            d_lo = rot.apply_soa(A, d[:, :, w])
+            h = c.segment_hits_local(rot.rows32(o_lo), rot.rows32(d_lo), off, self.threads)
+            hit[w] |= h.reshape(ns, len(w)).any(axis=0)
+        return hit
+
     def put_to_growth_surface(self, pin):
         """Rotate pinched curves down onto the growth surface (paper 3.2.5)."""
         _, n_g = self.growth.closest_points(self.roots[pin])
@@ -545,3 +598,4 @@ class StepContext:
             ns = self.sv_._ns
             return self._Dflat[seg + seg // ns].astype(np.float64)
         return self.Dseg[seg].astype(np.float64)
+
