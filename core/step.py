@@ -272,14 +272,7 @@ class StepContext:
             o[:, 1:] = end[:, :-1]
             d = end - o
         else:
-            a = self.bend_weights(idx) * angle
-            v = rot.rotate_soa(self.seg_soa(idx), axis, a)
-            scale = self.shrink_scale(a)
-            if scale is not None:
-                v *= scale
-            end = rot.cumsum_soa(v)
-            end += root.T[:, None, :]
-            end = end.astype(self.out_dtype).astype(np.float64)
+            end = self._ends_soa(idx, angle, axis).astype(np.float64)
             o = np.empty_like(end)
             o[:, 0] = root.T
             o[:, 1:] = end[:, :-1]
@@ -288,6 +281,18 @@ class StepContext:
         seg = (idx[:, None] * ns + np.arange(ns)).ravel()
         rep = np.repeat(np.arange(n), ns)
         return o.reshape(-1, 3), d.reshape(-1, 3), seg, rep, np.arange(n) * ns
+
+    def _ends_soa(self, idx, angle, axis):
+        """Segment ends of the Stiff/Bend deformed uniform curves ``idx``,
+        (3, ns, n) components in the output dtype (as :meth:`deform`)."""
+        a = self.bend_weights(idx) * angle
+        v = rot.rotate_soa(self.seg_soa(idx), axis, a)
+        scale = self.shrink_scale(a)
+        if scale is not None:
+            v *= scale
+        end = rot.cumsum_soa(v)
+        end += self.roots[idx].T[:, None, :]
+        return end.astype(self.out_dtype)
 
     def bend_weights(self, idx):
         """(ns, n) fraction of a curve's angle turning each segment (uniform
@@ -566,7 +571,14 @@ class StepContext:
     def output(self):
         out = self.points.copy()
         idx = np.flatnonzero(self.active)
-        if len(idx):
+        ns = self.sv_._ns
+        if len(idx) and ns and not self.soft and self.out_dtype == np.float32:
+            # The points written are the deformed segments' float32 ends
+            # (what ``o + d`` of :meth:`deform` rounds back to).
+            out3 = out.reshape(-1, ns + 1, 3)
+            end = self._ends_soa(idx, self.angle[idx], self.axis[idx])
+            out3[idx, 1:] = rot.aos(end)
+        elif len(idx):
             if self.soft:
                 seg, _, _ = self.segments(idx)
                 o, d, seg, rep, starts = self.deform(idx, quat=self.quat[seg])
@@ -574,7 +586,6 @@ class StepContext:
                 o, d, seg, rep, starts = self.deform(
                     idx, angle=self.angle[idx], axis=self.axis[idx]
                 )
-            ns = self.sv_._ns
             if ns:  # uniform CV count: write whole curves as blocks
                 out.reshape(-1, ns + 1, 3)[idx, 1:] = (o + d).reshape(-1, ns, 3)
             else:
