@@ -232,6 +232,34 @@ def rotation_axis(c, d):
     return a
 
 
+def _dot3(a, b):
+    """Row dots of component arrays (3, k): the sums of :func:`dot`."""
+    out = a[0] * b[0]
+    out += a[1] * b[1]
+    out += a[2] * b[2]
+    return out
+
+
+def _norm3(v):
+    """Row lengths of component arrays (3, k), as ``np.linalg.norm``."""
+    return np.sqrt(_dot3(v, v))
+
+
+def _unit3(v, n=None):
+    """:func:`normalize` on component arrays (3, k); zero rows stay zero."""
+    n = _norm3(v) if n is None else n
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
+
+
+def _cross3(a, b):
+    """``np.cross`` on component arrays (3, k) (the same products)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    for i, (j, k) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.multiply(a[j], b[k], out=out[i])
+        out[i] -= a[k] * b[j]
+    return out
+
+
 def curve_frames(t, u_shape, shape_ratio, prev_ref=None):
     """Per-curve orthonormal frames, rows (e0, e1, e2), shape (k, 3, 3).
 
@@ -244,8 +272,8 @@ def curve_frames(t, u_shape, shape_ratio, prev_ref=None):
 
     Parameters
     ----------
-    t : (k, 3) unit root segment directions.
-    u_shape : (k, 3) tip minus root, made perpendicular to ``t``.
+    t : (3, k) components of the unit root segment directions.
+    u_shape : (3, k) tip minus root, made perpendicular to ``t``.
     shape_ratio : (k,) ``|u_shape|`` over the curve length.
     prev_ref : (k, 3, 3) or None
         The previous step's references (rows ``t``, reference, their cross);
@@ -256,24 +284,45 @@ def curve_frames(t, u_shape, shape_ratio, prev_ref=None):
     frames : (k, 3, 3)
     ref : (k, 3, 3)
         The references to pass as ``prev_ref`` next time.
+    e1 : (3, k)
+        The frames' second rows as components (``e0`` is ``t``).
+
+    The work is done on component arrays with the arithmetic of
+    :func:`normalize`, :func:`dot`, :func:`rotate_between` and ``np.cross``.
     """
     if prev_ref is None:
-        carried = stable_perpendicular(t)
+        carried = np.ascontiguousarray(stable_perpendicular(t.T).T)
     else:
-        carried = rotate_between(prev_ref[:, 1], prev_ref[:, 0], t)
-        carried = carried - dot(carried, t)[:, None] * t
-        bad = np.linalg.norm(carried, axis=1) < 0.5
-        carried = normalize(carried)
+        a = np.ascontiguousarray(prev_ref[:, 0].T)
+        v = np.ascontiguousarray(prev_ref[:, 1].T)
+        # rotate_between(v, a, t)
+        w = _cross3(a, t)
+        c = _dot3(a, t)
+        kk = 1.0 / np.maximum(1.0 + c, 1e-12)
+        carried = v * c
+        carried += _cross3(w, v)
+        carried += w * (_dot3(w, v) * kk)
+        carried = carried - _dot3(carried, t) * t
+        n = _norm3(carried)
+        bad = n < 0.5
+        carried = _unit3(carried, n)
         if bad.any():
-            carried[bad] = stable_perpendicular(t[bad])
+            carried[:, bad] = stable_perpendicular(t[:, bad].T).T
     alpha = np.clip(
         (shape_ratio - tol.FRAME_SHAPE_LO) / (tol.FRAME_SHAPE_HI - tol.FRAME_SHAPE_LO), 0.0, 1.0
     )
-    e1 = alpha[:, None] * normalize(u_shape) + (1.0 - alpha[:, None]) * carried
-    e1 = e1 - dot(e1, t)[:, None] * t
-    bad = np.linalg.norm(e1, axis=1) < 1e-6
-    e1 = normalize(e1)
-    e1[bad] = carried[bad]
-    frames = np.stack([t, e1, np.cross(t, e1)], axis=1)
-    ref = np.stack([t, carried, np.cross(t, carried)], axis=1)
-    return frames, ref
+    e1 = alpha * _unit3(u_shape)
+    e1 += (1.0 - alpha) * carried
+    e1 = e1 - _dot3(e1, t) * t
+    n = _norm3(e1)
+    bad = n < 1e-6
+    e1 = _unit3(e1, n)
+    e1[:, bad] = carried[:, bad]
+    k = t.shape[1]
+    frames = np.empty((k, 3, 3))
+    ref = np.empty((k, 3, 3))
+    for out, e in ((frames, e1), (ref, carried)):
+        out[:, 0] = t.T
+        out[:, 1] = e.T
+        out[:, 2] = _cross3(t, e).T
+    return frames, ref, e1

@@ -153,9 +153,9 @@ class StepContext:
         self.B = np.zeros((sv.n_curves, 3, 3))  # this step's frames (rows in use only)
         self.ref = None
         if len(idx):
-            B, self.ref = self._frames(idx, sv._frame[idx])
+            B, self.ref, rows = self._frames(idx, sv._frame[idx])
             self.B[idx] = B
-            self.axis[idx] = np.einsum("kji,kj->ki", B, sv._axis_lo[idx])
+            self.axis[idx] = self._from_frame(rows, sv._axis_lo[idx])
             if self.soft:
                 seg, rep, _ = self.segments(idx)
                 self.quat[seg] = self._quat_to(B[rep], self.quat[seg], to_world=True)
@@ -168,13 +168,30 @@ class StepContext:
         return np.concatenate([q[:, :1], v], axis=1)
 
     def _frames(self, idx, prev):
+        """Local frames of curves ``idx`` (:func:`rot.curve_frames`), computed
+        on component arrays; also returns their rows as components (3, 3, n)."""
         sv = self.sv_
         first = sv._soff[idx]
-        t = rot.normalize(self.seg_in(first))
-        chord = self.points[sv._off[idx + 1] - 1] - self.roots[idx]
-        u = chord - rot.dot(chord, t)[:, None] * t
-        ratio = np.linalg.norm(u, axis=1) / self.curve_len[idx]
-        return rot.curve_frames(t, u, ratio, prev)
+        t = rot._unit3(np.ascontiguousarray(self.seg_in(first).T))
+        rootT = self.roots[idx].T
+        chord = np.empty((3, len(idx)))
+        last = self.points[sv._off[idx + 1] - 1]
+        for i in range(3):
+            np.subtract(last[:, i], rootT[i], out=chord[i])
+        u = chord - rot._dot3(chord, t) * t
+        ratio = rot._norm3(u) / self.curve_len[idx]
+        B, ref, e1 = rot.curve_frames(t, u, ratio, prev)
+        return B, ref, (t, e1, rot._cross3(t, e1))
+
+    @staticmethod
+    def _from_frame(rows, a):
+        """World vectors of local ``a`` (n, 3) in frames given as row
+        components (= einsum("kji,kj->ki", B, a)), (n, 3)."""
+        e0, e1, e2 = rows
+        out = e0 * a[:, 0]
+        out += e1 * a[:, 1]
+        out += e2 * a[:, 2]
+        return out.T
 
     def store_state(self):
         sv = self.sv_
@@ -187,14 +204,19 @@ class StepContext:
         frame[dropped] = 0.0
         fresh = idx[~sv._active[idx]]
         if len(fresh):
-            self.B[fresh], frame[fresh] = self._frames(fresh, None)
+            self.B[fresh], frame[fresh], _ = self._frames(fresh, None)
         B = self.B
         sv._angle = self.angle
         sv._angle_max = self.angle_max
         sv._active = self.active
         axis_lo = np.zeros_like(self.axis)
         if len(idx):
-            axis_lo[idx] = np.einsum("kij,kj->ki", B[idx], self.axis[idx])
+            Bi, ax = B[idx], self.axis[idx]  # = einsum("kij,kj->ki", Bi, ax)
+            for i in range(3):
+                a = Bi[:, i, 0] * ax[:, 0]
+                a += Bi[:, i, 1] * ax[:, 1]
+                a += Bi[:, i, 2] * ax[:, 2]
+                axis_lo[idx, i] = a
         sv._axis_lo = axis_lo
         sv._hold &= self.active
         if self.soft:
