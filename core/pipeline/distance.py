@@ -220,11 +220,14 @@ def _box_cells(ilo, ihi):
 class _LowerBoundField:
     """Conservative distance field of a mesh: a lower bound of the distance anywhere.
 
-    Every cell touched by a triangle's bounding box is *occupied*; the exact
-    squared distance (in cells) from every cell to the nearest occupied one
-    is a separable min-plus transform along x, y and z. A point in cell
-    ``c`` is then at least ``(sqrt(D2[c]) - sqrt(3)) * h`` from the mesh
-    (cell centres apart minus two half diagonals). A point ``q`` outside
+    Every cell touched by a triangle's bounding box is *occupied*. A point
+    in cell ``c`` and a mesh point in occupied cell ``c'`` are at least
+    ``(|c_a - c'_a| - 1)+ * h`` apart along every axis ``a``, so
+    ``D2[c] = min_c' sum_a ((|c_a - c'_a| - 1)+)^2`` (a separable min-plus
+    transform along x, y and z) gives the lower bound ``sqrt(D2[c]) * h``
+    (at least as tight as centre distance minus a cell diagonal). With a
+    ``window`` of ``w`` cells, only distances up to ``w`` cells are kept
+    (beyond, ``w`` cells is the bound). A point ``q`` outside
     the grid's box is projected onto it (``q'``): for any mesh point ``p``
     in the box, the angle at ``q'`` is at least 90 degrees, so
     ``|q - p|^2 >= |q - q'|^2 + |q' - p|^2``.
@@ -253,22 +256,23 @@ class _LowerBoundField:
             D2[cell[:, 0], cell[:, 1], cell[:, 2]] = 0.0
             for axis in range(3):
                 D2 = _minplus_window(D2, axis, window)
-            self.D = np.sqrt(np.minimum(D2, np.float32((window + 1) ** 2)))
+            self.D = np.sqrt(np.minimum(D2, np.float32(window**2)))
 
     def __call__(self, q):
         """(k,) lower bounds of the distance of points ``q`` (k, 3) to the mesh."""
         qc = np.clip(q, self.glo, self.ghi)
         out = np.linalg.norm(q - qc, axis=1)
         c = np.clip(np.floor((qc - self.glo) / self.h).astype(np.int64), 0, self.dims - 1)
-        inside = (self.D[c[:, 0], c[:, 1], c[:, 2]] - np.sqrt(3.0)) * self.h
+        inside = self.D[c[:, 0], c[:, 1], c[:, 2]] * self.h
         # p in the box and q' the projection of q: the angle at q' is >= 90 degrees
-        return np.sqrt(out**2 + np.maximum(inside, 0.0) ** 2)
+        return np.sqrt(out**2 + inside.astype(np.float64) ** 2)
 
 
 def _minplus(D2):
-    """``out[i] = min_j D2[j] + (i - j)^2`` along axis 0 (chunked over the others)."""
+    """``out[i] = min_j D2[j] + ((|i - j| - 1)+)^2`` along axis 0 (chunked over the others)."""
     n = D2.shape[0]
-    sq = (np.arange(n)[:, None] - np.arange(n)[None, :]).astype(np.float64) ** 2
+    sq = np.maximum(np.abs(np.arange(n)[:, None] - np.arange(n)[None, :]) - 1, 0)
+    sq = sq.astype(np.float64) ** 2
     flat = D2.reshape(n, -1)
     out = np.empty_like(flat)
     step = max(1, 4_000_000 // (n * n))
@@ -278,10 +282,10 @@ def _minplus(D2):
 
 
 def _minplus_window(D2, axis, w):
-    """``out[i] = min_{|i - j| <= w} D2[j] + (i - j)^2`` along ``axis``.
+    """``out[i] = min_{|i - j| <= w} D2[j] + ((|i - j| - 1)+)^2`` along ``axis``.
 
-    Overestimates only values above ``w^2``: the caller clamps to
-    ``(w + 1)^2`` (a nearest cell outside the window is farther than that).
+    Overestimates only values above ``w^2``: the caller clamps to ``w^2``
+    (a cell outside the window costs at least that).
     """
     out = D2.copy()
     n = D2.shape[axis]
@@ -289,7 +293,7 @@ def _minplus_window(D2, axis, w):
         a = [slice(None)] * 3
         b = [slice(None)] * 3
         a[axis], b[axis] = slice(s, None), slice(None, -s)
-        s2 = np.float32(s * s)
+        s2 = np.float32((s - 1) ** 2)
         np.minimum(out[tuple(a)], D2[tuple(b)] + s2, out=out[tuple(a)])
         np.minimum(out[tuple(b)], D2[tuple(a)] + s2, out=out[tuple(b)])
     return out
@@ -330,6 +334,9 @@ class _MeshIndex:
         self.centroid = T.mean(1)
         self.radius = np.linalg.norm(T - self.centroid[:, None], axis=2).max(1)
         self.eps = 1e-12 * (self.size + float(np.abs(self.lo).max()))  # rounding slack
+        n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+        nl = np.linalg.norm(n, axis=1, keepdims=True)
+        self.normal = np.where(nl > 0, n / np.where(nl > 0, nl, 1.0), 0.0)
         self._grids = {}
         self._fields = {}
 
@@ -369,7 +376,7 @@ class _MeshIndex:
         q = (A[:, None, :] + (B - A)[:, None, :] * t[None, :, None]).reshape(-1, 3)
         near = self.field(near=True)
         lb = near(q)
-        reach = (_NEAR_WINDOW + 1 - np.sqrt(3.0)) * near.h
+        reach = _NEAR_WINDOW * near.h
         if cap is None or cap > reach:
             lb = np.maximum(lb, self.field()(q))
             # coarser fields around the mesh for the points outside its box
@@ -564,16 +571,30 @@ def _search(A, B, ix, g, idx, ilo, ihi, rho, best, upper):
 
 
 def _pairs(A, B, ix, T, si, ti, rho, best, upper):
-    """Bounding-sphere cull, then the exact distance of (segment, triangle) pairs."""
+    """Exact distances of (segment, triangle) pairs that can matter, into ``best``.
+
+    Each segment's nearest-centroid triangle is tested first (an upper
+    bound close to the distance); the other pairs are culled against
+    ``min(rho, best)`` by their triangle's bounding sphere, then by the
+    plane bound :func:`_plane_bound`. Culling never drops the closest
+    triangle when it is within ``rho`` (a hair of slack against rounding).
+    """
     if len(si) == 0:
         return
     dc = _point_segment(ix.centroid[ti], A[si], B[si])
     _min_into(upper, si, dc)
-    # (a hair of slack against rounding: never cull the closest triangle)
-    keep = dc - ix.radius[ti] * (1 + 1e-9) <= np.minimum(rho[si], upper[si]) + ix.eps
-    # and the nearest centroid of each segment, for a tight upper bound (next radius)
-    keep |= dc <= upper[si]
-    si, ti = si[keep], ti[keep]
+    first = dc <= upper[si]
+    _exact_pairs(A, B, T, si[first], ti[first], best)
+    keep = ~first
+    si, ti, dc = si[keep], ti[keep], dc[keep]
+    bound = np.minimum(rho[si], best[si]) + ix.eps
+    keep = dc - ix.radius[ti] * (1 + 1e-9) <= bound
+    si, ti, bound = si[keep], ti[keep], bound[keep]
+    keep = _plane_bound(A[si], B[si], ix, ti) <= bound
+    _exact_pairs(A, B, T, si[keep], ti[keep], best)
+
+
+def _exact_pairs(A, B, T, si, ti, best):
     if len(si) == 0:
         return
     m = len(T)
@@ -581,6 +602,29 @@ def _pairs(A, B, ix, T, si, ti, rho, best, upper):
     si, ti = pair // m, pair % m
     d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
     _min_into(best, si, d)
+
+
+def _plane_bound(a, b, ix, ti):
+    """Lower bound of the distance of segments ``[a, b]`` to triangles ``ti``.
+
+    With the triangle's unit normal ``n``, centroid ``c`` and radius ``r``:
+    a point ``q`` of the segment and ``p`` of the triangle are apart by at
+    least their height difference over the plane (0 if the segment crosses
+    it) and, in the plane, at least ``|q' - c| - r`` (``q'`` the projection);
+    both minimized over the segment separately.
+    """
+    n = ix.normal[ti]
+    c = ix.centroid[ti]
+    ua, ub = a - c, b - c
+    ha, hb = _dot(n, ua), _dot(n, ub)
+    h = np.where(ha * hb <= 0, 0.0, np.minimum(np.abs(ha), np.abs(hb)))
+    pa = ua - n * ha[:, None]
+    pb = pa - (ub - n * hb[:, None])  # pa - pb'
+    L2 = _dot(pb, pb)
+    t = np.clip(_dot(pa, pb) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    lat = np.linalg.norm(pa - pb * t[:, None], axis=1)
+    lat = np.maximum(lat - ix.radius[ti] * (1 + 1e-9), 0.0)
+    return np.sqrt(h * h + lat * lat) * (1 - 1e-9) - ix.eps
 
 
 def _min_into(out, i, v):
