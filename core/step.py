@@ -517,14 +517,6 @@ class StepContext:
         p = np.empty((3, ns + 1, n))
         for i in range(3):
             p[i] = P[..., i].T
-        d = self.seg_soa(idx)  # the input dtype's differences, as in seg_in
-        o = p[:, :ns]
-        sq = d[0] * d[0]
-        sq += d[1] * d[1]
-        sq += d[2] * d[2]
-        back, grow = self.ray_growth(np.sqrt(sq, out=sq), (np.arange(ns) == 0)[:, None])
-        o = o - back * d
-        d *= grow
         # bounding balls of the input curves (world)
         lo, hi = p.min(axis=1), p.max(axis=1)
         centre = 0.5 * (lo + hi)
@@ -532,6 +524,7 @@ class StepContext:
         radius = 0.5 * np.sqrt(half[0] ** 2 + half[1] ** 2 + half[2] ** 2)
         radius = radius * (1.0 + 1e-6) + 2.0 * self.eps_abs
         hit = np.zeros(n, bool)
+        root = (np.arange(ns) == 0)[:, None]
         for (c, off), cand in zip(self.cols, self.cand, strict=True):
             w = np.flatnonzero(cand[idx])
             if len(w) == 0:
@@ -540,11 +533,20 @@ class StepContext:
             self.n_rays += len(w) * ns
             if len(w) == 0:
                 continue
+            # the rays of :meth:`input_rays` grown by :meth:`extend`
+            d = self.seg_soa(idx[w])  # the input dtype's differences, as in seg_in
+            sq = d[0] * d[0]
+            sq += d[1] * d[1]
+            sq += d[2] * d[2]
+            back, grow = self.ray_growth(np.sqrt(sq, out=sq), root)
+            o = p[:, :ns, w]
+            o -= back * d
+            d *= grow
             A, b = c.local_map()
-            o_lo = rot.apply_soa(A, o[:, :, w])
+            o_lo = rot.apply_soa(A, o)
             for i in range(3):
                 o_lo[i] += b[i]
-            d_lo = rot.apply_soa(A, d[:, :, w])
+            d_lo = rot.apply_soa(A, d)
             h = c.segment_hits_local(rot.rows32(o_lo), rot.rows32(d_lo), off, self.threads)
             hit[w] |= h.reshape(ns, len(w)).any(axis=0)
         return hit
