@@ -87,3 +87,32 @@ def test_cached_inside_test_equals_parity(seed, offset):
     assert np.array_equal(col.contains(p, offset), col._parity(p, offset))
     col.vertices = V * 1.1  # deformation invalidates it
     assert np.array_equal(col.contains(p, offset), col._parity(p, offset))
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**31 - 1), offset=st.sampled_from([0.0, 0.05]))
+def test_input_curve_filter_equals_all_rays(seed, offset):
+    """Unrotated curves are only traced when their bounding ball comes near
+    the mesh (StepContext.input_hits): the same answers as tracing every
+    segment of every candidate."""
+    from core import Settings, Solver
+    from core.step import StepContext
+
+    rng = np.random.default_rng(seed)
+    V, F = ellipsoid()
+    M = matrix(rng)
+    col = Collider(V, F, matrix=M, offset=offset)
+    V_wo = V @ M[:3, :3].T + M[:3, 3]
+    C, cvs = 400, 5
+    roots = V_wo.mean(0) + rng.normal(size=(C, 1, 3)) * 1.2
+    steps = rng.normal(size=(C, cvs - 1, 3)) * 0.15
+    pts = np.concatenate([roots, roots + np.cumsum(steps, axis=1)], axis=1)
+    pts = pts.reshape(-1, 3).astype(np.float32)
+    solver = Solver(np.arange(0, C * cvs + 1, cvs), Settings())
+    ctx = StepContext(solver, pts, [(col, col.effective_offset(0.0))], None)
+    idx = np.flatnonzero(ctx.cand_any)
+    fast = ctx.input_hits(idx)
+    o, d, _, rep, starts = ctx.input_rays(idx)
+    every = np.logical_or.reduceat(ctx.hits(idx, o, d, rep, ctx.root_mask(len(o), starts)), starts)
+    assert np.array_equal(fast, every)
+    assert every.any() and (~every).any()
