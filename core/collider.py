@@ -143,6 +143,7 @@ class Collider:
         self.closed = self._is_closed(F, len(V))
         self._M, self._Minv = _as_matrix(matrix)
         self._version = 0
+        self._normals_cache = (None, 0, None)  # see _face_normals
         self._built = []  # [(key, backend, n_front_faces)], see _backend
         self.build_count = 0
         self._geometry_cache = None
@@ -278,8 +279,25 @@ class Collider:
     def _face_normals(self, prim, unit=True):
         """Face normals (right-handed, local space) of triangles ``prim``.
 
-        Computed on demand: only hit triangles ever need one.
+        Computed on demand: only hit triangles ever need one. Once the unit
+        normals asked for one shape of the collider add up to a quarter of
+        its faces (a rigid collider, frame after frame), all of them are
+        computed once and looked up (the same values).
         """
+        if unit:
+            key, asked, table = self._normals_cache
+            if key != self._version:
+                key, asked, table = self._version, 0, None
+            if table is None:
+                asked += len(prim)
+                if asked * 4 >= len(self._F):
+                    table = self._face_normals_of(np.arange(len(self._F)), True)
+            self._normals_cache = (key, asked, table)
+            if table is not None:
+                return table[prim]
+        return self._face_normals_of(prim, unit)
+
+    def _face_normals_of(self, prim, unit):
         V = self._V
         F = self._F[prim]
         a = V[F[:, 0]].astype(np.float64)
@@ -610,7 +628,8 @@ class Collider:
         if len(far):
             c = cell[far]
             val = inside[c[:, 0], c[:, 1], c[:, 2]]
-            unknown = np.unique(c[val < 0], axis=0)
+            flat = np.unique(np.ravel_multi_index(c[val < 0].T, inside.shape))
+            unknown = np.stack(np.unravel_index(flat, inside.shape), axis=1)
             if len(unknown):
                 centre_lo = lo + (unknown + 0.5) * h + self._center
                 centre_wo = apply(self._M[:3, :3], centre_lo) + self._M[:3, 3]
