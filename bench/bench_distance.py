@@ -77,14 +77,15 @@ def fur(V, n_curves, cvs, seed=1):
     return pts.reshape(-1, 3), off
 
 
-def scatter(V, n_curves, cvs, seed=2):
-    """Curves around the body: roots 0 to 4 segment lengths off the surface, random
-    directions (some cross close to it, most stay within a few segment lengths)."""
+def scatter(V, n_curves, cvs, seed=2, offset=(0.0, 4.0)):
+    """Curves around the body: roots ``offset`` (min, max) segment lengths off the
+    surface, random directions (some pass close to it, most stay within a few
+    segment lengths)."""
     rng = np.random.default_rng(seed)
     v = V[rng.choice(len(V) - 2, n_curves, replace=False)]
     n = v / np.linalg.norm(v, axis=1, keepdims=True)
     seg = LENGTH / (cvs - 1)
-    root = v + n * rng.uniform(0.0, 4 * seg, (n_curves, 1))
+    root = v + n * seg * rng.uniform(*offset, (n_curves, 1))
     d = rng.normal(0, 1, (n_curves, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     d = np.where((d * n).sum(1, keepdims=True) < -0.3, -d, d)  # mostly not into the body
@@ -112,6 +113,8 @@ def main(argv=None):
     ap.add_argument("--cvs", type=int, default=8)
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--scene", choices=["scatter", "fur"], default="scatter")
+    ap.add_argument("--offset", default="0,4",
+                    help="scatter: root distance range, in segment lengths (default 0,4)")
     ap.add_argument("--profile", choices=["capped", "uncapped"], default=None)
     args = ap.parse_args(argv)
 
@@ -120,11 +123,15 @@ def main(argv=None):
     M = np.eye(4)
     M[:3, :3] = R
     M[:3, 3] = [0.3, -0.2, 1.0]
-    pts, off = (scatter if args.scene == "scatter" else fur)(V, args.curves, args.cvs)
+    if args.scene == "scatter":
+        lo, hi = (float(x) for x in args.offset.split(","))
+        pts, off = scatter(V, args.curves, args.cvs, offset=(lo, hi))
+    else:
+        pts, off = fur(V, args.curves, args.cvs)
     pts = pts @ R.T + M[:3, 3]  # grown around the collider in world space
     cap = 0.2 * LENGTH
-    print(f"scene {args.scene}: collider {len(F)} triangles; curves: {args.curves} x {args.cvs} "
-          f"= {len(pts)} CVs; cap {cap}")
+    print(f"scene {args.scene} (offset {args.offset}): collider {len(F)} triangles; "
+          f"curves: {args.curves} x {args.cvs} = {len(pts)} CVs; cap {cap:g}")
 
     if args.profile:
         import cProfile

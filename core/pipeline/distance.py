@@ -163,16 +163,48 @@ class _TriGrid:
         self.big = np.flatnonzero(big)
         small = np.flatnonzero(~big)
         cell, owner = _box_cells(ilo[small], ihi[small])
+        # only the cells of the box that the triangle's plane crosses
+        hit = _plane_crosses_cells(T[small], cell, owner, self.glo, h)
+        cell, owner = cell[hit], owner[hit]
         keys = self.key(cell)
         order = np.argsort(keys, kind="stable")
         self.keys = keys[order]
         self.tris = small[owner[order]]
+        self._slabs(T)
         # dense lookup: triangles of cell key k are tris[start[k]:start[k + 1]]
         n_keys = int((self.dims + 2).prod())
         self.start = None
         if n_keys <= _DENSE_CELLS:
             self.start = np.zeros(n_keys + 1, np.int64)
             np.cumsum(np.bincount(self.keys, minlength=n_keys), out=self.start[1:])
+
+    def _slabs(self, T):
+        """Per occupied cell, a slab holding its triangles: ``a <= n . p <= b``.
+
+        ``n`` is the cell's mean triangle normal (unit, or 0); ``a``/``b`` the
+        range of ``n . v`` over the vertices of every triangle in the cell,
+        so the whole triangles (not only their parts in the cell) are in
+        the slab. Stored at the cell's first slot in :attr:`tris`.
+        """
+        R = len(self.tris)
+        self.slab_n = np.zeros((R, 3))
+        self.slab_a = np.zeros(R)
+        self.slab_b = np.zeros(R)
+        if R == 0:
+            return
+        head = np.flatnonzero(np.r_[True, self.keys[1:] != self.keys[:-1]])
+        Tr = T[self.tris]
+        n = np.cross(Tr[:, 1] - Tr[:, 0], Tr[:, 2] - Tr[:, 0])
+        nl = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.where(nl > 0, n / np.where(nl > 0, nl, 1.0), 0.0)
+        nc = np.add.reduceat(n, head, axis=0)
+        nl = np.linalg.norm(nc, axis=1, keepdims=True)
+        nc = np.where(nl > 1e-6, nc / np.where(nl > 1e-6, nl, 1.0), 0.0)
+        cell_of = np.repeat(np.arange(len(head)), np.diff(np.r_[head, R]))
+        pv = np.einsum("rij,rj->ri", Tr, nc[cell_of])
+        self.slab_n[head] = nc
+        self.slab_a[head] = np.minimum.reduceat(pv.min(1), head)
+        self.slab_b[head] = np.maximum.reduceat(pv.max(1), head)
 
     def candidates(self, ilo, ihi):
         """(box, triangle) pairs of the boxes ``[ilo, ihi]`` (cells), deduplicated.
@@ -217,6 +249,21 @@ def _box_cells(ilo, ihi):
     return cell, owner
 
 
+def _plane_crosses_cells(T, cell, owner, glo, h):
+    """(n,) bool: the plane of triangle ``owner`` meets cell ``cell`` (box overlap test).
+
+    A triangle meets only cells that its plane meets, so dropping the
+    others keeps every cell that holds a point of the triangle (with a
+    little slack against rounding; degenerate triangles keep every cell).
+    """
+    Tn = T[owner]
+    n = np.cross(Tn[:, 1] - Tn[:, 0], Tn[:, 2] - Tn[:, 0])
+    centre = glo + (cell + 0.5) * h
+    reach = 0.5 * h * np.abs(n).sum(1)
+    return np.abs(_dot(n, centre - Tn[:, 0])) <= reach * (1 + 1e-6) + 1e-12 * h * reach.max(
+        initial=0.0)
+
+
 class _LowerBoundField:
     """Conservative distance field of a mesh: a lower bound of the distance anywhere.
 
@@ -243,7 +290,8 @@ class _LowerBoundField:
         self.ghi = self.glo + dims * h
         ilo = np.clip(np.floor((lo - self.glo) / h).astype(np.int64), 0, dims - 1)
         ihi = np.clip(np.floor((hi - self.glo) / h).astype(np.int64), 0, dims - 1)
-        cell, _ = _box_cells(ilo, ihi)
+        cell, owner = _box_cells(ilo, ihi)
+        cell = cell[_plane_crosses_cells(T, cell, owner, self.glo, h)]
         if window is None:
             D2 = np.full(tuple(dims), np.inf)
             D2[cell[:, 0], cell[:, 1], cell[:, 2]] = 0.0
@@ -491,7 +539,6 @@ def _segment_distance(ix, A, B, cap):
     # expanding exact search: radius rho, done where the best found is <= rho
     rho = np.minimum(lb + g.h, capv)
     best = np.full(S, np.inf)
-    upper = np.full(S, np.inf)  # upper bounds of the distance (a triangle's centroid)
     far = np.zeros(S, bool)
     todo = np.flatnonzero(~exact)
     while len(todo):
@@ -503,7 +550,7 @@ def _segment_distance(ix, A, B, cap):
         ok = (ihi - ilo + 1).prod(1) <= _MAX_CELLS
         far[todo[~ok]] = True
         todo, ilo, ihi = todo[ok], ilo[ok], ihi[ok]
-        _search(A, B, ix, g, todo, ilo, ihi, rho, best, upper)
+        _search(A, B, ix, g, todo, ilo, ihi, rho, capv, best)
         # every triangle within rho of a segment is a candidate: best <= rho is exact,
         # and a search at the cap that found nothing closer proves the cap
         found = best[todo] <= rho[todo]
@@ -512,7 +559,7 @@ def _segment_distance(ix, A, B, cap):
         dist[todo[done]] = np.where(found[done], best[todo[done]], capv[todo[done]])
         todo = todo[~done]
         # next radius: an upper bound of the distance when one is known, else a bit more
-        nxt = np.minimum(best[todo], upper[todo])
+        nxt = best[todo]
         grow = np.minimum(2 * rho[todo], rho[todo] + 2 * g.h)
         rho[todo] = np.minimum(np.where(np.isfinite(nxt), nxt, grow), capv[todo])
     if far.any():
@@ -524,19 +571,19 @@ def _segment_distance(ix, A, B, cap):
     return dist, exact
 
 
-def _search(A, B, ix, g, idx, ilo, ihi, rho, best, upper):
+def _search(A, B, ix, g, idx, ilo, ihi, rho, cap, best):
     """Exact distances of segments ``idx`` to the triangles within ``rho`` of them.
 
-    Updates ``best`` (smallest exact distance found) and ``upper`` (smallest
-    segment-to-centroid distance, an upper bound). Cells farther than
-    ``rho`` from the segment are dropped, then triangles whose bounding
-    sphere is farther than ``min(rho, upper)``, before the exact test.
+    Updates ``best`` (smallest exact distance found). Cells farther than
+    ``rho`` from the segment are dropped, then the (segment, triangle)
+    pairs are culled by :func:`_pairs`.
     """
     if len(idx) == 0:
         return
     ncell = (ihi - ilo + 1).prod(1)
     csum = np.cumsum(ncell)
     T = ix.T
+    m = len(T)
     half = 0.5 * np.sqrt(3.0) * g.h
     start = 0
     while start < len(idx):
@@ -557,7 +604,13 @@ def _search(A, B, ix, g, idx, ilo, ihi, rho, best, upper):
         keep = n > 0
         centre = g.glo + (cell[keep] + 0.5) * g.h
         sk = si[keep]
-        keep[keep] = _point_segment(centre, A[sk], B[sk]) <= rho[sk] + half + ix.eps
+        near = _point_segment(centre, A[sk], B[sk]) <= rho[sk] + half + ix.eps
+        # and whose slab (see _TriGrid._slabs) is within rho of the segment
+        lk = lo[keep]
+        nc = g.slab_n[lk]
+        ha, hb = _dot(nc, A[sk]), _dot(nc, B[sk])
+        gap = np.maximum(np.minimum(ha, hb) - g.slab_b[lk], g.slab_a[lk] - np.maximum(ha, hb))
+        keep[keep] = near & (gap <= rho[sk] + ix.eps)
         lo, n, si = lo[keep], n[keep], si[keep]
         tot = int(n.sum())
         ti = g.tris[np.repeat(lo - (np.cumsum(n) - n), n) + np.arange(tot)]
@@ -565,41 +618,44 @@ def _search(A, B, ix, g, idx, ilo, ihi, rho, best, upper):
         if len(g.big):
             si = np.concatenate([si, np.repeat(part, len(g.big))])
             ti = np.concatenate([ti, np.tile(g.big, len(part))])
-        for a in range(0, len(si), _CHUNK_PAIRS):
-            _pairs(A, B, ix, T, si[a:a + _CHUNK_PAIRS], ti[a:a + _CHUNK_PAIRS],
-                   rho, best, upper)
+        # a triangle is in several cells: one pair each (sorted by segment)
+        pair = np.unique(si * m + ti)
+        for a in range(0, len(pair), _CHUNK_PAIRS):
+            p = pair[a:a + _CHUNK_PAIRS]
+            _pairs(A, B, ix, T, p // m, p % m, rho, cap, best)
 
 
-def _pairs(A, B, ix, T, si, ti, rho, best, upper):
-    """Exact distances of (segment, triangle) pairs that can matter, into ``best``.
+def _pairs(A, B, ix, T, si, ti, rho, cap, best):
+    """Exact distances of the (segment, triangle) pairs that can matter, into ``best``.
 
-    Each segment's nearest-centroid triangle is tested first (an upper
-    bound close to the distance); the other pairs are culled against
-    ``min(rho, best)`` by their triangle's bounding sphere, then by the
-    plane bound :func:`_plane_bound`. Culling never drops the closest
-    triangle when it is within ``rho`` (a hair of slack against rounding).
+    ``si`` sorted. Every pair gets the plane bound :func:`_plane_bound`;
+    each segment's triangle with the nearest centroid is tested exactly
+    first (unless the search is at the cap and its bound is beyond the
+    cap), which gives an upper bound close to the distance;
+    then only the pairs whose bound is within ``min(rho, best)`` are
+    tested. Culling never drops the closest triangle when it is within
+    ``rho`` (the bound has a hair of slack against rounding).
     """
     if len(si) == 0:
         return
-    dc = _point_segment(ix.centroid[ti], A[si], B[si])
-    _min_into(upper, si, dc)
-    first = dc <= upper[si]
+    a, b = A[si], B[si]
+    lbp = _plane_bound(a, b, ix, ti)
+    dc = _point_segment(ix.centroid[ti], a, b)
+    head = np.flatnonzero(np.r_[True, si[1:] != si[:-1]])
+    grp = np.repeat(np.arange(len(head)), np.diff(np.r_[head, len(si)]))
+    low = np.minimum.reduceat(dc, head)
+    cand = np.flatnonzero(dc <= low[grp])
+    cand = cand[np.r_[True, grp[cand[1:]] != grp[cand[:-1]]]]  # one per segment
+    first = np.zeros(len(si), bool)
+    first[cand] = (lbp[cand] <= rho[si[cand]]) | (rho[si[cand]] < cap[si[cand]])
     _exact_pairs(A, B, T, si[first], ti[first], best)
-    keep = ~first
-    si, ti, dc = si[keep], ti[keep], dc[keep]
-    bound = np.minimum(rho[si], best[si]) + ix.eps
-    keep = dc - ix.radius[ti] * (1 + 1e-9) <= bound
-    si, ti, bound = si[keep], ti[keep], bound[keep]
-    keep = _plane_bound(A[si], B[si], ix, ti) <= bound
+    keep = ~first & (lbp <= np.minimum(rho[si], best[si]))
     _exact_pairs(A, B, T, si[keep], ti[keep], best)
 
 
 def _exact_pairs(A, B, T, si, ti, best):
     if len(si) == 0:
         return
-    m = len(T)
-    pair = np.unique(si * m + ti)
-    si, ti = pair // m, pair % m
     d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
     _min_into(best, si, d)
 
