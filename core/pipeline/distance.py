@@ -164,13 +164,14 @@ class _TriGrid:
         small = np.flatnonzero(~big)
         cell, owner = _box_cells(ilo[small], ihi[small])
         # only the cells of the box that the triangle's plane crosses
-        hit = _plane_crosses_cells(T[small], cell, owner, self.glo, h)
+        planes = _planes(T)
+        hit = _plane_crosses_cells(planes, cell, small[owner], self.glo, h)
         cell, owner = cell[hit], owner[hit]
         keys = self.key(cell)
         order = np.argsort(keys, kind="stable")
         self.keys = keys[order]
         self.tris = small[owner[order]]
-        self._slabs(T)
+        self._slabs(T, planes[0])
         # dense lookup: triangles of cell key k are tris[start[k]:start[k + 1]]
         n_keys = int((self.dims + 2).prod())
         self.start = None
@@ -178,7 +179,7 @@ class _TriGrid:
             self.start = np.zeros(n_keys + 1, np.int64)
             np.cumsum(np.bincount(self.keys, minlength=n_keys), out=self.start[1:])
 
-    def _slabs(self, T):
+    def _slabs(self, T, normal):
         """Per occupied cell, a slab holding its triangles: ``a <= n . p <= b``.
 
         ``n`` is the cell's mean triangle normal (unit, or 0); ``a``/``b`` the
@@ -194,7 +195,7 @@ class _TriGrid:
             return
         head = np.flatnonzero(np.r_[True, self.keys[1:] != self.keys[:-1]])
         Tr = T[self.tris]
-        n = np.cross(Tr[:, 1] - Tr[:, 0], Tr[:, 2] - Tr[:, 0])
+        n = normal[self.tris]
         nl = np.linalg.norm(n, axis=1, keepdims=True)
         n = np.where(nl > 0, n / np.where(nl > 0, nl, 1.0), 0.0)
         nc = np.add.reduceat(n, head, axis=0)
@@ -249,19 +250,25 @@ def _box_cells(ilo, ihi):
     return cell, owner
 
 
-def _plane_crosses_cells(T, cell, owner, glo, h):
-    """(n,) bool: the plane of triangle ``owner`` meets cell ``cell`` (box overlap test).
+def _planes(T):
+    """Triangle planes ``n . x = c`` (``n`` the unnormalized normal) and ``|n|_1``."""
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    return n, _dot(n, T[:, 0]), np.abs(n).sum(1)
+
+
+def _plane_crosses_cells(planes, cell, tri, glo, h):
+    """(k,) bool: the plane of triangle ``tri`` meets cell ``cell`` (box overlap test).
 
     A triangle meets only cells that its plane meets, so dropping the
     others keeps every cell that holds a point of the triangle (with a
     little slack against rounding; degenerate triangles keep every cell).
     """
-    Tn = T[owner]
-    n = np.cross(Tn[:, 1] - Tn[:, 0], Tn[:, 2] - Tn[:, 0])
+    n, c, l1 = planes
     centre = glo + (cell + 0.5) * h
-    reach = 0.5 * h * np.abs(n).sum(1)
-    return np.abs(_dot(n, centre - Tn[:, 0])) <= reach * (1 + 1e-6) + 1e-12 * h * reach.max(
-        initial=0.0)
+    reach = 0.5 * h * l1[tri]
+    off = np.abs(_dot(n[tri], centre) - c[tri])
+    return off <= reach * (1 + 1e-6) + 1e-9 * h * l1.max(initial=0.0) * (
+        1 + float(np.abs(glo).max()) / h)
 
 
 class _LowerBoundField:
@@ -291,7 +298,7 @@ class _LowerBoundField:
         ilo = np.clip(np.floor((lo - self.glo) / h).astype(np.int64), 0, dims - 1)
         ihi = np.clip(np.floor((hi - self.glo) / h).astype(np.int64), 0, dims - 1)
         cell, owner = _box_cells(ilo, ihi)
-        cell = cell[_plane_crosses_cells(T, cell, owner, self.glo, h)]
+        cell = cell[_plane_crosses_cells(_planes(T), cell, owner, self.glo, h)]
         if window is None:
             D2 = np.full(tuple(dims), np.inf)
             D2[cell[:, 0], cell[:, 1], cell[:, 2]] = 0.0
@@ -536,6 +543,13 @@ def _segment_distance(ix, A, B, cap):
     lb = ix.lower_bound(A, B, _NEAR_PIECES, scalar_cap)
     dist = np.minimum(lb, capv)
     exact = lb >= capv
+    # capped: a coarse grid's cells and slabs prove most of the rest clear of the cap
+    i = np.flatnonzero(~exact & np.isfinite(capv))
+    if len(i):
+        gc = ix.grid(max(g.h, (float(np.median(seg)) + 2 * float(capv[i].max())) / 2.5))
+        clear = ~_may_reach(A[i], B[i], capv[i], gc, ix.eps)
+        dist[i[clear]] = capv[i[clear]]
+        exact[i[clear]] = True
     # expanding exact search: radius rho, done where the best found is <= rho
     rho = np.minimum(lb + g.h, capv)
     best = np.full(S, np.inf)
@@ -569,6 +583,47 @@ def _segment_distance(ix, A, B, cap):
         dist[i] = np.minimum(np.maximum(dist[i], lb8), capv[i])
         exact[i] = lb8 >= capv[i]
     return dist, exact
+
+
+def _may_reach(A, B, rho, g, eps):
+    """(S,) bool: some cell of grid ``g`` within ``rho`` of the segment, slab included.
+
+    False proves that no triangle is within ``rho`` (as in :func:`_search`).
+    """
+    out = np.zeros(len(A), bool)
+    if len(g.big):
+        out[:] = True  # big triangles are in no cell
+        return out
+    ilo = np.clip(np.floor((np.minimum(A, B) - rho[:, None] - g.glo) / g.h),
+                  -1, g.dims).astype(np.int64)
+    ihi = np.clip(np.floor((np.maximum(A, B) + rho[:, None] - g.glo) / g.h),
+                  -1, g.dims).astype(np.int64)
+    ncell = (ihi - ilo + 1).prod(1)
+    csum = np.cumsum(ncell)
+    half = 0.5 * np.sqrt(3.0) * g.h
+    start = 0
+    while start < len(A):
+        base = csum[start - 1] if start else 0
+        stop = max(int(np.searchsorted(csum, base + _CHUNK_CELLS, "right")), start + 1)
+        cell, owner = _box_cells(ilo[start:stop], ihi[start:stop])
+        owner += start
+        start = stop
+        keys = g.key(cell)
+        if g.start is not None:
+            lo = g.start[keys]
+            occ = g.start[keys + 1] > lo
+        else:
+            lo = np.searchsorted(g.keys, keys, "left")
+            occ = np.searchsorted(g.keys, keys, "right") > lo
+        cell, owner, lo = cell[occ], owner[occ], lo[occ]
+        a, b, r = A[owner], B[owner], rho[owner] + eps
+        nc = g.slab_n[lo]
+        ha, hb = _dot(nc, a), _dot(nc, b)
+        gap = np.maximum(np.minimum(ha, hb) - g.slab_b[lo], g.slab_a[lo] - np.maximum(ha, hb))
+        ok = gap <= r
+        ok[ok] = _point_segment(g.glo + (cell[ok] + 0.5) * g.h, a[ok], b[ok]) <= r[ok] + half
+        out[owner[ok]] = True
+    return out
 
 
 def _search(A, B, ix, g, idx, ilo, ihi, rho, cap, best):
