@@ -294,6 +294,10 @@ class RigidBatch:
         sq += v[1] * v[1]
         sq += v[2] * v[2]
         self.length = np.sqrt(sq, out=sq)
+        # Without Shrink the ray growth does not depend on the angle.
+        self.growth = None
+        if not ctx.s.shrink:
+            self.growth = ctx.ray_growth(self.length, (np.arange(self.ns) == 0)[:, None])
         self.per_col = []
         for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
             m = cand[curves]
@@ -358,8 +362,11 @@ class RigidBatch:
         a = self.w[:, items] * theta  # (ns, n)
         cos, sin = np.cos(a), np.sin(a)
         scale = ctx.shrink_scale(a)
-        length = self.length[:, items] if scale is None else self.length[:, items] * scale
-        back, grow = ctx.ray_growth(length, (np.arange(ns) == 0)[:, None])
+        if scale is None:
+            back, grow = (g.take(items, axis=1) for g in self.growth)
+        else:
+            length = self.length[:, items] * scale
+            back, grow = ctx.ray_growth(length, (np.arange(ns) == 0)[:, None])
         for c, off, m, root_lo, Y, V0, X in self.per_col:
             mi = m[items]
             if not mi.any():
@@ -371,14 +378,19 @@ class RigidBatch:
                 it, sub = items[mi], mi
                 cs, sn, bk, gr = cos[:, mi], sin[:, mi], back[:, mi], grow[:, mi]
             d = Y.take(it, axis=2)
-            d += V0.take(it, axis=2) * cs
-            d += X.take(it, axis=2) * sn
+            t = V0.take(it, axis=2)
+            t *= cs
+            d += t
+            X.take(it, axis=2, out=t)
+            t *= sn
+            d += t
             if scale is not None:
                 d *= scale[:, sub]
             o = rot.cumsum_soa(d)
             o -= d
             o += root_lo[:, it][:, None, :]
-            o -= bk * d
+            np.multiply(bk, d, out=t)
+            o -= t
             d *= gr
             k = len(it)
             h = c.segment_hits_local(rot.rows32(o), rot.rows32(d), off, ctx.threads)
