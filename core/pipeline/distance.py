@@ -6,6 +6,23 @@ float64 rounding) for segments near a collider and a guaranteed **lower
 bound** for segments far from every collider (see
 :func:`collider_distance`): the result never overestimates the true
 distance, which is what the Region of Influence needs.
+
+How (per collider, in its own space for a rigid ``Collider``):
+
+1. a lower bound of every segment from a windowed distance field of the
+   mesh's occupied cells (two samples per segment); with ``max_distance``,
+   segments whose bound reaches the cap are done;
+2. capped: a coarse triangle grid with a *slab* per cell (the range of its
+   triangles along their mean normal) proves most of the remaining
+   segments clear of the cap, cell by cell, without touching triangles;
+3. an expanding exact search over a fine triangle grid (radius capped):
+   cells are culled by distance and slab, (segment, triangle) pairs by a
+   plane bound, after one exact test of the nearest-centroid triangle;
+   the survivors get the exact segment-triangle distance.
+
+The grids and fields of a :class:`~core.Collider` are cached on it (keyed on
+its vertices; a similarity ``matrix`` moves the queries, not the mesh), so
+a rigid collider builds them once; ``(V, F)`` pairs are indexed per call.
 """
 
 from __future__ import annotations
@@ -777,7 +794,10 @@ def collider_distance(points, offsets, colliders, return_exact=False, max_distan
     colliders : sequence of Collider or (V, F) pairs
         Meshes (a Collider's ``matrix`` is applied; its collision offset is
         *not* subtracted: the distance is to the mesh itself). Empty
-        colliders are ignored.
+        colliders are ignored. Pass Colliders for per-frame use: their
+        search structures are cached on them while their vertices do not
+        change (a rigid, rotation + uniform scale + translation ``matrix``
+        can change freely); ``(V, F)`` pairs rebuild them every call.
     return_exact : bool
         Also return which CV distances are exact.
     max_distance : float >= 0, optional
@@ -788,7 +808,8 @@ def collider_distance(points, offsets, colliders, return_exact=False, max_distan
         every collider skip the exact search, so a small cap is much
         faster. :func:`region_of_influence` gives the same result with
         ``min(distance, cap)`` as with ``distance`` when no displacement is
-        longer than ``cap``. Capped values count as exact.
+        longer than ``cap``. Capped values count as exact. ``None`` or
+        ``inf``: no cap.
 
     Returns
     -------

@@ -169,3 +169,49 @@ def test_invalid_cap_raises(bad):
         collider_distance(pts, off, [po.grid(2.0, 2)], max_distance=bad)
     with pytest.raises(InputError, match="max_distance"):
         segment_mesh_distance(pts[:1], pts[1:], *po.grid(2.0, 2), max_distance=bad)
+
+
+def test_capped_huge_and_tiny_triangles():
+    """A ground plane of 2 huge triangles next to a fine sphere (triangles in no cell)."""
+    rng = np.random.default_rng(12)
+    Vs, Fs = po.icosphere((0, 0, 0.5), 0.3, 3)
+    Vp = np.array([[-50, -50, -0.2], [50, -50, -0.1], [50, 50, 0.3], [-50, 50, 0.0]])
+    Fp = np.array([[0, 1, 2], [0, 2, 3]]) + len(Vs)
+    V, F = np.vstack([Vs, Vp]), np.vstack([Fs, Fp])
+    curves = []
+    for _ in range(15):
+        root = np.r_[rng.uniform(-0.8, 0.8, 2), 0.2]
+        curves.append(root + np.cumsum(rng.normal(0, 0.08, (4, 3)), 0))
+    pts, off = po.pack(curves)
+    truth = brute_cv(pts, off, [(V, F)])
+    for cap in (0.02, 0.1, 0.3):
+        d, exact = collider_distance(pts, off, [(V, F)], max_distance=cap, return_exact=True)
+        assert exact.all()
+        np.testing.assert_allclose(d, np.minimum(truth, cap), rtol=0, atol=TOL)
+
+
+def test_capped_fine_mesh_many_curves():
+    """A finer mesh (5,120 triangles) and fur around it: every search path is taken
+    (cleared by the field, by the coarse slabs, exact), the curves move between calls
+    (cached structures reused) and the collider rotates and scales uniformly."""
+    rng = np.random.default_rng(21)
+    V, F = po.icosphere((0, 0, 0), 0.6, 4)
+    V = V * (1 + 0.05 * np.sin(5 * V[:, :1]))  # bumpy, not a sphere
+    pts, off = po.fur_on_mesh(rng, V, F, n_curves=40, n_cvs=5, length=0.3, noise=0.6)
+    pts = pts + rng.normal(0, 0.05, pts.shape)  # some curves off the surface, some inside
+    col = Collider(V, F)
+    for step in range(2):
+        M = np.eye(4)
+        M[:3, :3] = po.rotation([1, 1, 0], 0.3 * step) * (1 + 0.1 * step)
+        M[:3, 3] = [0.02 * step, 0, 0]
+        col.matrix = M
+        moved = pts + 0.01 * step
+        Vw = V.astype(np.float32).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+        truth = brute_cv(moved, off, [(Vw, F)])
+        for cap in (0.01, 0.06):
+            d, exact = collider_distance(moved, off, [col], max_distance=cap,
+                                         return_exact=True)
+            assert (d <= truth + TOL).all()
+            np.testing.assert_allclose(d[exact], np.minimum(truth, cap)[exact], rtol=0,
+                                       atol=TOL)
+            assert exact.mean() > 0.99
