@@ -19,6 +19,9 @@ from .status import Status
 #: round cast fewest rays for the same main-thread time.
 _WIDTH = 2
 
+#: Probes per block when building ray batches (working arrays stay in cache).
+_BLOCK = 1024
+
 
 def solve(ctx, idx, status):
     """Stiff and Bend: one angle per curve about its kept axis."""
@@ -354,47 +357,57 @@ class RigidBatch:
         """:meth:`hits` for curves that all have ``self.ns`` segments.
 
         Works on (3, ns, n) component arrays (long contiguous rows, no rows
-        of 3) with the arithmetic of :meth:`hits`; the rays go to the tracer
+        of 3) with the arithmetic of :meth:`hits`, in blocks of probes small
+        enough to stay in the CPU cache; the rays go to the tracer
         segment-major (a ray's result does not depend on its batch).
         """
         ctx = self.ctx
         ns = self.ns
-        a = self.w[:, items] * theta  # (ns, n)
-        cos, sin = np.cos(a), np.sin(a)
-        scale = ctx.shrink_scale(a)
-        if scale is None:
-            back, grow = (g.take(items, axis=1) for g in self.growth)
-        else:
-            length = self.length[:, items] * scale
-            back, grow = ctx.ray_growth(length, (np.arange(ns) == 0)[:, None])
         for c, off, m, root_lo, Y, V0, X in self.per_col:
             mi = m[items]
             if not mi.any():
                 continue
-            if mi.all():
-                it, sub = items, slice(None)
-                cs, sn, bk, gr = cos, sin, back, grow
-            else:
-                it, sub = items[mi], mi
-                cs, sn, bk, gr = cos[:, mi], sin[:, mi], back[:, mi], grow[:, mi]
-            d = Y.take(it, axis=2)
-            t = V0.take(it, axis=2)
-            t *= cs
-            d += t
-            X.take(it, axis=2, out=t)
-            t *= sn
-            d += t
-            if scale is not None:
-                d *= scale[:, sub]
-            o = rot.cumsum_soa(d)
-            o -= d
-            o += root_lo[:, it][:, None, :]
-            np.multiply(bk, d, out=t)
-            o -= t
-            d *= gr
+            sub = slice(None) if mi.all() else mi
+            it = items[sub]
+            th = theta[sub]
             k = len(it)
-            h = c.segment_hits_local(rot.rows32(o), rot.rows32(d), off, ctx.threads)
+            o32 = np.empty((ns, k, 3), np.float32)
+            d32 = np.empty((ns, k, 3), np.float32)
+            for lo in range(0, k, _BLOCK):
+                blk = slice(lo, lo + _BLOCK)
+                self._rays(it[blk], th[blk], root_lo, Y, V0, X, o32[:, blk], d32[:, blk])
+            h = c.segment_hits_local(o32.reshape(-1, 3), d32.reshape(-1, 3), off, ctx.threads)
             ctx.n_rays += len(h)
             hit[sub] |= h.reshape(ns, k).any(axis=0)
         return hit
+
+    def _rays(self, it, theta, root_lo, Y, V0, X, o32, d32):
+        """Rays (collider space, grown) of curves ``it`` turned by ``theta``,
+        written into ``o32``, ``d32`` (ns, n, 3)."""
+        ctx = self.ctx
+        ns = self.ns
+        a = self.w[:, it] * theta  # (ns, n)
+        scale = ctx.shrink_scale(a)
+        if scale is None:
+            back, grow = (g.take(it, axis=1) for g in self.growth)
+        else:
+            back, grow = ctx.ray_growth(self.length[:, it] * scale, (np.arange(ns) == 0)[:, None])
+        d = Y.take(it, axis=2)
+        t = V0.take(it, axis=2)
+        t *= np.cos(a)
+        d += t
+        X.take(it, axis=2, out=t)
+        t *= np.sin(a)
+        d += t
+        if scale is not None:
+            d *= scale
+        o = rot.cumsum_soa(d)
+        o -= d
+        o += root_lo[:, it][:, None, :]
+        np.multiply(back, d, out=t)
+        o -= t
+        d *= grow
+        for i in range(3):
+            o32[..., i] = o[i]
+            d32[..., i] = d[i]
 
