@@ -409,6 +409,12 @@ class _MeshIndex:
         n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
         nl = np.linalg.norm(n, axis=1, keepdims=True)
         self.normal = np.where(nl > 0, n / np.where(nl > 0, nl, 1.0), 0.0)
+        # unit outward in-plane normals of the edges (v0v1, v1v2, v2v0) and offsets
+        e = np.roll(T, -1, axis=1) - T
+        m = np.cross(e, self.normal[:, None, :])
+        ml = np.linalg.norm(m, axis=2, keepdims=True)
+        self.edge_n = np.where(ml > 0, m / np.where(ml > 0, ml, 1.0), 0.0)
+        self.edge_c = np.einsum("mki,mki->mk", self.edge_n, T)
         self._grids = {}
         self._fields = {}
 
@@ -700,28 +706,30 @@ def _search(A, B, ix, g, idx, ilo, ihi, rho, cap, best):
 def _pairs(A, B, ix, T, si, ti, rho, cap, best):
     """Exact distances of the (segment, triangle) pairs that can matter, into ``best``.
 
-    ``si`` sorted. Every pair gets the plane bound :func:`_plane_bound`;
-    each segment's triangle with the nearest centroid is tested exactly
-    first (unless the search is at the cap and its bound is beyond the
-    cap), which gives an upper bound close to the distance;
-    then only the pairs whose bound is within ``min(rho, best)`` are
-    tested. Culling never drops the closest triangle when it is within
-    ``rho`` (the bound has a hair of slack against rounding).
+    ``si`` sorted. Each segment's triangle with the nearest centroid is
+    tested exactly first (unless the search is at the cap and its bounding
+    sphere is beyond the cap), which gives an upper bound close to the
+    distance; the other pairs are tested only if their bounding sphere,
+    then their :func:`_plane_bound`, are within ``min(rho, best)``.
+    Culling never drops the closest triangle when it is within ``rho``
+    (the bounds have a hair of slack against rounding).
     """
     if len(si) == 0:
         return
     a, b = A[si], B[si]
-    lbp = _plane_bound(a, b, ix, ti)
     dc = _point_segment(ix.centroid[ti], a, b)
+    sphere = dc - ix.radius[ti] * (1 + 1e-9) - ix.eps  # bounding-sphere bound
     head = np.flatnonzero(np.r_[True, si[1:] != si[:-1]])
     grp = np.repeat(np.arange(len(head)), np.diff(np.r_[head, len(si)]))
     low = np.minimum.reduceat(dc, head)
     cand = np.flatnonzero(dc <= low[grp])
     cand = cand[np.r_[True, grp[cand[1:]] != grp[cand[:-1]]]]  # one per segment
     first = np.zeros(len(si), bool)
-    first[cand] = (lbp[cand] <= rho[si[cand]]) | (rho[si[cand]] < cap[si[cand]])
+    first[cand] = (sphere[cand] <= rho[si[cand]]) | (rho[si[cand]] < cap[si[cand]])
     _exact_pairs(A, B, T, si[first], ti[first], best)
-    keep = ~first & (lbp <= np.minimum(rho[si], best[si]))
+    bound = np.minimum(rho[si], best[si])
+    keep = np.flatnonzero(~first & (sphere <= bound))
+    keep = keep[_plane_bound(a[keep], b[keep], ix, ti[keep]) <= bound[keep]]
     _exact_pairs(A, B, T, si[keep], ti[keep], best)
 
 
@@ -738,8 +746,9 @@ def _plane_bound(a, b, ix, ti):
     With the triangle's unit normal ``n``, centroid ``c`` and radius ``r``:
     a point ``q`` of the segment and ``p`` of the triangle are apart by at
     least their height difference over the plane (0 if the segment crosses
-    it) and, in the plane, at least ``|q' - c| - r`` (``q'`` the projection);
-    both minimized over the segment separately.
+    it) and, in the plane, at least ``|q' - c| - r`` (``q'`` the projection)
+    and at least the distance of both ends outside one edge's line; each
+    minimized over the segment separately.
     """
     n = ix.normal[ti]
     c = ix.centroid[ti]
@@ -752,6 +761,12 @@ def _plane_bound(a, b, ix, ti):
     t = np.clip(_dot(pa, pb) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
     lat = np.linalg.norm(pa - pb * t[:, None], axis=1)
     lat = np.maximum(lat - ix.radius[ti] * (1 + 1e-9), 0.0)
+    # separating edges: in the plane, the segment is at least as far from the
+    # triangle as both its ends are outside one edge's line
+    en, ec = ix.edge_n[ti], ix.edge_c[ti]
+    sa = np.einsum("kei,ki->ke", en, a) - ec
+    sb = np.einsum("kei,ki->ke", en, b) - ec
+    lat = np.maximum(lat, np.minimum(sa, sb).max(1) * (1 - 1e-9))
     return np.sqrt(h * h + lat * lat) * (1 - 1e-9) - ix.eps
 
 
