@@ -623,7 +623,6 @@ def _may_reach(A, B, rho, g, eps):
                   -1, g.dims).astype(np.int64)
     ncell = (ihi - ilo + 1).prod(1)
     csum = np.cumsum(ncell)
-    half = 0.5 * np.sqrt(3.0) * g.h
     start = 0
     while start < len(A):
         base = csum[start - 1] if start else 0
@@ -639,14 +638,30 @@ def _may_reach(A, B, rho, g, eps):
             lo = np.searchsorted(g.keys, keys, "left")
             occ = np.searchsorted(g.keys, keys, "right") > lo
         cell, owner, lo = cell[occ], owner[occ], lo[occ]
-        a, b, r = A[owner], B[owner], rho[owner] + eps
-        nc = g.slab_n[lo]
-        ha, hb = _dot(nc, a), _dot(nc, b)
-        gap = np.maximum(np.minimum(ha, hb) - g.slab_b[lo], g.slab_a[lo] - np.maximum(ha, hb))
-        ok = gap <= r
-        ok[ok] = _point_segment(g.glo + (cell[ok] + 0.5) * g.h, a[ok], b[ok]) <= r[ok] + half
+        ok = _cell_bound(A[owner], B[owner], g, cell, lo) <= rho[owner] + eps
         out[owner[ok]] = True
     return out
+
+
+def _cell_bound(a, b, g, cell, lo):
+    """Lower bound of the distance of segments ``[a, b]`` to the triangles of ``cell``.
+
+    The closest point of the closest triangle lies in one of its cells, in
+    that cell's box and slab (see :meth:`_TriGrid._slabs`): at least the
+    slab gap along the slab normal ``n`` and, across ``n``, the distance of
+    the cell centre to the projected segment minus half a cell diagonal
+    (each minimized over the segment separately).
+    """
+    nc = g.slab_n[lo]
+    centre = g.glo + (cell + 0.5) * g.h
+    ha, hb = _dot(nc, a), _dot(nc, b)
+    gap = np.maximum(np.minimum(ha, hb) - g.slab_b[lo], g.slab_a[lo] - np.maximum(ha, hb))
+    hc = _dot(nc, centre)
+    pa = a - centre - nc * (ha - hc)[:, None]
+    pb = b - centre - nc * (hb - hc)[:, None]
+    lat = np.maximum(_point_segment(np.zeros_like(pa), pa, pb) - 0.5 * np.sqrt(3.0) * g.h, 0.0)
+    gap = np.maximum(gap, 0.0)
+    return np.sqrt(gap * gap + lat * lat) * (1 - 1e-9)
 
 
 def _search(A, B, ix, g, idx, ilo, ihi, rho, cap, best):
@@ -662,7 +677,6 @@ def _search(A, B, ix, g, idx, ilo, ihi, rho, cap, best):
     csum = np.cumsum(ncell)
     T = ix.T
     m = len(T)
-    half = 0.5 * np.sqrt(3.0) * g.h
     start = 0
     while start < len(idx):
         base = csum[start - 1] if start else 0
@@ -678,17 +692,10 @@ def _search(A, B, ix, g, idx, ilo, ihi, rho, cap, best):
         else:
             lo = np.searchsorted(g.keys, keys, "left")
             n = np.searchsorted(g.keys, keys, "right") - lo
-        # occupied cells within rho (+ half a diagonal) of the segment
+        # occupied cells whose slab and box can be within rho of the segment
         keep = n > 0
-        centre = g.glo + (cell[keep] + 0.5) * g.h
         sk = si[keep]
-        near = _point_segment(centre, A[sk], B[sk]) <= rho[sk] + half + ix.eps
-        # and whose slab (see _TriGrid._slabs) is within rho of the segment
-        lk = lo[keep]
-        nc = g.slab_n[lk]
-        ha, hb = _dot(nc, A[sk]), _dot(nc, B[sk])
-        gap = np.maximum(np.minimum(ha, hb) - g.slab_b[lk], g.slab_a[lk] - np.maximum(ha, hb))
-        keep[keep] = near & (gap <= rho[sk] + ix.eps)
+        keep[keep] = _cell_bound(A[sk], B[sk], g, cell[keep], lo[keep]) <= rho[sk] + ix.eps
         lo, n, si = lo[keep], n[keep], si[keep]
         tot = int(n.sum())
         ti = g.tris[np.repeat(lo - (np.cumsum(n) - n), n) + np.arange(tot)]
