@@ -75,6 +75,21 @@ def _executor(n: int) -> ThreadPoolExecutor:
         return _pool
 
 
+def beside(fn, threads: int):
+    """Run ``fn()`` on a ray-pool thread while the caller goes on (when
+    ``threads > 1``; inline otherwise). Returns a callable that waits for and
+    returns ``fn``'s result (or raises its exception).
+
+    For independent phases: numpy's loops and the tracer release the GIL, so
+    the two overlap. ``fn`` may use the pool itself (it never waits for a
+    thread it occupies), the caller too.
+    """
+    if threads <= 1:
+        result = fn()
+        return lambda: result
+    return _executor(threads).submit(fn).result
+
+
 class EmbreeBackend:
     """Embree BVH over one triangle mesh (in the mesh's own space).
 
