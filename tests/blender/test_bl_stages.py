@@ -311,3 +311,25 @@ def test_render_groom_bind_refuses_the_guides_themselves(fc):
     guides, groom, box, out = groom_scene(fc)
     guides.furcollide.groom.groom = guides
     assert not bpy.ops.furcollide.groom_bind.poll()
+
+
+def test_pipeline_panel_draws_the_stages(fc):
+    from test_bl_pipeline import _draw
+
+    guides, groom, box, out = groom_scene(fc)
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    log = _draw(panel)
+    for idname in ("furcollide.fur_attach_unbind", "furcollide.groom_bind",
+                   "furcollide.groom_remove"):
+        assert ("operator", idname) in log
+    for name in ("use_wind", "wind_stage", "wind_strength", "use_jiggle", "jiggle_stage",
+                 "use_region_of_influence", "roi_margin", "write_collider_distance",
+                 "distance_max", "groom", "use_clearance"):
+        assert ("prop", name) in log
+    assert ("label", "Restricts motion After Collision (none is on)") in log
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    guides.furcollide.motion.use_wind = True
+    guides.furcollide.motion.use_region_of_influence = False
+    log = _draw(panel)
+    assert any(k == "label" and v and v.startswith("Render curves fixed") for k, v in log)
+    assert ("label", "Motion after collision may push hair into colliders") in log
