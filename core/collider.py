@@ -16,7 +16,7 @@ import numpy as np
 from . import tolerances as tol
 from .errors import ColliderError
 from .rays import make_backend
-from .rotations import apply, det3, inv_affine, norm_bound
+from .rotations import apply, apply_soa, det3, inv_affine, norm_bound
 from .rotations import dot as rot_dot
 
 #: Fixed, irrational-ish unit directions for the parity (inside) test.
@@ -377,30 +377,58 @@ class Collider:
         k = len(p_wo)
         if self.empty or k == 0:
             return np.zeros(k, bool)
+        q = self.grid_coords(np.asarray(p_wo, np.float64).T)
+        return self.near_surface_grid(q, radius_wo, offset_wo)
+
+    def grid_coords(self, p_wo):
+        """World points given as components (3, k) in the occupancy grid's
+        frame (local space minus the grid's corner), as components (3, k)."""
+        lo = self._occupancy()[0]
+        A, b = self.local_map()
+        q = apply_soa(A, np.asarray(p_wo, np.float64))
+        for i in range(3):
+            q[i] += b[i]
+            q[i] -= lo[i]
+        return q
+
+    def near_surface_grid(self, q, radius_wo, offset_wo=0.0) -> np.ndarray:
+        """:meth:`near_surface` for centres given by :meth:`grid_coords`."""
+        k = q.shape[1]
+        if self.empty or k == 0:
+            return np.zeros(k, bool)
         lo, h, dims, sat, max_edge, _ = self._occupancy()
         A, b = self.local_map()
         stretch = norm_bound(A)  # at least the largest local length of a world unit
         reach = np.asarray(radius_wo, np.float64) + offset_wo * tol.OFFSET_MAX_STRETCH
-        r = reach * stretch + max_edge + h
-        q = apply(A, np.asarray(p_wo, np.float64)) + b - lo
-        r = np.broadcast_to(r, (k,))[:, None]
-        # clip in float first: far-away points must not overflow the int cast
-        i0 = np.floor(np.clip((q - r) / h, -1, dims + 1)).astype(np.int64)
-        i1 = np.floor(np.clip((q + r) / h, -1, dims + 1)).astype(np.int64)
-        outside = ((i1 < 0) | (i0 >= dims)).any(axis=1)
-        i0 = np.clip(i0, 0, dims - 1)
-        i1 = np.clip(i1, 0, dims - 1) + 1
-        x0, y0, z0 = i0.T
-        x1, y1, z1 = i1.T
+        r = np.broadcast_to(reach * stretch + max_edge + h, (k,))
+        # Summed-area table over the cells the ball's box covers, by flat
+        # index (one gather per corner).
+        outside = np.zeros(k, bool)
+        corner = []
+        step = (sat.shape[1] * sat.shape[2], sat.shape[2], 1)
+        for i in range(3):
+            # clip in float first: far-away points must not overflow the int cast
+            i0 = np.floor(np.clip((q[i] - r) / h, -1, dims[i] + 1)).astype(np.int64)
+            i1 = np.floor(np.clip((q[i] + r) / h, -1, dims[i] + 1)).astype(np.int64)
+            outside |= (i1 < 0) | (i0 >= dims[i])
+            i0 = np.clip(i0, 0, dims[i] - 1, out=i0)
+            i1 = np.clip(i1, 0, dims[i] - 1, out=i1)
+            i1 += 1
+            i0 *= step[i]
+            i1 *= step[i]
+            corner.append((i0, i1))
+        (x0, x1), (y0, y1), (z0, z1) = corner
+        flat = sat.reshape(-1)
+        x0y0, x0y1, x1y0, x1y1 = x0 + y0, x0 + y1, x1 + y0, x1 + y1
         total = (
-            sat[x1, y1, z1]
-            - sat[x0, y1, z1]
-            - sat[x1, y0, z1]
-            - sat[x1, y1, z0]
-            + sat[x0, y0, z1]
-            + sat[x0, y1, z0]
-            + sat[x1, y0, z0]
-            - sat[x0, y0, z0]
+            flat[x1y1 + z1]
+            - flat[x0y1 + z1]
+            - flat[x1y0 + z1]
+            - flat[x1y1 + z0]
+            + flat[x0y0 + z1]
+            + flat[x0y1 + z0]
+            + flat[x1y0 + z0]
+            - flat[x0y0 + z0]
         )
         return (total > 0) & ~outside
 
@@ -558,6 +586,13 @@ class Collider:
         if not self.detects_pinch or k == 0:
             return np.zeros(k, bool)
         p_wo = np.asarray(p_wo, np.float64)
+        return self.contains_grid(p_wo, self.grid_coords(p_wo.T), offset_wo)
+
+    def contains_grid(self, p_wo, q, offset_wo=0.0) -> np.ndarray:
+        """:meth:`contains` with the points' :meth:`grid_coords` ``q`` given."""
+        k = len(p_wo)
+        if not self.detects_pinch or k == 0:
+            return np.zeros(k, bool)
         lo, h, dims, _, _, inside = self._occupancy()
         # Points with no surface anywhere near their grid cell share the
         # answer of the cell's centre: compute it once per cell (and per
@@ -567,9 +602,8 @@ class Collider:
             self._occ_inside_key = (self._version, offset_wo)
         # near_surface pads by h + max_edge: a point it calls far has no vertex
         # within max_edge of its own cell, so no triangle crosses that cell.
-        near = self.near_surface(p_wo, 0.0, offset_wo)
-        A, b = self.local_map()
-        cell = np.floor(np.clip((apply(A, p_wo) + b - lo) / h, -1, dims + 1)).astype(np.int64)
+        near = self.near_surface_grid(q, 0.0, offset_wo)
+        cell = np.floor(np.clip(q.T / h, -1, dims + 1)).astype(np.int64)
         in_grid = ((cell >= 0) & (cell < dims)).all(axis=1)
         out = np.zeros(k, bool)
         far = np.flatnonzero(~near & in_grid)

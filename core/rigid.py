@@ -27,10 +27,17 @@ def solve(ctx, idx, status):
     far = idx[~ctx.cand_any[idx]]
     act = near[ctx.active[near]]  # rotated curves near a collider
     new = near[~ctx.active[near]]  # unrotated: their segments are the input's
-    # 1. Rotated curves near a collider: their recovery step is tested first
+    # 1. Unrotated curves near a collider: tested at their input shape.
+    cn = new[ctx.input_hits(new)]
+    if len(cn):  # first hit: choose the axis (kept until recovered)
+        ctx.axis[cn] = ctx.new_axes(cn, *ctx.input_rays(cn)[:2], *ctx.segments(cn)[1:])
+        ctx.active[cn] = True
+    # One batch for the rotated curves (items 0..len(act)-1) and the new
+    # colliding ones, so that every search below is one ray query per round.
+    batch = RigidBatch(ctx, np.concatenate([act, cn]))
+    # 2. Rotated curves near a collider: their recovery step is tested first
     #    (one ray query); only those it would make collide are tested at their
     #    current angle, to tell a blocked recovery from a new collision.
-    batch = RigidBatch(ctx, act)
     th0 = angle[act].copy()
     th1 = recovery_step(ctx, act)
     moving = th1 < th0
@@ -39,44 +46,42 @@ def solve(ctx, idx, status):
     again = np.flatnonzero(moving & hit_step)
     hit_act[again] = batch.hits(again, th0[again])
     blocked = moving & hit_step & ~hit_act
-    hit_new = np.zeros(len(new), bool)
-    if len(new):
-        o, d, seg, rep, starts = ctx.input_rays(new)
-        hit_new = np.logical_or.reduceat(
-            ctx.hits(new, o, d, rep, ctx.root_mask(len(o), starts)), starts
-        )
-    cn = new[hit_new]
-    if len(cn):  # first hit: choose the axis (kept until recovered)
-        ctx.axis[cn] = ctx.new_axes(cn, *ctx.input_rays(cn)[:2], *ctx.segments(cn)[1:])
-        ctx.active[cn] = True
 
-    # 2. Collision: the smallest clearing angle above the current one.
+    # 3. Collision: the smallest clearing angle above the current one.
     cc = act[hit_act]
     if len(cc):  # first probe: lift the current shape above the tangent plane
         o, d, _, rep, starts = ctx.deform(cc, angle=angle[cc], axis=ctx.axis[cc])
         k, point, push = ctx.first_hit_details(cc, o, d, rep, starts)
         g = ctx._plane_guess(cc, o + d, rep, starts, point, push, ctx.axis[cc])
         ctx.guess[cc] = np.where(k >= 0, g, ctx.guess[cc])
-    collide(ctx, batch, np.flatnonzero(hit_act), status)
-    if len(cn):
-        collide(ctx, RigidBatch(ctx, cn), np.arange(len(cn)), status)
-
-    # 3. Recovery toward the (plasticity) target, stopping before contact.
+    colliding = np.concatenate([np.flatnonzero(hit_act), len(act) + np.arange(len(cn))])
+    # 4. Recovery toward the (plasticity) target, stopping before contact:
+    #    blocked steps are bisected in the same search rounds as the collisions.
     items = np.flatnonzero(~hit_act)
-    recover(ctx, act[items], th0[items], th1[items], blocked[items], status, batch, items)
+    b = np.flatnonzero(blocked[items])
+    p = ctx.prec
+    lo_th, hi_th = th1[items[b]], th0[items[b]]
+    K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
+    k_rec = collide(ctx, batch, colliding, status, (items[b], lo_th, hi_th, K))
+    recover(ctx, act[items], th0[items], th1[items], b, k_rec, status)
     rec = far[ctx.active[far]]  # far from every collider: nothing to check
-    recover(ctx, rec, angle[rec].copy(), recovery_step(ctx, rec), None, status, None, None)
+    recover(ctx, rec, angle[rec].copy(), recovery_step(ctx, rec), None, None, status)
     release(ctx, idx)
 
 
-def collide(ctx, batch, items, status):
-    """Resolve colliding curves ``batch.curves[items]`` (paper 3.2.1)."""
-    if len(items) == 0:
-        return
+def collide(ctx, batch, items, status, bisect=None):
+    """Resolve colliding curves ``batch.curves[items]`` (paper 3.2.1).
+
+    ``bisect`` (batch items, low angle, high angle, steps): recovery steps to
+    bisect in the same search rounds (see :func:`search_angles`); their
+    results are returned.
+    """
     p, angle = ctx.prec, ctx.angle
     c = batch.curves[items]
     th0 = angle[c]
-    k = search_angles(ctx, batch, items, th0, ctx.guess[c])
+    k, k_rec = search_angles(ctx, batch, items, th0, ctx.guess[c], bisect)
+    if len(items) == 0:
+        return k_rec
     if ctx.s.mode == "bend":
         # Bending turns the root segment by only 1/n of the angle: curves
         # hit near the root that bending cannot clear turn at the root (as
@@ -87,7 +92,7 @@ def collide(ctx, batch, items, status):
             ctx.sv_._stiff[cr] = True
             # seed: the Stiff estimate, plus about the mean bend already taken
             seed = ctx.guess_stiff[cr] + 0.5 * th0[retry]
-            k2 = search_angles(
+            k2, _ = search_angles(
                 ctx, RigidBatch(ctx, cr), np.arange(len(cr)), np.zeros(len(cr)), seed
             )
             ctx.sv_._stiff[cr[k2 < 0]] = False
@@ -105,6 +110,7 @@ def collide(ctx, batch, items, status):
     angle[bad] = th0[~ok]
     fresh = bad[ctx.sv_._angle[bad] == 0]
     ctx.active[fresh] = ctx.sv_._active[fresh]
+    return k_rec
 
 
 def recovery_step(ctx, rec):
@@ -125,27 +131,21 @@ def recovery_step(ctx, rec):
     return np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
 
 
-def recover(ctx, rec, th0, th1, blocked, status, batch, items):
+def recover(ctx, rec, th0, th1, b, k, status):
     """Turn clear curves ``rec`` from ``th0`` to their recovery step ``th1``.
 
-    Where the step would collide (``blocked``; ``batch.curves[items]`` are
-    ``rec``) the largest safe step is bisected instead: recovery stops where
-    the curve would collide again.
+    Where the step would collide (``rec[b]``) the largest safe step, ``k``
+    precision steps above ``th1`` (bisected by :func:`collide`), is taken
+    instead: recovery stops where the curve would collide again.
     """
     if len(rec) == 0:
         return
     p = ctx.prec
     th1 = th1.copy()
-    b = np.flatnonzero(blocked) if blocked is not None else np.zeros(0, np.int64)
+    if b is None:
+        b = np.zeros(0, np.int64)
     if len(b):
-        lo_th, hi_th = th1[b], th0[b]
-        K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
-
-        def test(it, ks):
-            return ~batch.hits(items[b[it]], np.minimum(lo_th[it] + ks * p, hi_th[it]))
-
-        k = gallop_bisect(len(b), test, K, lo=np.zeros(len(b)), hi=K, width=_WIDTH)
-        th1[b] = np.minimum(lo_th + k * p, hi_th)
+        th1[b] = np.minimum(th1[b] + k * p, th0[b])
     ctx.angle[rec] = th1
     # Back at exactly the input shape counts as FREE, not RECOVERING.
     st = np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE)
@@ -154,7 +154,7 @@ def recover(ctx, rec, th0, th1, blocked, status, batch, items):
     status[rec] = np.maximum(status[rec], st)
 
 
-def search_angles(ctx, batch, items, th0, guess=None):
+def search_angles(ctx, batch, items, th0, guess=None, bisect=None):
     """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
 
     ``guess`` (radians, per item) is an estimate of the increment (the
@@ -162,23 +162,32 @@ def search_angles(ctx, batch, items, th0, guess=None):
     round probes 0.8, 1, 1.25 and 1.6 times it, and the search continues
     from the bracket that gives (bisection) or from its top (gallop).
 
+    ``bisect`` (items ``bi``, angles ``lo``, ``hi``, steps ``K``): largest
+    clear angle ``min(lo + k p, hi)``, ``k`` in ``[0, K]``, of
+    ``batch.curves[bi]`` (``lo`` colliding, ``hi`` clear): a bisection run
+    in the same rounds (one ray query per round for both).
+
     Returns
     -------
-    (n,) int
+    k : (n,) int
         Steps ``k`` (angle ``min(th0 + k p, max_angle)``), -1 where no
         angle up to ``max_angle`` clears the curve.
+    k_bisect : (m,) int
+        The bisected steps (empty without ``bisect``).
     """
     p = ctx.prec
     n = len(items)
     kmax = np.maximum(np.ceil((ctx.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
+    base, cap = th0, np.full(n, ctx.max_angle)
 
     def test(it, ks):
-        return ~batch.hits(items[it], np.minimum(th0[it] + ks * p, ctx.max_angle))
+        return ~batch.hits(all_items[it], np.minimum(base[it] + ks * p, cap[it]))
 
+    all_items = items
     lo = np.zeros(n, np.int64)
     hi = np.full(n, -1, np.int64)
     stride = None
-    if guess is not None:
+    if guess is not None and n:
         # One round of probes spread around the guess; it leaves a bracket
         # to bisect, or a floor to gallop on from with a guess-sized stride.
         kg = np.clip(np.rint(guess / p).astype(np.int64), 1, np.maximum(kmax, 1))
@@ -194,7 +203,19 @@ def search_angles(ctx, batch, items, th0, guess=None):
         lo[it[anyg]] = np.where(first > 0, probes[rows, np.maximum(first - 1, 0)], 0)[anyg]
         lo[it[~anyg]] = probes[~anyg, -1]
         stride = np.maximum(kg // 2, 1)
-    return gallop_bisect(n, test, kmax, lo=lo, hi=hi, stride=stride, width=_WIDTH)
+    if bisect is not None and len(bisect[0]):
+        bi, lo_th, hi_th, K = bisect
+        m = len(bi)
+        all_items = np.concatenate([items, bi])
+        base = np.concatenate([th0, lo_th])
+        cap = np.concatenate([cap, hi_th])
+        kmax = np.concatenate([kmax, K])
+        lo = np.concatenate([lo, np.zeros(m, np.int64)])
+        hi = np.concatenate([hi, K])
+        stride = np.concatenate([np.ones(n, np.int64) if stride is None else stride,
+                                 np.ones(m, np.int64)])
+    k = gallop_bisect(len(all_items), test, kmax, lo=lo, hi=hi, stride=stride, width=_WIDTH)
+    return k[:n], k[n:]
 
 
 def release(ctx, idx):
@@ -223,8 +244,14 @@ class RigidBatch:
         self.ctx = ctx
         self.curves = curves
         sv = ctx.sv_
-        seg, rep, starts = ctx.segments(curves)
         self.cnt = sv._nseg[curves]
+        # Uniform CV counts (the usual groom): component arrays (3, ns, n),
+        # see :meth:`_hits_uniform`.
+        self.ns = ctx.sv_._ns if len(curves) else 0
+        if self.ns:
+            self._init_uniform(ctx, curves)
+            return
+        seg, rep, starts = ctx.segments(curves)
         self.starts = starts
         v = ctx.seg_in(seg)
         ax = ctx.axis[curves][rep]
@@ -237,9 +264,6 @@ class RigidBatch:
             self.w = np.ones(len(seg))
         self.length = np.sqrt(rot.dot(v, v))
         self.root = ctx.root_mask(len(seg), starts)
-        # Uniform CV counts (the usual groom): keep (curves, segments, 3) blocks.
-        ns = int(self.cnt[0]) if len(curves) else 0
-        self.ns = ns if len(curves) and (self.cnt == ns).all() else 0
         self.per_col = []
         for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
             m = cand[curves]
@@ -247,12 +271,38 @@ class RigidBatch:
                 continue
             A, b = c.local_map()
             terms = [rot.apply(A, x) for x in (Y, V0, X)]
-            if self.ns:
-                terms = [x.reshape(-1, self.ns, 3) for x in terms]
             self.per_col.append((c, off, m, rot.apply(A, ctx.roots[curves]) + b, *terms))
-        if self.ns:
-            self.w = self.w.reshape(-1, self.ns)
-            self.length = self.length.reshape(-1, self.ns)
+
+    def _init_uniform(self, ctx, curves):
+        """The terms as (3, ns, n) component arrays (same arithmetic as the
+        rows of 3 of the general case, so the same rays bit for bit)."""
+        v = ctx.seg_soa(curves)
+        ax = ctx.axis[curves]
+        a0, a1, a2 = ax.T
+        along = v[0] * a0
+        along += v[1] * a1
+        along += v[2] * a2
+        Y = np.empty_like(v)
+        X = np.empty_like(v)
+        for i, (p, q, r) in enumerate(((a1, 2, (a2, 1)), (a2, 0, (a0, 2)), (a0, 1, (a1, 0)))):
+            np.multiply(ax[:, i], along, out=Y[i])
+            np.multiply(p, v[q], out=X[i])
+            X[i] -= r[0] * v[r[1]]
+        V0 = np.subtract(v, Y)
+        self.w = np.broadcast_to(ctx.bend_weights(curves), (self.ns, len(curves)))
+        sq = v[0] * v[0]
+        sq += v[1] * v[1]
+        sq += v[2] * v[2]
+        self.length = np.sqrt(sq, out=sq)
+        self.per_col = []
+        for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
+            m = cand[curves]
+            if not m.any():
+                continue
+            A, b = c.local_map()
+            terms = [rot.apply_soa(A, x) for x in (Y, V0, X)]
+            root_lo = np.ascontiguousarray((rot.apply(A, ctx.roots[curves]) + b).T)
+            self.per_col.append((c, off, m, root_lo, *terms))
 
     def hits(self, items, theta):
         """Does curve ``curves[items[i]]`` turned by ``theta[i]`` hit a collider.
@@ -297,30 +347,42 @@ class RigidBatch:
         return hit
 
     def _hits_uniform(self, items, theta, hit):
-        """:meth:`hits` for curves that all have ``self.ns`` segments."""
+        """:meth:`hits` for curves that all have ``self.ns`` segments.
+
+        Works on (3, ns, n) component arrays (long contiguous rows, no rows
+        of 3) with the arithmetic of :meth:`hits`; the rays go to the tracer
+        segment-major (a ray's result does not depend on its batch).
+        """
         ctx = self.ctx
         ns = self.ns
-        a = theta[:, None] * self.w[items]  # (n, ns)
-        cos, sin = np.cos(a)[..., None], np.sin(a)[..., None]
+        a = self.w[:, items] * theta  # (ns, n)
+        cos, sin = np.cos(a), np.sin(a)
         scale = ctx.shrink_scale(a)
-        length = self.length[items] if scale is None else self.length[items] * scale
-        back, grow = ctx.ray_growth(length, np.arange(ns) == 0)
-        back, grow = back[..., None], grow[..., None]
+        length = self.length[:, items] if scale is None else self.length[:, items] * scale
+        back, grow = ctx.ray_growth(length, (np.arange(ns) == 0)[:, None])
         for c, off, m, root_lo, Y, V0, X in self.per_col:
             mi = m[items]
             if not mi.any():
                 continue
-            it = items if mi.all() else items[mi]
-            sub = slice(None) if mi.all() else mi
-            d = Y[it] + V0[it] * cos[sub] + X[it] * sin[sub]
+            if mi.all():
+                it, sub = items, slice(None)
+                cs, sn, bk, gr = cos, sin, back, grow
+            else:
+                it, sub = items[mi], mi
+                cs, sn, bk, gr = cos[:, mi], sin[:, mi], back[:, mi], grow[:, mi]
+            d = Y.take(it, axis=2)
+            d += V0.take(it, axis=2) * cs
+            d += X.take(it, axis=2) * sn
             if scale is not None:
-                d *= scale[sub][..., None]
-            o = np.cumsum(d, axis=1)
+                d *= scale[:, sub]
+            o = rot.cumsum_soa(d)
             o -= d
-            o += root_lo[it][:, None, :]
-            o -= back[sub] * d
-            d *= grow[sub]
-            h = c.segment_hits_local(o.reshape(-1, 3), d.reshape(-1, 3), off, ctx.threads)
+            o += root_lo[:, it][:, None, :]
+            o -= bk * d
+            d *= gr
+            k = len(it)
+            h = c.segment_hits_local(rot.rows32(o), rot.rows32(d), off, ctx.threads)
             ctx.n_rays += len(h)
-            hit[sub] |= h.reshape(-1, ns).any(axis=1)
+            hit[sub] |= h.reshape(ns, k).any(axis=0)
         return hit
+

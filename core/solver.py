@@ -326,11 +326,8 @@ class Solver:
         # Pinch detection (paper 3.1): roots inside closed single-sided colliders.
         t0 = time.perf_counter()
         pinched = np.zeros(C, bool)
-        for (c, off), box in zip(cols, ctx.boxes, strict=True):
-            if c.detects_pinch:
-                q = np.flatnonzero(enabled & ctx.root_in_box(box))
-                if len(q):
-                    pinched[q[c.contains(ctx.roots[q], off)]] = True
+        for k in range(len(cols)):
+            pinched |= ctx.roots_inside(k, enabled)
         timings["pinch"] = (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()

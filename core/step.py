@@ -35,14 +35,33 @@ class StepContext:
         self.out_dtype = out_dtype
         self.timings = {}
         self.n_rays = 0
-        # Input segment vectors (S, 3) in the input dtype, segment-major.
+        # Input segment vectors in the input dtype: (S, 3) segment-major, or
+        # for a uniform CV count ``ns`` a (C, ns, 3) view of one flat
+        # difference of all points (no per-curve gathers or copies).
         ns = solver._ns
-        if ns:  # uniform CV count: (curves, segments, 3) blocks, no gathers
-            D3 = np.diff(points.reshape(-1, ns + 1, 3), axis=1)
-            self.Dseg = D3.reshape(-1, 3)
-            L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg)).reshape(-1, ns)
-            self.curve_len = L.sum(axis=1, dtype=np.float64)
-            shortest = L.min(axis=1)
+        if ns:
+            Df = np.empty_like(points)
+            flat = points.reshape(-1)
+            np.subtract(flat[3:], flat[:-3], out=Df.reshape(-1)[:-3])
+            Df[-1] = 0
+            self._Dflat = Df  # row c (ns + 1) + j: segment j of curve c
+            self.D3 = Df.reshape(-1, ns + 1, 3)[:, :ns]
+            self.Dseg = None
+            sq = Df[:, 0] * Df[:, 0]  # = einsum("ij,ij->i"), as separate passes
+            sq += Df[:, 1] * Df[:, 1]
+            sq += Df[:, 2] * Df[:, 2]
+            L = np.sqrt(sq, out=sq).reshape(-1, ns + 1)[:, :ns]
+            # Column passes: numpy's reductions are slow on short rows. Below
+            # 8 terms numpy sums a row sequentially, as this loop does.
+            shortest = L[:, 0].copy()
+            for j in range(1, ns):
+                np.minimum(shortest, L[:, j], out=shortest)
+            if ns < 8:
+                self.curve_len = L[:, 0].astype(np.float64)
+                for j in range(1, ns):
+                    self.curve_len += L[:, j]
+            else:
+                self.curve_len = L.sum(axis=1, dtype=np.float64)
         else:
             self.Dseg = np.diff(points, axis=0)[solver._seg_start]
             L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg))
@@ -55,9 +74,12 @@ class StepContext:
         if bad.any():
             c = int(np.argmax(bad))
             a, b = int(solver._soff[c]), int(solver._soff[c + 1])
-            k = int(solver._seg_start[a + int(np.argmin(L.ravel()[a:b]))])
+            k = int(solver._seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
             raise InputError(f"curve {c} has a zero-length segment between points {k} and {k + 1}")
-        self.roots = points[solver._off[:-1]].astype(np.float64)
+        if ns:
+            self.roots = points.reshape(-1, ns + 1, 3)[:, 0].astype(np.float64)
+        else:
+            self.roots = points[solver._off[:-1]].astype(np.float64)
         # Ray growth (tol.RAY_EXTEND_ULPS): float32 ulps at the size of the
         # largest collider (where embree works, centred), plus the output
         # dtype's rounding at the colliders' distance from the origin. It
@@ -74,25 +96,46 @@ class StepContext:
         # Candidate curves per collider: the ball a curve can sweep about its
         # root (any rotation, scale <= 1) meets the collider's bounds, then
         # comes near one of its vertices (Collider.near_surface).
+        # Roots are handled as components (3, C) here (long contiguous passes).
         self.cand = []
-        self.boxes = []
+        self._near_roots = []  # per collider: (roots in its box, their grid coords)
+        rootsT = self.roots.T
         for c, off in cols:
             lo, hi = c.bounds_world(off)
-            self.boxes.append((lo, hi))
-            gap = np.maximum(lo - self.roots, 0) + np.maximum(self.roots - hi, 0)
-            cand = np.einsum("ij,ij->i", gap, gap) <= self.curve_len**2
+            in_box = None
+            for i in range(3):
+                g = np.maximum(lo[i] - rootsT[i], 0)
+                g += np.maximum(rootsT[i] - hi[i], 0)
+                in_box = g == 0 if in_box is None else in_box & (g == 0)
+                if i == 0:
+                    gg = g * g
+                else:
+                    gg += g * g
+            cand = gg <= self.curve_len**2
             w = np.flatnonzero(cand)
-            cand[w] = c.near_surface(self.roots[w], self.curve_len[w], off)
+            q = c.grid_coords(rootsT[:, w])
+            cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
             self.cand.append(cand)
+            self._near_roots.append((w, q, in_box))
         if self.cand:
             self.cand_any = np.logical_or.reduce(self.cand)
         else:
             self.cand_any = np.zeros(solver.n_curves, bool)
         self.soft = s.mode == "soft"
 
-    def root_in_box(self, box):
-        lo, hi = box
-        return np.all((self.roots >= lo) & (self.roots <= hi), axis=1)
+    def roots_inside(self, k, enabled):
+        """Enabled curves whose root is inside collider ``k`` (paper 3.1: pinch)."""
+        c, off = self.cols[k]
+        inside = np.zeros(self.sv_.n_curves, bool)
+        if not c.detects_pinch:
+            return inside
+        w, q, in_box = self._near_roots[k]
+        # roots in the box have a gap of 0: they are among w
+        sel = np.flatnonzero((enabled & in_box)[w])
+        if len(sel):
+            r = w[sel]
+            inside[r[c.contains_grid(self.roots[r], q[:, sel], off)]] = True
+        return inside
 
     # ------------------------------------------------------------ frames
     def load_state(self):
@@ -212,32 +255,52 @@ class StepContext:
         return o, end - o, seg, rep, starts
 
     def _deform_uniform(self, idx, angle, axis, quat):
-        """:meth:`deform` for curves that all have ``ns`` segments (blocks)."""
+        """:meth:`deform` for curves that all have ``ns`` segments (blocks).
+
+        Stiff/Bend work on component arrays (3, ns, n) (see
+        :func:`rot.rotate_soa`); the arithmetic is that of :meth:`deform`.
+        """
         ns, n = self.sv_._ns, len(idx)
-        v = self.Dseg.reshape(-1, ns, 3)[idx].astype(np.float64)
+        root = self.roots[idx]
         if quat is not None:
+            v = self.D3[idx].astype(np.float64)
             v = rot.quat_rotate(quat, v.reshape(-1, 3)).reshape(n, ns, 3)
+            end = (np.cumsum(v, axis=1) + root[:, None, :]).astype(self.out_dtype)
+            end = end.astype(np.float64)
+            o = np.empty_like(end)
+            o[:, :1] = root[:, None, :]
+            o[:, 1:] = end[:, :-1]
+            d = end - o
         else:
-            if self.s.mode == "bend":
-                w = np.where(self.sv_._stiff[idx][:, None], 1.0, (np.arange(ns) + 1.0) / ns)
-            else:
-                w = np.ones((1, ns))
-            a = angle[:, None] * w
-            cos, sin = np.cos(a)[..., None], np.sin(a)[..., None]
-            ax = axis[:, None, :]
-            along = np.einsum("nkj,nj->nk", v, axis)[..., None]
-            v = v * cos + np.cross(ax, v) * sin + ax * (along * (1.0 - cos))
-            scale = self.shrink_scale(a)
-            if scale is not None:
-                v *= scale[..., None]
-        root = self.roots[idx][:, None, :]
-        end = (np.cumsum(v, axis=1) + root).astype(self.out_dtype).astype(np.float64)
-        o = np.empty_like(end)
-        o[:, :1] = root
-        o[:, 1:] = end[:, :-1]
+            end = self._ends_soa(idx, angle, axis).astype(np.float64)
+            o = np.empty_like(end)
+            o[:, 0] = root.T
+            o[:, 1:] = end[:, :-1]
+            d = rot.aos(np.subtract(end, o, out=end))
+            o = rot.aos(o)
         seg = (idx[:, None] * ns + np.arange(ns)).ravel()
         rep = np.repeat(np.arange(n), ns)
-        return o.reshape(-1, 3), (end - o).reshape(-1, 3), seg, rep, np.arange(n) * ns
+        return o.reshape(-1, 3), d.reshape(-1, 3), seg, rep, np.arange(n) * ns
+
+    def _ends_soa(self, idx, angle, axis):
+        """Segment ends of the Stiff/Bend deformed uniform curves ``idx``,
+        (3, ns, n) components in the output dtype (as :meth:`deform`)."""
+        a = self.bend_weights(idx) * angle
+        v = rot.rotate_soa(self.seg_soa(idx), axis, a)
+        scale = self.shrink_scale(a)
+        if scale is not None:
+            v *= scale
+        end = rot.cumsum_soa(v)
+        end += self.roots[idx].T[:, None, :]
+        return end.astype(self.out_dtype)
+
+    def bend_weights(self, idx):
+        """(ns, n) fraction of a curve's angle turning each segment (uniform
+        curves): Bend ``(j + 1) / ns`` (1 for curves solved as Stiff), Stiff 1."""
+        ns = self.sv_._ns
+        if self.s.mode == "bend":
+            return np.where(self.sv_._stiff[idx], 1.0, ((np.arange(ns) + 1.0) / ns)[:, None])
+        return np.ones((ns, 1))
 
     def shrink_scale(self, a):
         """Shrink (paper 3.2.2): segment scale for segment rotation angles ``a``
@@ -411,6 +474,59 @@ class StepContext:
         ss = self.sv_._seg_start[seg]
         return self.points[ss].astype(np.float64), self.seg_in(seg), seg, rep, starts
 
+    def input_hits(self, idx):
+        """Does the *input* curve ``idx`` hit a collider (per curve)?
+
+        The same rays as :meth:`hits` on :meth:`input_rays`; for uniform CV
+        counts built as (3, ns, n) components straight in each collider's
+        space, and only for curves whose input points come near its surface
+        (a ball about their bounding box, :meth:`Collider.near_surface`:
+        curves it leaves out cannot touch the mesh).
+        """
+        ns, n = self.sv_._ns, len(idx)
+        if not ns or n == 0:
+            if n == 0:
+                return np.zeros(0, bool)
+            o, d, seg, rep, starts = self.input_rays(idx)
+            return np.logical_or.reduceat(
+                self.hits(idx, o, d, rep, self.root_mask(len(o), starts)), starts
+            )
+        P = self.points.reshape(-1, ns + 1, 3)[idx]  # (n, ns + 1, 3), input dtype
+        p = np.empty((3, ns + 1, n))
+        for i in range(3):
+            p[i] = P[..., i].T
+        d = self.seg_soa(idx)  # the input dtype's differences, as in seg_in
+        o = p[:, :ns]
+        sq = d[0] * d[0]
+        sq += d[1] * d[1]
+        sq += d[2] * d[2]
+        back, grow = self.ray_growth(np.sqrt(sq, out=sq), (np.arange(ns) == 0)[:, None])
+        o = o - back * d
+        d *= grow
+        # bounding balls of the input curves (world)
+        lo, hi = p.min(axis=1), p.max(axis=1)
+        centre = 0.5 * (lo + hi)
+        half = hi - lo
+        radius = 0.5 * np.sqrt(half[0] ** 2 + half[1] ** 2 + half[2] ** 2)
+        radius = radius * (1.0 + 1e-6) + 2.0 * self.eps_abs
+        hit = np.zeros(n, bool)
+        for (c, off), cand in zip(self.cols, self.cand, strict=True):
+            w = np.flatnonzero(cand[idx])
+            if len(w) == 0:
+                continue
+            w = w[c.near_surface_grid(c.grid_coords(centre[:, w]), radius[w], off)]
+            self.n_rays += len(w) * ns
+            if len(w) == 0:
+                continue
+            A, b = c.local_map()
+            o_lo = rot.apply_soa(A, o[:, :, w])
+            for i in range(3):
+                o_lo[i] += b[i]
+            d_lo = rot.apply_soa(A, d[:, :, w])
+            h = c.segment_hits_local(rot.rows32(o_lo), rot.rows32(d_lo), off, self.threads)
+            hit[w] |= h.reshape(ns, len(w)).any(axis=0)
+        return hit
+
     def put_to_growth_surface(self, pin):
         """Rotate pinched curves down onto the growth surface (paper 3.2.5)."""
         _, n_g = self.growth.closest_points(self.roots[pin])
@@ -455,7 +571,14 @@ class StepContext:
     def output(self):
         out = self.points.copy()
         idx = np.flatnonzero(self.active)
-        if len(idx):
+        ns = self.sv_._ns
+        if len(idx) and ns and not self.soft and self.out_dtype == np.float32:
+            # The points written are the deformed segments' float32 ends
+            # (what ``o + d`` of :meth:`deform` rounds back to).
+            out3 = out.reshape(-1, ns + 1, 3)
+            end = self._ends_soa(idx, self.angle[idx], self.axis[idx])
+            out3[idx, 1:] = rot.aos(end)
+        elif len(idx):
             if self.soft:
                 seg, _, _ = self.segments(idx)
                 o, d, seg, rep, starts = self.deform(idx, quat=self.quat[seg])
@@ -463,13 +586,27 @@ class StepContext:
                 o, d, seg, rep, starts = self.deform(
                     idx, angle=self.angle[idx], axis=self.axis[idx]
                 )
-            ns = self.sv_._ns
             if ns:  # uniform CV count: write whole curves as blocks
                 out.reshape(-1, ns + 1, 3)[idx, 1:] = (o + d).reshape(-1, ns, 3)
             else:
                 out[self.sv_._seg_start[seg] + 1] = o + d
         return out
 
+    def seg_soa(self, idx):
+        """Input segment vectors of uniform curves ``idx`` as float64
+        components, shape (3, ns, n): elementwise work on them runs over long
+        contiguous rows instead of rows of 3."""
+        ns = self.sv_._ns
+        g = self.D3[idx]
+        out = np.empty((3, ns, len(idx)))
+        for i in range(3):
+            out[i] = g[..., i].T
+        return out
+
     def seg_in(self, seg):
         """Input segment vectors (float64) of segment ids ``seg``."""
+        if self.Dseg is None:
+            ns = self.sv_._ns
+            return self._Dflat[seg + seg // ns].astype(np.float64)
         return self.Dseg[seg].astype(np.float64)
+

@@ -32,6 +32,16 @@ _CHUNK_CELLS = 1_000_000
 _MAX_DIMS = 256
 #: Triangles spanning more grid cells than this are tested by every search.
 _BIG_CELLS = 4096
+#: Triangle grids with at most this many cells get a dense cell -> triangles lookup.
+_DENSE_CELLS = 1 << 23
+#: Cells along the longest side of the near lower-bound field (over the mesh's box).
+_NEAR_DIMS = 128
+#: The near field holds distances up to this many cells (beyond: "at least that").
+_NEAR_WINDOW = 8
+#: Sub-pieces of a segment in the first (cheap) lower bound.
+_NEAR_PIECES = 2
+#: Pair (segment, triangle) entries per chunk of the exact search.
+_CHUNK_PAIRS = 400_000
 
 
 def _dot(a, b):
@@ -157,6 +167,12 @@ class _TriGrid:
         order = np.argsort(keys, kind="stable")
         self.keys = keys[order]
         self.tris = small[owner[order]]
+        # dense lookup: triangles of cell key k are tris[start[k]:start[k + 1]]
+        n_keys = int((self.dims + 2).prod())
+        self.start = None
+        if n_keys <= _DENSE_CELLS:
+            self.start = np.zeros(n_keys + 1, np.int64)
+            np.cumsum(np.bincount(self.keys, minlength=n_keys), out=self.start[1:])
 
     def candidates(self, ilo, ihi):
         """(box, triangle) pairs of the boxes ``[ilo, ihi]`` (cells), deduplicated.
@@ -214,22 +230,30 @@ class _LowerBoundField:
     ``|q - p|^2 >= |q - q'|^2 + |q' - p|^2``.
     """
 
-    def __init__(self, T, h_min, box=None):
+    def __init__(self, T, h_min, box=None, dims=_FIELD_DIMS, window=None):
         lo, hi = T.min(1), T.max(1)
         blo, bhi = (lo.min(0), hi.max(0)) if box is None else box
         self.glo = blo
         ext = float((bhi - blo).max()) or 1.0
-        self.h = h = max(ext / _FIELD_DIMS, h_min)
+        self.h = h = max(ext / dims, h_min)
         self.dims = dims = np.floor((bhi - blo) / h).astype(np.int64) + 1
         self.ghi = self.glo + dims * h
         ilo = np.clip(np.floor((lo - self.glo) / h).astype(np.int64), 0, dims - 1)
         ihi = np.clip(np.floor((hi - self.glo) / h).astype(np.int64), 0, dims - 1)
         cell, _ = _box_cells(ilo, ihi)
-        D2 = np.full(tuple(dims), np.inf)
-        D2[cell[:, 0], cell[:, 1], cell[:, 2]] = 0.0
-        for axis in range(3):
-            D2 = np.moveaxis(_minplus(np.moveaxis(D2, axis, 0)), 0, axis)
-        self.D = np.sqrt(D2)
+        if window is None:
+            D2 = np.full(tuple(dims), np.inf)
+            D2[cell[:, 0], cell[:, 1], cell[:, 2]] = 0.0
+            for axis in range(3):
+                D2 = np.moveaxis(_minplus(np.moveaxis(D2, axis, 0)), 0, axis)
+            self.D = np.sqrt(D2)
+        else:
+            # only distances up to `window` cells: beyond, (window + 1) is a lower bound
+            D2 = np.full(tuple(dims), np.float32(np.inf), np.float32)
+            D2[cell[:, 0], cell[:, 1], cell[:, 2]] = 0.0
+            for axis in range(3):
+                D2 = _minplus_window(D2, axis, window)
+            self.D = np.sqrt(np.minimum(D2, np.float32((window + 1) ** 2)))
 
     def __call__(self, q):
         """(k,) lower bounds of the distance of points ``q`` (k, 3) to the mesh."""
@@ -253,7 +277,153 @@ def _minplus(D2):
     return out.reshape(D2.shape)
 
 
-def segment_mesh_distance(A, B, V, F):
+def _minplus_window(D2, axis, w):
+    """``out[i] = min_{|i - j| <= w} D2[j] + (i - j)^2`` along ``axis``.
+
+    Overestimates only values above ``w^2``: the caller clamps to
+    ``(w + 1)^2`` (a nearest cell outside the window is farther than that).
+    """
+    out = D2.copy()
+    n = D2.shape[axis]
+    for s in range(1, min(w, n - 1) + 1):
+        a = [slice(None)] * 3
+        b = [slice(None)] * 3
+        a[axis], b[axis] = slice(s, None), slice(None, -s)
+        s2 = np.float32(s * s)
+        np.minimum(out[tuple(a)], D2[tuple(b)] + s2, out=out[tuple(a)])
+        np.minimum(out[tuple(b)], D2[tuple(a)] + s2, out=out[tuple(b)])
+    return out
+
+
+def _check_cap(max_distance):
+    """Validated ``max_distance``: None (no cap) or a float >= 0 (inf means no cap)."""
+    if max_distance is None:
+        return None
+    if isinstance(max_distance, (bool, np.bool_)):
+        raise InputError(f"max_distance must be a number >= 0 or None, got {max_distance!r}")
+    try:
+        cap = float(max_distance)
+    except (TypeError, ValueError):
+        raise InputError(
+            f"max_distance must be a number >= 0 or None, got {max_distance!r}"
+        ) from None
+    if np.isnan(cap) or cap < 0:
+        raise InputError(f"max_distance must be a number >= 0 or None, got {cap}")
+    return None if np.isinf(cap) else cap
+
+
+class _MeshIndex:
+    """Search structures of one triangle mesh (its own space), built lazily, kept.
+
+    A :class:`~core.Collider` keeps its index (see :func:`_collider_index`)
+    as long as its vertices do not change, so a rigid collider builds its
+    grids and distance fields once.
+    """
+
+    def __init__(self, V, F):
+        T = np.ascontiguousarray(V[F], dtype=np.float64)  # (m, 3, 3)
+        self.T = T
+        tlo, thi = T.min(1), T.max(1)
+        self.lo, self.hi = tlo.min(0), thi.max(0)
+        self.size = float((self.hi - self.lo).max()) or 1.0
+        self.tri_h = max(float(np.median((thi - tlo).max(1))), 1e-9 * self.size, 1e-300)
+        self.centroid = T.mean(1)
+        self.radius = np.linalg.norm(T - self.centroid[:, None], axis=2).max(1)
+        self.eps = 1e-12 * (self.size + float(np.abs(self.lo).max()))  # rounding slack
+        self._grids = {}
+        self._fields = {}
+
+    def grid(self, h):
+        """Triangle grid with cells of at least ``h`` (``tri_h * 2^k``, cached)."""
+        k = max(0, int(np.ceil(np.log2(max(h / self.tri_h, 1.0)) - 1e-9)))
+        g = self._grids.get(k)
+        if g is None:
+            g = self._grids[k] = _TriGrid(self.T, self.tri_h * 2.0**k)
+        return g
+
+    def field(self, box=None, near=False):
+        """Lower-bound field: ``near`` (fine, windowed) or over ``box`` (cached by box)."""
+        key = "near" if near else (None if box is None else
+                                   tuple(np.concatenate(box).round(12).tolist()))
+        f = self._fields.get(key)
+        if f is None:
+            if near:
+                # cells about half a triangle: finer is of little use to the search
+                dims = int(np.clip(2 * self.size / self.tri_h, 16, _NEAR_DIMS))
+                f = _LowerBoundField(self.T, 0.0, dims=dims, window=_NEAR_WINDOW)
+            else:
+                f = _LowerBoundField(self.T, self.tri_h, box)
+            if len(self._fields) > 8:  # padded boxes follow the queries: keep a few
+                self._fields.pop(next(k for k in self._fields if k != "near"))
+            self._fields[key] = f
+        return f
+
+    def lower_bound(self, A, B, pieces, cap=None):
+        """(S,) lower bound of the segments' distance (``pieces`` samples each).
+
+        With ``cap`` (scalar), the coarse fields are used only if the near
+        field cannot reach the cap.
+        """
+        S = len(A)
+        t = (np.arange(pieces) + 0.5) / pieces
+        q = (A[:, None, :] + (B - A)[:, None, :] * t[None, :, None]).reshape(-1, 3)
+        near = self.field(near=True)
+        lb = near(q)
+        reach = (_NEAR_WINDOW + 1 - np.sqrt(3.0)) * near.h
+        if cap is None or cap > reach:
+            lb = np.maximum(lb, self.field()(q))
+            # coarser fields around the mesh for the points outside its box
+            # (boxes rounded outward to 1/8 of the mesh's size, so they are reused)
+            for pad in _FIELD_PADS:
+                qlo = np.maximum(q.min(0), self.lo - pad * self.size)
+                qhi = np.minimum(q.max(0), self.hi + pad * self.size)
+                if (qlo < self.lo).any() or (qhi > self.hi).any():
+                    u = self.size / 8
+                    qlo = self.lo - np.ceil((self.lo - qlo) / u) * u
+                    qhi = self.hi + np.ceil((qhi - self.hi) / u) * u
+                    lb = np.maximum(lb, self.field((np.minimum(qlo, self.lo),
+                                                    np.maximum(qhi, self.hi)))(q))
+        seg = np.linalg.norm(B - A, axis=1)
+        return np.maximum(lb.reshape(S, pieces) - (seg / (2 * pieces))[:, None], 0.0).min(1)
+
+
+def _similarity(M3):
+    """Scale ``s`` if ``M3 = s * Q`` with ``Q`` orthogonal (distances scale by ``s``), else None."""
+    G = M3.T @ M3
+    s2 = float(np.trace(G)) / 3.0
+    if s2 > 0 and np.abs(G - s2 * np.eye(3)).max() <= 1e-12 * s2:
+        return np.sqrt(s2)
+    return None
+
+
+def _collider_index(col):
+    """``(index, M3, t, scale)``: ``col``'s mesh index and the map from world to its space.
+
+    A world point ``x`` is ``(x - t) @ inv(M3).T`` in the index's space and a
+    distance there times ``scale`` is the world distance. Rigid (similarity)
+    transforms keep the collider's own space, so the index survives motion
+    and is cached on the Collider until its vertices change; other
+    transforms index the world mesh (cached for that matrix).
+    """
+    M = col.matrix
+    M3, t = M[:3, :3], M[:3, 3]
+    s = _similarity(M3)
+    key = (col._version, id(col._V), None if s is not None else M.tobytes())
+    cached = getattr(col, "_distance_index", None)
+    if cached is not None and cached[0] == key:
+        index = cached[1]
+    else:
+        V = col.vertices.astype(np.float64)
+        if s is None:
+            V = V @ M3.T + t
+        index = _MeshIndex(V, col.faces.astype(np.int64))
+        col._distance_index = (key, index)
+    if s is None:
+        return index, np.eye(3), np.zeros(3), 1.0
+    return index, M3, t, s
+
+
+def segment_mesh_distance(A, B, V, F, max_distance=None):
     """Distance of each segment ``[A, B]`` to the triangle mesh ``(V, F)``.
 
     An expanding search over a grid of the triangles finds the exact
@@ -263,7 +433,7 @@ def segment_mesh_distance(A, B, V, F):
     the mesh's occupied cells instead (64 cells along the mesh's box, and
     along that box grown by 0.5 and 2 times its size on every side, where
     the query points reach there; off by at most ~3 cells of the finest
-    field covering the point).
+    field covering the point, plus 1/16 of the segment).
 
     Parameters
     ----------
@@ -271,43 +441,52 @@ def segment_mesh_distance(A, B, V, F):
         Segment ends, the mesh's space.
     V : (n, 3) ndarray of float64
     F : (m, 3) ndarray of int, m >= 1
+    max_distance : float >= 0, optional
+        Cap: return ``min(distance, max_distance)``. Segments whose lower
+        bound already reaches the cap get no exact search, and the
+        expanding search stops at the cap.
 
     Returns
     -------
     dist : (S,) ndarray of float64
-        Never above the exact distance; exact (float64 rounding) where
-        ``exact``.
+        Never above the exact distance (nor above ``max_distance``); exact
+        (float64 rounding) where ``exact``.
     exact : (S,) bool
+        With a cap, ``dist == min(distance, max_distance)`` counts as exact.
+
+    Raises
+    ------
+    InputError
+        ``max_distance`` negative, NaN or not a number.
+    """
+    cap = _check_cap(max_distance)
+    A = np.asarray(A, np.float64)
+    B = np.asarray(B, np.float64)
+    if len(A) == 0:
+        return np.zeros(0), np.zeros(0, bool)
+    return _segment_distance(_MeshIndex(np.asarray(V, np.float64), np.asarray(F)), A, B,
+                             np.inf if cap is None else cap)
+
+
+def _segment_distance(ix, A, B, cap):
+    """``(dist, exact)`` of segments ``[A, B]`` (the index's space), capped at ``cap``.
+
+    ``cap`` is a scalar or an (S,) array (``inf``: no cap).
     """
     S = len(A)
-    if S == 0:
-        return np.zeros(0), np.zeros(0, bool)
-    T = V[F]  # (m, 3, 3)
-    ext = (T.max(1) - T.min(1)).max(1)
+    capv = np.broadcast_to(np.asarray(cap, np.float64), (S,))
     seg = np.linalg.norm(B - A, axis=1)
-    h = max(float(np.median(ext)), 0.5 * float(np.median(seg)), 1e-12)
-    g = _TriGrid(T, h)
-    # lower bound of every segment: pieces of it against distance fields
-    k = _FAR_PIECES
-    t = (np.arange(k) + 0.5) / k
-    mid = (A[:, None, :] + (B - A)[:, None, :] * t[None, :, None]).reshape(-1, 3)
-    lb_pt = _LowerBoundField(T, g.h)(mid)
-    # coarser fields around the mesh for the curves outside its box
-    mlo, mhi = T.min((0, 1)), T.max((0, 1))
-    size = float((mhi - mlo).max())
-    for pad in _FIELD_PADS:
-        qlo = np.maximum(mid.min(0), mlo - pad * size)
-        qhi = np.minimum(mid.max(0), mhi + pad * size)
-        if (qlo < mlo).any() or (qhi > mhi).any():
-            box = (np.minimum(qlo, mlo), np.maximum(qhi, mhi))
-            lb_pt = np.maximum(lb_pt, _LowerBoundField(T, g.h, box)(mid))
-    lb = np.maximum(lb_pt.reshape(S, k) - (seg / (2 * k))[:, None], 0.0).min(1)
-    dist = lb.copy()
-    exact = np.zeros(S, bool)
+    g = ix.grid(max(0.5 * float(np.median(seg)), ix.tri_h))
+    scalar_cap = float(capv.max()) if np.isfinite(capv).all() else None
+    lb = ix.lower_bound(A, B, _NEAR_PIECES, scalar_cap)
+    dist = np.minimum(lb, capv)
+    exact = lb >= capv
     # expanding exact search: radius rho, done where the best found is <= rho
-    rho = lb + g.h
+    rho = np.minimum(lb + g.h, capv)
     best = np.full(S, np.inf)
-    todo = np.arange(S)
+    upper = np.full(S, np.inf)  # upper bounds of the distance (a triangle's centroid)
+    far = np.zeros(S, bool)
+    todo = np.flatnonzero(~exact)
     while len(todo):
         r = rho[todo]
         ilo = np.clip(np.floor((np.minimum(A[todo], B[todo]) - r[:, None] - g.glo) / g.h),
@@ -315,34 +494,117 @@ def segment_mesh_distance(A, B, V, F):
         ihi = np.clip(np.floor((np.maximum(A[todo], B[todo]) + r[:, None] - g.glo) / g.h),
                       -1, g.dims).astype(np.int64)
         ok = (ihi - ilo + 1).prod(1) <= _MAX_CELLS
+        far[todo[~ok]] = True
         todo, ilo, ihi = todo[ok], ilo[ok], ihi[ok]
-        _search(A, B, T, g, todo, ilo, ihi, best)
-        done = best[todo] <= rho[todo]
+        _search(A, B, ix, g, todo, ilo, ihi, rho, best, upper)
+        # every triangle within rho of a segment is a candidate: best <= rho is exact,
+        # and a search at the cap that found nothing closer proves the cap
+        found = best[todo] <= rho[todo]
+        done = found | (rho[todo] >= capv[todo])
         exact[todo[done]] = True
-        dist[todo[done]] = best[todo[done]]
+        dist[todo[done]] = np.where(found[done], best[todo[done]], capv[todo[done]])
         todo = todo[~done]
-        # next radius: the best found so far is an upper bound (final search)
-        rho[todo] = np.where(np.isfinite(best[todo]), best[todo], 2 * rho[todo])
+        # next radius: an upper bound of the distance when one is known, else a bit more
+        nxt = np.minimum(best[todo], upper[todo])
+        grow = np.minimum(2 * rho[todo], rho[todo] + 2 * g.h)
+        rho[todo] = np.minimum(np.where(np.isfinite(nxt), nxt, grow), capv[todo])
+    if far.any():
+        # far segments: the finer lower bound (more pieces, coarse fields included)
+        i = np.flatnonzero(far)
+        lb8 = ix.lower_bound(A[i], B[i], _FAR_PIECES)
+        dist[i] = np.minimum(np.maximum(dist[i], lb8), capv[i])
+        exact[i] = lb8 >= capv[i]
     return dist, exact
 
 
-def _search(A, B, T, g, idx, ilo, ihi, best):
-    """Exact distances of segments ``idx`` to the triangles in their boxes, into ``best``."""
+def _search(A, B, ix, g, idx, ilo, ihi, rho, best, upper):
+    """Exact distances of segments ``idx`` to the triangles within ``rho`` of them.
+
+    Updates ``best`` (smallest exact distance found) and ``upper`` (smallest
+    segment-to-centroid distance, an upper bound). Cells farther than
+    ``rho`` from the segment are dropped, then triangles whose bounding
+    sphere is farther than ``min(rho, upper)``, before the exact test.
+    """
+    if len(idx) == 0:
+        return
     ncell = (ihi - ilo + 1).prod(1)
     csum = np.cumsum(ncell)
+    T = ix.T
+    half = 0.5 * np.sqrt(3.0) * g.h
     start = 0
     while start < len(idx):
         base = csum[start - 1] if start else 0
         stop = max(int(np.searchsorted(csum, base + _CHUNK_CELLS, "right")), start + 1)
-        part = slice(start, stop)
+        part = idx[start:stop]
+        cell, owner = _box_cells(ilo[start:stop], ihi[start:stop])
         start = stop
-        box, ti = g.candidates(ilo[part], ihi[part])
-        si = idx[part][box]
-        d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
-        np.minimum.at(best, si, d)
+        si = part[owner]
+        keys = g.key(cell)
+        if g.start is not None:
+            lo = g.start[keys]
+            n = g.start[keys + 1] - lo
+        else:
+            lo = np.searchsorted(g.keys, keys, "left")
+            n = np.searchsorted(g.keys, keys, "right") - lo
+        # occupied cells within rho (+ half a diagonal) of the segment
+        keep = n > 0
+        centre = g.glo + (cell[keep] + 0.5) * g.h
+        sk = si[keep]
+        keep[keep] = _point_segment(centre, A[sk], B[sk]) <= rho[sk] + half + ix.eps
+        lo, n, si = lo[keep], n[keep], si[keep]
+        tot = int(n.sum())
+        ti = g.tris[np.repeat(lo - (np.cumsum(n) - n), n) + np.arange(tot)]
+        si = np.repeat(si, n)
+        if len(g.big):
+            si = np.concatenate([si, np.repeat(part, len(g.big))])
+            ti = np.concatenate([ti, np.tile(g.big, len(part))])
+        for a in range(0, len(si), _CHUNK_PAIRS):
+            _pairs(A, B, ix, T, si[a:a + _CHUNK_PAIRS], ti[a:a + _CHUNK_PAIRS],
+                   rho, best, upper)
 
 
-def collider_distance(points, offsets, colliders, return_exact=False):
+def _pairs(A, B, ix, T, si, ti, rho, best, upper):
+    """Bounding-sphere cull, then the exact distance of (segment, triangle) pairs."""
+    if len(si) == 0:
+        return
+    dc = _point_segment(ix.centroid[ti], A[si], B[si])
+    _min_into(upper, si, dc)
+    # (a hair of slack against rounding: never cull the closest triangle)
+    keep = dc - ix.radius[ti] * (1 + 1e-9) <= np.minimum(rho[si], upper[si]) + ix.eps
+    # and the nearest centroid of each segment, for a tight upper bound (next radius)
+    keep |= dc <= upper[si]
+    si, ti = si[keep], ti[keep]
+    if len(si) == 0:
+        return
+    m = len(T)
+    pair = np.unique(si * m + ti)
+    si, ti = pair // m, pair % m
+    d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
+    _min_into(best, si, d)
+
+
+def _min_into(out, i, v):
+    """``out[i] = min(out[i], v)`` with repeated ``i`` (sort + reduceat)."""
+    if len(i) == 0:
+        return
+    if len(i) > 1 and (i[1:] < i[:-1]).any():
+        o = np.argsort(i, kind="stable")
+        i, v = i[o], v[o]
+    first = np.flatnonzero(np.r_[True, i[1:] != i[:-1]])
+    u = i[first]
+    out[u] = np.minimum(out[u], np.minimum.reduceat(v, first))
+
+
+def _point_segment(p, a, b):
+    """Distance of points ``p`` to segments ``[a, b]``, row by row."""
+    ab = b - a
+    ap = p - a
+    L2 = _dot(ab, ab)
+    t = np.clip(_dot(ap, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    return np.linalg.norm(ap - ab * t[:, None], axis=1)
+
+
+def collider_distance(points, offsets, colliders, return_exact=False, max_distance=None):
     """Fur Collider Distance: per CV, the distance of its segments to the colliders.
 
     The distance of CV ``j`` is the smallest distance to any collider of
@@ -363,6 +625,15 @@ def collider_distance(points, offsets, colliders, return_exact=False):
         colliders are ignored.
     return_exact : bool
         Also return which CV distances are exact.
+    max_distance : float >= 0, optional
+        Cap (e.g. the largest displacement the Region of Influence will
+        clamp): every returned distance is ``min(distance, max_distance)``
+        (``max_distance`` without colliders), still never above the true
+        distance. Segments that are provably at least ``max_distance`` from
+        every collider skip the exact search, so a small cap is much
+        faster. :func:`region_of_influence` gives the same result with
+        ``min(distance, cap)`` as with ``distance`` when no displacement is
+        longer than ``cap``. Capped values count as exact.
 
     Returns
     -------
@@ -372,34 +643,53 @@ def collider_distance(points, offsets, colliders, return_exact=False):
         lengths); for segments farther away a lower bound from distance
         fields of the collider (typically within a few percent of the
         collider's size below the truth, more for CVs farther away than the
-        collider's size). It never exceeds the true distance.
+        collider's size). It never exceeds the true distance. With
+        ``max_distance``: at most ``max_distance``.
     exact : (P,) ndarray of bool
-        Only with ``return_exact``.
+        Only with ``return_exact``. With ``max_distance``, true where the
+        distance is exactly ``min(true distance, max_distance)``.
 
     Raises
     ------
     InputError
-        Malformed curves (the message names the curve or point).
+        Malformed curves (the message names the curve or point), or
+        ``max_distance`` negative, NaN or not a number.
     ColliderError
         Malformed ``(V, F)`` collider.
     """
     pts, off = check_curves(points, offsets)
+    cap = _check_cap(max_distance)
     if isinstance(colliders, Collider):
         colliders = [colliders]
     P = len(pts)
     _, _, s0 = layout(off)
     A, B = pts[s0], pts[s0 + 1]
-    seg_d = np.full(len(s0), np.inf)
+    seg_d = np.full(len(s0), np.inf if cap is None else cap)
     seg_exact = np.ones(len(s0), bool)
     for i, col in enumerate(colliders):
-        mesh = _world_mesh(col, i)
-        if mesh is None:
+        if isinstance(col, Collider):
+            if col.empty:
+                continue
+            ix, M3, t, scale = _collider_index(col)
+        else:
+            mesh = _world_mesh(col, i)
+            if mesh is None:
+                continue
+            ix, M3, t, scale = _MeshIndex(*mesh), np.eye(3), np.zeros(3), 1.0
+        if len(s0) == 0:
             continue
-        d, ex = segment_mesh_distance(A, B, *mesh)
+        if scale == 1.0 and not (M3 - np.eye(3)).any() and not t.any():
+            Al, Bl = A, B
+        else:
+            Minv = np.linalg.inv(M3).T
+            Al, Bl = (A - t) @ Minv, (B - t) @ Minv
+        # the best distance so far caps this collider's search too
+        d, ex = _segment_distance(ix, Al, Bl, seg_d / scale)
+        d = d * scale
         better = d < seg_d
         seg_exact = np.where(better, ex, seg_exact)
         seg_d = np.minimum(seg_d, d)
-    dist = np.full(P, np.inf)
+    dist = np.full(P, np.inf if cap is None else cap)
     exact = np.ones(P, bool)
     # segment k runs from point s0[k] to s0[k] + 1
     for end in (s0, s0 + 1):

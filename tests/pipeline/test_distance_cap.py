@@ -1,0 +1,171 @@
+"""Collider Distance with a cap (``max_distance``): exactly min(true distance, cap)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pipe_oracle as po
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from core import Collider
+from core.errors import InputError
+from core.pipeline import collider_distance, segment_mesh_distance, segment_triangle_distance
+
+PROP = settings(max_examples=12, deadline=None, derandomize=True, database=None,
+                suppress_health_check=list(HealthCheck))
+TOL = 1e-9
+
+
+def brute_segments(A, B, V, F):
+    """(S,) exact segment-mesh distance: every segment against every triangle."""
+    S, m = len(A), len(F)
+    si = np.repeat(np.arange(S), m)
+    ti = np.tile(np.arange(m), S)
+    T = V[F]
+    d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
+    return d.reshape(S, m).min(1)
+
+
+def brute_cv(points, offsets, meshes):
+    """(P,) exact per-CV distance (min over the CV's segments and the meshes)."""
+    A, B, _ = po.segments(points, offsets)
+    seg = np.full(len(A), np.inf)
+    for V, F in meshes:
+        seg = np.minimum(seg, brute_segments(A, B, V, F))
+    out = np.full(len(points), np.inf)
+    k = 0
+    for i in range(len(offsets) - 1):
+        for j in range(offsets[i], offsets[i + 1] - 1):
+            out[j] = min(out[j], seg[k])
+            out[j + 1] = min(out[j + 1], seg[k])
+            k += 1
+    return out
+
+
+def _scene(rng, n_curves=10, n_cvs=5, spread=1.2):
+    V, F = po.icosphere(rng.uniform(-0.3, 0.3, 3), rng.uniform(0.3, 0.7), sub=2)
+    curves = []
+    for _ in range(n_curves):
+        root = rng.uniform(-spread, spread, 3)
+        steps = rng.normal(0, 0.15, (n_cvs - 1, 3))
+        curves.append(np.vstack([root, root + np.cumsum(steps, 0)]))
+    pts, off = po.pack(curves)
+    return V, F, pts, off
+
+
+def test_segment_triangle_distance_against_sampling():
+    rng = np.random.default_rng(0)
+    k = 400
+    a, b = rng.normal(0, 1, (k, 3)), rng.normal(0, 1, (k, 3))
+    t0, t1, t2 = (rng.normal(0, 1, (k, 3)) for _ in range(3))
+    d = segment_triangle_distance(a, b, t0, t1, t2)
+    n = 201
+    for i in range(0, k, 40):
+        q = a[i] + np.linspace(0, 1, n)[:, None] * (b[i] - a[i])
+        est = po.point_mesh_distance(q, np.array([t0[i], t1[i], t2[i]]), np.array([[0, 1, 2]]))
+        est = est.min()
+        slack = np.linalg.norm(b[i] - a[i]) / (2 * (n - 1))
+        assert est - slack - 1e-12 <= d[i] <= est + 1e-12
+
+
+@PROP
+@given(seed=st.integers(0, 10_000), cap=st.floats(0.0, 1.5), spread=st.floats(0.6, 3.0))
+def test_capped_is_min_of_brute_force_and_cap(seed, cap, spread):
+    rng = np.random.default_rng(seed)
+    V, F, pts, off = _scene(rng, spread=spread)
+    truth = brute_cv(pts, off, [(V, F)])
+    d, exact = collider_distance(pts, off, [(V, F)], max_distance=cap, return_exact=True)
+    assert (d <= truth + TOL).all(), "never above the truth"
+    assert (d <= cap).all()
+    want = np.minimum(truth, cap)
+    np.testing.assert_allclose(d[exact], want[exact], rtol=0, atol=TOL)
+    assert exact.all()  # small meshes: every search settles
+    # the uncapped result, capped afterwards, is the same where it is exact
+    du, eu = collider_distance(pts, off, [(V, F)], return_exact=True)
+    np.testing.assert_allclose(d[eu], np.minimum(du, cap)[eu], rtol=0, atol=TOL)
+
+
+@PROP
+@given(seed=st.integers(0, 10_000), cap=st.floats(0.01, 1.0),
+       uniform=st.booleans())
+def test_capped_collider_with_matrix(seed, cap, uniform):
+    """A Collider with a transform (similarity or not): same as its world mesh."""
+    rng = np.random.default_rng(seed)
+    V, F, pts, off = _scene(rng, n_curves=8, n_cvs=4)
+    R = po.rotation(rng.normal(0, 1, 3), rng.uniform(0, 3))
+    S = np.diag(np.full(3, 1.3) if uniform else rng.uniform(0.6, 1.6, 3))
+    M = np.eye(4)
+    M[:3, :3] = R @ S
+    M[:3, 3] = rng.uniform(-0.3, 0.3, 3)
+    col = Collider(V, F, matrix=M)
+    Vw = V.astype(np.float32).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+    truth = brute_cv(pts, off, [(Vw, F)])
+    for _ in range(2):  # the second call may reuse cached structures
+        d = collider_distance(pts, off, [col], max_distance=cap)
+        np.testing.assert_allclose(d, np.minimum(truth, cap), rtol=0, atol=TOL)
+        assert (d <= truth + TOL).all()
+
+
+def test_several_colliders_with_cap():
+    rng = np.random.default_rng(7)
+    pts, off = po.fur_on_plane(rng, 12, 5, 1.0)
+    a = po.icosphere((0, 0, 1.2), 0.5, 2)
+    b = po.icosphere((0.5, 0, 0.9), 0.3, 2)
+    truth = brute_cv(pts, off, [a, b])
+    for cap in (0.05, 0.2, 0.6):
+        d = collider_distance(pts, off, [a, Collider(*b)], max_distance=cap)
+        Vb = b[0].astype(np.float32).astype(np.float64)
+        truth = brute_cv(pts, off, [a, (Vb, b[1])])
+        np.testing.assert_allclose(d, np.minimum(truth, cap), rtol=0, atol=TOL)
+
+
+def test_moved_and_deformed_collider_is_not_stale():
+    """Cached structures follow the collider's matrix and vertices."""
+    rng = np.random.default_rng(8)
+    pts, off = po.fur_on_plane(rng, 15, 5, 1.0)
+    V, F = po.icosphere((0, 0, 0.8), 0.5, 2)
+    col = Collider(V, F)
+    cap = 0.5
+    for step in range(3):
+        M = np.eye(4)
+        M[:3, 3] = [0.2 * step, 0, 0.1 * step]
+        col.matrix = M
+        if step == 2:
+            col.vertices = V * [1.0, 1.2, 0.8]
+        Vw = col.vertices.astype(np.float64) + M[:3, 3]
+        truth = brute_cv(pts, off, [(Vw, F)])
+        d = collider_distance(pts, off, [col], max_distance=cap)
+        np.testing.assert_allclose(d, np.minimum(truth, cap), rtol=0, atol=TOL)
+
+
+def test_cap_zero_gives_zeros_and_no_collider_gives_the_cap():
+    rng = np.random.default_rng(9)
+    pts, off = po.fur_on_plane(rng, 10, 4, 1.0)
+    sphere = po.icosphere((0, 0, 2), 0.5, 1)
+    d, exact = collider_distance(pts, off, [sphere], max_distance=0.0, return_exact=True)
+    assert (d == 0).all() and exact.all()
+    np.testing.assert_array_equal(collider_distance(pts, off, [], max_distance=0.3),
+                                  np.full(len(pts), 0.3))
+    np.testing.assert_array_equal(collider_distance(pts, off, [sphere], max_distance=np.inf),
+                                  collider_distance(pts, off, [sphere]))
+    np.testing.assert_array_equal(collider_distance(pts, off, [sphere], max_distance=None),
+                                  collider_distance(pts, off, [sphere]))
+
+
+def test_segment_mesh_distance_cap():
+    V, F = po.grid(4.0, 8, z=0.0)
+    A = np.array([[0.1, 0.2, 0.3], [0.0, 0.0, 2.0], [0.3, 0.3, -0.05]])
+    B = A + [0.1, 0.0, 0.0]
+    d, exact = segment_mesh_distance(A, B, V, F, max_distance=0.5)
+    np.testing.assert_allclose(d, [0.3, 0.5, 0.05], atol=1e-12)
+    assert exact.all()
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), "far", True, [0.1, 0.2], -np.inf])
+def test_invalid_cap_raises(bad):
+    pts, off = po.pack([np.array([[0.0, 0, 0], [0, 0, 1]])])
+    with pytest.raises(InputError, match="max_distance"):
+        collider_distance(pts, off, [po.grid(2.0, 2)], max_distance=bad)
+    with pytest.raises(InputError, match="max_distance"):
+        segment_mesh_distance(pts[:1], pts[1:], *po.grid(2.0, 2), max_distance=bad)
