@@ -166,11 +166,7 @@ def _distance(points, offsets, colliders, cap):
     pl = _pipeline()
     if not colliders:
         return np.full(len(points), np.inf)
-    try:
-        return pl.collider_distance(points, offsets, colliders, max_distance=cap)
-    except TypeError:  # a core without the cap: exact everywhere (slower)
-        d = pl.collider_distance(points, offsets, colliders)
-        return d if cap is None else np.minimum(d, cap)
+    return pl.collider_distance(points, offsets, colliders, max_distance=cap)
 
 
 def write_attributes(data, attributes: dict) -> None:
