@@ -333,3 +333,28 @@ def test_pipeline_panel_draws_the_stages(fc):
     log = _draw(panel)
     assert any(k == "label" and v and v.startswith("Render curves fixed") for k, v in log)
     assert ("label", "Motion after collision may push hair into colliders") in log
+
+
+def test_a_failing_stage_is_reported_and_the_frame_solves_again(fc, monkeypatch):
+    """A stage error is the setup's status (the handler never raises); the solver state
+    is not mistaken for the previous frame's: solving the frame again gives the result of
+    an uninterrupted run."""
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 6))
+    out = fc.setup(hair, [box])
+    hair.furcollide.motion.write_collider_distance = True
+    play(scene, range(1, 6))
+    clean = world(out)
+    bpy.ops.furcollide.reset()
+    play(scene, range(1, 5))
+    real = fc.runtime.stages.output_stage
+
+    def boom(*a, **k):
+        raise ValueError("stage exploded")
+
+    monkeypatch.setattr(fc.runtime.stages, "output_stage", boom)
+    scene.frame_set(5)
+    assert "stage exploded" in hair.furcollide.status_message
+    monkeypatch.setattr(fc.runtime.stages, "output_stage", real)
+    scene.frame_set(5)
+    np.testing.assert_array_equal(world(out), clean)
