@@ -358,3 +358,19 @@ def test_a_failing_stage_is_reported_and_the_frame_solves_again(fc, monkeypatch)
     monkeypatch.setattr(fc.runtime.stages, "output_stage", real)
     scene.frame_set(5)
     np.testing.assert_array_equal(world(out), clean)
+
+
+def test_clearance_pass_keeps_the_setup_collision_offset(fc):
+    """Render curves freed by the clearance pass keep the setup's Collision Offset from
+    the collider, like the guides."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    guides.furcollide.collision_offset = 0.05
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    play(scene, range(1, 8))
+    gout = guides.furcollide.groom.output
+    roff = offsets_of(gout)
+    center = box.matrix_world.translation
+    # inside the box grown by most of the offset: no segment
+    assert len(segments_in_box(world(gout), roff, center, half=HALF + 0.04)) == 0
+    assert guides.furcollide.stat_groom_fixed > 0
