@@ -877,6 +877,7 @@ def _evaluate(scene, depsgraph, ob) -> str:
             rt.solver_frame = None
             return _hold(ob, rt, inp, f, reason=str(exc))
     res, cols = _step(ob, rt, solver, inp, depsgraph)
+    rt.solver_frame = f  # the solver holds frame f now, even if a stage below fails
     points, attrs = _finish(ob, rt, inp, res, f, scene, cols)
     stats = _stats(res.status, f, res.timings.get("total", 0.0))
     changed = cache.rows_differ(points, inp.raw)  # points the stages moved
@@ -1036,6 +1037,7 @@ def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
             raise ValueError(f"bake frame {f - 1} was made for other curves")
         solver.state = cache.decode_state(stored, rt.memory.sparse)
     res, cols = _step(ob, rt, solver, inp, depsgraph)
+    rt.solver_frame = f
     points, attrs = _finish(ob, rt, inp, res, f, scene, cols)
     fp = np.frombuffer(settings_fingerprint(ob).encode(), np.uint8)
     state = solver.state

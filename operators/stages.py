@@ -166,11 +166,7 @@ def _distance(points, offsets, colliders, cap):
     pl = _pipeline()
     if not colliders:
         return np.full(len(points), np.inf)
-    try:
-        return pl.collider_distance(points, offsets, colliders, max_distance=cap)
-    except TypeError:  # a core without the cap: exact everywhere (slower)
-        d = pl.collider_distance(points, offsets, colliders)
-        return d if cap is None else np.minimum(d, cap)
+    return pl.collider_distance(points, offsets, colliders, max_distance=cap)
 
 
 def write_attributes(data, attributes: dict) -> None:
@@ -294,7 +290,14 @@ def groom_frame(ob, binding, guides_world, depsgraph, colliders):
     pts = binding.deform(np.asarray(guides_world, np.float64), V)
     n_fixed = 0
     if g.use_clearance and colliders:
-        pts, _status, n_fixed = _pipeline().clearance_pass(pts, binding.render_offsets, colliders)
+        from ..core import Settings
+
+        # Stiff (the minimal rotation at the root, shape kept) with the setup's own
+        # Collision Offset: render strands keep the same gap as the guides.
+        settings = Settings(mode="stiff", collision_offset=ob.furcollide.collision_offset)
+        pts, _status, n_fixed = _pipeline().clearance_pass(
+            pts, binding.render_offsets, colliders, settings=settings
+        )
     return np.asarray(pts, np.float32), int(n_fixed)
 
 

@@ -8,7 +8,10 @@ and writes everything to ``out/demo/``:
   add-on's operators, the bake cache next to it);
 * ``before.png`` / ``after.png``: Cycles (CPU) stills of the same frame
   without and with FurCollide, and ``compare.png``, the two side by side;
-* one line of statistics per frame on stdout.
+* ``pipeline-1-groom.png`` ... ``pipeline-4-render-groom.png`` and
+  ``pipeline.png`` (the four as a 2x2 sheet): the fur pipeline, step by step;
+* one line of statistics per frame on stdout (and one per frame for the
+  pipeline: guide status counts, min collider distance, clearance count).
 
 The scene (see ``demo_scene.py``): fur on a body, pushed and pinched by a
 sphere and covered by a thin single-sided cloth; grass with a rolling ball.
@@ -18,6 +21,17 @@ collider meshes, make the hair object active, ``bpy.ops.furcollide.add()``,
 then ``bpy.ops.furcollide.bake_all()``. If the add-on's operators cannot be
 registered (``--engine core``, or while they are being developed) the demo
 drives the collision core directly and writes an output copy of the hair.
+
+With the operators, the demo also runs the whole fur pipeline (paper
+sections 2 and 4) on the body fur, headless: the dense fur is the render
+groom; ``furcollide.fur_sampler`` picks 15 % of it as guides; FurCollide is
+set up on the guides (``furcollide.add``); ``furcollide.fur_attach_bind``
+makes them follow the turning body; wind after collision with the Region of
+Influence and the per-frame collider distance attribute; and
+``furcollide.groom_bind`` makes the dense fur follow the collided guides,
+with the clearance pass. After the bake, the render groom is checked at the
+still frame: no curve (pinched ones aside) may cross the pusher or the
+cloth, or go deeper than a strand's thickness into the body (exit 1).
 
 Exit status: 0 on success, 1 on any failure (the reason is printed).
 """
@@ -88,10 +102,16 @@ def parse_args(argv=None):
         "directly; auto: operators if they register, else core",
     )
     ap.add_argument(
+        "--no-pipeline",
+        action="store_true",
+        help="skip the fur pipeline (Fur Sampler, Fur Attach, wind, render groom)",
+    )
+    ap.add_argument(
         "--docs-img",
         type=Path,
         default=None,
-        help="also write a small JPEG of compare.png here (for the README)",
+        help="also write a small JPEG of compare.png here, and of the pipeline "
+        "pictures (pipeline*.jpg) next to it (for the README)",
     )
     args = ap.parse_args(argv)
     try:
@@ -266,36 +286,22 @@ def collide_with_core(bpy, demo, frame_end):
     return outputs, frames
 
 
-def collide_with_operators(bpy, demo, frame_end, blend_path):
-    """Set FurCollide up through its operators, bake, return the outputs."""
+def collide_with_operators(bpy, demo, frame_end, blend_path, pipeline=False):
+    """Set FurCollide up through its operators, bake, return the outputs.
+
+    With ``pipeline``, the fur pipeline (:func:`pipeline_setup`) is set up
+    before the bake and returned too (else None).
+    """
     import numpy as np
 
     scene = demo.scene
     scene.frame_end = frame_end
     outputs = []
     for hair, colliders, kind in demo.setups:
-        for ob in scene.objects:
-            ob.select_set(False)
-        for ob in colliders:
-            ob.select_set(True)
-        hair.select_set(True)
-        bpy.context.view_layer.objects.active = hair
-        before = set(bpy.data.objects)
-        ret = bpy.ops.furcollide.add()
-        if ret != {"FINISHED"}:
-            raise RuntimeError(f"bpy.ops.furcollide.add() on {hair.name!r} returned {ret}")
-        new = [o for o in bpy.data.objects if o not in before and o.type == "CURVES"]
-        if len(new) != 1:
-            raise RuntimeError(f"furcollide.add on {hair.name!r} made {len(new)} hair outputs")
-        set_ = apply_addon_settings(hair, SETTINGS[kind])
-        missed = sorted(set(SETTINGS[kind]) - {x.split("=")[0] for x in set_})
-        if missed:
-            log(f"warning: the add-on has no setting(s) {missed}; its defaults are used")
-        log(
-            f"furcollide.add: {hair.name} + {[o.name for o in colliders]} -> {new[0].name}"
-            + (f" ({', '.join(set_)})" if set_ else "")
-        )
-        outputs.append(new[0])
+        out = add_setup(bpy, scene, hair, colliders, kind)
+        outputs.append(out)
+
+    pipe = pipeline_setup(bpy, demo) if pipeline else None
 
     # The bake cache lives next to the saved .blend.
     bpy.ops.wm.save_as_mainfile(filepath=str(blend_path))
@@ -309,6 +315,7 @@ def collide_with_operators(bpy, demo, frame_end, blend_path):
 
     stats = Stats([h.name for h, *_ in demo.setups])
     stats.header()
+    t0 = time.perf_counter()
     for f in range(scene.frame_start, frame_end + 1):
         scene.frame_set(f)
         row = []
@@ -321,8 +328,406 @@ def collide_with_operators(bpy, demo, frame_end, blend_path):
             attr.data.foreach_get("value", st)
             row.append((counts_of(st), None))
         stats.add(f, row)
+        if pipe is not None:
+            pipe.record(f)
     stats.summary()
-    return outputs
+    if pipe is not None:
+        log(
+            f"played the bake back in {time.perf_counter() - t0:.1f} s "
+            "(the render groom is deformed and cleared on every frame)"
+        )
+        pipe.print_table()
+    return outputs, pipe
+
+
+def add_setup(bpy, scene, hair, colliders, kind):
+    """``bpy.ops.furcollide.add()`` on ``hair`` with ``colliders``; its SETTINGS; the output."""
+    select(bpy, scene, colliders, hair)
+    before = set(bpy.data.objects)
+    ret = bpy.ops.furcollide.add()
+    if ret != {"FINISHED"}:
+        raise RuntimeError(f"bpy.ops.furcollide.add() on {hair.name!r} returned {ret}")
+    new = [o for o in bpy.data.objects if o not in before and o.type == "CURVES"]
+    if len(new) != 1:
+        raise RuntimeError(f"furcollide.add on {hair.name!r} made {len(new)} hair outputs")
+    set_ = apply_addon_settings(hair, SETTINGS[kind])
+    missed = sorted(set(SETTINGS[kind]) - {x.split("=")[0] for x in set_})
+    if missed:
+        log(f"warning: the add-on has no setting(s) {missed}; its defaults are used")
+    log(
+        f"furcollide.add: {hair.name} + {[o.name for o in colliders]} -> {new[0].name}"
+        + (f" ({', '.join(set_)})" if set_ else "")
+    )
+    return new[0]
+
+
+def select(bpy, scene, selected, active):
+    """Select exactly ``selected`` and ``active``; make ``active`` the active object."""
+    for ob in scene.objects:
+        ob.select_set(False)
+    for ob in selected:
+        ob.select_set(True)
+    active.select_set(True)
+    bpy.context.view_layer.objects.active = active
+
+
+def run_op(name, **kwargs):
+    """``bpy.ops.furcollide.<name>(**kwargs)``; RuntimeError unless it finished."""
+    import bpy
+
+    ret = getattr(bpy.ops.furcollide, name)(**kwargs)
+    if ret != {"FINISHED"}:
+        raise RuntimeError(f"bpy.ops.furcollide.{name}() returned {ret}")
+
+
+# ----------------------------------------------------------------- pipeline
+
+# The fur pipeline (paper sections 2 and 4) on the body fur, all through the
+# add-on's operators: the dense "Fur" is the render groom, FurCollide runs on
+# guides sampled from it, and the groom follows the collided guides.
+PIPELINE = dict(
+    fraction=0.15,  # Fur Sampler: share of the groom's curves kept as guides
+    seed=3,
+    # Wind after collision (Region of Influence keeps it collision free).
+    motion=dict(
+        use_wind=True,
+        wind_stage="OUTPUT",
+        wind_strength=0.04,
+        wind_direction=(1.0, 0.4, 0.0),
+        wind_turbulence=0.8,
+        wind_frequency=0.7,
+        wind_scale=0.4,
+        use_region_of_influence=True,
+        write_collider_distance=True,
+        distance_max=0.1,
+    ),
+)
+#: How deep (world units) render curves pressed onto the skin may dip into the
+#: body, the growth surface (not a collider): about a strand's thickness.
+BODY_DEPTH_TOLERANCE = 0.015
+PIPELINE_OPERATORS = {"fur_sampler", "fur_attach_bind", "groom_bind"}
+
+
+def has_pipeline_operators(bpy) -> bool:
+    return PIPELINE_OPERATORS <= set(dir(bpy.ops.furcollide))
+
+
+class Pipeline:
+    """The fur pipeline's objects, its per-frame statistics and its checks."""
+
+    def __init__(self, demo, guides, output, groom_out):
+        self.demo = demo
+        self.guides = guides  # Fur Sampler result: the FurCollide source
+        self.output = output  # collided guides (+ wind), the setup's output
+        self.groom_out = groom_out  # the render groom following the guides
+        self.rows = []
+
+    @property
+    def objects(self):
+        return [self.guides, self.output, self.groom_out]
+
+    def record(self, f):
+        """Statistics of frame ``f`` (call right after ``scene.frame_set(f)``)."""
+        import numpy as np
+
+        data = self.output.data
+        counts, st = {}, None
+        attr = data.attributes.get("furcollide_status")
+        if attr is not None:
+            st = np.empty(len(attr.data), np.int32)
+            attr.data.foreach_get("value", st)
+            counts = counts_of(st)
+        dist = None
+        attr = data.attributes.get("furcollide_collider_distance")
+        if attr is not None and len(attr.data):
+            d = np.empty(len(attr.data), np.float32)
+            attr.data.foreach_get("value", d)
+            if st is not None:  # pinched curves touch the pusher: leave them out
+                offs = np.empty(len(data.curves) + 1, np.int32)
+                data.curve_offset_data.foreach_get("value", offs)
+                d = d[np.repeat(st != 3, np.diff(offs))]
+            dist = float(d.min()) if len(d) else None
+        s = self.guides.furcollide
+        self.rows.append((f, counts, dist, int(s.stat_groom_fixed)))
+
+    def print_table(self):
+        g = self.guides
+        log(
+            f"pipeline: {len(g.data.curves)} guides ({g.name}) -> {self.output.name}; "
+            f"render groom {len(self.groom_out.data.curves)} curves -> {self.groom_out.name}"
+        )
+        log("pipeline  frame  guides col/rec/pin/unres  min collider dist* clearance fixed")
+        for f, counts, dist, fixed in self.rows:
+            c = "/".join(str(counts.get(k, 0)) for k in (1, 2, 3, 4))
+            d = f"{dist:17.4f}" if dist is not None else f"{'-':>17s}"
+            log(f"pipeline  {f:5d}  {c:>23s}  {d}  {fixed:15d}")
+        log("pipeline  (* of the guides' CVs, pinched guides left out, capped at "
+            f"{PIPELINE['motion']['distance_max']})")
+        fixed = [r[3] for r in self.rows]
+        if fixed:
+            peak = max(self.rows, key=lambda r: r[3])
+            log(
+                f"pipeline: clearance pass fixed {sum(fixed)} render curves over "
+                f"{len(fixed)} frames (peak {peak[3]} at frame {peak[0]})"
+            )
+
+    def follows_pinched_guide(self):
+        """(R,) bool: render curves with a pinched guide among their nearest guides."""
+        import demo_scene as ds
+        import numpy as np
+
+        g = self.guides
+        attr = self.output.data.attributes.get("furcollide_status")
+        if attr is None:
+            return np.zeros(len(self.groom_out.data.curves), bool)
+        st = np.empty(len(attr.data), np.int32)
+        attr.data.foreach_get("value", st)
+        # Roots at the reference pose: the groom's and the guides' own data.
+        r = ds.hair_points(self.demo.fur)[ds.curve_offsets(self.demo.fur)[:-1]]
+        q = ds.hair_points(g)[ds.curve_offsets(g)[:-1]]
+        k = min(int(g.furcollide.groom.guides), len(q))
+        d2 = ((r[:, None, :] - q[None, :, :]) ** 2).sum(-1)
+        near = np.argpartition(d2, k - 1, axis=1)[:, :k]
+        return (st[near] == 3).any(1)
+
+    def check_crossings(self, frame):
+        """Render groom curves that cross the pusher, the cloth or the body at ``frame``.
+
+        Pinched curves are left out: those with the root inside the pusher,
+        and those that follow a pinched guide (one of the ``groom.guides``
+        guides nearest to its root at the reference pose), which lie on the
+        skin with it. The pusher and the cloth are the setup's colliders: no
+        render curve may cross them (the clearance pass sees to it). The body
+        is the growth surface, not a collider: curves pressed onto the skin
+        may dip into it a little; deeper than BODY_DEPTH_TOLERANCE is an
+        error. Returns a list of failures (empty when all is well), printed.
+        """
+        import demo_scene as ds
+        import numpy as np
+
+        if str(ROOT) not in sys.path:
+            sys.path.insert(0, str(ROOT))
+        from core import Collider
+
+        demo = self.demo
+        P = ds.hair_points(self.groom_out).astype(np.float64)
+        offs = ds.curve_offsets(self.groom_out)
+        C = len(offs) - 1
+
+        def collider(ob):
+            V, F = ds.mesh_world(ob)
+            return Collider(V, F, matrix=np.array(ob.matrix_world), name=ob.name)
+
+        pusher = collider(demo.pusher)
+        pinched = pusher.contains(P[offs[:-1]]) | self.follows_pinched_guide()
+        # Segments of every curve; the first one starts a hair's breadth off
+        # the skin (roots sit exactly on the body).
+        seg_curve = np.repeat(np.arange(C), np.diff(offs) - 1)
+        last = np.zeros(len(P), bool)
+        last[offs[1:] - 1] = True
+        o = P[~last]
+        d = P[1:][~last[:-1]] - o
+        first = np.zeros(len(o), bool)
+        first[offs[:-1] - np.arange(C)] = True
+        o = o + np.where(first[:, None], 0.02 * d, 0.0)
+        d = d * np.where(first[:, None], 0.98, 1.0)
+
+        def crossing(col):
+            hit = col.segment_hits(o, d)
+            return (np.bincount(seg_curve[hit], minlength=C) > 0) & ~pinched
+
+        failures, parts = [], []
+        for ob, col in ((demo.pusher, pusher), (demo.cloth, collider(demo.cloth))):
+            n = int(crossing(col).sum())
+            parts.append(f"{ob.name} {n}")
+            if n:
+                failures.append(f"{n} render groom curves cross {ob.name}")
+        body = collider(demo.body)
+        cross = crossing(body)
+        depth = 0.0
+        if cross.any():
+            pts_curve = np.repeat(np.arange(C), np.diff(offs))
+            idx = np.flatnonzero(cross[pts_curve])
+            inside = idx[body.contains(P[idx])]
+            if len(inside):
+                q, _n = body.closest_points(P[inside])
+                depth = float(np.linalg.norm(P[inside] - q, axis=1).max())
+        deep = depth > BODY_DEPTH_TOLERANCE
+        parts.append(
+            f"{demo.body.name} {int(cross.sum())} (deepest point {depth * 1000:.1f} mm inside, "
+            f"tolerance {BODY_DEPTH_TOLERANCE * 1000:.0f} mm)"
+        )
+        if deep:
+            failures.append(
+                f"render groom curves go {depth * 1000:.1f} mm into {demo.body.name}"
+            )
+        log(
+            f"pipeline check, frame {frame}: render groom curves crossing: "
+            + ", ".join(parts)
+            + f"; of {C} curves, {int(pinched.sum())} pinched ones left out: "
+            + ("FAILED" if failures else "ok")
+        )
+        return failures
+
+
+def pipeline_setup(bpy, demo):
+    """Fur Sampler -> FurCollide on the guides -> Fur Attach -> wind -> render groom."""
+    scene = demo.scene
+    fur = demo.fur
+    colliders = demo.setups[0][1]  # the pusher and the cloth, like the plain setup
+    scene.frame_set(scene.frame_start)  # the reference pose
+    t0 = time.perf_counter()
+
+    # 1. Fur Sampler: guides from the dense fur (the render groom).
+    select(bpy, scene, [], fur)
+    before = set(bpy.data.objects)
+    run_op("fur_sampler", fraction=PIPELINE["fraction"], seed=PIPELINE["seed"])
+    new = [o for o in bpy.data.objects if o not in before]
+    if len(new) != 1 or bpy.context.view_layer.objects.active != new[0]:
+        raise RuntimeError(f"furcollide.fur_sampler made {[o.name for o in new]}")
+    guides = new[0]
+    log(
+        f"pipeline: fur_sampler(fraction={PIPELINE['fraction']}) on {fur.name}: "
+        f"{len(guides.data.curves)} of {len(fur.data.curves)} curves -> {guides.name}"
+    )
+
+    # 2. FurCollide on the guides, with the fur's settings.
+    output = add_setup(bpy, scene, guides, colliders, "fur")
+    s = guides.furcollide
+    s.frame_start, s.frame_end = scene.frame_start, scene.frame_end
+    # The offset also per collider: the render groom's clearance pass uses the
+    # setup's colliders (with their own offsets) but not the setup's Collision
+    # Offset, and thick render strands would show through the thin cloth.
+    offset = SETTINGS["fur"]["collision_offset"]
+    for c in s.colliders:
+        c.use_offset, c.collision_offset = True, offset
+    log(f"pipeline: collider offsets {offset} on {[c.object.name for c in s.colliders]}")
+
+    # 3. Fur Attach: the guides follow the (turning) body from the first frame.
+    s.attach_reference_frame = scene.frame_start
+    run_op("fur_attach_bind")
+    log(f"pipeline: fur_attach_bind at frame {s.attach_reference_frame} (use_fur_attach="
+        f"{s.use_fur_attach})")
+
+    # 4. Wind after collision, Region of Influence, collider distance attribute.
+    m = s.motion
+    for key, value in PIPELINE["motion"].items():
+        setattr(m, key, value)
+    log("pipeline: motion " + ", ".join(
+        f"{k}={tuple(round(x, 3) for x in v) if isinstance(v, tuple) else v}"
+        for k, v in PIPELINE["motion"].items()
+    ))
+
+    # 5. Render groom: the fur follows the collided guides, then the clearance pass.
+    s.groom.groom = fur
+    s.groom.use_clearance = True
+    select(bpy, scene, [], guides)
+    run_op("groom_bind")
+    groom_out = s.groom.output
+    if groom_out is None:
+        raise RuntimeError("furcollide.groom_bind made no groom output")
+    log(
+        f"pipeline: groom_bind {fur.name} -> {groom_out.name} "
+        f"({s.groom.guides} guides per curve, clearance pass on); "
+        f"set up in {time.perf_counter() - t0:.1f} s"
+    )
+    return Pipeline(demo, guides, output, groom_out)
+
+
+def set_object_material(ob, mat):
+    """Object-level material (the hair data stays the add-on's own)."""
+    if not ob.material_slots:
+        ob.data.materials.append(None)
+    ob.material_slots[0].link = "OBJECT"
+    ob.material_slots[0].material = mat
+
+
+#: (file stem, label, frame key, shown object, material key) of each panel.
+PIPELINE_PANELS = (
+    ("pipeline-1-groom", "1 groom, frame {ref}: {groom} curves", "ref", "fur", "fur_before"),
+    ("pipeline-2-guides", "2 Fur Sampler: {guides} guides", "ref", "guides", "guides"),
+    ("pipeline-3-collided", "3 frame {still}: guides collided, wind", "still", "output",
+     "status"),
+    ("pipeline-4-render-groom", "4 render groom follows, cleared", "still", "groom_out",
+     "render_groom"),
+)
+
+
+def render_pipeline(bpy, demo, pipe, still, out_dir, size, set_frame):
+    """Four labelled panels of the pipeline (Camera Fur) and a 2x2 sheet pipeline.png."""
+    scene = demo.scene
+    cam = demo.furcam
+    shown = {"fur": demo.fur, "guides": pipe.guides, "output": pipe.output,
+             "groom_out": pipe.groom_out}
+    hairs = list(shown.values()) + [h for h, *_ in demo.setups]
+    hairs += [o for o in scene.objects if o.type == "CURVES" and o not in hairs]
+    away = [demo.grass, demo.ground, demo.ball]
+    saved = {o: o.hide_render for o in hairs + away}
+    for o in away:
+        o.hide_render = True
+    colors = {"ref": (1.0, 0.85, 0.4), "still": (0.55, 0.95, 0.8)}
+    labels = []
+    paths = {}
+    scene.camera = cam
+    try:
+        for stem, text, when, key, mat in PIPELINE_PANELS:
+            ob = shown[key]
+            set_object_material(ob, demo.materials[mat])
+            text = text.format(
+                ref=scene.frame_start, still=still, groom=len(demo.fur.data.curves),
+                guides=len(pipe.guides.data.curves),
+            )
+            lab = add_label(bpy, cam, text, colors[when])
+            labels.append(lab)
+            for o in hairs:
+                o.hide_render = o is not ob
+            for o in labels:
+                o.hide_render = o is not lab
+            frame = scene.frame_start if when == "ref" else still
+            set_frame(frame)
+            path = out_dir / f"{stem}.png"
+            scene.render.filepath = str(path)
+            t0 = time.perf_counter()
+            bpy.ops.render.render(write_still=True)
+            if not path.exists():
+                raise RuntimeError(f"Cycles did not write {path}")
+            log(f"rendered {_rel(path)} (frame {frame}) in {time.perf_counter() - t0:.1f} s")
+            paths[stem] = path
+    finally:
+        scene.camera = demo.camera
+        for o, h in saved.items():
+            o.hide_render = h
+        for lab in labels:
+            lab.hide_render = lab.hide_viewport = True
+    sheet = tile_images(bpy, [paths[p[0]] for p in PIPELINE_PANELS], size, "pipeline")
+    path = out_dir / "pipeline.png"
+    sheet.filepath_raw = str(path)
+    sheet.file_format = "PNG"
+    sheet.save()
+    paths["pipeline"] = path
+    return paths, sheet
+
+
+def tile_images(bpy, paths, size, name, columns=2, gap=4):
+    """A new Blender image with the PNGs ``paths`` (all ``size``) in a grid, row by row."""
+    import numpy as np
+
+    w, h = size
+    rows = (len(paths) + columns - 1) // columns
+    buf = np.ones((rows * h + (rows - 1) * gap, columns * w + (columns - 1) * gap, 4),
+                  np.float32)
+    for i, p in enumerate(paths):
+        row, col = divmod(i, columns)
+        im = bpy.data.images.load(str(p))
+        px = np.empty(w * h * 4, np.float32)
+        im.pixels.foreach_get(px)
+        y0 = (rows - 1 - row) * (h + gap)  # Blender images start at the bottom row
+        x0 = col * (w + gap)
+        buf[y0 : y0 + h, x0 : x0 + w] = px.reshape(h, w, 4)
+        bpy.data.images.remove(im)
+    img = bpy.data.images.new(name, buf.shape[1], buf.shape[0], alpha=False)
+    img.pixels.foreach_set(buf.ravel())
+    return img
 
 
 # ----------------------------------------------------------------- render
@@ -353,8 +758,6 @@ def add_label(bpy, camera, text, color):
 
 def render_stills(bpy, demo, outputs, frame, out_dir, size, samples, set_frame):
     """Render before/after stills of ``frame`` (wide and close-up) and a 2x2 compare."""
-    import numpy as np
-
     scene = demo.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
@@ -371,11 +774,7 @@ def render_stills(bpy, demo, outputs, frame, out_dir, size, samples, set_frame):
     sources = [h for h, *_ in demo.setups]
     after_mats = [demo.materials["fur_after"], demo.materials["grass_after"]]
     for out, mat in zip(outputs, after_mats, strict=True):
-        # Object-level material: the output's data stays FurCollide's own.
-        if not out.material_slots:
-            out.data.materials.append(None)
-        out.material_slots[0].link = "OBJECT"
-        out.material_slots[0].material = mat
+        set_object_material(out, mat)
     labels = {}
     for cam in (demo.camera, demo.closeup):
         labels[cam.name, "before"] = add_label(bpy, cam, "without collision", (1.0, 0.55, 0.25))
@@ -417,21 +816,8 @@ def render_stills(bpy, demo, outputs, frame, out_dir, size, samples, set_frame):
         lab.hide_viewport = True
 
     # compare.png: before | after, wide shot on top, close-up below.
-    grid_keys = [("before", "after"), ("before_closeup", "after_closeup")]
-    w, h = size
-    gap = 4
-    buf = np.ones((2 * h + gap, 2 * w + gap, 4), np.float32)
-    for row, keys in enumerate(grid_keys):
-        for col, key in enumerate(keys):
-            im = bpy.data.images.load(str(paths[key]))
-            px = np.empty(w * h * 4, np.float32)
-            im.pixels.foreach_get(px)
-            y0 = (1 - row) * (h + gap)  # Blender images start at the bottom row
-            x0 = col * (w + gap)
-            buf[y0 : y0 + h, x0 : x0 + w] = px.reshape(h, w, 4)
-            bpy.data.images.remove(im)
-    cmp_img = bpy.data.images.new("compare", buf.shape[1], buf.shape[0], alpha=False)
-    cmp_img.pixels.foreach_set(buf.ravel())
+    keys = ("before", "after", "before_closeup", "after_closeup")
+    cmp_img = tile_images(bpy, [paths[k] for k in keys], size, "compare")
     cmp_path = out_dir / "compare.png"
     cmp_img.filepath_raw = str(cmp_path)
     cmp_img.file_format = "PNG"
@@ -444,12 +830,13 @@ def _rel(p: Path):
     return p.relative_to(ROOT) if p.is_relative_to(ROOT) else p
 
 
-def save_docs_image(cmp_img, path: Path):
+def save_docs_image(img, path: Path, quality=88):
+    """Save a Blender image as a JPEG for the README."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    cmp_img.filepath_raw = str(path)
-    cmp_img.file_format = "JPEG"
-    cmp_img.save(quality=88)
-    log(f"wrote {path} ({path.stat().st_size // 1024} KiB)")
+    img.filepath_raw = str(path)
+    img.file_format = "JPEG"
+    img.save(quality=quality)
+    log(f"wrote {_rel(path)} ({path.stat().st_size // 1024} KiB)")
 
 
 # ----------------------------------------------------------------- main
@@ -494,8 +881,18 @@ def main(argv=None) -> int:
             engine = "operators" if ok else "core"
         log(f"engine: {engine}")
 
+        pipeline = not args.no_pipeline
+        if pipeline and engine != "operators":
+            log("pipeline: skipped (the fur pipeline runs through the add-on's operators)")
+            pipeline = False
+        elif pipeline and not has_pipeline_operators(bpy):
+            missing = sorted(PIPELINE_OPERATORS - set(dir(bpy.ops.furcollide)))
+            log(f"pipeline: skipped (the add-on has no bpy.ops.furcollide.{missing})")
+            pipeline = False
+
+        pipe = None
         if engine == "operators":
-            outputs = collide_with_operators(bpy, demo, frame_end, blend)
+            outputs, pipe = collide_with_operators(bpy, demo, frame_end, blend, pipeline)
 
             def set_frame(f):
                 demo.scene.frame_set(f)  # the add-on's handler loads the baked frame
@@ -507,21 +904,52 @@ def main(argv=None) -> int:
                 for out, pts in zip(outputs, frames[f], strict=True):
                     ds.set_hair_points_world(out, pts)
 
+        failures = []
+        if pipe is not None:
+            set_frame(still)
+            failures += pipe.check_crossings(still)
+            for ob in pipe.objects:  # the before/after stills show the plain setups
+                ob.hide_render = True
+
         if not args.no_render:
             paths, cmp_img = render_stills(
                 bpy, demo, outputs, still, out_dir, args.size, args.samples, set_frame
             )
             if args.docs_img:
                 save_docs_image(cmp_img, args.docs_img)
+            if pipe is not None:
+                more, sheet = render_pipeline(
+                    bpy, demo, pipe, still, out_dir, args.size, set_frame
+                )
+                paths.update(more)
+                if args.docs_img:
+                    docs = args.docs_img.parent
+                    save_docs_image(sheet, docs / "pipeline.jpg", quality=82)
+                    for stem, *_ in PIPELINE_PANELS:
+                        img = tile_images(bpy, [more[stem]], args.size, stem, columns=1)
+                        save_docs_image(img, docs / f"{stem}.jpg")
         else:
             paths = {}
             for ob in (h for h, *_ in demo.setups):
                 ob.hide_render = True
         set_frame(still)
+        if pipe is not None:
+            # demo.blend shows the plain setups; the pipeline is there, hidden.
+            for ob in pipe.objects:
+                ob.hide_render = True
+                ob.hide_set(True)
+            log(
+                "demo.blend: the pipeline's objects ("
+                + ", ".join(repr(o.name) for o in pipe.objects)
+                + ") are hidden; unhide them to play the pipeline"
+            )
         bpy.ops.wm.save_as_mainfile(filepath=str(blend))
         paths["blend"] = blend
         log("wrote " + ", ".join(str(_rel(p)) for p in paths.values()))
         log(f"done in {time.perf_counter() - t_all:.1f} s")
+        if failures:
+            log("error: " + "; ".join(failures))
+            return 1
         return 0
     except Exception as err:
         traceback.print_exc()

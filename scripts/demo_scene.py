@@ -5,7 +5,8 @@ Three FurCollide situations from the paper's Figure 1, side by side:
 * **Fur on a body**: a furry ball (the growth surface, with UVs) whose fur
   is hit by an animated *Pusher* sphere that pushes through the fur and
   then into the skin (roots end up inside the pusher: *pinched*), and a
-  thin single-sided *Cloth* that comes down and lies on the fur.
+  thin single-sided *Cloth* that comes down and lies on the fur. The body
+  turns slowly about its centre (for Fur Attach in the demo's pipeline).
 * **Grass**: a patch of blades with a *Ball* rolling across it (Bend with
   recovery and plasticity leaves a trampled trail).
 
@@ -41,7 +42,13 @@ PUSHER_RADIUS = 0.27
 PUSHER_DIR = Vector((-0.9, -0.4, -0.08)).normalized()  # from the left, below the cloth
 PINCH_DEPTH = 0.1  # how deep the pusher goes into the skin at its deepest
 
-CLOTH_REST = 0.09  # cloth height above the skin when resting (fur is 0.17)
+CLOTH_REST = 0.10  # cloth height above the skin when resting (fur is 0.17)
+
+# The body turns slowly about its centre (degrees at FRAME_END, XYZ Euler): a
+# sphere turning in place keeps its shape, so hair that does not follow it
+# (the plain setup) still sits on it, while Fur Attach carries the pipeline's
+# guides and render groom around with the skin.
+BODY_TURN = (8.0, 0.0, 40.0)
 
 
 @dataclass
@@ -59,6 +66,7 @@ class DemoScene:
     camera: bpy.types.Object
     closeup: bpy.types.Object
     materials: dict = field(default_factory=dict)
+    furcam: bpy.types.Object | None = None  # framing the body only (pipeline pictures)
 
     @property
     def setups(self):
@@ -87,6 +95,17 @@ def _material(name, color, roughness=0.5, hair=False, emission=0.0):
         bsdf.inputs["Emission Color"].default_value = (*color, 1.0)
         bsdf.inputs["Emission Strength"].default_value = emission
     mat.diffuse_color = (*color, 1.0)
+    return mat
+
+
+def _status_material(name, attribute="furcollide_color"):
+    """Hair material coloured by a point colour attribute (FurCollide's status colours)."""
+    mat = _material(name, (0.6, 0.6, 0.6), 0.5, True)
+    nt = mat.node_tree
+    bsdf = nt.nodes.get("Principled BSDF")
+    node = nt.nodes.new("ShaderNodeAttribute")
+    node.attribute_name = attribute
+    nt.links.new(node.outputs["Color"], bsdf.inputs["Base Color"])
     return mat
 
 
@@ -281,6 +300,9 @@ def build(fur_count=3500, grass_count=2500, seed=7, n_cv=8) -> DemoScene:
         "ball": _material("Ball", (0.9, 0.9, 0.88), 0.25),
         "soil": _material("Soil", (0.16, 0.11, 0.07), 0.9),
         "floor": _material("Floor", (0.22, 0.23, 0.25), 0.8),
+        "guides": _material("Guides", (0.95, 0.8, 0.1), 0.45, True),
+        "render_groom": _material("Render groom (FurCollide)", (0.1, 0.7, 0.55), 0.45, True),
+        "status": _status_material("Guides by FurCollide status"),
     }
 
     # --- body with fur ------------------------------------------------------
@@ -289,6 +311,10 @@ def build(fur_count=3500, grass_count=2500, seed=7, n_cv=8) -> DemoScene:
     body.data.materials.append(mats["skin"])
     bpy.context.view_layer.update()
     roots, normals, uvs = sample_surface(body, fur_count, rng)
+    for f, turn in ((FRAME_START, (0.0, 0.0, 0.0)), (FRAME_END, BODY_TURN)):
+        body.rotation_euler = [math.radians(a) for a in turn]
+        body.keyframe_insert("rotation_euler", frame=f)
+    _set_interpolation(body, "LINEAR")
     # Groom: comb down and a little back (away from the camera).
     comb = np.tile(np.array([0.0, 0.35, -1.0]), (fur_count, 1))
     comb -= normals * np.einsum("ij,ij->i", comb, normals)[:, None]  # tangent part
@@ -419,8 +445,18 @@ def build(fur_count=3500, grass_count=2500, seed=7, n_cv=8) -> DemoScene:
     close.location = aim + side * 2.3 + Vector((0, 0, 1.05))
     close.rotation_euler = (aim - close.location).to_track_quat("-Z", "Y").to_euler()
 
+    # The fur alone, from the front left: the pusher's side and the cloth on top.
+    fur_data = bpy.data.cameras.new("Camera Fur")
+    fur_data.lens = 50
+    furcam = _link(bpy.data.objects.new("Camera Fur", fur_data))
+    aim = BODY_CENTER + Vector((-0.15, 0.0, 0.1))
+    furcam.location = aim + Vector((-0.55, -1.0, 0.55)).normalized() * 3.6
+    furcam.rotation_euler = (aim - furcam.location).to_track_quat("-Z", "Y").to_euler()
+
     scene.frame_set(FRAME_START)
-    return DemoScene(scene, body, fur, pusher, cloth, ground, grass, ball, cam, close, mats)
+    return DemoScene(
+        scene, body, fur, pusher, cloth, ground, grass, ball, cam, close, mats, furcam=furcam
+    )
 
 
 def hair_points(ob) -> np.ndarray:

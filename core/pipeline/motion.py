@@ -226,24 +226,46 @@ def jiggle(points, offsets, roots, frame=None, fps=24.0, stiffness=2.0, damping=
             window = 240 if decay <= 0 else min(240, max(3, math.ceil(math.log(1000) / decay)))
         if isinstance(window, bool) or int(window) != window or window < 2:
             raise InputError(f"window must be an integer >= 2, got {window!r}")
-        hist = np.stack([np.asarray(roots(frame - k), np.float64)
-                         for k in range(int(window), -1, -1)])
+        N = int(window) + 1
+
+        def row(j):  # frame j of the window, oldest first
+            return roots(frame - (N - 1 - j))
     else:
         hist = np.asarray(roots, np.float64)
-    if hist.ndim != 3 or hist.shape[1:] != (C, 3) or len(hist) < 3:
-        raise InputError(f"roots history must have shape (N >= 3, {C}, 3), got {hist.shape}")
-    if not np.isfinite(hist).all():
-        i = int(np.argmax(~np.isfinite(hist).all(axis=(0, 2))))
-        raise InputError(f"roots history of curve {i} is not finite")
+        if hist.ndim != 3 or hist.shape[1:] != (C, 3) or len(hist) < 3:
+            raise InputError(f"roots history must have shape (N >= 3, {C}, 3), got {hist.shape}")
+        N = len(hist)
+
+        def row(j):
+            return hist[j]
     if amount == 0:
         return pts.copy()
-    N = len(hist)
     dt = 1.0 / fps
-    # central second differences at frames 1 .. N-2 (relative to the current one)
-    acc = (hist[2:] - 2 * hist[1:-1] + hist[:-2]) / dt**2  # (N-2, C, 3)
+    # y = -sum_j h_j a_j over the central second differences a_j = (r_{j+1} - 2 r_j +
+    # r_{j-1}) / dt^2 at j = 1 .. N-2 equals -sum_j c_j r_j / dt^2 with c the second
+    # difference of h (h = 0 outside): the frames are summed one at a time, so memory
+    # stays (C, 3) whatever the window.
     lag = (N - 2 - np.arange(N - 2)) * dt  # frame j lags N-1-j frames, j = 1..N-2
-    h = spring_impulse_response(lag, stiffness, damping) * dt
-    y = -np.einsum("n,nci->ci", h, acc)  # (C, 3)
+    h = np.zeros(N + 2)
+    h[2:N] = spring_impulse_response(lag, stiffness, damping) * dt  # h[j + 1] = h_j
+    c = h[:-2] - 2 * h[1:-1] + h[2:]  # (N,)
+    # c sums to 0: positions relative to the current roots give the same y without
+    # cancelling large coordinates.
+    y = np.zeros((C, 3))
+    ref = None
+    for j in range(N - 1, -1, -1):
+        r = np.asarray(row(j), np.float64)
+        if r.shape != (C, 3):
+            raise InputError(f"roots history must have shape (N >= 3, {C}, 3), got a frame "
+                             f"of shape {r.shape}")
+        if not np.isfinite(r).all():
+            i = int(np.argmax(~np.isfinite(r).all(axis=1)))
+            raise InputError(f"roots history of curve {i} is not finite")
+        if ref is None:
+            ref = r
+        elif c[j] != 0:
+            y -= c[j] * (r - ref)
+    y /= dt**2
     curve, _, _ = layout(off)
     disp = (amount * _weights(pts, off, falloff))[:, None] * y[curve]
     return _displace(pts, off, disp, preserve_length)

@@ -311,3 +311,66 @@ def test_render_groom_bind_refuses_the_guides_themselves(fc):
     guides, groom, box, out = groom_scene(fc)
     guides.furcollide.groom.groom = guides
     assert not bpy.ops.furcollide.groom_bind.poll()
+
+
+def test_pipeline_panel_draws_the_stages(fc):
+    from test_bl_pipeline import _draw
+
+    guides, groom, box, out = groom_scene(fc)
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    log = _draw(panel)
+    for idname in ("furcollide.fur_attach_unbind", "furcollide.groom_bind",
+                   "furcollide.groom_remove"):
+        assert ("operator", idname) in log
+    for name in ("use_wind", "wind_stage", "wind_strength", "use_jiggle", "jiggle_stage",
+                 "use_region_of_influence", "roi_margin", "write_collider_distance",
+                 "distance_max", "groom", "use_clearance"):
+        assert ("prop", name) in log
+    assert ("label", "Restricts motion After Collision (none is on)") in log
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    guides.furcollide.motion.use_wind = True
+    guides.furcollide.motion.use_region_of_influence = False
+    log = _draw(panel)
+    assert any(k == "label" and v and v.startswith("Render curves fixed") for k, v in log)
+    assert ("label", "Motion after collision may push hair into colliders") in log
+
+
+def test_a_failing_stage_is_reported_and_the_frame_solves_again(fc, monkeypatch):
+    """A stage error is the setup's status (the handler never raises); the solver state
+    is not mistaken for the previous frame's: solving the frame again gives the result of
+    an uninterrupted run."""
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 6))
+    out = fc.setup(hair, [box])
+    hair.furcollide.motion.write_collider_distance = True
+    play(scene, range(1, 6))
+    clean = world(out)
+    bpy.ops.furcollide.reset()
+    play(scene, range(1, 5))
+    real = fc.runtime.stages.output_stage
+
+    def boom(*a, **k):
+        raise ValueError("stage exploded")
+
+    monkeypatch.setattr(fc.runtime.stages, "output_stage", boom)
+    scene.frame_set(5)
+    assert "stage exploded" in hair.furcollide.status_message
+    monkeypatch.setattr(fc.runtime.stages, "output_stage", real)
+    scene.frame_set(5)
+    np.testing.assert_array_equal(world(out), clean)
+
+
+def test_clearance_pass_keeps_the_setup_collision_offset(fc):
+    """Render curves freed by the clearance pass keep the setup's Collision Offset from
+    the collider, like the guides."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    guides.furcollide.collision_offset = 0.05
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    play(scene, range(1, 8))
+    gout = guides.furcollide.groom.output
+    roff = offsets_of(gout)
+    center = box.matrix_world.translation
+    # inside the box grown by most of the offset: no segment
+    assert len(segments_in_box(world(gout), roff, center, half=HALF + 0.04)) == 0
+    assert guides.furcollide.stat_groom_fixed > 0

@@ -32,13 +32,18 @@ def test_panels_registered_and_poll(fc):
 def test_every_property_has_a_tooltip():
     settings = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
     collider = settings.properties["colliders"].fixed_type
-    for cls in (settings, collider):
+    motion = settings.properties["motion"].fixed_type
+    groom = settings.properties["groom"].fixed_type
+    pipeline = bpy.types.Scene.bl_rna.properties["furcollide_pipeline"].fixed_type
+    for cls in (settings, collider, motion, groom, pipeline):
         for prop in cls.properties:
             if prop.identifier in {"rna_type", "name"}:
                 continue
             assert len(prop.description) > 15, f"{cls.identifier}.{prop.identifier}"
-    for item in settings.properties["mode"].enum_items:
-        assert len(item.description) > 15, item.identifier
+    for enum in (settings.properties["mode"], settings.properties["pinch_resolution"],
+                 motion.properties["wind_stage"], motion.properties["jiggle_stage"]):
+        for item in enum.enum_items:
+            assert len(item.description) > 15, item.identifier
 
 
 def _furcollide_operators():

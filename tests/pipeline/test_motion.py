@@ -138,3 +138,27 @@ def test_bad_input():
         jiggle(pts, off, np.zeros((5, 3, 3)))
     with pytest.raises(InputError, match="frame"):
         jiggle(pts, off, lambda f: 0)
+
+
+def test_jiggle_matches_the_acceleration_sum_and_ignores_far_translations():
+    """The frame-by-frame sum equals -sum h_j a_j over the second differences (the
+    definition), and moving everything 1e6 units away changes nothing but the position."""
+    from core.pipeline.motion import spring_impulse_response
+
+    pts, off = _fur(9)
+    C = len(off) - 1
+    rng = np.random.default_rng(3)
+    hist = np.cumsum(rng.normal(scale=0.01, size=(30, C, 3)), axis=0)
+    fps, k, z = 24.0, 1.3, 0.25
+    out = jiggle(pts, off, hist, fps=fps, stiffness=k, damping=z, preserve_length=False)
+    dt = 1 / fps
+    acc = (hist[2:] - 2 * hist[1:-1] + hist[:-2]) / dt**2
+    lag = (len(hist) - 2 - np.arange(len(hist) - 2)) * dt
+    y = -np.einsum("n,nci->ci", spring_impulse_response(lag, k, z) * dt, acc)
+    disp = out - pts
+    tip = off[1:] - 1
+    np.testing.assert_allclose(disp[tip], y, rtol=1e-9, atol=1e-12)
+    far = np.array([1e6, -1e6, 1e6])
+    moved = jiggle(pts + far, off, hist + far, fps=fps, stiffness=k, damping=z,
+                   preserve_length=False)
+    np.testing.assert_allclose(moved - far, out, atol=1e-6)
