@@ -40,6 +40,7 @@ from . import bridge, cache, runtime, stages
 from .setup import (
     SetupOperator,
     active_setup,
+    evaluate_now,
     new_hair_object_like,
     redraw,
     refuse,
@@ -547,12 +548,7 @@ class FURCOLLIDE_OT_fur_attach_bind(SetupOperator, Operator):
         s.use_fur_attach = True
         # Every frame's input changes: drop every cached frame (see _invalidate_attach).
         runtime.invalidate(src, reason="Fur Attach bound", from_frame=s.frame_start - 1)
-        err = ""
-        if not runtime._busy:
-            try:
-                runtime.evaluate(scene, context.evaluated_depsgraph_get(), src)
-            except Exception as exc:  # noqa: BLE001 - reported below
-                err = runtime.describe(exc)
+        err = evaluate_now(context, src)
         far = float(binding.root_distance.max()) if len(binding.root_distance) else 0.0
         self.report(
             {"INFO"},
@@ -596,12 +592,7 @@ class FURCOLLIDE_OT_fur_attach_unbind(SetupOperator, Operator):
         s.attach_id = ""
         s.use_fur_attach = False  # its update drops every cached frame
         runtime.invalidate(src, reason="Fur Attach unbound", from_frame=s.frame_start - 1)
-        err = ""
-        if not runtime._busy:
-            try:
-                runtime.evaluate(context.scene, context.evaluated_depsgraph_get(), src)
-            except Exception as exc:  # noqa: BLE001 - reported below
-                err = runtime.describe(exc)
+        err = evaluate_now(context, src)
         self.report({"INFO"}, f"Fur Attach: unbound '{src.name}'")
         if err:
             self.report({"WARNING"}, f"FurCollide: {err}")
@@ -680,12 +671,7 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
             groom.hide_set(True)
         except RuntimeError:  # not in the active view layer
             pass
-        err = ""
-        if not runtime._busy:
-            try:
-                runtime.evaluate(scene, dg, src)
-            except Exception as exc:  # noqa: BLE001 - reported below
-                err = runtime.describe(exc)
+        err = evaluate_now(context, src)
         roots = "on the Surface" if surface is not None else "following the guides"
         self.report(
             {"INFO"},

@@ -66,13 +66,22 @@ def _invalidate_range(self, context):
         runtime.invalidate(ob, reason="frame range changed", from_frame=s.frame_start - 1)
 
 
-@_never_raises
-def _invalidate_attach(self, context):
-    # Fur Attach changes the input of every frame. The memory cache stores only the
-    # curves the solver changed (the rest is rebuilt from the current input), so
-    # earlier frames would mix old results with the new input: drop them all.
-    ob = self.id_data
-    runtime.invalidate(ob, reason="Fur Attach changed", from_frame=ob.furcollide.frame_start - 1)
+def _invalidate_every_frame(reason):
+    """An update that drops every cached frame: for changes of every frame's input
+    (Fur Attach, motion before collision) or output (motion after collision). The
+    memory cache stores only the curves that differ from the input, so earlier frames
+    would mix old results with the new input."""
+
+    @_never_raises
+    def update(self, context):
+        ob = self.id_data
+        runtime.invalidate(ob, reason=reason, from_frame=ob.furcollide.frame_start - 1)
+
+    return update
+
+
+_invalidate_attach = _invalidate_every_frame("Fur Attach changed")
+_invalidate_all = _invalidate_every_frame("motion changed")
 
 
 @_never_raises
@@ -182,14 +191,6 @@ class FurCollideCollider(PropertyGroup):
     collision_offset: _offset(
         "Gap kept between the hair and this mesh (needs Own Offset)", _invalidate_colliders
     )
-
-
-@_never_raises
-def _invalidate_all(self, context):
-    # Motion before collision changes every frame's input; motion after it every
-    # frame's output: no cached frame stays valid.
-    ob = self.id_data
-    runtime.invalidate(ob, reason="motion changed", from_frame=ob.furcollide.frame_start - 1)
 
 
 @_never_raises

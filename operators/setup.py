@@ -69,7 +69,13 @@ def reports_errors(execute):
 
 
 def evaluate_now(context, src) -> str:
-    """Solve the current frame of the setup on ``src``; returns an error or ''."""
+    """Solve the current frame of the setup on ``src``; returns an error or ''.
+
+    Does nothing while the frame handler runs (an operator called from a handler
+    or a bake): that run writes the frame itself.
+    """
+    if runtime._busy:
+        return ""
     try:
         runtime.evaluate(context.scene, context.evaluated_depsgraph_get(), src)
     except Exception as exc:  # noqa: BLE001 - the caller reports it
