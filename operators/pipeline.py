@@ -666,11 +666,7 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
         stages.store_groom(out, arrays)
         g.output = out
         g.bind_id = uuid.uuid4().hex
-        groom.hide_render = True
-        try:
-            groom.hide_set(True)
-        except RuntimeError:  # not in the active view layer
-            pass
+        runtime.hide_in_viewport(groom, True, render=True)
         err = evaluate_now(context, src)
         roots = "on the Surface" if surface is not None else "following the guides"
         self.report(

@@ -329,12 +329,18 @@ def apply_visibility(ob) -> None:
     s = ob.furcollide
     out = s.output
     for target, hide in ((ob, s.show_result), (out, not s.show_result)):
-        if target is None:
-            continue
-        try:
-            target.hide_set(hide)
-        except RuntimeError:  # not in the active view layer
-            pass
+        if target is not None:
+            hide_in_viewport(target, hide)
+
+
+def hide_in_viewport(ob, hide: bool, render: bool | None = None) -> None:
+    """Hide or show ``ob`` in the viewport (and in renders when ``render`` is given)."""
+    if render is not None:
+        ob.hide_render = render
+    try:
+        ob.hide_set(hide)
+    except RuntimeError:  # not in the active view layer
+        pass
 
 
 def dependency_group_name(ob) -> str:
@@ -745,11 +751,7 @@ def remove_groom(src) -> None:
     g.output = None
     g.bind_id = ""
     if g.groom is not None:
-        g.groom.hide_render = False
-        try:
-            g.groom.hide_set(False)
-        except RuntimeError:
-            pass
+        hide_in_viewport(g.groom, False, render=False)
     rt = get_runtime(src, create=False)
     if rt is not None:
         rt.groom = rt.groom_shown = None

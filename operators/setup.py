@@ -253,11 +253,7 @@ class FURCOLLIDE_OT_remove(SetupOperator, Operator):
         s.is_baked = False
         s.bake_path = ""
         s.uid = ""
-        src.hide_render = False
-        try:
-            src.hide_set(False)
-        except RuntimeError:  # not in the active view layer
-            pass
+        runtime.hide_in_viewport(src, False, render=False)
         msg = f"Removed the FurCollide setup of '{src.name}'"
         if kept:
             msg += f" (bake files kept in {bpy.path.abspath(kept)})"
