@@ -472,12 +472,20 @@ class _MeshIndex:
         return np.maximum(lb.reshape(S, pieces) - (seg / (2 * pieces))[:, None], 0.0).min(1)
 
 
+#: A matrix whose singular values agree to this (relative) is a rotation and
+#: uniform scale (float32 rounding of a Blender matrix included).
+_SIMILARITY_TOL = 1e-5
+
+
 def _similarity(M3):
-    """Scale ``s`` if ``M3 = s * Q`` with ``Q`` orthogonal (distances scale by ``s``), else None."""
-    G = M3.T @ M3
-    s2 = float(np.trace(G)) / 3.0
-    if s2 > 0 and np.abs(G - s2 * np.eye(3)).max() <= 1e-12 * s2:
-        return np.sqrt(s2)
+    """Smallest singular value ``s`` of ``M3`` if it is a similarity, else None.
+
+    ``|M3 x| >= s |x|``: a local distance times ``s`` never exceeds the
+    world distance, and is within the matrix's (tiny) anisotropy of it.
+    """
+    sv = np.linalg.svd(M3, compute_uv=False)
+    if sv[-1] > 0 and sv[0] <= sv[-1] * (1 + _SIMILARITY_TOL):
+        return float(sv[-1])
     return None
 
 
@@ -485,10 +493,12 @@ def _collider_index(col):
     """``(index, M3, t, scale)``: ``col``'s mesh index and the map from world to its space.
 
     A world point ``x`` is ``(x - t) @ inv(M3).T`` in the index's space and a
-    distance there times ``scale`` is the world distance. Rigid (similarity)
-    transforms keep the collider's own space, so the index survives motion
-    and is cached on the Collider until its vertices change; other
-    transforms index the world mesh (cached for that matrix).
+    distance there times ``scale`` is the world distance (exactly for a
+    similarity; for one up to float32 rounding, a lower bound within that
+    rounding, relative 1e-5 at most). Rigid (similarity) transforms keep
+    the collider's own space, so the index survives motion and is cached on
+    the Collider until its vertices change; other transforms index the
+    world mesh (cached for that matrix only).
     """
     M = col.matrix
     M3, t = M[:3, :3], M[:3, 3]

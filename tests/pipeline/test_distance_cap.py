@@ -215,3 +215,29 @@ def test_capped_fine_mesh_many_curves():
             np.testing.assert_allclose(d[exact], np.minimum(truth, cap)[exact], rtol=0,
                                        atol=TOL)
             assert exact.mean() > 0.99
+
+
+def test_float32_rigid_matrix_keeps_the_cache_and_never_overestimates():
+    """A Blender matrix is float32: a rotation up to rounding still moves the queries
+    (the collider's index is built once), and the distance stays a lower bound."""
+    from core.pipeline.distance import _collider_index
+
+    rng = np.random.default_rng(31)
+    V, F, pts, off = _scene(rng, n_curves=8, n_cvs=4)
+    col = Collider(V, F)
+    built = None
+    for step in range(3):
+        M = np.eye(4)
+        M[:3, :3] = po.rotation([1, 2, 3], 0.4 + 0.3 * step) * 1.1
+        M[:3, 3] = [0.1 * step, 0.0, -0.05 * step]
+        M = M.astype(np.float32).astype(np.float64)
+        col.matrix = M
+        index = _collider_index(col)[0]
+        assert built is None or index is built
+        built = index
+        Vw = V.astype(np.float32).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+        truth = brute_cv(pts, off, [(Vw, F)])
+        d = collider_distance(pts, off, [col], max_distance=0.3)
+        want = np.minimum(truth, 0.3)
+        assert (d <= truth + TOL).all()
+        np.testing.assert_allclose(d, want, rtol=1e-6, atol=TOL)
