@@ -104,18 +104,21 @@ def rotate_soa(v, axis, angle):
     a0, a1, a2 = axis.T
     v0, v1, v2 = v
     along = v0 * a0
-    along += v1 * a1
-    along += v2 * a2
-    along *= 1.0 - c
+    p = v1 * a1
+    along += p
+    np.multiply(v2, a2, out=p)
+    along += p
+    along *= np.subtract(1.0, c, out=p)
     out = np.empty_like(v)
-    for i, (p, q) in enumerate(((a1 * v2, a2 * v1), (a2 * v0, a0 * v2), (a0 * v1, a1 * v0))):
-        p -= q  # (axis x v)_i
+    q = np.empty_like(p)
+    for i, (j, k) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.multiply(axis[:, j], v[k], out=p)
+        p -= np.multiply(axis[:, k], v[j], out=q)  # (axis x v)_i
         p *= s
         o = out[i]
         np.multiply(v[i], c, out=o)
         o += p
-        p = np.multiply(axis[:, i], along, out=p)
-        o += p
+        o += np.multiply(axis[:, i], along, out=p)
     return out
 
 
