@@ -1,17 +1,24 @@
 """Benchmark of ``core.pipeline.collider_distance`` at guide scale.
 
-Scene (seeded, numpy only): a closed, displaced UV sphere (~130,000
-triangles, radius ~1) as a rigid ``Collider`` with a rotation + translation
-matrix, and 10,000 curves x 8 CVs (length 0.2) grown from just above its
-surface with random tilt (some lie almost flat on it) and a curl, so most
-CVs are within a few segment lengths of the collider.
+Scenes (seeded, numpy only), around a closed, displaced UV sphere (130,048
+triangles, radius ~1) used as a rigid ``Collider`` with a rotation +
+translation matrix, 10,000 curves x 8 CVs, 0.2 long (segments ~0.029):
 
-Times (CPU time of this thread, min / median over repeats) ``collider_distance``
-uncapped and with ``max_distance = 0.2 x curve length`` (the Region of
-Influence use), for the first call on a fresh Collider (cold: grid built)
-and for repeated calls (warm: cached structures reused).
+* ``scatter`` (default): roots ``--offset lo,hi`` segment lengths off the
+  surface (default 0,4), random directions with a little wobble: some
+  curves pass close to the collider, most stay within a few segment
+  lengths. ``--offset 1,6`` and ``2,8`` give fewer near CVs.
+* ``fur``: curves rooted on the collider itself (2-10 mm above it), tilted
+  up to 80 degrees and curled: most CVs near it (the worst case).
 
-    .venv/bin/python bench/bench_distance.py [--curves N] [--cvs N] [--repeat N]
+Times (CPU time of this thread, min / median over repeats) of
+``collider_distance`` uncapped and with ``max_distance = 0.2 x curve
+length`` (the Region of Influence use), for the first call on a fresh
+Collider (cold: grids and fields built) and for repeated calls (warm: the
+structures cached on the Collider reused).
+
+    .venv/bin/python bench/bench_distance.py [--scene scatter|fur] [--offset LO,HI]
+        [--curves N] [--cvs N] [--repeat N] [--profile capped|uncapped]
 """
 
 from __future__ import annotations
