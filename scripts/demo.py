@@ -8,8 +8,10 @@ and writes everything to ``out/demo/``:
   add-on's operators, the bake cache next to it);
 * ``before.png`` / ``after.png``: Cycles (CPU) stills of the same frame
   without and with FurCollide, and ``compare.png``, the two side by side;
-* ``pipeline-1-groom.png`` ... ``pipeline-4-render-groom.png`` and
-  ``pipeline.png`` (the four as a 2x2 sheet): the fur pipeline, step by step;
+* ``pipeline-1-groom.png`` ... ``pipeline-6-render-groom.png`` and
+  ``pipeline.png`` (the six as a 3x2 sheet): the fur pipeline, step by step
+  (groom, Fur Sampler, Fur Attach, FurCollide + wind, collider distance,
+  render groom);
 * one line of statistics per frame on stdout (and one per frame for the
   pipeline: guide status counts, min collider distance, clearance count).
 
@@ -642,48 +644,137 @@ def set_object_material(ob, mat):
     ob.material_slots[0].material = mat
 
 
-#: (file stem, label, frame key, shown object, material key) of each panel.
+#: (file stem, label, frame key, shown objects, their material keys) of each
+#: panel. Frames: "ref" the reference pose (first frame), "still" the still
+#: frame, "late" the last frame (the body has turned most).
 PIPELINE_PANELS = (
-    ("pipeline-1-groom", "1 groom, frame {ref}: {groom} curves", "ref", "fur", "fur_before"),
-    ("pipeline-2-guides", "2 Fur Sampler: {guides} guides", "ref", "guides", "guides"),
-    ("pipeline-3-collided", "3 frame {still}: guides collided, wind", "still", "output",
-     "status"),
-    ("pipeline-4-render-groom", "4 render groom follows, cleared", "still", "groom_out",
-     "render_groom"),
+    ("pipeline-1-groom", "1 groom, frame {ref}: {groom} curves", "ref", ("fur",),
+     ("fur_before",)),
+    ("pipeline-2-guides", "2 Fur Sampler: {guides} guides", "ref", ("guides",),
+     ("guides",)),
+    ("pipeline-3-attach", "3 Fur Attach, frame {late}: guides turn with body", "late",
+     ("attached", "band", "band_ref"), ("guides", "band", "band_ref")),
+    ("pipeline-4-collided", "4 FurCollide + wind, frame {still}", "still", ("output",),
+     ("status",)),
+    ("pipeline-5-distance", "5 Collider Distance (Region of Influence)", "still",
+     ("output",), ("distance",)),
+    ("pipeline-6-render-groom", "6 render groom follows, cleared", "still", ("groom_out",),
+     ("render_groom",)),
 )
+PIPELINE_COLUMNS = 3
+
+
+#: Fur Attach panel: a band of guides (this wide, in degrees about the body's
+#: vertical axis) is marked, blue at the reference pose and magenta where Fur
+#: Attach has carried it; it starts half the body's turn before the camera.
+ATTACH_BAND_DEG = 30.0
+
+
+def attached_guides(bpy, demo, pipe):
+    """Plain hair objects with the guides as FurCollide receives them at the
+    current frame: moved with the body by Fur Attach (the add-on's own input
+    stage), before any collision. The setup's source itself keeps the
+    reference pose (Fur Attach runs inside the frame handler).
+
+    Returns {"attached": the other guides, "band": a band of guides facing
+    the camera, "band_ref": the same band at the reference pose}.
+    """
+    import importlib
+    import math
+
+    import demo_scene as ds
+    import numpy as np
+
+    runtime = importlib.import_module(ADDON + ".operators.runtime")
+    g = pipe.guides
+    offs = ds.curve_offsets(g)
+    pts = runtime.attached_points(g, bpy.context.evaluated_depsgraph_get(), offs)
+    ref = ds.hair_points(g)
+    rad = None
+    src = g.data.attributes.get("radius")
+    if src is not None:
+        rad = np.empty(len(src.data), np.float32)
+        src.data.foreach_get("value", rad)
+
+    # The band: reference roots within ATTACH_BAND_DEG / 2 of the azimuth that
+    # the body's turn carries to the camera's azimuth in half the turn.
+    c = np.array(ds.BODY_CENTER)
+    roots = ref[offs[:-1]] - c
+    cam = np.array(demo.furcam.location) - c
+    az = np.degrees(np.arctan2(roots[:, 1], roots[:, 0]) - math.atan2(cam[1], cam[0]))
+    az = (az + 0.5 * ds.BODY_TURN[2] + 180.0) % 360.0 - 180.0
+    band = np.abs(az) <= 0.5 * ATTACH_BAND_DEG
+    sizes = np.diff(offs)
+    on = np.repeat(band, sizes)
+
+    def plain_hair(name, p, keep):
+        hc = bpy.data.hair_curves.new(name)
+        hc.add_curves(sizes[keep[offs[:-1]]].tolist())
+        hc.position_data.foreach_set("vector", p[keep].astype(np.float32).ravel())
+        if rad is not None:
+            attr = hc.attributes.get("radius") or hc.attributes.new("radius", "FLOAT", "POINT")
+            attr.data.foreach_set("value", rad[keep])
+        ob = bpy.data.objects.new(name, hc)  # world positions, identity matrix
+        demo.scene.collection.objects.link(ob)
+        return ob
+
+    return {
+        "attached": plain_hair("Fur Guides (Fur Attach input)", pts, ~on),
+        "band": plain_hair("Fur Guides band (Fur Attach input)", pts, on),
+        "band_ref": plain_hair("Fur Guides band (reference pose)", ref, on),
+    }
 
 
 def render_pipeline(bpy, demo, pipe, still, out_dir, size, set_frame):
-    """Four labelled panels of the pipeline (Camera Fur) and a 2x2 sheet pipeline.png."""
+    """The labelled panels of the pipeline (Camera Fur) and a 3x2 sheet pipeline.png."""
+    import demo_scene as ds
+
     scene = demo.scene
     cam = demo.furcam
+    frames = {"ref": scene.frame_start, "still": still, "late": scene.frame_end}
+    set_frame(frames["late"])
+    attached = attached_guides(bpy, demo, pipe)
     shown = {"fur": demo.fur, "guides": pipe.guides, "output": pipe.output,
-             "groom_out": pipe.groom_out}
+             "groom_out": pipe.groom_out, **attached}
+    mats = dict(demo.materials)
+    mats["band"] = ds._material("Guides band (Fur Attach)", (0.95, 0.1, 0.75), 0.45, True)
+    mats["band_ref"] = ds._material("Guides band (reference pose)", (0.1, 0.25, 0.9), 0.6, True)
+    mats["distance"] = ds.distance_material(
+        "Guides by collider distance", PIPELINE["motion"]["distance_max"]
+    )
     hairs = list(shown.values()) + [h for h, *_ in demo.setups]
     hairs += [o for o in scene.objects if o.type == "CURVES" and o not in hairs]
     away = [demo.grass, demo.ground, demo.ball]
-    saved = {o: o.hide_render for o in hairs + away}
+    colliders = [demo.pusher, demo.cloth]  # not shown with the Fur Attach input
+    saved = {o: o.hide_render for o in hairs + away + colliders}
     for o in away:
         o.hide_render = True
-    colors = {"ref": (1.0, 0.85, 0.4), "still": (0.55, 0.95, 0.8)}
+    colors = {"ref": (1.0, 0.85, 0.4), "late": (0.8, 0.7, 1.0), "still": (0.55, 0.95, 0.8)}
+    # Diagnostic colours: the plain sRGB view, no filmic tone mapping.
+    view = scene.view_settings
+    saved_view = (view.view_transform, view.look)
+    view.view_transform, view.look = "Standard", "None"
     labels = []
     paths = {}
     scene.camera = cam
     try:
-        for stem, text, when, key, mat in PIPELINE_PANELS:
-            ob = shown[key]
-            set_object_material(ob, demo.materials[mat])
+        for stem, text, when, keys, mat_keys in PIPELINE_PANELS:
+            obs = [shown[k] for k in keys]
+            for ob, m in zip(obs, mat_keys, strict=True):
+                set_object_material(ob, mats[m])
             text = text.format(
-                ref=scene.frame_start, still=still, groom=len(demo.fur.data.curves),
-                guides=len(pipe.guides.data.curves),
+                ref=frames["ref"], still=still, late=frames["late"],
+                groom=len(demo.fur.data.curves), guides=len(pipe.guides.data.curves),
             )
             lab = add_label(bpy, cam, text, colors[when])
             labels.append(lab)
             for o in hairs:
-                o.hide_render = o is not ob
+                o.hide_render = o not in obs
+            for o in colliders:
+                o.hide_render = stem == "pipeline-3-attach"
             for o in labels:
                 o.hide_render = o is not lab
-            frame = scene.frame_start if when == "ref" else still
+            frame = frames[when]
             set_frame(frame)
             path = out_dir / f"{stem}.png"
             scene.render.filepath = str(path)
@@ -695,11 +786,18 @@ def render_pipeline(bpy, demo, pipe, still, out_dir, size, set_frame):
             paths[stem] = path
     finally:
         scene.camera = demo.camera
+        view.view_transform, view.look = saved_view
         for o, h in saved.items():
             o.hide_render = h
         for lab in labels:
             lab.hide_render = lab.hide_viewport = True
-    sheet = tile_images(bpy, [paths[p[0]] for p in PIPELINE_PANELS], size, "pipeline")
+        set_object_material(pipe.output, mats["status"])  # demo.blend: by status
+        for ob in attached.values():
+            hc = ob.data
+            bpy.data.objects.remove(ob)
+            bpy.data.hair_curves.remove(hc)
+    sheet = tile_images(bpy, [paths[p[0]] for p in PIPELINE_PANELS], size, "pipeline",
+                        columns=PIPELINE_COLUMNS)
     path = out_dir / "pipeline.png"
     sheet.filepath_raw = str(path)
     sheet.file_format = "PNG"

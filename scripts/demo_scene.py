@@ -109,6 +109,30 @@ def _status_material(name, attribute="furcollide_color"):
     return mat
 
 
+def distance_material(name, max_distance, attribute="furcollide_collider_distance"):
+    """Hair material coloured by a point float attribute (FurCollide's collider
+    distance): red on the colliders, yellow half way, blue at ``max_distance``
+    and beyond (the cap of the attribute)."""
+    mat = _material(name, (0.6, 0.6, 0.6), 0.5, True)
+    nt = mat.node_tree
+    bsdf = nt.nodes.get("Principled BSDF")
+    node = nt.nodes.new("ShaderNodeAttribute")
+    node.attribute_name = attribute
+    scale = nt.nodes.new("ShaderNodeMapRange")  # 0..max_distance -> 0..1, clamped
+    scale.inputs["From Min"].default_value = 0.0
+    scale.inputs["From Max"].default_value = max_distance
+    ramp = nt.nodes.new("ShaderNodeValToRGB")
+    els = ramp.color_ramp.elements
+    els[0].position, els[0].color = 0.0, (0.9, 0.03, 0.02, 1.0)
+    els[1].position, els[1].color = 1.0, (0.25, 0.5, 1.0, 1.0)
+    mid = els.new(0.4)
+    mid.color = (1.0, 0.8, 0.05, 1.0)
+    nt.links.new(node.outputs["Fac"], scale.inputs["Value"])
+    nt.links.new(scale.outputs["Result"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], bsdf.inputs["Base Color"])
+    return mat
+
+
 def _link(ob, collection=None):
     (collection or bpy.context.scene.collection).objects.link(ob)
     return ob
