@@ -55,6 +55,11 @@ def test_demo_bakes_and_saves(tmp_path, engine):
     assert (tmp_path / "demo.blend").is_file()
     assert stat_rows(proc.stdout) == list(range(1, 9)), proc.stdout[-2000:]
     assert "engine: " in proc.stdout
+    if engine == "auto":  # the whole fur pipeline ran, and its crossing check passed
+        assert re.search(r"^demo: pipeline check, frame 8: .*: ok$", proc.stdout, re.M), (
+            proc.stdout[-3000:]
+        )
+        assert re.search(r"^demo: pipeline\s+8\s+\d+/\d+/\d+/\d+", proc.stdout, re.M)
 
 
 def test_demo_renders_stills(tmp_path):
