@@ -386,12 +386,13 @@ class RigidBatch:
         written into ``o32``, ``d32`` (ns, n, 3)."""
         ctx = self.ctx
         ns = self.ns
-        a = self.w[:, it] * theta  # (ns, n)
+        a = self.w.take(it, axis=1) * theta  # (ns, n); take keeps rows contiguous
         scale = ctx.shrink_scale(a)
         if scale is None:
             back, grow = (g.take(it, axis=1) for g in self.growth)
         else:
-            back, grow = ctx.ray_growth(self.length[:, it] * scale, (np.arange(ns) == 0)[:, None])
+            length = self.length.take(it, axis=1) * scale
+            back, grow = ctx.ray_growth(length, (np.arange(ns) == 0)[:, None])
         d = Y.take(it, axis=2)
         t = V0.take(it, axis=2)
         t *= np.cos(a)
@@ -403,7 +404,7 @@ class RigidBatch:
             d *= scale
         o = rot.cumsum_soa(d)
         o -= d
-        o += root_lo[:, it][:, None, :]
+        o += root_lo.take(it, axis=1)[:, None, :]
         np.multiply(back, d, out=t)
         o -= t
         d *= grow

@@ -99,7 +99,7 @@ class StepContext:
         # Roots are handled as components (3, C) here (long contiguous passes).
         self.cand = []
         self._near_roots = []  # per collider: (roots in its box, their grid coords)
-        rootsT = self.roots.T
+        rootsT = np.ascontiguousarray(self.roots.T)
         for c, off in cols:
             lo, hi = c.bounds_world(off)
             in_box = None
@@ -113,7 +113,7 @@ class StepContext:
                     gg += g * g
             cand = gg <= self.curve_len**2
             w = np.flatnonzero(cand)
-            q = c.grid_coords(rootsT[:, w])
+            q = c.grid_coords(rootsT.take(w, axis=1))  # (take: contiguous rows)
             cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
             self.cand.append(cand)
             self._near_roots.append((w, q, in_box))
@@ -134,7 +134,7 @@ class StepContext:
         sel = np.flatnonzero((enabled & in_box)[w])
         if len(sel):
             r = w[sel]
-            inside[r[c.contains_grid(self.roots[r], q[:, sel], off)]] = True
+            inside[r[c.contains_grid(self.roots[r], q.take(sel, axis=1), off)]] = True
         return inside
 
     # ------------------------------------------------------------ frames
@@ -529,7 +529,8 @@ class StepContext:
             w = np.flatnonzero(cand[idx])
             if len(w) == 0:
                 continue
-            w = w[c.near_surface_grid(c.grid_coords(centre[:, w]), radius[w], off)]
+            q = c.grid_coords(centre.take(w, axis=1))
+            w = w[c.near_surface_grid(q, radius[w], off)]
             self.n_rays += len(w) * ns
             if len(w) == 0:
                 continue
@@ -539,7 +540,7 @@ class StepContext:
             sq += d[1] * d[1]
             sq += d[2] * d[2]
             back, grow = self.ray_growth(np.sqrt(sq, out=sq), root)
-            o = p[:, :ns, w]
+            o = p.take(w, axis=2)[:, :ns]  # (a copy with contiguous rows)
             o -= back * d
             d *= grow
             A, b = c.local_map()
