@@ -280,15 +280,15 @@ class RigidBatch:
         """The terms as (3, ns, n) component arrays (same arithmetic as the
         rows of 3 of the general case, so the same rays bit for bit)."""
         v = ctx.seg_soa(curves)
-        ax = ctx.axis[curves]
-        a0, a1, a2 = ax.T
+        ax = np.ascontiguousarray(ctx.axis[curves].T)  # components as contiguous rows
+        a0, a1, a2 = ax
         along = v[0] * a0
         along += v[1] * a1
         along += v[2] * a2
         Y = np.empty_like(v)
         X = np.empty_like(v)
         for i, (p, q, r) in enumerate(((a1, 2, (a2, 1)), (a2, 0, (a0, 2)), (a0, 1, (a1, 0)))):
-            np.multiply(ax[:, i], along, out=Y[i])
+            np.multiply(ax[i], along, out=Y[i])
             np.multiply(p, v[q], out=X[i])
             X[i] -= r[0] * v[r[1]]
         V0 = np.subtract(v, Y)

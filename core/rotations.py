@@ -101,7 +101,8 @@ def rotate_soa(v, axis, angle):
     elementwise pass over long contiguous rows instead of rows of 3.
     """
     c, s = np.cos(angle), np.sin(angle)
-    a0, a1, a2 = axis.T
+    axis = np.ascontiguousarray(axis.T)  # components as contiguous rows
+    a0, a1, a2 = axis
     v0, v1, v2 = v
     along = v0 * a0
     p = v1 * a1
@@ -112,13 +113,13 @@ def rotate_soa(v, axis, angle):
     out = np.empty_like(v)
     q = np.empty_like(p)
     for i, (j, k) in enumerate(((1, 2), (2, 0), (0, 1))):
-        np.multiply(axis[:, j], v[k], out=p)
-        p -= np.multiply(axis[:, k], v[j], out=q)  # (axis x v)_i
+        np.multiply(axis[j], v[k], out=p)
+        p -= np.multiply(axis[k], v[j], out=q)  # (axis x v)_i
         p *= s
         o = out[i]
         np.multiply(v[i], c, out=o)
         o += p
-        o += np.multiply(axis[:, i], along, out=p)
+        o += np.multiply(axis[i], along, out=p)
     return out
 
 
