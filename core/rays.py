@@ -81,8 +81,8 @@ def beside(fn, threads: int):
     returns ``fn``'s result (or raises its exception).
 
     For independent phases: numpy's loops and the tracer release the GIL, so
-    the two overlap. ``fn`` may use the pool itself (it never waits for a
-    thread it occupies), the caller too.
+    the two overlap. Work that ``fn`` or the caller hands to the pool never
+    waits for ``fn``, so it completes on the pool's other threads.
     """
     if threads <= 1:
         result = fn()
