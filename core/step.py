@@ -171,11 +171,16 @@ class StepContext:
         """Local frames of curves ``idx`` (:func:`rot.curve_frames`), computed
         on component arrays; also returns their rows as components (3, 3, n)."""
         sv = self.sv_
-        first = sv._soff[idx]
-        t = rot._unit3(np.ascontiguousarray(self.seg_in(first).T))
+        ns = sv._ns
+        if ns:  # root segments and tips straight from the (C, ns + 1, 3) blocks
+            seg0 = self.D3[idx, 0]
+            last = self.points.reshape(-1, ns + 1, 3)[idx, ns]
+        else:
+            seg0 = self.Dseg[sv._soff[idx]]
+            last = self.points[sv._off[idx + 1] - 1]
+        t = rot._unit3(np.ascontiguousarray(seg0.T, dtype=np.float64))
         rootT = self.roots[idx].T
         chord = np.empty((3, len(idx)))
-        last = self.points[sv._off[idx + 1] - 1]
         for i in range(3):
             np.subtract(last[:, i], rootT[i], out=chord[i])
         u = chord - rot._dot3(chord, t) * t
