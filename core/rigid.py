@@ -31,9 +31,12 @@ def solve(ctx, idx, status):
     act = near[ctx.active[near]]  # rotated curves near a collider
     new = near[~ctx.active[near]]  # unrotated: their segments are the input's
     # 1. Unrotated curves near a collider: tested at their input shape.
-    cn = new[ctx.input_hits(new)]
+    hit_new, seg_hit = ctx.input_hits(new)
+    cn = new[hit_new]
     if len(cn):  # first hit: choose the axis (kept until recovered)
-        ctx.axis[cn] = ctx.new_axes(cn, *ctx.input_rays(cn)[:2], *ctx.segments(cn)[1:])
+        seg_hit = seg_hit[np.repeat(hit_new, ctx.sv_._nseg[new])]  # (the same rays)
+        o, d, _, rep, starts = ctx.input_rays(cn)
+        ctx.axis[cn] = ctx.new_axes(cn, o, d, rep, starts, seg_hit)
         ctx.active[cn] = True
     # One batch for the rotated curves (items 0..len(act)-1) and the new
     # colliding ones, so that every search below is one ray query per round.

@@ -389,8 +389,10 @@ class StepContext:
         m[starts] = True
         return m
 
-    def first_hit_details(self, idx, o, d, rep, starts):
+    def first_hit_details(self, idx, o, d, rep, starts, hit=None):
         """First hit (root to tip) of each curve: segment, point, push direction.
+
+        ``hit``: which segments hit, when already known (:meth:`input_hits`).
 
         Returns
         -------
@@ -400,7 +402,8 @@ class StepContext:
         """
         n = len(idx)
         root = self.root_mask(len(o), starts)
-        hit = self.hits(idx, o, d, rep, root)
+        if hit is None:
+            hit = self.hits(idx, o, d, rep, root)
         k = np.full(n, -1, np.int64)
         w = np.flatnonzero(hit)
         if len(w):
@@ -449,14 +452,14 @@ class StepContext:
         else:
             rigid.solve(self, idx, status)
 
-    def new_axes(self, idx, o, d, rep, starts):
+    def new_axes(self, idx, o, d, rep, starts, hit=None):
         """Rotation axes for curves starting a contact (paper 3.2.1).
 
         Also sets ``self.guess`` for them: the rotation that lifts every CV
         above the collider's tangent plane at the hit (a first probe for the
-        angle search, nothing more).
+        angle search, nothing more). ``hit``: see :meth:`first_hit_details`.
         """
-        k, point, push = self.first_hit_details(idx, o, d, rep, starts)
+        k, point, push = self.first_hit_details(idx, o, d, rep, starts, hit)
         c = point - self.roots[idx]
         normal = push
         if self.s.attract_to_growth_surface:
@@ -502,22 +505,26 @@ class StepContext:
         return self.points[ss].astype(np.float64), self.seg_in(seg), seg, rep, starts
 
     def input_hits(self, idx):
-        """Does the *input* curve ``idx`` hit a collider (per curve)?
+        """Does the *input* curve ``idx`` hit a collider?
 
         The same rays as :meth:`hits` on :meth:`input_rays`; for uniform CV
         counts built as (3, ns, n) components straight in each collider's
         space, and only for curves whose input points come near its surface
         (a ball about their bounding box, :meth:`Collider.near_surface`:
         curves it leaves out cannot touch the mesh).
+
+        Returns
+        -------
+        (n,) bool per curve, and per segment (in the order of
+        :meth:`input_rays`, as :meth:`hits` would give them).
         """
         ns, n = self.sv_._ns, len(idx)
         if not ns or n == 0:
             if n == 0:
-                return np.zeros(0, bool)
+                return np.zeros(0, bool), np.zeros(0, bool)
             o, d, seg, rep, starts = self.input_rays(idx)
-            return np.logical_or.reduceat(
-                self.hits(idx, o, d, rep, self.root_mask(len(o), starts)), starts
-            )
+            seg_hit = self.hits(idx, o, d, rep, self.root_mask(len(o), starts))
+            return np.logical_or.reduceat(seg_hit, starts), seg_hit
         P = self.points.reshape(-1, ns + 1, 3)[idx]  # (n, ns + 1, 3), input dtype
         p = np.empty((3, ns + 1, n))
         for i in range(3):
@@ -528,7 +535,7 @@ class StepContext:
         half = hi - lo
         radius = 0.5 * np.sqrt(half[0] ** 2 + half[1] ** 2 + half[2] ** 2)
         radius = radius * (1.0 + 1e-6) + 2.0 * self.eps_abs
-        hit = np.zeros(n, bool)
+        seg_hit = np.zeros((ns, n), bool)
         root = (np.arange(ns) == 0)[:, None]
         for (c, off), cand in zip(self.cols, self.cand, strict=True):
             w = np.flatnonzero(cand[idx])
@@ -554,8 +561,8 @@ class StepContext:
                 o_lo[i] += b[i]
             d_lo = rot.apply_soa(A, d)
             h = c.segment_hits_local(rot.rows32(o_lo), rot.rows32(d_lo), off, self.threads)
-            hit[w] |= h.reshape(ns, len(w)).any(axis=0)
-        return hit
+            seg_hit[:, w] |= h.reshape(ns, len(w))
+        return seg_hit.any(axis=0), seg_hit.T.ravel()
 
     def put_to_growth_surface(self, pin):
         """Rotate pinched curves down onto the growth surface (paper 3.2.5)."""

@@ -93,8 +93,8 @@ def test_cached_inside_test_equals_parity(seed, offset):
 @given(seed=st.integers(0, 2**31 - 1), offset=st.sampled_from([0.0, 0.05]))
 def test_input_curve_filter_equals_all_rays(seed, offset):
     """Unrotated curves are only traced when their bounding ball comes near
-    the mesh (StepContext.input_hits): the same answers as tracing every
-    segment of every candidate."""
+    the mesh (StepContext.input_hits): the same answers, per segment, as
+    tracing every segment of every candidate."""
     from core import Settings, Solver
     from core.step import StepContext
 
@@ -111,8 +111,10 @@ def test_input_curve_filter_equals_all_rays(seed, offset):
     solver = Solver(np.arange(0, C * cvs + 1, cvs), Settings())
     ctx = StepContext(solver, pts, [(col, col.effective_offset(0.0))], None)
     idx = np.flatnonzero(ctx.cand_any)
-    fast = ctx.input_hits(idx)
+    fast, fast_seg = ctx.input_hits(idx)
     o, d, _, rep, starts = ctx.input_rays(idx)
-    every = np.logical_or.reduceat(ctx.hits(idx, o, d, rep, ctx.root_mask(len(o), starts)), starts)
+    every_seg = ctx.hits(idx, o, d, rep, ctx.root_mask(len(o), starts))
+    every = np.logical_or.reduceat(every_seg, starts)
+    assert np.array_equal(fast_seg, every_seg)
     assert np.array_equal(fast, every)
     assert every.any() and (~every).any()
