@@ -21,6 +21,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from . import embree_native as _native
 from .errors import BackendUnavailable
 
 try:  # embreex wheels exist for linux-x64, windows-x64, macOS 13+ (arm64/x64) only
@@ -106,16 +107,20 @@ class EmbreeBackend:
     def __init__(self, V, F):
         if _EMBREE_ERROR is not None:
             raise BackendUnavailable(embree_error())
-        self._scene = _rs.EmbreeScene()
-        _mc.TriangleMesh(
-            self._scene,
-            np.ascontiguousarray(V, dtype=np.float32),
-            np.ascontiguousarray(F, dtype=np.int32),
-        )
-        # Commit now (Embree commits lazily on the first query) so that the
-        # threads of a split batch never race to commit the same scene.
-        one = np.zeros((1, 3), np.float32)
-        self._scene.run(one, one + np.float32(1.0), dists=np.ones(1, np.float32))
+        V = np.ascontiguousarray(V, dtype=np.float32)
+        F = np.ascontiguousarray(F, dtype=np.int32)
+        try:
+            # Zero-copy geometry, same BVH (see embree_native): ~3x faster to build,
+            # which is what a deforming collider pays every frame.
+            self._scene, self._shared = _native.triangle_scene(V, F)
+        except _native.NativeUnavailable:
+            self._shared = None
+            self._scene = _rs.EmbreeScene()
+            _mc.TriangleMesh(self._scene, V, F)
+            # Commit now (Embree commits lazily on the first query) so that the
+            # threads of a split batch never race to commit the same scene.
+            one = np.zeros((1, 3), np.float32)
+            self._scene.run(one, one + np.float32(1.0), dists=np.ones(1, np.float32))
 
     def _run(self, o, d, tmax):
         return self._scene.run(o, d, dists=tmax, query="INTERSECT")
