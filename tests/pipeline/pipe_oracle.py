@@ -147,3 +147,18 @@ def fur_on_mesh(rng, V, F, n_curves=40, n_cvs=5, length=0.3, noise=0.3):
         steps = d * length / (n_cvs - 1) + rng.normal(0, noise * length / n_cvs, (n_cvs - 1, 3))
         curves.append(np.vstack([r, r + np.cumsum(steps, 0)]))
     return pack(curves)
+
+
+def sphere_and_ground(seed=12):
+    """A ground plane of 2 huge triangles next to a fine sphere, and 15 curves between:
+    (points, offsets, V, F)."""
+    rng = np.random.default_rng(seed)
+    Vs, Fs = icosphere((0, 0, 0.5), 0.3, 3)
+    Vp = np.array([[-50, -50, -0.2], [50, -50, -0.1], [50, 50, 0.3], [-50, 50, 0.0]])
+    Fp = np.array([[0, 1, 2], [0, 2, 3]]) + len(Vs)
+    curves = []
+    for _ in range(15):
+        root = np.r_[rng.uniform(-0.8, 0.8, 2), 0.2]
+        curves.append(root + np.cumsum(rng.normal(0, 0.08, (4, 3)), 0))
+    pts, off = pack(curves)
+    return pts, off, np.vstack([Vs, Vp]), np.vstack([Fs, Fp])

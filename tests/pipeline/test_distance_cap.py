@@ -173,16 +173,7 @@ def test_invalid_cap_raises(bad):
 
 def test_capped_huge_and_tiny_triangles():
     """A ground plane of 2 huge triangles next to a fine sphere (triangles in no cell)."""
-    rng = np.random.default_rng(12)
-    Vs, Fs = po.icosphere((0, 0, 0.5), 0.3, 3)
-    Vp = np.array([[-50, -50, -0.2], [50, -50, -0.1], [50, 50, 0.3], [-50, 50, 0.0]])
-    Fp = np.array([[0, 1, 2], [0, 2, 3]]) + len(Vs)
-    V, F = np.vstack([Vs, Vp]), np.vstack([Fs, Fp])
-    curves = []
-    for _ in range(15):
-        root = np.r_[rng.uniform(-0.8, 0.8, 2), 0.2]
-        curves.append(root + np.cumsum(rng.normal(0, 0.08, (4, 3)), 0))
-    pts, off = po.pack(curves)
+    pts, off, V, F = po.sphere_and_ground()
     truth = brute_cv(pts, off, [(V, F)])
     for cap in (0.02, 0.1, 0.3):
         d, exact = collider_distance(pts, off, [(V, F)], max_distance=cap, return_exact=True)
