@@ -69,7 +69,8 @@ def parse_args(argv=None):
     ap.add_argument(
         "--quick", action="store_true", help="small smoke scene: 5,000 curves, 12 frames, 20k tris"
     )
-    ap.add_argument("--profile", action="store_true", help="cProfile top 25 of the rigid solve")
+    ap.add_argument("--profile", action="store_true",
+                    help="cProfile top 25 of the solve (of the --only run; default rigid)")
     ap.add_argument(
         "--profile-cpu",
         action="store_true",
@@ -203,7 +204,7 @@ def run_solver(kind, args, fur, V, F, core, pool_idents, profile=False):
     else:
         Vw0 = scene.deformed_vertices(V, 0, frames)
         t0 = time.perf_counter()
-        col = Collider(Vw0, F, double_sided=False, matrix=None)
+        col = Collider(Vw0, F, double_sided=False, matrix=None, deforming=True)
         setup_ms = 1000 * (time.perf_counter() - t0)
         check_scene = None
 
@@ -500,17 +501,18 @@ def main(argv=None):
 
     if (args.profile or args.profile_cpu) and core is not None:
         how = "cpu" if args.profile_cpu else "wall"
-        r = run_solver("rigid", args, fur, V, F, core, pool_idents, profile=how)
+        kind = args.only or "rigid"
+        r = run_solver(kind, args, fur, V, F, core, pool_idents, profile=how)
         note = (
             "timer: main-thread CPU time (waits on worker threads count ~0)"
             if how == "cpu"
             else "timer: wall clock; worker-thread time shows up as waiting in the main thread"
         )
         print(
-            f"\n(profiled rigid run: median {r['frame_ms']['median']:.1f} ms/frame under cProfile;"
+            f"\n(profiled {kind} run: median {r['frame_ms']['median']:.1f} ms/frame under cProfile;"
             f" {note})"
         )
-        print_profile(r["profile"], title=f"cProfile ({how}) of the rigid solve")
+        print_profile(r["profile"], title=f"cProfile ({how}) of the {kind} solve")
 
     if args.json:
         out = {

@@ -57,6 +57,7 @@ class ColliderEntry:
     key: tuple
     double_sided: bool
     offset: float | None
+    deforming: bool = False
 
 
 @dataclass
@@ -546,21 +547,36 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> Coll
     key = bridge.mesh_topology_key(me)
     V = bridge.mesh_vertices(me)
     M = bridge.matrix(oe)
+    deforming = is_deforming(o, depsgraph.scene)
     if (
         entry is None
         or entry.key != key
         or entry.double_sided != double_sided
         or entry.offset != offset
+        or entry.deforming != deforming
     ):
         col = _core().Collider(
             V, bridge.mesh_triangles(me), double_sided=double_sided, matrix=M,
-            offset=offset, drop_degenerate=True, name=o.name,
+            offset=offset, drop_degenerate=True, name=o.name, deforming=deforming,
         )
-        return ColliderEntry(col, key, double_sided, offset)
+        return ColliderEntry(col, key, double_sided, offset, deforming)
     if not np.array_equal(V, entry.collider.vertices):  # deforming: the core refits
         entry.collider.vertices = V
     entry.collider.matrix = M
     return entry
+
+
+def is_deforming(o, scene) -> bool:
+    """Does mesh object ``o`` change shape from frame to frame (deform modifiers,
+    shape keys, cloth, geometry nodes)? Then its BVH is built for speed (see
+    ``core.Collider(deforming=...)``). A property of the object's set-up, never of
+    the frames seen, so results do not depend on the playback history."""
+    try:
+        if o.is_deform_modified(scene, "PREVIEW"):
+            return True
+    except (AttributeError, TypeError, RuntimeError):
+        pass
+    return any(m.type == "NODES" and m.show_viewport for m in o.modifiers)
 
 
 def _collider_list(ob, rt, depsgraph):

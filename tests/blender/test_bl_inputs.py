@@ -193,3 +193,20 @@ def test_invalid_setting_combination_is_a_status_not_a_traceback(fc, capsys):
     s.max_angle = 90.0
     bpy.context.scene.frame_set(1)
     assert s.status_message == ""
+
+
+def test_deforming_colliders_get_the_fast_bvh_build(fc):
+    """A collider with shape keys (or deform modifiers, cloth, geometry nodes) is built
+    as a deforming core Collider; a plain one is not. Decided from the object's set-up,
+    so results never depend on which frames were played before."""
+    hair, box = fc.make_scene(frames=(1, 4))
+    still = bpy.data.objects.new("Still", box.data.copy())
+    bpy.context.scene.collection.objects.link(still)
+    still.location = (5, 5, 5)
+    box.shape_key_add(name="Basis")
+    box.shape_key_add(name="Squash").value = 0.5
+    fc.setup(hair, [box, still])
+    bpy.context.scene.frame_set(2)
+    rt = fc.runtime.get_runtime(hair)
+    flags = {e.collider.name: e.collider.deforming for e in rt.colliders.values()}
+    assert flags == {"Box": True, "Still": False}
