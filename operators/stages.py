@@ -71,9 +71,6 @@ class RootHistory:
         for k in [k for k in self.frames if k > f]:
             del self.frames[k]
 
-    def clear(self) -> None:
-        self.frames.clear()
-
     def lookup(self, f: int) -> np.ndarray:
         """Roots at frame ``f``: recorded, else those of the nearest later recorded frame."""
         got = self.frames.get(int(round(f)))
