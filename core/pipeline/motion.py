@@ -234,6 +234,9 @@ def jiggle(points, offsets, roots, frame=None, fps=24.0, stiffness=2.0, damping=
         hist = np.asarray(roots, np.float64)
         if hist.ndim != 3 or hist.shape[1:] != (C, 3) or len(hist) < 3:
             raise InputError(f"roots history must have shape (N >= 3, {C}, 3), got {hist.shape}")
+        if not np.isfinite(hist).all():  # bad input raises even with amount 0
+            i = int(np.argmax(~np.isfinite(hist).all(axis=(0, 2))))
+            raise InputError(f"roots history of curve {i} is not finite")
         N = len(hist)
 
         def row(j):

@@ -136,6 +136,11 @@ def test_bad_input():
         wind(pts, off, 1, direction=(1, 0))
     with pytest.raises(InputError, match="roots history"):
         jiggle(pts, off, np.zeros((5, 3, 3)))
+    C = len(off) - 1
+    hist = np.zeros((5, C, 3))
+    hist[2, 1, 0] = np.nan
+    with pytest.raises(InputError, match="curve 1 is not finite"):
+        jiggle(pts, off, hist, amount=0)
     with pytest.raises(InputError, match="frame"):
         jiggle(pts, off, lambda f: 0)
 
