@@ -41,8 +41,8 @@ def _as_vertices(V, what="vertices") -> np.ndarray:
     if not np.issubdtype(V.dtype, np.floating) and not np.issubdtype(V.dtype, np.integer):
         raise ColliderError(f"collider {what} must be numeric, got dtype {V.dtype}")
     V = V.astype(np.float32)
-    bad = ~np.isfinite(V).all(axis=1)
-    if bad.any():
+    if not np.isfinite(V.ravel()).all():  # flat first: the row-wise test is slow
+        bad = ~np.isfinite(V).all(axis=1)
         raise ColliderError(
             f"collider {what}: vertex {int(np.argmax(bad))} is not finite "
             f"({int(bad.sum())} non-finite vertices)"
@@ -149,6 +149,7 @@ class Collider:
             F = F[~bad]
         self._F = F
         self._used = np.unique(F)  # vertices referenced by a face (topology only)
+        self._all_used = len(self._used) == len(V)
         self.closed = self._is_closed(F, len(V))
         self._M, self._Minv = _as_matrix(matrix)
         self._version = 0
@@ -279,11 +280,22 @@ class Collider:
         """Local bounds ``(lo, hi)`` of the used vertices (cached per vertices)."""
         if self._geometry_cache is None:
             if len(self._F):
-                Vu = self._V[self._used].astype(np.float64)
-                self._geometry_cache = (Vu.min(0), Vu.max(0))
+                Vu = self._used_components()
+                lo = np.array([float(c.min()) for c in Vu])
+                hi = np.array([float(c.max()) for c in Vu])
+                self._geometry_cache = (lo, hi)
             else:
                 self._geometry_cache = (np.zeros(3), np.zeros(3))
         return self._geometry_cache
+
+    def _used_components(self):
+        """The used vertices as three contiguous float32 component arrays
+        (cached per vertices): per-axis passes over (n, 3) rows are slow."""
+        if getattr(self, "_components_key", None) != self._version:
+            Vt = self._V.T if self._all_used else self._V[self._used].T
+            self._components = [np.ascontiguousarray(c) for c in Vt]
+            self._components_key = self._version
+        return self._components
 
     def _face_normals(self, prim, unit=True):
         """Face normals (right-handed, local space) of triangles ``prim``.
@@ -364,21 +376,41 @@ class Collider:
         than the bounding box. Rebuilt with the vertices (O(n)).
         """
         if getattr(self, "_occ_key", None) != self._version:
-            V = self._V.astype(np.float64)[self._used] - self._center
-            lo, hi = (b - self._center for b in self._geometry())
+            lo_g, hi_g = self._geometry()
+            lo, hi = lo_g - self._center, hi_g - self._center
             h = max(float((hi - lo).max()) / tol.OCCUPANCY_CELLS, 1e-30)
             dims = np.floor((hi - lo) / h).astype(np.int64) + 1
-            cell = np.minimum(np.floor((V - lo) / h).astype(np.int64), dims - 1)
-            occ = np.zeros(dims, np.int32)
-            occ[cell[:, 0], cell[:, 1], cell[:, 2]] = 1
+            flat = None
+            for i, c in enumerate(self._used_components()):
+                x = c.astype(np.float64)
+                x -= self._center[i]
+                x -= lo[i]
+                x /= h
+                ci = np.minimum(np.floor(x).astype(np.int64), dims[i] - 1)
+                flat = ci if flat is None else flat * dims[i] + ci
+            occ = (np.bincount(flat, minlength=int(dims.prod())) > 0).astype(np.int32)
             sat = np.zeros(dims + 1, np.int32)
-            sat[1:, 1:, 1:] = occ.cumsum(0).cumsum(1).cumsum(2)
+            # int32 accumulators: cumsum would widen to int64 and back
+            body = sat[1:, 1:, 1:]
+            np.cumsum(occ.reshape(dims), axis=0, dtype=np.int32, out=body)
+            np.cumsum(body, axis=1, dtype=np.int32, out=body)
+            np.cumsum(body, axis=2, dtype=np.int32, out=body)
             if getattr(self, "_edges", None) is None:  # unique edges: topology only
                 e = np.sort(np.concatenate([self._F[:, [k, (k + 1) % 3]] for k in range(3)]), 1)
                 key = np.unique(e[:, 0].astype(np.int64) * len(self._V) + e[:, 1])
-                self._edges = np.stack([key // len(self._V), key % len(self._V)], 1)
-            e = self._V[self._edges[:, 0]] - self._V[self._edges[:, 1]]
-            max_edge = float(np.einsum("ij,ij->i", e, e).max())
+                self._edges = [
+                    np.ascontiguousarray(key // len(self._V)),
+                    np.ascontiguousarray(key % len(self._V)),
+                ]
+            a, b = self._edges
+            sq = None
+            for c in (self._V[:, i] for i in range(3)):
+                c = np.ascontiguousarray(c)
+                d = c.take(a)
+                d -= c.take(b)
+                d *= d
+                sq = d if sq is None else sq + d
+            max_edge = float(sq.max())
             # float32 edges: pad by a relative ulp margin to stay conservative
             max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
             self._occ = (lo, h, dims, sat, max_edge, np.full(dims, -1, np.int8))
