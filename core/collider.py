@@ -11,6 +11,8 @@ Naming: ``_wo`` is world space, ``_lo`` the collider's local space.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from . import tolerances as tol
@@ -155,6 +157,7 @@ class Collider:
         self._version = 0
         self._normals_cache = (None, 0, None)  # see _face_normals
         self._built = []  # [(key, backend, n_front_faces)], see _backend
+        self._build_lock = threading.Lock()  # a build may run on a ray thread
         self.build_count = 0
         self._geometry_cache = None
         self._recenter()
@@ -513,6 +516,17 @@ class Collider:
         A few shells are kept (several solvers may share one collider with
         different offsets), newest last.
         """
+        with self._build_lock:
+            return self._backend_locked(offset_wo)
+
+    def needs_build(self, offset_wo: float) -> bool:
+        """True when the next query at ``offset_wo`` must build a BVH first
+        (new vertices, new offset): the solver then starts it early, on a ray
+        thread, so the build overlaps the frame's set-up."""
+        key = self._shell_key(offset_wo)
+        return not self.empty and all(k != key for k, _, _ in self._built)
+
+    def _backend_locked(self, offset_wo: float):
         key = self._shell_key(offset_wo)
         for k, be, nf in self._built:
             if k == key:

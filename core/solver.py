@@ -335,6 +335,8 @@ class Solver:
         ctx.load_state()
         timings["frames"] = (time.perf_counter() - t0) * 1e3
         pinched = pinch_result()
+        for b in ctx.builds:  # done by now (the pinch test waited for them)
+            b()
 
         t0 = time.perf_counter()
         was_pinched = self._pinched
