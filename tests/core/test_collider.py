@@ -182,3 +182,30 @@ def test_collider_copies_its_inputs():
     M3[:3, 3] = [5, 5, 5]
     r = Solver(offs, Settings(mode="stiff")).step(pts, [col])
     assert np.array_equal(r.points, ref.points)
+
+
+def test_early_build_on_a_ray_thread():
+    """With two threads the solver starts a changed collider's BVH build
+    during the set-up: once per change, never for a collider far from every
+    curve, and with the same result as the lazy single-thread build."""
+    pts, offs = _one_curve()
+    V, F = scenes.uv_sphere([0.1, 0, 0.8], 0.3, 24, 12)
+    far_V = V + np.float32(50.0)
+    runs = {}
+    for threads in (1, 2):
+        near = Collider(V, F, deforming=True)
+        far = Collider(far_V, F, deforming=True)
+        solver = Solver(offs, Settings(mode="bend", threads=threads))
+        out = []
+        for k in range(4):
+            wobble = (1.0 + 0.02 * k) * (V - V.mean(0)) + V.mean(0)
+            near.vertices = wobble
+            far.vertices = wobble + np.float32(50.0)
+            r = solver.step(pts, [near, far])
+            out.append((r.points.copy(), np.asarray(r.status).copy()))
+            assert near.build_count == k + 1
+            assert far.build_count == 0
+        runs[threads] = out
+    for (p1, s1), (p2, s2) in zip(runs[1], runs[2]):
+        assert np.array_equal(p1, p2) and np.array_equal(s1, s2)
+    assert (runs[1][0][1] != Status.FREE).any()  # the near collider is in play
