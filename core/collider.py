@@ -12,12 +12,13 @@ Naming: ``_wo`` is world space, ``_lo`` the collider's local space.
 from __future__ import annotations
 
 import threading
+from functools import partial
 
 import numpy as np
 
 from . import tolerances as tol
 from .errors import ColliderError
-from .rays import make_backend
+from .rays import beside, make_backend
 from .rotations import apply, apply_soa, det3, inv_affine, norm_bound
 from .rotations import dot as rot_dot
 
@@ -157,7 +158,11 @@ class Collider:
         self._version = 0
         self._normals_cache = (None, 0, None)  # see _face_normals
         self._built = []  # [(key, backend, n_front_faces)], see _backend
-        self._build_lock = threading.Lock()  # a build may run on a ray thread
+        # Builds may run on a ray thread (see prefetch): one lock for the BVHs,
+        # one for the occupancy grid (built by whichever thread needs it first).
+        self._build_lock = threading.Lock()
+        self._occ_lock = threading.Lock()
+        self._prefetching = None  # shell key of the last prefetch started
         self.build_count = 0
         self._geometry_cache = None
         self._recenter()
@@ -378,48 +383,55 @@ class Collider:
         cannot touch the mesh: an O(1) test per curve that is much tighter
         than the bounding box. Rebuilt with the vertices (O(n)).
         """
-        if getattr(self, "_occ_key", None) != self._version:
-            lo_g, hi_g = self._geometry()
-            lo, hi = lo_g - self._center, hi_g - self._center
-            h = max(float((hi - lo).max()) / tol.OCCUPANCY_CELLS, 1e-30)
-            dims = np.floor((hi - lo) / h).astype(np.int64) + 1
-            flat = None
-            for i, c in enumerate(self._used_components()):
-                x = c.astype(np.float64)
-                x -= self._center[i]
-                x -= lo[i]
-                x /= h
-                ci = np.minimum(np.floor(x).astype(np.int64), dims[i] - 1)
-                flat = ci if flat is None else flat * dims[i] + ci
-            occ = (np.bincount(flat, minlength=int(dims.prod())) > 0).astype(np.int32)
-            sat = np.zeros(dims + 1, np.int32)
-            # int32 accumulators: cumsum would widen to int64 and back
-            body = sat[1:, 1:, 1:]
-            np.cumsum(occ.reshape(dims), axis=0, dtype=np.int32, out=body)
-            np.cumsum(body, axis=1, dtype=np.int32, out=body)
-            np.cumsum(body, axis=2, dtype=np.int32, out=body)
-            if getattr(self, "_edges", None) is None:  # unique edges: topology only
-                e = np.sort(np.concatenate([self._F[:, [k, (k + 1) % 3]] for k in range(3)]), 1)
-                key = np.unique(e[:, 0].astype(np.int64) * len(self._V) + e[:, 1])
-                self._edges = [
-                    np.ascontiguousarray(key // len(self._V)),
-                    np.ascontiguousarray(key % len(self._V)),
-                ]
-            a, b = self._edges
-            sq = None
-            for c in (self._V[:, i] for i in range(3)):
-                c = np.ascontiguousarray(c)
-                d = c.take(a)
-                d -= c.take(b)
-                d *= d
-                sq = d if sq is None else sq + d
-            max_edge = float(sq.max())
-            # float32 edges: pad by a relative ulp margin to stay conservative
-            max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
-            self._occ = (lo, h, dims, sat, max_edge, np.full(dims, -1, np.int8))
-            self._occ_key = self._version
-            self._occ_inside_key = None
-        return self._occ
+        if getattr(self, "_occ_key", None) == self._version:
+            return self._occ
+        with self._occ_lock:
+            if getattr(self, "_occ_key", None) != self._version:
+                self._build_occupancy()
+            return self._occ
+
+    def _build_occupancy(self):
+        """Compute :meth:`_occupancy` (under its lock)."""
+        lo_g, hi_g = self._geometry()
+        lo, hi = lo_g - self._center, hi_g - self._center
+        h = max(float((hi - lo).max()) / tol.OCCUPANCY_CELLS, 1e-30)
+        dims = np.floor((hi - lo) / h).astype(np.int64) + 1
+        flat = None
+        for i, c in enumerate(self._used_components()):
+            x = c.astype(np.float64)
+            x -= self._center[i]
+            x -= lo[i]
+            x /= h
+            ci = np.minimum(np.floor(x).astype(np.int64), dims[i] - 1)
+            flat = ci if flat is None else flat * dims[i] + ci
+        occ = (np.bincount(flat, minlength=int(dims.prod())) > 0).astype(np.int32)
+        sat = np.zeros(dims + 1, np.int32)
+        # int32 accumulators: cumsum would widen to int64 and back
+        body = sat[1:, 1:, 1:]
+        np.cumsum(occ.reshape(dims), axis=0, dtype=np.int32, out=body)
+        np.cumsum(body, axis=1, dtype=np.int32, out=body)
+        np.cumsum(body, axis=2, dtype=np.int32, out=body)
+        if getattr(self, "_edges", None) is None:  # unique edges: topology only
+            e = np.sort(np.concatenate([self._F[:, [k, (k + 1) % 3]] for k in range(3)]), 1)
+            key = np.unique(e[:, 0].astype(np.int64) * len(self._V) + e[:, 1])
+            self._edges = [
+                np.ascontiguousarray(key // len(self._V)),
+                np.ascontiguousarray(key % len(self._V)),
+            ]
+        a, b = self._edges
+        sq = None
+        for c in (self._V[:, i] for i in range(3)):
+            c = np.ascontiguousarray(c)
+            d = c.take(a)
+            d -= c.take(b)
+            d *= d
+            sq = d if sq is None else sq + d
+        max_edge = float(sq.max())
+        # float32 edges: pad by a relative ulp margin to stay conservative
+        max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
+        self._occ = (lo, h, dims, sat, max_edge, np.full(dims, -1, np.int8))
+        self._occ_inside_key = None
+        self._occ_key = self._version  # last: readers check it without the lock
 
     def near_surface(self, p_wo, radius_wo, offset_wo=0.0) -> np.ndarray:
         """Conservative test: can a ball (``p_wo``, ``radius_wo``) touch the mesh?
@@ -519,12 +531,27 @@ class Collider:
         with self._build_lock:
             return self._backend_locked(offset_wo)
 
-    def needs_build(self, offset_wo: float) -> bool:
-        """True when the next query at ``offset_wo`` must build a BVH first
-        (new vertices, new offset): the solver then starts it early, on a ray
-        thread, so the build overlaps the frame's set-up."""
+    def prefetch(self, offset_wo: float, threads: int):
+        """Start building the BVH that queries at ``offset_wo`` need on a ray
+        thread, when the vertices or the offset changed.
+
+        Embree builds without the GIL, so the build overlaps the caller's own
+        work (the solver's set-up). Queries made meanwhile wait for it. The
+        result never depends on it: only when the work is done.
+
+        Returns
+        -------
+        callable or None
+            Waits for the work (re-raising its error); None when nothing was
+            started (nothing to do, one thread, or already under way).
+        """
+        if threads <= 1 or self.empty:
+            return None
         key = self._shell_key(offset_wo)
-        return not self.empty and all(k != key for k, _, _ in self._built)
+        if key == self._prefetching or any(k == key for k, _, _ in self._built):
+            return None
+        self._prefetching = key
+        return beside(partial(self._backend, offset_wo), threads)
 
     def _backend_locked(self, offset_wo: float):
         key = self._shell_key(offset_wo)

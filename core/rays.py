@@ -156,11 +156,14 @@ class EmbreeBackend:
         if n <= 1:
             return np.asarray(self._run(o, d, tmax), dtype=np.int32)
         bounds = np.linspace(0, k, n + 1).astype(np.int64)
+        # The caller traces the last chunk itself rather than idling on a lock.
         futs = [
             _executor(n).submit(self._run, o[a:b], d[a:b], tmax[a:b])
-            for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+            for a, b in zip(bounds[:-2], bounds[1:-1], strict=True)
         ]
-        return np.concatenate([np.asarray(f.result(), dtype=np.int32) for f in futs])
+        a = bounds[-2]
+        last = np.asarray(self._run(o[a:], d[a:], tmax[a:]), dtype=np.int32)
+        return np.concatenate([np.asarray(f.result(), dtype=np.int32) for f in futs] + [last])
 
     def hit_details(self, o, d, tmax):
         """First hit with its ray parameter.

@@ -311,32 +311,43 @@ class Solver:
                 "pinch_resolution='growth_surface' needs the growth surface (step(growth=...))"
             )
 
-        ctx = StepContext(self, points, cols, growth)
-        timings = ctx.timings
-        timings["setup"] = (time.perf_counter() - t_start) * 1e3
+        waits = []  # background work of this step: never left running on error
+        try:
+            ctx = StepContext(self, points, cols, growth)
+            waits += ctx.builds
+            timings = ctx.timings
+            timings["setup"] = (time.perf_counter() - t_start) * 1e3
 
-        C = self.n_curves
-        status = np.zeros(C, np.int8)
-        status[~enabled] = Status.DISABLED
+            C = self.n_curves
+            status = np.zeros(C, np.int8)
+            status[~enabled] = Status.DISABLED
 
-        # Pinch detection (paper 3.1): roots inside closed single-sided
-        # colliders, on a ray thread while the main thread builds the local
-        # frames of every curve that carries state (independent work).
-        def pinch():
+            # Pinch detection (paper 3.1): roots inside closed single-sided
+            # colliders, on a ray thread while the main thread builds the local
+            # frames of every curve that carries state (independent work).
+            def pinch():
+                t0 = time.perf_counter()
+                pinched = np.zeros(C, bool)
+                for k in range(len(cols)):
+                    pinched |= ctx.roots_inside(k, enabled)
+                timings["pinch"] = (time.perf_counter() - t0) * 1e3
+                return pinched
+
+            pinch_result = beside(pinch, ctx.threads if cols else 1)
+            waits.append(pinch_result)
             t0 = time.perf_counter()
-            pinched = np.zeros(C, bool)
-            for k in range(len(cols)):
-                pinched |= ctx.roots_inside(k, enabled)
-            timings["pinch"] = (time.perf_counter() - t0) * 1e3
-            return pinched
-
-        pinch_result = beside(pinch, ctx.threads if cols else 1)
-        t0 = time.perf_counter()
-        ctx.load_state()
-        timings["frames"] = (time.perf_counter() - t0) * 1e3
-        pinched = pinch_result()
-        for b in ctx.builds:  # done by now (the pinch test waited for them)
-            b()
+            ctx.load_state()
+            timings["frames"] = (time.perf_counter() - t0) * 1e3
+            pinched = pinch_result()
+            for b in waits:  # done by now (the pinch test waited for them)
+                b()
+        except BaseException:
+            for b in waits:
+                try:
+                    b()
+                except BaseException:  # the first error is the one to report
+                    pass
+            raise
 
         t0 = time.perf_counter()
         was_pinched = self._pinched

@@ -9,15 +9,13 @@ Growth Surface, and writing the output. The modes live in :mod:`.rigid`
 
 from __future__ import annotations
 
-from functools import partial
-
 import numpy as np
 
 from . import rigid
 from . import rotations as rot
 from . import tolerances as tol
 from .errors import InputError
-from .rays import beside, default_threads
+from .rays import default_threads
 from .soft import SoftSolve
 
 
@@ -116,12 +114,13 @@ class StepContext:
                     gg += g * g
             cand = gg <= self.curve_len**2
             w = np.flatnonzero(cand)
-            if len(w) and self.threads > 1 and c.needs_build(off):
+            if len(w):
                 # A changed collider (deforming: every frame) near the curves:
-                # Embree builds without the GIL, so on a ray thread the build
-                # overlaps the rest of the set-up instead of stalling the
-                # pinch test or the first query.
-                self.builds.append(beside(partial(c._backend, off), self.threads))
+                # its BVH is built on a ray thread while the set-up goes on
+                # (a no-op when the solver already started it).
+                b = c.prefetch(off, self.threads)
+                if b is not None:
+                    self.builds.append(b)
             q = c.grid_coords(rootsT.take(w, axis=1))  # (take: contiguous rows)
             cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
             self.cand.append(cand)
