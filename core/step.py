@@ -117,7 +117,7 @@ class StepContext:
             if len(w):
                 # A changed collider (deforming: every frame) near the curves:
                 # its BVH is built on a ray thread while the set-up goes on
-                # (a no-op when the solver already started it).
+                # (a no-op when it is built or under way already).
                 b = c.prefetch(off, self.threads)
                 if b is not None:
                     self.builds.append(b)
