@@ -367,8 +367,14 @@ class Solver:
         timings["solve"] = (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()
-        out = ctx.output()
-        ctx.store_state()
+        # Independent: the next step's state on a ray thread, the output here
+        # (output only gathers and rotates arrays already checked: it cannot
+        # fail on input, so storing the state beside it keeps steps atomic).
+        stored = beside(ctx.store_state, ctx.threads)
+        try:
+            out = ctx.output()
+        finally:
+            stored()
         timings["output"] = (time.perf_counter() - t0) * 1e3
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         timings["rays"] = ctx.n_rays
