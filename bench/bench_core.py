@@ -204,7 +204,9 @@ def run_solver(kind, args, fur, V, F, core, pool_idents, profile=False):
     else:
         Vw0 = scene.deformed_vertices(V, 0, frames)
         t0 = time.perf_counter()
-        col = Collider(Vw0, F, double_sided=False, matrix=None, deforming=True)
+        # The API exactly: no flag; the default (deforming=None) switches
+        # to the fast BVH build once the vertices change (frame 1 on).
+        col = Collider(Vw0, F, double_sided=False, matrix=None)
         setup_ms = 1000 * (time.perf_counter() - t0)
         check_scene = None
 

@@ -101,13 +101,19 @@ class Collider:
         Ray tracer; default embree. 'numpy' is the brute-force reference.
     name : str
         Used in error messages (e.g. the Blender object's name).
-    deforming : bool
-        The vertices change every frame (skinning, shape keys, cloth): its BVH
-        is built for speed (Embree's low-quality build, about 10 ms instead of
-        40 ms for 130k triangles on Linux) at about 15 % slower queries. Only
-        the build quality depends on it, never a result's correctness; the BVH
-        is a function of the vertices and this flag, so results stay
-        reproducible. Leave it off for rigid colliders.
+    deforming : bool or None
+        True: the vertices change every frame (skinning, shape keys, cloth),
+        so its BVH is built for speed (Embree's low-quality build, about
+        10 ms instead of 40 ms for 130k triangles on Linux) at 5-15 % slower
+        queries. False: always the standard build (rigid colliders).
+        None (default): decided by use: the standard build until
+        :attr:`vertices` is first set to new values, the fast build from then
+        on. Only the build quality depends on it, never a result's
+        correctness. With True or False the BVH is a function of the vertices
+        and the flag alone; with None it also depends on whether the collider
+        was ever deformed, which could in principle decide a tie between two
+        hits at exactly the same distance differently (pass the flag when a
+        re-run from a fresh Collider must match bit for bit).
 
     Raises
     ------
@@ -126,10 +132,10 @@ class Collider:
         drop_degenerate=False,
         backend=None,
         name="collider",
-        deforming=False,
+        deforming=None,
     ):
         self.name = str(name)
-        self.deforming = bool(deforming)
+        self.deforming = None if deforming is None else bool(deforming)
         if backend not in (None, "embree", "numpy"):
             raise ColliderError(f"collider '{self.name}': unknown backend {backend!r}")
         self._backend_name = backend
@@ -522,6 +528,13 @@ class Collider:
         q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
         return (self._version, float(f"{offset_wo:.9g}"), q)
 
+    @property
+    def fast_build(self) -> bool:
+        """Whether the next BVH build is Embree's fast one (see ``deforming``)."""
+        if self.deforming is None:
+            return self._version > 0
+        return self.deforming
+
     def _backend(self, offset_wo: float):
         """The ray backend for the shell at ``offset_wo`` (built lazily).
 
@@ -578,7 +591,7 @@ class Collider:
                 blocks_F.append(F + n * len(blocks_F))
             V = np.concatenate(blocks_V)
             F = np.concatenate(blocks_F)
-        backend = make_backend(self._backend_name, V, F, fast_build=self.deforming)
+        backend = make_backend(self._backend_name, V, F, fast_build=self.fast_build)
         self.build_count += 1
         self._built = [b for b in self._built if b[0][0] == self._version][-3:]
         self._built.append((key, backend, len(self._F)))

@@ -111,6 +111,7 @@ class EmbreeBackend:
     def __init__(self, V, F, fast_build=False):
         if _EMBREE_ERROR is not None:
             raise BackendUnavailable(embree_error())
+        self.fast_build = bool(fast_build)
         V = np.ascontiguousarray(V, dtype=np.float32)
         F = np.ascontiguousarray(F, dtype=np.int32)
         try:

@@ -206,6 +206,31 @@ def test_early_build_on_a_ray_thread():
             assert near.build_count == k + 1
             assert far.build_count == 0
         runs[threads] = out
-    for (p1, s1), (p2, s2) in zip(runs[1], runs[2]):
+    for (p1, s1), (p2, s2) in zip(runs[1], runs[2], strict=True):
         assert np.array_equal(p1, p2) and np.array_equal(s1, s2)
     assert (runs[1][0][1] != Status.FREE).any()  # the near collider is in play
+
+
+def test_deforming_auto_switches_to_the_fast_build_once_deformed():
+    """deforming=None (default): the standard BVH until the vertices change,
+    the fast one from then on; explicit flags never switch. Hits agree."""
+    pts, offs = _one_curve()
+    V, F = scenes.uv_sphere([0.1, 0, 0.8], 0.3, 24, 12)
+    auto = Collider(V, F)
+    rigid = Collider(V, F, deforming=False)
+    fast = Collider(V, F, deforming=True)
+    assert (auto.fast_build, rigid.fast_build, fast.fast_build) == (False, False, True)
+    auto.vertices = V.copy()  # same values: not a deformation
+    assert not auto.fast_build
+    outs = []
+    for col in (auto, rigid, fast):
+        solver = Solver(offs, Settings(mode="bend", threads=1))
+        r0 = solver.step(pts, [col])
+        col.vertices = V * np.float32(1.05)
+        r1 = solver.step(pts, [col])
+        outs.append((r0.points, r1.points))
+        assert col._built[-1][1].fast_build == col.fast_build
+    assert auto.fast_build and not rigid.fast_build and fast.fast_build
+    for r0, r1 in outs[1:]:
+        assert np.array_equal(r0, outs[0][0]) and np.array_equal(r1, outs[0][1])
+    assert not np.array_equal(outs[0][1], pts)  # the sphere is in the way
