@@ -165,9 +165,30 @@ class StepContext:
             self.B[idx] = B
             self.axis[idx] = self._from_frame(rows, sv._axis_lo[idx])
             if self.soft:
-                seg, rep, _ = self.segments(idx)
-                self.quat[seg] = self._quat_to(B[rep], self.quat[seg], to_world=True)
-                self.quat_max[seg] = self._quat_to(B[rep], self.quat_max[seg], to_world=True)
+                for q in (self.quat, self.quat_max):
+                    self._quats_to(idx, B, q, q, to_world=True)
+
+    def _quats_to(self, idx, B, src, dst, to_world):
+        """Move the quaternions of every segment of curves ``idx`` between
+        world and their curve's local frame ``B`` (n, 3, 3): ``dst[seg] =
+        _quat_to(B[rep], src[seg], to_world)``. Uniform curves work on
+        (n, ns) blocks, frame by frame (no per-segment copy of ``B``),
+        with the same arithmetic."""
+        ns = self.sv_._ns
+        if not ns:
+            seg, rep, _ = self.segments(idx)
+            dst[seg] = self._quat_to(B[rep], src[seg], to_world)
+            return
+        q = src.reshape(-1, ns, 4)[idx]  # (n, ns, 4) copy
+        v = q[..., 1:].copy()
+        for i in range(3):
+            # to world: sum_j B[j, i] v_j; to local: sum_j B[i, j] v_j
+            b = B[:, :, i] if to_world else B[:, i, :]
+            out = b[:, 0, None] * v[..., 0]
+            out += b[:, 1, None] * v[..., 1]
+            out += b[:, 2, None] * v[..., 2]
+            q[..., 1 + i] = out
+        dst.reshape(-1, ns, 4)[idx] = q
 
     @staticmethod
     def _quat_to(B, q, to_world):
@@ -236,9 +257,9 @@ class StepContext:
             q = np.tile([1.0, 0.0, 0.0, 0.0], (len(self.quat), 1))
             qm = q.copy()
             if len(idx):
-                seg, rep, _ = self.segments(idx)
-                q[seg] = self._quat_to(B[idx][rep], self.quat[seg], to_world=False)
-                qm[seg] = self._quat_to(B[idx][rep], self.quat_max[seg], to_world=False)
+                Bi = B[idx]
+                self._quats_to(idx, Bi, self.quat, q, to_world=False)
+                self._quats_to(idx, Bi, self.quat_max, qm, to_world=False)
             sv._quat, sv._quat_max = q, qm
 
     # ----------------------------------------------------------- geometry
