@@ -39,6 +39,11 @@ _MIN_RAYS_PER_THREAD = 4096
 _pool: ThreadPoolExecutor | None = None
 _pool_size = 0
 _pool_lock = threading.Lock()
+_local = threading.local()  # in_pool: set on the pool's own threads
+
+
+def _mark_pool_thread():
+    _local.in_pool = True
 
 
 def embree_available() -> bool:
@@ -71,7 +76,9 @@ def _executor(n: int) -> ThreadPoolExecutor:
         if _pool is None or _pool_size < n:
             if _pool is not None:
                 _pool.shutdown(wait=False)
-            _pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="furcollide-rays")
+            _pool = ThreadPoolExecutor(
+                max_workers=n, thread_name_prefix="furcollide-rays", initializer=_mark_pool_thread
+            )
             _pool_size = n
         return _pool
 
@@ -119,6 +126,7 @@ class EmbreeBackend:
             # which is what a deforming collider pays every frame.
             self._scene, self._shared = _native.triangle_scene(V, F, fast_build)
         except _native.NativeUnavailable:
+            self.fast_build = False  # TriangleMesh has one build quality
             self._shared = None
             self._scene = _rs.EmbreeScene()
             _mc.TriangleMesh(self._scene, V, F)
@@ -154,7 +162,8 @@ class EmbreeBackend:
         if k == 0:
             return np.empty(0, np.int32)
         n = int(min(threads, max(1, k // _MIN_RAYS_PER_THREAD)))
-        if n <= 1:
+        if n <= 1 or getattr(_local, "in_pool", False):
+            # (on a pool thread: waiting for the pool's other threads could deadlock)
             return np.asarray(self._run(o, d, tmax), dtype=np.int32)
         bounds = np.linspace(0, k, n + 1).astype(np.int64)
         # The caller traces the last chunk itself rather than idling on a lock.
@@ -163,7 +172,12 @@ class EmbreeBackend:
             for a, b in zip(bounds[:-2], bounds[1:-1], strict=True)
         ]
         a = bounds[-2]
-        last = np.asarray(self._run(o[a:], d[a:], tmax[a:]), dtype=np.int32)
+        try:
+            last = np.asarray(self._run(o[a:], d[a:], tmax[a:]), dtype=np.int32)
+        except BaseException:
+            for f in futs:  # never leave chunks running; this error is the one raised
+                f.exception()
+            raise
         return np.concatenate([np.asarray(f.result(), dtype=np.int32) for f in futs] + [last])
 
     def hit_details(self, o, d, tmax):

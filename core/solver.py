@@ -339,7 +339,7 @@ class Solver:
             ctx.load_state()
             timings["frames"] = (time.perf_counter() - t0) * 1e3
             pinched = pinch_result()
-            for b in waits:  # done by now (the pinch test waited for them)
+            for b in waits:  # wait for the builds (and re-raise their errors)
                 b()
         except BaseException:
             for b in waits:
@@ -367,9 +367,11 @@ class Solver:
         timings["solve"] = (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()
-        # Independent: the next step's state on a ray thread, the output here
-        # (output only gathers and rotates arrays already checked: it cannot
-        # fail on input, so storing the state beside it keeps steps atomic).
+        # Independent: the next step's state on a ray thread, the output here.
+        # Output only gathers and rotates arrays already checked, so it cannot
+        # fail on input; should it fail otherwise (out of memory), the state
+        # has advanced all the same: restore a snapshot (solver.state) or
+        # reset() before solving that frame again.
         stored = beside(ctx.store_state, ctx.threads)
         try:
             out = ctx.output()

@@ -101,35 +101,59 @@ class StepContext:
         self._near_roots = []  # per collider: (roots in its box, their grid coords)
         self.builds = []  # BVH builds started early (see below)
         rootsT = np.ascontiguousarray(self.roots.T)
-        for c, off in cols:
-            lo, hi = c.bounds_world(off)
-            in_box = None
-            for i in range(3):
-                g = np.maximum(lo[i] - rootsT[i], 0)
-                g += np.maximum(rootsT[i] - hi[i], 0)
-                in_box = g == 0 if in_box is None else in_box & (g == 0)
-                if i == 0:
-                    gg = g * g
-                else:
-                    gg += g * g
-            cand = gg <= self.curve_len**2
-            w = np.flatnonzero(cand)
-            if len(w):
-                # A changed collider (deforming: every frame) near the curves:
-                # its BVH is built on a ray thread while the set-up goes on
-                # (a no-op when it is built or under way already).
-                b = c.prefetch(off, self.threads)
-                if b is not None:
-                    self.builds.append(b)
-            q = c.grid_coords(rootsT.take(w, axis=1))  # (take: contiguous rows)
-            cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
-            self.cand.append(cand)
-            self._near_roots.append((w, q, in_box))
+        try:
+            for c, off in cols:
+                self._candidates(c, off, rootsT)
+        except BaseException:
+            for b in self.builds:  # never leave a build running behind an error
+                try:
+                    b()
+                except BaseException:
+                    pass
+            raise
         if self.cand:
             self.cand_any = np.logical_or.reduce(self.cand)
         else:
             self.cand_any = np.zeros(solver.n_curves, bool)
         self.soft = s.mode == "soft"
+
+    def _candidates(self, c, off, rootsT):
+        """Candidate curves of collider ``c`` (appended to ``self.cand``)."""
+        lo, hi = c.bounds_world(off)
+        in_box = None
+        for i in range(3):
+            g = np.maximum(lo[i] - rootsT[i], 0)
+            g += np.maximum(rootsT[i] - hi[i], 0)
+            in_box = g == 0 if in_box is None else in_box & (g == 0)
+            if i == 0:
+                gg = g * g
+            else:
+                gg += g * g
+        cand = gg <= self.curve_len**2
+        w = np.flatnonzero(cand)
+        # A changed collider (deforming: every frame) that the step will query
+        # gets its BVH built on a ray thread while the set-up goes on. Started
+        # before the grid test (to overlap it) only for a collider queried
+        # last step too, so a collider whose box holds the curves but whose
+        # surface is out of their reach (a ring, a room) is not built every
+        # frame; otherwise started once the grid test says it is needed.
+        # Only timing depends on this, never a result.
+        early = len(w) and getattr(c, "_queried", False)
+        if early:
+            self._prefetch(c, off)
+        q = c.grid_coords(rootsT.take(w, axis=1))  # (take: contiguous rows)
+        cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
+        needed = bool(cand.any() or (c.detects_pinch and in_box.any()))
+        c._queried = needed
+        if needed and not early:
+            self._prefetch(c, off)
+        self.cand.append(cand)
+        self._near_roots.append((w, q, in_box))
+
+    def _prefetch(self, c, off):
+        b = c.prefetch(off, self.threads)  # None: built, under way, or one thread
+        if b is not None:
+            self.builds.append(b)
 
     def roots_inside(self, k, enabled):
         """Enabled curves whose root is inside collider ``k`` (paper 3.1: pinch)."""
@@ -172,8 +196,8 @@ class StepContext:
         """Move the quaternions of every segment of curves ``idx`` between
         world and their curve's local frame ``B`` (n, 3, 3): ``dst[seg] =
         _quat_to(B[rep], src[seg], to_world)``. Uniform curves work on
-        (n, ns) blocks, frame by frame (no per-segment copy of ``B``),
-        with the same arithmetic."""
+        (n, ns) blocks, frame by frame (no per-segment copy of ``B``); both
+        layouts add the same terms in the same order."""
         ns = self.sv_._ns
         if not ns:
             seg, rep, _ = self.segments(idx)
@@ -192,9 +216,18 @@ class StepContext:
 
     @staticmethod
     def _quat_to(B, q, to_world):
+        """Quaternions ``q`` (k, 4) with their vector part moved by frames
+        ``B`` (k, 3, 3): to world ``B^T v``, to local ``B v`` (the arithmetic
+        of :meth:`_quats_to`, term by term)."""
+        out = q.copy()
         v = q[:, 1:]
-        v = np.einsum("kji,kj->ki", B, v) if to_world else np.einsum("kij,kj->ki", B, v)
-        return np.concatenate([q[:, :1], v], axis=1)
+        for i in range(3):
+            b = B[:, :, i] if to_world else B[:, i, :]
+            o = b[:, 0] * v[:, 0]
+            o += b[:, 1] * v[:, 1]
+            o += b[:, 2] * v[:, 2]
+            out[:, 1 + i] = o
+        return out
 
     def _frames(self, idx, prev):
         """Local frames of curves ``idx`` (:func:`rot.curve_frames`), computed

@@ -144,3 +144,20 @@ def test_solver_backends_agree_on_closed_colliders(seed, mode, kind):
         hit = oracle.segments_hit_mesh(res.points, offs, Vw, spec["F"])
         assert not np.any(hit & keep), backend
     assert np.array_equal(st_["embree"][robust], st_["numpy"][robust])
+
+
+def test_split_batches_on_pool_threads_run_inline():
+    """Two pool tasks that each trace a batch big enough to split: on a pool
+    thread a batch is traced inline (waiting for the pool's other threads from
+    inside the pool could deadlock); the hits are those of the caller's split."""
+    from core import rays
+
+    V, F = scenes.uv_sphere([0, 0, 0], 1.0, 32, 16)
+    be = rays.make_backend("embree", V, F)
+    rng = np.random.default_rng(0)
+    o = rng.uniform(-1.5, 1.5, (20000, 3))
+    d = rng.normal(size=(20000, 3)) * 0.5
+    expected = be.first_hit(o, d, 1.0, threads=2)
+    waits = [rays.beside(lambda: be.first_hit(o, d, 1.0, threads=2), 2) for _ in range(2)]
+    for w in waits:
+        assert np.array_equal(w(timeout=60), expected)

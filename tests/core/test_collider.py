@@ -229,8 +229,56 @@ def test_deforming_auto_switches_to_the_fast_build_once_deformed():
         col.vertices = V * np.float32(1.05)
         r1 = solver.step(pts, [col])
         outs.append((r0.points, r1.points))
-        assert col._built[-1][1].fast_build == col.fast_build
+        be = col._built[-1][1]
+        native = getattr(be, "_shared", None) is not None  # (the fallback has one quality)
+        assert be.fast_build == (col.fast_build and native)
     assert auto.fast_build and not rigid.fast_build and fast.fast_build
     for r0, r1 in outs[1:]:
         assert np.array_equal(r0, outs[0][0]) and np.array_equal(r1, outs[0][1])
     assert not np.array_equal(outs[0][1], pts)  # the sphere is in the way
+
+
+def test_no_build_for_a_collider_out_of_reach_whatever_the_threads():
+    """A ring whose box holds the curves but whose surface is out of their
+    reach is never queried, so never built, with one thread or two."""
+    pts, offs = _one_curve()  # from the origin, 1.0 long
+    u = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    ring = np.concatenate(
+        [np.stack([5 * np.cos(u), 5 * np.sin(u), np.full_like(u, z)], 1) for z in (0.0, 1.0)]
+    )
+    n = len(u)
+    i, j = np.arange(n), (np.arange(n) + 1) % n
+    F = np.concatenate([np.stack([i, j, i + n], 1), np.stack([j, j + n, i + n], 1)])
+    for threads in (1, 2):
+        col = Collider(ring, F, deforming=True)
+        solver = Solver(offs, Settings(mode="bend", threads=threads))
+        for k in range(3):
+            col.vertices = ring * (1.0 + 0.01 * k)
+            r = solver.step(pts, [col])
+            assert np.array_equal(r.points, pts)
+        assert col.build_count == 0
+
+
+def test_a_failing_step_leaves_no_build_running():
+    """A step that raises after starting a collider's build waits for it."""
+    pts, offs = _one_curve()
+    V, F = scenes.uv_sphere([0.1, 0, 0.8], 0.3, 24, 12)
+    col = Collider(V, F, deforming=True)
+    solver = Solver(offs, Settings(mode="bend", threads=2))
+    solver.step(pts, [col])  # queried: the next step starts its build early
+    col.vertices = V * np.float32(1.01)
+
+    def broken(*a, **k):
+        raise RuntimeError("simulated failure during the set-up")
+
+    col.grid_coords = broken
+    try:
+        solver.step(pts, [col])
+    except RuntimeError:
+        pass
+    else:  # pragma: no cover
+        raise AssertionError("the step should have raised")
+    assert not col._build_lock.locked() and col.build_count == 2
+    del col.grid_coords
+    r = solver.step(pts, [col])  # and the solver goes on
+    assert col.build_count == 2 and np.isfinite(r.points).all()
