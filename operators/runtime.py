@@ -511,6 +511,11 @@ def prepare_input(ob, rt, inp, scene, f) -> None:
         inp.local = None
 
 
+def _shown(obj, depsgraph) -> bool:
+    """Is ``obj`` evaluated in ``depsgraph`` (not hidden from it)?"""
+    return obj is not None and obj.evaluated_get(depsgraph).is_evaluated
+
+
 def read_inputs(ob, depsgraph) -> Inputs:
     """Evaluated source positions (world), offsets, enable mask."""
     s = ob.furcollide
@@ -791,7 +796,8 @@ def _evaluate(scene, depsgraph, ob) -> str:
     str
         What was done: ``'reset'``, ``'step'``, ``'cache'``, ``'bake'``,
         ``'hold'``, ``'outdated'``, ``'passthrough'``, ``'subframe'``,
-        ``'topology'`` or ``'baking'``.
+        ``'topology'``, ``'baking'`` or ``'hidden'`` (no output of the setup is
+        in this depsgraph).
 
     Raises
     ------
@@ -815,6 +821,11 @@ def _evaluate(scene, depsgraph, ob) -> str:
         )
     if rt.baking:
         return "baking"
+    if not _shown(s.output, depsgraph) and not _shown(s.groom.output, depsgraph):
+        # Nothing of this setup is in this depsgraph (its outputs are hidden from
+        # it, e.g. from the render): nothing to show, so nothing to compute or to
+        # report (its source is usually hidden too).
+        return "hidden"
     f = scene.frame_current
     sub = scene.frame_subframe
     if sub != 0.0:

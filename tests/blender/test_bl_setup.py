@@ -91,3 +91,24 @@ def test_output_pointed_at_a_groom_is_refused(fc):
     hair.furcollide.output = hair
     bpy.context.scene.frame_set(3)
     assert "not a FurCollide output" in hair.furcollide.status_message
+
+
+def test_hidden_setup_is_skipped_quietly(fc):
+    """A setup whose source and output are both out of the depsgraph (hidden
+    from it) is skipped without an error; shown again, it plays as usual."""
+    hair, box = fc.make_scene()
+    out = fc.setup(hair, [box])
+    sc = bpy.context.scene
+    hair.hide_viewport = out.hide_viewport = True
+    dg = bpy.context.evaluated_depsgraph_get()
+    assert fc.runtime.evaluate(sc, dg, hair) == "hidden"
+    for f in range(sc.frame_start, sc.frame_start + 4):
+        sc.frame_set(f)
+        assert hair.furcollide.status_message == ""
+    hair.hide_viewport = out.hide_viewport = False
+    moved = 0
+    for f in range(sc.frame_start, sc.frame_end + 1):
+        sc.frame_set(f)
+        assert hair.furcollide.status_message == ""
+        moved += int(hair.furcollide.stat_colliding > 0)
+    assert moved > 0
