@@ -350,7 +350,8 @@ def dependency_group_name(ob) -> str:
 
 
 def update_dependencies(ob) -> None:
-    """(Re)build the output's pass-through dependency modifier.
+    """(Re)build the pass-through dependency modifier of the output (and of the
+    render groom output, if any).
 
     The modifier's node group holds Object Info nodes for the source, the
     colliders (including the collider collection's meshes; no Collection Info
@@ -380,13 +381,22 @@ def update_dependencies(ob) -> None:
         node = ng.nodes.new("GeometryNodeObjectInfo")
         node.inputs["Object"].default_value = o
         node.location = (-300, -150 * i)
-    mod = out.modifiers.get(DEPENDENCY_MODIFIER)
+    # The render groom output needs them too: with the guides and their output
+    # hidden from render, it is what pulls them into the render depsgraph.
+    for target in (out, s.groom.output):
+        if target is not None:
+            _attach_dependencies(target, ng)
+
+
+def _attach_dependencies(target, ng) -> None:
+    """Give ``target`` the dependency modifier (first in its stack) using ``ng``."""
+    mod = target.modifiers.get(DEPENDENCY_MODIFIER)
     if mod is None:
-        mod = out.modifiers.new(DEPENDENCY_MODIFIER, "NODES")
+        mod = target.modifiers.new(DEPENDENCY_MODIFIER, "NODES")
         mod.show_expanded = False
-    index = list(out.modifiers).index(mod)
-    if index != 0 and hasattr(out.modifiers, "move"):  # first, before the artist's own
-        out.modifiers.move(index, 0)
+    index = list(target.modifiers).index(mod)
+    if index != 0 and hasattr(target.modifiers, "move"):  # first, before the artist's own
+        target.modifiers.move(index, 0)
     mod.node_group = ng
 
 
@@ -1168,8 +1178,20 @@ def on_depsgraph_update_post(scene, depsgraph=None):
 
 @persistent
 def on_load_post(*_args):
-    """A new file: forget every runtime (caches belong to the old file)."""
+    """A new file: forget every runtime (caches belong to the old file), and give
+    render groom outputs saved by earlier versions their dependency modifier
+    (without it a render with the guides hidden would not update them)."""
     registry.clear()
+    try:
+        for ob in bpy.data.objects:
+            s = getattr(ob, "furcollide", None)
+            if s is None or not s.is_setup or s.output is None:
+                continue
+            gout = s.groom.output
+            if gout is not None and gout.modifiers.get(DEPENDENCY_MODIFIER) is None:
+                update_dependencies(ob)
+    except Exception as exc:  # noqa: BLE001 - a handler must never raise
+        print(f"FurCollide: could not update the render groom's inputs: {exc}", flush=True)
 
 
 def describe(exc: Exception) -> str:

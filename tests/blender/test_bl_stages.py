@@ -374,3 +374,64 @@ def test_clearance_pass_keeps_the_setup_collision_offset(fc):
     # inside the box grown by most of the offset: no segment
     assert len(segments_in_box(world(gout), roff, center, half=HALF + 0.04)) == 0
     assert guides.furcollide.stat_groom_fixed > 0
+
+
+def test_render_groom_renders_every_frame_with_the_guides_hidden(fc, tmp_path):
+    """The usual render set-up: only the render groom is rendered (the guides,
+    their FurCollide output, the groom source and the collider are hidden from
+    render). Every rendered frame still shows that frame's render groom."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    for o in (guides, out, groom, box):
+        o.hide_render = True
+    assert not gout.hide_render
+    scene.frame_start, scene.frame_end = 1, 7
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 3.0
+    cam.location = (0, -5, 0.5)
+    cam.rotation_euler = (np.pi / 2, 0, 0)
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.render.resolution_x = scene.render.resolution_y = 32
+    scene.render.use_lock_interface = True
+    scene.render.filepath = str(tmp_path / "groom_####")
+    seen = {}
+
+    def spy(sc, depsgraph):  # runs after FurCollide's handler
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen[sc.frame_current] = world(gout).copy()
+
+    scene.frame_set(1)
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render(animation=True)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    assert sorted(seen) == list(range(1, 8))
+    assert guides.furcollide.status_message == ""
+    moved = 0
+    for f in range(1, 8):
+        scene.frame_set(f)
+        np.testing.assert_array_equal(world(gout), seen[f], err_msg=f"frame {f}")
+        moved += int(not np.array_equal(seen[f], seen[1]))
+    assert moved > 0  # the render groom moved with the guides
+
+
+def test_render_groom_output_of_an_older_file_gets_its_inputs_on_load(fc, tmp_path):
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    name = fc.runtime.DEPENDENCY_MODIFIER
+    assert gout.modifiers[0].name == name  # the bind gives it the modifier
+    gout.modifiers.remove(gout.modifiers[name])  # as saved by an earlier version
+    path = str(tmp_path / "old.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    gout = bpy.data.objects["Guides"].furcollide.groom.output
+    assert gout.modifiers[0].name == name
+    guides_out = bpy.data.objects["Guides FurCollide"]
+    assert gout.modifiers[0].node_group == guides_out.modifiers[0].node_group
