@@ -546,6 +546,7 @@ class FURCOLLIDE_OT_fur_attach_bind(SetupOperator, Operator):
         runtime.store_binding(src, binding, topology, attach_id)
         s.attach_id = attach_id
         s.use_fur_attach = True
+        runtime.update_dependencies(src)  # the Surface, even when hidden from render
         # Every frame's input changes: drop every cached frame (see _invalidate_attach).
         runtime.invalidate(src, reason="Fur Attach bound", from_frame=s.frame_start - 1)
         err = evaluate_now(context, src)

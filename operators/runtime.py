@@ -186,7 +186,9 @@ def invalidate(ob, reason="", from_frame=None, colliders=False, refresh=True) ->
     if ob is None:
         return
     rt = get_runtime(ob, create=False)
-    if rt is None:
+    if rt is None:  # nothing cached (a file just opened), but the inputs may have changed
+        if colliders:
+            update_dependencies(ob)
         return
     s = ob.furcollide
     scene = bpy.context.scene
@@ -349,6 +351,60 @@ def dependency_group_name(ob) -> str:
     return f".FurCollide Inputs {ob.furcollide.uid[:8]}"
 
 
+def owns_output(ob) -> bool:
+    """Is ``ob``'s output its own (not missing, not the original's for a copy)?"""
+    out = ob.furcollide.output
+    return out is not None and out.furcollide.source == ob
+
+
+def groom_owner(ob):
+    """The setup that owns the render groom output ``ob``'s setup points at:
+    ``ob`` itself, another setup (``ob`` is a copy of it), or None."""
+    gout = ob.furcollide.groom.output
+    if gout is None:
+        return None
+    if owns_output(ob):
+        return ob
+    for o in bpy.data.objects:
+        s = getattr(o, "furcollide", None)
+        if o != ob and s is not None and s.is_setup and s.groom.output == gout and owns_output(o):
+            return o
+    return None
+
+
+def _dependency_refs(ob) -> list:
+    """The objects the dependency modifier must reference: the source, the
+    colliders (including the collider collection's meshes) and the surface."""
+    refs = [ob] + [o for o, _ds, _off in collider_objects(ob)]
+    if ob.data.surface is not None:
+        refs.append(ob.data.surface)
+    return refs
+
+
+def dependencies_stale(ob) -> bool:
+    """Does the dependency modifier miss an input (a collider or a Surface set
+    without an update callback, a render groom output of an older file)?"""
+    s = ob.furcollide
+    if not owns_output(ob):
+        return False  # a copy of a setup: the outputs are the original's
+    ng = bpy.data.node_groups.get(dependency_group_name(ob))
+    if ng is None:
+        return True
+    have = {
+        n.inputs["Object"].default_value
+        for n in ng.nodes
+        if n.bl_idname == "GeometryNodeObjectInfo"
+    }
+    if set(_dependency_refs(ob)) - have:
+        return True
+    for target in (s.output, s.groom.output):
+        if target is not None:
+            mod = target.modifiers.get(DEPENDENCY_MODIFIER)
+            if mod is None or mod.node_group != ng:
+                return True
+    return False
+
+
 def update_dependencies(ob) -> None:
     """(Re)build the pass-through dependency modifier of the output (and of the
     render groom output, if any).
@@ -362,8 +418,8 @@ def update_dependencies(ob) -> None:
     """
     s = ob.furcollide
     out = s.output
-    if out is None:
-        return
+    if not owns_output(ob):
+        return  # missing, or a copy of a setup: never touch the original's outputs
     name = dependency_group_name(ob)
     ng = bpy.data.node_groups.get(name)
     if ng is None or ng.bl_idname != "GeometryNodeTree":
@@ -374,10 +430,7 @@ def update_dependencies(ob) -> None:
     gin = ng.nodes.new("NodeGroupInput")
     gout = ng.nodes.new("NodeGroupOutput")
     ng.links.new(gin.outputs[0], gout.inputs[0])
-    refs = [ob] + [o for o, _ds, _off in collider_objects(ob)]
-    if ob.data.surface is not None:
-        refs.append(ob.data.surface)
-    for i, o in enumerate(refs):
+    for i, o in enumerate(_dependency_refs(ob)):
         node = ng.nodes.new("GeometryNodeObjectInfo")
         node.inputs["Object"].default_value = o
         node.location = (-300, -150 * i)
@@ -1163,6 +1216,8 @@ def on_depsgraph_update_post(scene, depsgraph=None):
             return
         for ob in setups(scene):
             rt = get_runtime(ob, create=False)
+            if (rt is None or not rt.baking) and dependencies_stale(ob):
+                update_dependencies(ob)  # (a no-op next time: no update loop)
             if rt is None or rt.baking or ob.furcollide.is_baked:
                 continue
             inputs = {ob.name} | {o.name for o, _ds, _off in collider_objects(ob, scene)}
@@ -1178,20 +1233,20 @@ def on_depsgraph_update_post(scene, depsgraph=None):
 
 @persistent
 def on_load_post(*_args):
-    """A new file: forget every runtime (caches belong to the old file), and give
-    render groom outputs saved by earlier versions their dependency modifier
-    (without it a render with the guides hidden would not update them)."""
+    """A new file: forget every runtime (caches belong to the old file), and
+    complete the setups' dependency modifiers (render groom outputs of older
+    files, inputs changed without an update callback): without them a render
+    with those inputs hidden would not see them."""
     registry.clear()
     try:
         for ob in bpy.data.objects:
             s = getattr(ob, "furcollide", None)
             if s is None or not s.is_setup or s.output is None:
                 continue
-            gout = s.groom.output
-            if gout is not None and gout.modifiers.get(DEPENDENCY_MODIFIER) is None:
+            if s.output.furcollide.source == ob and dependencies_stale(ob):
                 update_dependencies(ob)
     except Exception as exc:  # noqa: BLE001 - a handler must never raise
-        print(f"FurCollide: could not update the render groom's inputs: {exc}", flush=True)
+        print(f"FurCollide: could not update the setups' inputs: {exc}", flush=True)
 
 
 def describe(exc: Exception) -> str:

@@ -180,6 +180,10 @@ class FURCOLLIDE_OT_add(Operator):
 
         runtime.clear_runtime(src)
         s = src.furcollide
+        owner = runtime.groom_owner(src)
+        if owner is not None and owner != src:  # a copy: the render groom is the original's
+            s.groom.output = None
+            s.groom.bind_id = ""
         s.uid = ""
         runtime.ensure_uid(src)
         s.is_setup = True
@@ -228,8 +232,12 @@ class FURCOLLIDE_OT_remove(SetupOperator, Operator):
     def execute(self, context):
         src = active_setup(context)
         s = src.furcollide
-        out = s.output
-        runtime.remove_groom(src)
+        out = s.output if runtime.owns_output(src) else None  # a copy: the original's
+        if runtime.groom_owner(src) in (None, src):
+            runtime.remove_groom(src)
+        else:  # a copy: the render groom is the original's
+            s.groom.output = None
+            s.groom.bind_id = ""
         runtime.clear_runtime(src)
         if out is not None:
             if self.keep_output:
