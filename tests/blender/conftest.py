@@ -154,16 +154,42 @@ def make_scene(frames=(1, 12), nx=6, ny=6, animate=True):
     return hair, box
 
 
-def setup(hair, colliders):
-    """Run furcollide.add with ``hair`` active and ``colliders`` selected."""
+def activate(ob, *selected):
+    """Make ``ob`` the active object, with ``selected`` (and ``ob``) selected."""
     for o in bpy.context.view_layer.objects:
         o.select_set(False)
-    for o in colliders:
+    for o in selected:
         o.select_set(True)
-    hair.select_set(True)
-    bpy.context.view_layer.objects.active = hair
+    ob.select_set(True)
+    bpy.context.view_layer.objects.active = ob
+
+
+def setup(hair, colliders):
+    """Run furcollide.add with ``hair`` active and ``colliders`` selected."""
+    activate(hair, *colliders)
     assert bpy.ops.furcollide.add() == {"FINISHED"}
     return hair.furcollide.output
+
+
+def render_camera(scene, engine="BLENDER_WORKBENCH", px=32):
+    """A small, fast render set-up: an orthographic camera looking at the
+    origin from -Y, ``px`` x ``px`` pixels, Lock Interface on."""
+    import numpy as np
+
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 3.0
+    cam.location = (0, -5, 0.5)
+    cam.rotation_euler = (np.pi / 2, 0, 0)
+    scene.render.engine = engine
+    if engine == "CYCLES":
+        scene.cycles.samples = 1
+        scene.cycles.device = "CPU"
+    scene.render.resolution_x = scene.render.resolution_y = px
+    scene.render.use_lock_interface = True
+    return cam
 
 
 def positions(ob):

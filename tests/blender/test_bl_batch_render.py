@@ -3,6 +3,7 @@
 import bpy
 import numpy as np
 import pytest
+from conftest import render_camera
 
 pytestmark = pytest.mark.blender
 
@@ -66,17 +67,8 @@ def _render_setup(fc, tmp_path):
     hair, box = fc.make_scene(frames=(1, 4), nx=8, ny=8)
     out = fc.setup(hair, [box])
     sc = bpy.context.scene
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 3.0
-    cam.location = (0, -5, 0.5)
-    cam.rotation_euler = (np.pi / 2, 0, 0)
-    sc.render.engine = "BLENDER_WORKBENCH"
-    sc.render.resolution_x = sc.render.resolution_y = 48
+    render_camera(sc, px=48)
     sc.render.film_transparent = True
-    sc.render.use_lock_interface = True
     box.hide_render = True  # the collider is hidden from render, yet it must count
     return hair, out
 

@@ -6,7 +6,7 @@ rendered with its growth surface hidden from render."""
 import bpy
 import numpy as np
 import pytest
-from conftest import make_box, make_hair, make_surface
+from conftest import activate, make_box, make_hair, make_surface, render_camera
 from test_bl_attach import animate_transform, bind
 from test_bl_stages import groom_scene, play, world
 
@@ -16,22 +16,6 @@ INPUTS = "FurCollide Inputs"
 
 
 # ------------------------------------------------------------------ helpers
-def _camera(scene, engine="BLENDER_WORKBENCH", px=32):
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 3.0
-    cam.location = (0, -5, 0.5)
-    cam.rotation_euler = (np.pi / 2, 0, 0)
-    scene.render.engine = engine
-    if engine == "CYCLES":
-        scene.cycles.samples = 1
-        scene.cycles.device = "CPU"
-    scene.render.resolution_x = scene.render.resolution_y = px
-    scene.render.use_lock_interface = True
-
-
 def _render(tmp_path, tag, watch, setup):
     """Render the animation; record every RENDER-depsgraph frame change (after
     FurCollide's handler): ``{(frame, subframe): [{name: world points}, ...]}`` and
@@ -78,15 +62,6 @@ def _node_objects(ob):
             if n.bl_idname == "GeometryNodeObjectInfo"}
 
 
-def _activate(ob, *selected):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    for o in selected:
-        o.select_set(True)
-    ob.select_set(True)
-    bpy.context.view_layer.objects.active = ob
-
-
 # --------------------------------------------------- 1. motion blur renders
 @pytest.mark.parametrize("engine", ["BLENDER_WORKBENCH", "CYCLES"])
 def test_motion_blur_render_plain_setup(fc, tmp_path, engine):
@@ -95,7 +70,7 @@ def test_motion_blur_render_plain_setup(fc, tmp_path, engine):
     hair, box = fc.make_scene(frames=(1, 4), nx=5, ny=5)
     out = fc.setup(hair, [box])
     scene = bpy.context.scene
-    _camera(scene, engine)
+    render_camera(scene, engine)
     scene.render.use_motion_blur = True
     box.hide_render = True
     seen, statuses = _render(tmp_path, "mb", [out], hair)
@@ -128,7 +103,7 @@ def test_motion_blur_render_groom(fc, tmp_path, engine):
     for o in (guides, out, groom, box):
         o.hide_render = True
     scene.frame_start, scene.frame_end = 1, 6
-    _camera(scene, engine)
+    render_camera(scene, engine)
     scene.render.use_motion_blur = True
     scene.frame_set(1)
     seen, statuses = _render(tmp_path, "mbg", [out, gout], guides)
@@ -151,7 +126,7 @@ def test_render_groom_of_a_baked_setup_with_guides_hidden(fc, tmp_path, order):
     guides.furcollide.frame_end = 6
     scene.frame_start, scene.frame_end = 1, 6
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "groom.blend"))
-    _activate(guides)
+    activate(guides)
     if order == "bind_then_bake":
         assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
         assert bpy.ops.furcollide.bake() == {"FINISHED"}
@@ -163,7 +138,7 @@ def test_render_groom_of_a_baked_setup_with_guides_hidden(fc, tmp_path, order):
     gout = guides.furcollide.groom.output
     for o in (guides, out, groom, box):
         o.hide_render = True
-    _camera(scene)
+    render_camera(scene)
     scene.frame_set(1)
     seen, statuses = _render(tmp_path, "baked", [gout], guides)
     assert guides.furcollide.status_message == ""
@@ -191,7 +166,7 @@ def _same_inputs(out, gout, must_have):
 
 def test_collider_added_after_groom_bind_reaches_the_groom_inputs(fc):
     guides, out, gout, box, new = _groom_bound(fc)
-    _activate(guides, new)
+    activate(guides, new)
     assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
     _same_inputs(out, gout, {guides, box, new})
 
@@ -220,7 +195,7 @@ def test_collider_added_after_reopening_the_file_reaches_the_groom_inputs(fc, tm
     bpy.ops.wm.open_mainfile(filepath=path)
     guides, new = bpy.data.objects["Guides"], bpy.data.objects["Wall"]
     out, gout = guides.furcollide.output, guides.furcollide.groom.output
-    _activate(guides, new)
+    activate(guides, new)
     assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
     play(bpy.context.scene, range(1, 3))
     assert [c.object for c in guides.furcollide.colliders][-1] == new
@@ -252,12 +227,12 @@ def test_render_groom_renders_a_collider_added_after_the_bind(fc, tmp_path):
     new.keyframe_insert("location", frame=1)
     new.location = (0.05, 0.05, 0.6)
     new.keyframe_insert("location", frame=6)
-    _activate(guides, new)
+    activate(guides, new)
     assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
     for o in (guides, out, guides.furcollide.groom.groom, box, new):
         o.hide_render = True
     scene.frame_start, scene.frame_end = 1, 6
-    _camera(scene)
+    render_camera(scene)
     scene.frame_set(1)
     seen, statuses = _render(tmp_path, "wall", [gout], guides)
     viewport = _check_render(seen, statuses, [gout], range(1, 7))
@@ -273,7 +248,7 @@ def test_remove_setup_with_render_groom(fc):
     gout = guides.furcollide.groom.output
     gname, gdata, oname = gout.name, gout.data.name, out.name
     assert groom.hide_render
-    _activate(guides)
+    activate(guides)
     assert bpy.ops.furcollide.remove() == {"FINISHED"}
     assert bpy.data.objects.get(gname) is None and bpy.data.objects.get(oname) is None
     assert bpy.data.hair_curves.get(gdata) is None
@@ -324,7 +299,7 @@ def test_remove_on_a_duplicate_keeps_the_original_output(fc):
     dup = _duplicate(hair)
     scene.frame_set(2)
     assert "copy of the setup on 'Fur'" in dup.furcollide.status_message
-    _activate(dup)
+    activate(dup)
     bpy.ops.furcollide.remove()
     assert name in bpy.data.objects, "the original's output was deleted"
     assert hair.furcollide.output == bpy.data.objects[name]
@@ -346,7 +321,7 @@ def test_add_on_a_duplicated_groom_setup_leaves_the_original_groom_alone(fc):
     dup.data.surface = None
     scene.frame_set(2)
     assert "copy of the setup on 'Guides'" in dup.furcollide.status_message
-    _activate(dup, box)
+    activate(dup, box)
     assert bpy.ops.furcollide.add() == {"FINISHED"}  # README: gives it its own output
     assert dup.furcollide.output not in (None, out)
     assert gout.modifiers[0].node_group == ng
@@ -425,7 +400,7 @@ def test_fur_attach_render_with_the_surface_hidden(fc, tmp_path, surface_first):
     hair, surf, wall, out = _attached(fc, surface_first)
     surf.hide_render = True
     wall.hide_render = True
-    _camera(scene)
+    render_camera(scene)
     scene.frame_set(1)
     seen, statuses = _render(tmp_path, "attach", [out], hair)
     assert hair.furcollide.status_message == ""

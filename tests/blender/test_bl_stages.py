@@ -5,7 +5,7 @@ Attach unbind and the render groom (guide deform + clearance pass)."""
 import bpy
 import numpy as np
 import pytest
-from conftest import make_box, make_hair, make_surface
+from conftest import make_box, make_hair, make_surface, render_camera
 
 pytestmark = pytest.mark.blender
 
@@ -388,16 +388,7 @@ def test_render_groom_renders_every_frame_with_the_guides_hidden(fc, tmp_path):
         o.hide_render = True
     assert not gout.hide_render
     scene.frame_start, scene.frame_end = 1, 7
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 3.0
-    cam.location = (0, -5, 0.5)
-    cam.rotation_euler = (np.pi / 2, 0, 0)
-    scene.render.engine = "BLENDER_WORKBENCH"
-    scene.render.resolution_x = scene.render.resolution_y = 32
-    scene.render.use_lock_interface = True
+    render_camera(scene)
     scene.render.filepath = str(tmp_path / "groom_####")
     seen = {}
 
