@@ -356,6 +356,8 @@ class Collider:
         Vw = apply(S, self._V.astype(np.float64) - self._center)
         F = self._F
         fa = np.cross(Vw[F[:, 1]] - Vw[F[:, 0]], Vw[F[:, 2]] - Vw[F[:, 0]])
+        if det3(S) < 0:  # a mirroring matrix flips the winding: keep normals outward
+            fa = -fa
         n = len(self._V)
         vn = np.stack(
             [

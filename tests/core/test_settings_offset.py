@@ -45,10 +45,13 @@ def _floor(V, F, r, d):
 
 @FAST
 @given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(["stiff", "bend", "soft"]),
-       d=st.sampled_from([0.02, 0.1, 0.2]))
-def test_settings_offset_keeps_distance(seed, mode, d):
+       d=st.sampled_from([0.02, 0.1, 0.2]), mirror=st.booleans())
+def test_settings_offset_keeps_distance(seed, mode, d, mirror):
     pts, offs, V, F, c, r = _scene(seed)
-    col = Collider(V, F, matrix=scenes.affine(t=c, s=r))
+    M = scenes.affine(t=c, s=r)
+    if mirror:  # det < 0 (a mirrored object): the same sphere, faces wound the other way
+        M[:3, 0] *= -1.0
+    col = Collider(V, F, matrix=M)
     res = Solver(offs, Settings(mode=mode, collision_offset=d)).step(pts, [col])
     status = np.asarray(res.status)
     keep = ~np.isin(status, EXCLUDED)
