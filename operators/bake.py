@@ -66,6 +66,14 @@ class BakeJob:
             except ValueError as exc:
                 raise BakeError(str(exc)) from None
             last = runtime.resume_frame(ob, directory)
+            if last is not None and not runtime.resume_inputs_match(ob, directory, last, scene):
+                if verbose:
+                    print(
+                        f"FurCollide bake '{ob.name}': the source or a collider changed since "
+                        f"the partial bake (frame {last}): starting over",
+                        flush=True,
+                    )
+                last = None
             nxt = s.frame_start if last is None else last + 1
             self.jobs.append([ob, directory, nxt, None])
         if not self.jobs:

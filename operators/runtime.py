@@ -22,6 +22,7 @@ one console line, and the output keeps its last good result.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import os
@@ -1134,12 +1135,50 @@ def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
     fp = np.frombuffer(settings_fingerprint(ob).encode(), np.uint8)
     state = solver.state
     state["fingerprint"] = fp
+    state["inputs"] = inputs_digest(inp, cols, _growth(ob, rt, solver.settings, depsgraph))
     cache.write_frame(directory, f, points, res.status, inp.offsets, state, rt.memory.sparse,
                       attrs)
     _write(ob, inp, points, res.status, attributes=attrs)
     rt.solver_frame = f
     rt.stats = _stats(res.status, f, res.timings.get("total", 0.0), "bake")
     return rt.stats
+
+
+def inputs_digest(inp, cols, growth) -> np.ndarray:
+    """SHA-1 (20 bytes, uint8) of what a frame's solve reads: the input curves
+    and every collider's (and the growth surface's) vertices, faces, matrix
+    and flags. A bake stores it with each frame (see :func:`resume_inputs_match`)."""
+    h = hashlib.sha1()
+    for a in (inp.points, inp.offsets, inp.enabled):
+        if a is not None:
+            h.update(np.ascontiguousarray(a).tobytes())
+    for c in [*cols, *([growth] if growth is not None else [])]:
+        for a in (c.vertices, c.faces, c.matrix):
+            h.update(np.ascontiguousarray(a).tobytes())
+        h.update(repr((c.double_sided, c.offset)).encode())
+    return np.frombuffer(h.digest(), np.uint8).copy()
+
+
+def resume_inputs_match(ob, directory, f, scene) -> bool:
+    """Are frame ``f``'s inputs (source, colliders, surface) what the partial
+    bake solved at ``f``? An edited collider or source means starting over:
+    the settings fingerprint does not see geometry."""
+    global _busy
+    busy, _busy = _busy, True  # no live solve while looking
+    try:
+        scene.frame_set(f)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        rt = get_runtime(ob)
+        inp = read_inputs(ob, depsgraph)
+        prepare_input(ob, rt, inp, scene, f)
+        cols = _collider_list(ob, rt, depsgraph)
+        growth = _growth(ob, rt, core_settings(ob), depsgraph)
+        digest = inputs_digest(inp, cols, growth)
+        with np.load(cache.frame_path(directory, f), allow_pickle=False) as z:
+            key = next((k for k in z.files if k.endswith("__inputs")), None)
+            return key is not None and np.array_equal(z[key], digest)
+    finally:
+        _busy = busy
 
 
 def resume_frame(ob, directory) -> int | None:
