@@ -8,6 +8,8 @@ No geometry math here beyond applying 4x4 matrices.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from .cache import curve_point_mask
@@ -276,8 +278,21 @@ def _copy_attribute(attr, dst) -> None:
 
 # ---------------------------------------------------------------- meshes
 def mesh_topology_key(me) -> tuple:
-    """Cheap key that changes when a mesh's triangulation can change."""
-    return (len(me.vertices), len(me.polygons), len(me.loops))
+    """Key that changes when a mesh's triangulation can change: its counts and a
+    64-bit hash of its corner vertex indices (same counts, reordered or rewired
+    faces: Sort Mesh Elements, a re-import, geometry nodes)."""
+    n = len(me.loops)
+    corners = np.empty(n, np.int32)
+    if n:
+        me.loops.foreach_get("vertex_index", corners)
+    digest = hashlib.blake2b(corners.tobytes(), digest_size=8).digest()
+    return (len(me.vertices), len(me.polygons), n, int.from_bytes(digest, "little", signed=True))
+
+
+def same_topology(now: tuple, bound: tuple) -> bool:
+    """Does a mesh's :func:`mesh_topology_key` match one stored at binding time?
+    (Keys saved by earlier versions hold the three counts only.)"""
+    return tuple(now[: len(bound)]) == tuple(bound)
 
 
 def mesh_vertices(me) -> np.ndarray:

@@ -438,6 +438,8 @@ class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
         surf = src.data.surface
         if surf is None or surf.type != "MESH":
             return "The source hair has no Surface mesh (Object Data > Surface)"
+        if len(surf.data.polygons) == 0:
+            return f"The Surface '{surf.name}' has no faces to grow children on"
         return ""
 
     @reports_errors

@@ -465,6 +465,10 @@ def store_binding(ob, binding, topology_key, attach_id) -> None:
     """Persist ``binding`` on the source ``ob`` and keep it in its runtime."""
     buf = io.BytesIO()
     np.savez(buf, topology_key=np.asarray(topology_key, np.int64), **binding.arrays())
+    if ATTACH_PROPERTY in ob.keys():
+        # Blender truncates bytes assigned over an existing bytes property at
+        # their first NUL byte: a second Bind would corrupt the binding.
+        del ob[ATTACH_PROPERTY]
     ob[ATTACH_PROPERTY] = buf.getvalue()
     rt = get_runtime(ob)
     if rt is not None:
@@ -532,11 +536,15 @@ def attached_points(ob, depsgraph, offsets) -> np.ndarray:
     se = surf.evaluated_get(depsgraph)
     me = se.data
     now = bridge.mesh_topology_key(me)
-    if now != key:
+    if not bridge.same_topology(now, key):
+        what = (
+            f"{now[0]} vertices / {now[1]} faces, bound: {key[0]} / {key[1]}"
+            if tuple(now[:2]) != tuple(key[:2])
+            else "its vertices or faces were reordered"
+        )
         raise ValueError(
             f"Fur Attach: the Surface '{surf.name}' changed topology since binding "
-            f"({now[0]} vertices / {now[1]} faces, bound: {key[0]} / {key[1]}): "
-            "press Bind again"
+            f"({what}): press Bind again"
         )
     V = bridge.mesh_vertices(me).astype(np.float64)
     M = bridge.matrix(se)
@@ -567,7 +575,9 @@ class Inputs:
 
 def prepare_input(ob, rt, inp, scene, f) -> None:
     """Record the roots for jiggle and apply the motion that runs before collision."""
-    if stages.needs_history(ob):
+    if stages.needs_history(ob) and f >= ob.furcollide.frame_start:
+        # (before the start frame the hair counts as at rest: frames viewed there
+        # must not change a bake, which starts at the start frame)
         rt.history.record(f, inp.points[inp.offsets[:-1]], inp.key)
     moved = stages.apply_motion(ob, "INPUT", inp.points, inp.offsets, f, scene, rt.history)
     if moved is not None:

@@ -146,6 +146,8 @@ def output_stage(ob, points, offsets, f, scene, history, colliders):
     if m.write_collider_distance:
         cap = float(m.distance_max) if m.distance_max > 0 else None
         distance = _distance(points, offsets, colliders, cap)
+        if cap is not None:  # nothing within the cap (no collider either): the cap
+            distance = np.minimum(distance, cap)
         attributes[DISTANCE_ATTRIBUTE] = np.asarray(distance, np.float32)
     if moved is None:
         return points, attributes
@@ -239,6 +241,10 @@ def store_groom(out, arrays: dict) -> None:
     """Save the groom binding on the groom output object ``out``."""
     buf = io.BytesIO()
     np.savez(buf, **arrays)
+    if GROOM_PROPERTY in out.keys():
+        # Blender truncates bytes assigned over an existing bytes property at
+        # their first NUL byte: a second Bind Groom would corrupt the binding.
+        del out[GROOM_PROPERTY]
     out[GROOM_PROPERTY] = buf.getvalue()
 
 
@@ -281,7 +287,7 @@ def groom_frame(ob, binding, guides_world, depsgraph, colliders):
     surf = ob.data.surface
     if binding.roots is not None and surf is not None and surf.type == "MESH":
         se = surf.evaluated_get(depsgraph)
-        if bridge.mesh_topology_key(se.data) == binding.surface_key:
+        if bridge.same_topology(bridge.mesh_topology_key(se.data), binding.surface_key):
             V = bridge.transform(bridge.mesh_vertices(se.data).astype(np.float64),
                                  bridge.matrix(se))
     pts = binding.deform(np.asarray(guides_world, np.float64), V)
