@@ -669,6 +669,7 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
         stages.store_groom(out, arrays)
         g.output = out
         g.bind_id = uuid.uuid4().hex
+        g.bound_guides = g.guides
         runtime.update_dependencies(src)  # renders with the guides hidden still see them
         runtime.hide_in_viewport(groom, True, render=True)
         err = evaluate_now(context, src)

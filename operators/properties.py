@@ -350,6 +350,7 @@ class FurCollideGroom(PropertyGroup):
         "count is shown below",
     )
     bind_id: _hidden(StringProperty, "Groom Bind ID", "")
+    bound_guides: _hidden(IntProperty, "Bound Guides per Curve", 0)
 
 
 class FurCollideSettings(PropertyGroup):

@@ -57,7 +57,10 @@ class FURCOLLIDE_PT_main(Panel):
         return ob is not None and ob.type == "CURVES"
 
     def draw_header_preset(self, context):
-        if active_setup(context) is not None:
+        src = active_setup(context)
+        if src is not None:
+            # A baked setup only reads (its settings are greyed out): so are presets.
+            self.layout.enabled = not src.furcollide.is_baked
             FURCOLLIDE_PT_presets.draw_panel_header(self.layout)
 
     def draw(self, context):

@@ -88,6 +88,8 @@ def draw_groom(layout, src):
     col = box.column()
     col.prop(g, "groom")
     col.prop(g, "guides")
+    if g.output is not None and g.bound_guides and g.guides != g.bound_guides:
+        col.label(text=f"Bound with {g.bound_guides}: press Bind Groom again", icon="INFO")
     col.prop(g, "use_clearance")
     row = col.row(align=True)
     row.operator("furcollide.groom_bind", icon="LINKED")

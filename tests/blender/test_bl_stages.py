@@ -426,3 +426,19 @@ def test_render_groom_output_of_an_older_file_gets_its_inputs_on_load(fc, tmp_pa
     assert gout.modifiers[0].name == name
     guides_out = bpy.data.objects["Guides FurCollide"]
     assert gout.modifiers[0].node_group == guides_out.modifiers[0].node_group
+
+
+def test_render_groom_panel_hints_bind_again_after_guides_per_curve_changes(fc):
+    from test_bl_pipeline import _draw
+
+    guides, groom, box, out = groom_scene(fc)
+    g = guides.furcollide.groom
+    g.guides = 3
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    hint = ("label", "Bound with 3: press Bind Groom again")
+    assert hint not in _draw(panel)
+    g.guides = 5
+    assert hint in _draw(panel)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    assert ("label", "Bound with 5: press Bind Groom again") not in _draw(panel)
