@@ -198,3 +198,21 @@ def positions(ob):
     P = np.empty(len(d.points) * 3, np.float32)
     d.position_data.foreach_get("vector", P)
     return P.reshape(-1, 3)
+
+
+def bake_crashing_at(fc, monkeypatch, frame, match="simulated crash"):
+    """Run furcollide.bake with a simulated crash in ``frame`` (the frames before
+    it are kept on disk); the error message must match ``match``."""
+    import pytest
+
+    real = fc.runtime.bake_frame
+
+    def crashing(scene, depsgraph, ob, f, directory, trust_solver):
+        if f == frame:
+            raise RuntimeError("simulated crash")
+        return real(scene, depsgraph, ob, f, directory, trust_solver)
+
+    with monkeypatch.context() as m:
+        m.setattr(fc.runtime, "bake_frame", crashing)
+        with pytest.raises(RuntimeError, match=match):
+            bpy.ops.furcollide.bake()

@@ -5,6 +5,7 @@ import os
 import bpy
 import numpy as np
 import pytest
+from conftest import bake_crashing_at
 
 pytestmark = pytest.mark.blender
 
@@ -82,17 +83,7 @@ def test_resume_after_crash(fc, tmp_path, monkeypatch):
     assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
 
     # 1) a crash (exception) in the middle of frame 7
-    real = fc.runtime.bake_frame
-
-    def crashing(scene, depsgraph, ob, f, directory, trust_solver):
-        if f == 7:
-            raise RuntimeError("simulated crash")
-        return real(scene, depsgraph, ob, f, directory, trust_solver)
-
-    monkeypatch.setattr(fc.runtime, "bake_frame", crashing)
-    with pytest.raises(RuntimeError, match="simulated crash"):
-        bpy.ops.furcollide.bake()
-    monkeypatch.undo()
+    bake_crashing_at(fc, monkeypatch, 7)
     assert not hair.furcollide.is_baked
     assert fc.cache.list_frames(d) == list(range(1, 7))
 

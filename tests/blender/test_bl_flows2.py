@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 import pytest
 from conftest import activate as _activate
-from conftest import make_box, make_hair, render_camera
+from conftest import bake_crashing_at, make_box, make_hair, render_camera
 from test_bl_stages import offsets_of, segments_in_box, world
 
 pytestmark = pytest.mark.blender
@@ -147,17 +147,7 @@ def test_interrupted_bake_does_not_resume_over_an_edited_collider(fc, tmp_path, 
     current settings and colliders; editing a collider invalidates."""
     hair, box, out = _small_scene(fc)
     _save(tmp_path)
-    real = fc.runtime.bake_frame
-
-    def crash(scene, depsgraph, ob, f, directory, trust_solver):
-        if f == 5:
-            raise RuntimeError("simulated crash")
-        return real(scene, depsgraph, ob, f, directory, trust_solver)
-
-    monkeypatch.setattr(fc.runtime, "bake_frame", crash)
-    with pytest.raises(RuntimeError, match="simulated crash"):
-        bpy.ops.furcollide.bake()
-    monkeypatch.undo()
+    bake_crashing_at(fc, monkeypatch, 5)
     d = fc.runtime.bake_directory(hair)
     assert fc.cache.list_frames(d) == [1, 2, 3, 4]
     for v in box.data.vertices:  # the artist makes the collider bigger

@@ -15,7 +15,7 @@ import bmesh
 import bpy
 import numpy as np
 import pytest
-from conftest import activate, make_box, make_hair, make_surface, render_camera
+from conftest import activate, bake_crashing_at, make_box, make_hair, make_surface, render_camera
 from test_bl_stages import groom_scene, offsets_of, segments_in_box, world
 
 pytestmark = pytest.mark.blender
@@ -578,18 +578,8 @@ def test_jiggle_bake_started_mid_range_starts_over_at_the_start_frame(fc, tmp_pa
     assert np.abs(baked[5] - baked[1]).max() > 0.1
 
     # interrupted at frame 5, then Bake again: jiggle starts over, it never resumes
-    real = fc.runtime.bake_frame
-
-    def crashing(scene_, depsgraph, ob, f, directory, trust_solver):
-        if f == 5:
-            raise RuntimeError("simulated crash")
-        return real(scene_, depsgraph, ob, f, directory, trust_solver)
-
-    monkeypatch.setattr(fc.runtime, "bake_frame", crashing)
     scene.frame_set(3)
-    with pytest.raises(RuntimeError, match="frame 5: .*simulated crash.*bake again to resume"):
-        bpy.ops.furcollide.bake()
-    monkeypatch.undo()
+    bake_crashing_at(fc, monkeypatch, 5, match="frame 5: .*simulated crash.*bake again to resume")
     assert fc.cache.list_frames(d) == [1, 2, 3, 4] and not hair.furcollide.is_baked
     capsys.readouterr()
     assert bpy.ops.furcollide.bake() == {"FINISHED"}
