@@ -103,7 +103,7 @@ class BakeJob:
         """Bake the next frame of every setup that needs it (raises BakeError)."""
         f = self.frame
         self.scene.frame_set(f)
-        depsgraph = bpy.context.evaluated_depsgraph_get()
+        depsgraph = runtime.scene_depsgraph(self.scene)
         for job in self.jobs:
             ob, directory, nxt, last = job
             s = ob.furcollide

@@ -1169,6 +1169,17 @@ def inputs_digest(inp, cols, growth) -> np.ndarray:
     return np.frombuffer(h.digest(), np.uint8).copy()
 
 
+def scene_depsgraph(scene):
+    """The evaluated depsgraph of ``scene`` (the context's one when it is the
+    context scene; else its first view layer's, brought up to date): the CLI's
+    ``--scene`` may name a scene no window shows."""
+    if scene == bpy.context.scene:
+        return bpy.context.evaluated_depsgraph_get()
+    depsgraph = scene.view_layers[0].depsgraph
+    depsgraph.update()
+    return depsgraph
+
+
 def resume_inputs_match(ob, directory, f, scene) -> bool:
     """Are frame ``f``'s inputs (source, colliders, surface) what the partial
     bake solved at ``f``? An edited collider or source means starting over:
@@ -1177,7 +1188,7 @@ def resume_inputs_match(ob, directory, f, scene) -> bool:
     busy, _busy = _busy, True  # no live solve while looking
     try:
         scene.frame_set(f)
-        depsgraph = bpy.context.evaluated_depsgraph_get()
+        depsgraph = scene_depsgraph(scene)
         rt = get_runtime(ob)
         inp = read_inputs(ob, depsgraph)
         prepare_input(ob, rt, inp, scene, f)
