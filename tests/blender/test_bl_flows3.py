@@ -263,13 +263,19 @@ def test_attach_bind_far_from_the_surface_snaps_with_a_warning(fc, capsys):
                                atol=1e-5)
 
 
-@pytest.mark.parametrize("edit", ["add_vertex", "subdivide"])
-def test_attach_surface_edited_after_bind(fc, capsys, edit):
+def _attach_bound(fc):
+    """The attach scene, its hair bound to a fresh 4 x 4 Surface (no UV map)."""
     scene, hair, out = _attach_scene(fc)
     surf = make_surface(n=4, uv=False)
     hair.data.surface = surf
     activate(hair)
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    return scene, hair, out, surf
+
+
+@pytest.mark.parametrize("edit", ["add_vertex", "subdivide"])
+def test_attach_surface_edited_after_bind(fc, capsys, edit):
+    scene, hair, out, surf = _attach_bound(fc)
     play(scene, range(1, 3))
     held = fc.positions(out).copy()
     me = surf.data
@@ -303,11 +309,7 @@ def test_attach_surface_edited_after_bind(fc, capsys, edit):
 
 
 def test_attach_surface_vertex_order_change_is_reported(fc):
-    scene, hair, out = _attach_scene(fc)
-    surf = make_surface(n=4, uv=False)
-    hair.data.surface = surf
-    activate(hair)
-    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    scene, hair, out, surf = _attach_bound(fc)
     play(scene, range(1, 3))
     before = fc.positions(out).copy()
     me = surf.data
@@ -325,11 +327,7 @@ def test_attach_surface_vertex_order_change_is_reported(fc):
 
 
 def test_attach_bind_again_then_reopen_keeps_the_binding(fc, tmp_path):
-    scene, hair, out = _attach_scene(fc)
-    surf = make_surface(n=4, uv=False)
-    hair.data.surface = surf
-    activate(hair)
-    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    scene, hair, out, surf = _attach_bound(fc)
     surf.data.vertices.add(1)  # README: the topology changed, press Bind again
     surf.data.update()
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
