@@ -9,6 +9,7 @@ No geometry math here beyond applying 4x4 matrices.
 from __future__ import annotations
 
 import hashlib
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -48,6 +49,11 @@ _SKIP_ATTRIBUTES = {
     "normal_mode",
 }
 _CURVE_TYPES = ("CATMULL_ROM", "POLY", "BEZIER", "NURBS")
+
+
+#: Object types that can collide: meshes, and everything Blender turns into one
+#: (a Bezier rope with a bevel, a NURBS surface, text, metaballs).
+COLLIDER_TYPES = frozenset({"MESH", "CURVE", "SURFACE", "FONT", "META"})
 
 
 class BridgeError(ValueError):
@@ -293,6 +299,33 @@ def same_topology(now: tuple, bound: tuple) -> bool:
     """Does a mesh's :func:`mesh_topology_key` match one stored at binding time?
     (Keys saved by earlier versions hold the three counts only.)"""
     return tuple(now[: len(bound)]) == tuple(bound)
+
+
+def is_collider_type(ob) -> bool:
+    """Can object ``ob`` be a collider (see :data:`COLLIDER_TYPES`)?"""
+    return ob is not None and ob.type in COLLIDER_TYPES
+
+
+@contextmanager
+def evaluated_mesh(oe):
+    """The mesh of evaluated object ``oe``, for the ``with`` block.
+
+    A mesh object's own evaluated data; for curves, surfaces, text and
+    metaballs a temporary mesh (``to_mesh``, freed on leaving the block), or
+    None where there is no surface (a curve without bevel or extrusion).
+    """
+    if oe.type == "MESH":
+        yield oe.data
+        return
+    try:
+        me = oe.to_mesh()
+    except RuntimeError:  # nothing to tessellate (a metaball that is not the basis)
+        me = None
+    try:
+        yield me
+    finally:
+        if me is not None:
+            oe.to_mesh_clear()
 
 
 def mesh_vertices(me) -> np.ndarray:

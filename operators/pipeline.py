@@ -71,12 +71,16 @@ def _core_pipeline():
 
 # ------------------------------------------------------------------ helpers
 def surface_mesh_world(ob, depsgraph):
-    """Evaluated mesh object ``ob``: world vertices (n, 3) float64, triangles (m, 3)."""
+    """Evaluated mesh of object ``ob`` (a mesh, or a curve, text... turned into one):
+    world vertices (n, 3) float64, triangles (m, 3); none for a curve without a surface."""
     oe = ob.evaluated_get(depsgraph)
-    me = oe.data
-    V = bridge.mesh_vertices(me).astype(np.float64)
     M = bridge.matrix(oe)
-    return V @ M[:3, :3].T + M[:3, 3], bridge.mesh_triangles(me).astype(np.int64)
+    with bridge.evaluated_mesh(oe) as me:
+        if me is None:
+            return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+        V = bridge.mesh_vertices(me).astype(np.float64)
+        F = bridge.mesh_triangles(me).astype(np.int64)
+    return V @ M[:3, :3].T + M[:3, 3], F
 
 
 def surface_weights(surf, me, name):

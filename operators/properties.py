@@ -23,7 +23,7 @@ from bpy.props import (
 )
 from bpy.types import PropertyGroup
 
-from . import runtime
+from . import bridge, runtime
 
 # ------------------------------------------------------------------ updates
 # Update callbacks run inside Blender's UI: like the frame handler, they never
@@ -96,8 +96,8 @@ def _toggle_result(self, context):
     runtime.apply_visibility(self.id_data)
 
 
-def _is_mesh(self, ob):
-    return ob.type == "MESH"
+def _is_collider_type(self, ob):
+    return bridge.is_collider_type(ob)
 
 
 def _is_hair(self, ob):
@@ -167,10 +167,12 @@ class FurCollideCollider(PropertyGroup):
     object: PointerProperty(
         name="Collider",
         type=bpy.types.Object,
-        poll=_is_mesh,
+        poll=_is_collider_type,
         update=_invalidate_colliders,
-        description="Mesh the hair must not pass through. Its evaluated shape is used "
-        "every frame, so armatures, shape keys, modifiers and cloth all count",
+        description="Mesh the hair must not pass through (or a curve with a bevel, such "
+        "as a rope, a surface, text or a metaball: its evaluated surface is used). Its "
+        "evaluated shape is used every frame, so armatures, shape keys, modifiers and "
+        "cloth all count",
     )
     enabled: _toggle(
         "Enabled", True,
@@ -401,8 +403,9 @@ class FurCollideSettings(PropertyGroup):
         name="Collider Collection",
         type=bpy.types.Collection,
         update=_invalidate_colliders,
-        description="Every mesh in this collection also collides (with the setup's "
-        "Collision Offset and the option below)",
+        description="Every mesh in this collection (and every curve with a bevel, surface, "
+        "text or metaball) also collides, with the setup's Collision Offset and the option "
+        "below",
     )
     collection_double_sided: _toggle(
         "Collection Double Sided", False,

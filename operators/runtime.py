@@ -282,7 +282,7 @@ def collider_objects(ob, scene=None) -> list[tuple]:
     out, seen = [], set()
     for c in s.colliders:
         o = c.object
-        if o is None or not c.enabled or o.type != "MESH" or o == ob:
+        if o is None or not c.enabled or not bridge.is_collider_type(o) or o == ob:
             continue
         if not in_scene(o, scene):
             continue
@@ -291,7 +291,7 @@ def collider_objects(ob, scene=None) -> list[tuple]:
     coll = s.collider_collection
     if coll is not None:
         for o in coll.all_objects:
-            if o.type == "MESH" and o.name not in seen:
+            if bridge.is_collider_type(o) and o.name not in seen:
                 seen.add(o.name)
                 out.append((o, bool(s.collection_double_sided), None))
     return out
@@ -622,21 +622,26 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> Coll
     rigid collider never rebuilds its BVH. Otherwise a new entry is built.
     """
     oe = o.evaluated_get(depsgraph)
-    me = oe.data
-    key = bridge.mesh_topology_key(me)
-    V = bridge.mesh_vertices(me)
     M = bridge.matrix(oe)
     deforming = is_deforming(o, depsgraph.scene)
-    if (
-        entry is None
-        or entry.key != key
-        or entry.double_sided != double_sided
-        or entry.offset != offset
-        or entry.deforming != deforming
-    ):
+    with bridge.evaluated_mesh(oe) as me:
+        if me is None:  # a curve without bevel or extrusion: no surface, nothing collides
+            key, V, F = ("no surface",), np.zeros((0, 3), np.float32), None
+        else:
+            key, V = bridge.mesh_topology_key(me), bridge.mesh_vertices(me)
+        changed = (
+            entry is None
+            or entry.key != key
+            or entry.double_sided != double_sided
+            or entry.offset != offset
+            or entry.deforming != deforming
+        )
+        if changed and me is not None:
+            F = bridge.mesh_triangles(me)
+    if changed:
         col = _core().Collider(
-            V, bridge.mesh_triangles(me), double_sided=double_sided, matrix=M,
-            offset=offset, drop_degenerate=True, name=o.name, deforming=deforming,
+            V, np.zeros((0, 3), np.int32) if F is None else F, double_sided=double_sided,
+            matrix=M, offset=offset, drop_degenerate=True, name=o.name, deforming=deforming,
         )
         return ColliderEntry(col, key, double_sided, offset, deforming)
     if not np.array_equal(V, entry.collider.vertices):  # deforming: the core refits
@@ -646,8 +651,9 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> Coll
 
 
 def is_deforming(o, scene) -> bool:
-    """Does mesh object ``o`` change shape from frame to frame (deform modifiers,
-    shape keys, cloth, geometry nodes)? Then its BVH is built for speed (see
+    """Does collider ``o`` change shape from frame to frame (deform modifiers,
+    shape keys, cloth, geometry nodes; for a curve, text or metaball also animated
+    or hooked data)? Then its BVH is built for speed (see
     ``core.Collider(deforming=...)``). A property of the object's set-up, never of
     the frames seen, so results do not depend on the playback history."""
     try:
@@ -655,6 +661,12 @@ def is_deforming(o, scene) -> bool:
             return True
     except (AttributeError, TypeError, RuntimeError):
         pass
+    if o.type != "MESH":
+        data = o.data
+        if getattr(data, "animation_data", None) is not None or getattr(data, "shape_keys", None):
+            return True
+        if any(m.show_viewport for m in o.modifiers):
+            return True
     return any(m.type == "NODES" and m.show_viewport for m in o.modifiers)
 
 

@@ -100,9 +100,11 @@ def redraw(context) -> None:
 
 
 # ---------------------------------------------------------------- operators
-def _selected_meshes(context, exclude=()):
-    """Selected mesh objects, in selection order, minus ``exclude``."""
-    return [o for o in context.selected_objects if o.type == "MESH" and o not in exclude]
+def _selected_colliders(context, exclude=()):
+    """Selected objects that can collide (meshes, bevelled curves, text...), in
+    selection order, minus ``exclude``."""
+    return [o for o in context.selected_objects
+            if bridge.is_collider_type(o) and o not in exclude]
 
 
 def new_hair_object_like(src, suffix, scene, fill):
@@ -144,8 +146,9 @@ def _new_output(src, src_eval, scene):
 
 
 class FURCOLLIDE_OT_add(Operator):
-    """Make the active hair collide with the selected meshes: creates the output hair
-    object that receives the result every frame and hides the source from render"""
+    """Make the active hair collide with the selected meshes (or bevelled curves, text):
+    creates the output hair object that receives the result every frame and hides the
+    source from render"""
 
     bl_idname = "furcollide.add"
     bl_label = "Add FurCollide"
@@ -193,7 +196,7 @@ class FURCOLLIDE_OT_add(Operator):
         s.is_baked = False
         s.bake_path = ""
         s.colliders.clear()
-        colliders = _selected_meshes(context, exclude={src})
+        colliders = _selected_colliders(context, exclude={src})
         for o in colliders:
             s.colliders.add().object = o
         s.collider_index = max(0, len(s.colliders) - 1)
@@ -271,7 +274,8 @@ class FURCOLLIDE_OT_remove(SetupOperator, Operator):
 
 
 class FURCOLLIDE_OT_collider_add(SetupOperator, Operator):
-    """Add the selected meshes as colliders (or an empty slot to fill in)"""
+    """Add the selected meshes, bevelled curves or text objects as colliders (or an empty
+    slot to fill in)"""
 
     bl_idname = "furcollide.collider_add"
     bl_label = "Add Collider"
@@ -282,7 +286,7 @@ class FURCOLLIDE_OT_collider_add(SetupOperator, Operator):
         src = active_setup(context)
         s = src.furcollide
         have = {c.object for c in s.colliders if c.object is not None}
-        new = _selected_meshes(context, exclude=have | {src})
+        new = _selected_colliders(context, exclude=have | {src})
         if not new:
             s.colliders.add()
         for o in new:

@@ -6,15 +6,21 @@ from bpy.types import Panel, UIList
 from ..operators import bake, cache, runtime
 from ..operators.setup import active_setup, backend_message
 
+#: List icon per collider object type (a mesh, or what Blender turns into one).
+_TYPE_ICONS = {"CURVE": "CURVE_DATA", "SURFACE": "SURFACE_DATA", "FONT": "FONT_DATA",
+               "META": "META_DATA"}
+
 
 class FURCOLLIDE_UL_colliders(UIList):
-    """Colliders of a setup: mesh, enabled, double-sided."""
+    """Colliders of a setup: object, enabled, double-sided."""
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         row = layout.row(align=True)
-        missing = item.object is not None and not runtime.in_scene(item.object, context.scene)
+        ob = item.object
+        missing = ob is not None and not runtime.in_scene(ob, context.scene)
         row.alert = missing
-        row.prop(item, "object", text="", emboss=False, icon="ERROR" if missing else "MESH_DATA")
+        icon = "ERROR" if missing else _TYPE_ICONS.get(getattr(ob, "type", ""), "MESH_DATA")
+        row.prop(item, "object", text="", emboss=False, icon=icon)
         row.prop(item, "double_sided", text="", icon="MOD_SOLIDIFY", emboss=item.double_sided)
         icon = "CHECKBOX_HLT" if item.enabled else "CHECKBOX_DEHLT"
         row.prop(item, "enabled", text="", icon=icon)
