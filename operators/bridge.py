@@ -67,6 +67,13 @@ def matrix(ob, inverted=False) -> np.ndarray:
     return np.array(m.inverted_safe() if inverted else m, dtype=np.float64)
 
 
+def translation(t) -> np.ndarray:
+    """The 4x4 matrix translating by ``t`` (3,)."""
+    M = np.eye(4)
+    M[:3, 3] = t
+    return M
+
+
 def is_identity(M: np.ndarray) -> bool:
     """Is the 4x4 ``M`` exactly the identity?"""
     return np.array_equal(M, _IDENTITY)

@@ -70,11 +70,12 @@ def _core_pipeline():
 
 
 # ------------------------------------------------------------------ helpers
-def surface_mesh_world(ob, depsgraph):
+def surface_mesh_world(ob, depsgraph, matrix=None):
     """Evaluated mesh of object ``ob`` (a mesh, or a curve, text... turned into one):
-    world vertices (n, 3) float64, triangles (m, 3); none for a curve without a surface."""
+    world vertices (n, 3) float64, triangles (m, 3); none for a curve without a surface.
+    ``matrix``: its world matrix when not its own (a collection instance)."""
     oe = ob.evaluated_get(depsgraph)
-    M = bridge.matrix(oe)
+    M = bridge.matrix(oe) if matrix is None else matrix
     with bridge.evaluated_mesh(oe) as me:
         if me is None:
             return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
@@ -398,8 +399,8 @@ class FURCOLLIDE_OT_collider_distance(_OutputOperator, Operator):
         src = active_setup(context)
         out = src.furcollide.output
         dg = context.evaluated_depsgraph_get()
-        objs = [o for o, _ds, _off in runtime.collider_objects(src, context.scene)]
-        cols = [surface_mesh_world(o, dg) for o in objs]
+        cols = [surface_mesh_world(r.object, dg, r.matrix(dg))
+                for r in runtime.collider_objects(src, context.scene)]
         cols = [c for c in cols if len(c[1])]
         if not cols:
             self.report({"ERROR"}, f"The setup of '{src.name}' has no enabled collider")

@@ -97,7 +97,7 @@ def _toggle_result(self, context):
 
 
 def _is_collider_type(self, ob):
-    return bridge.is_collider_type(ob)
+    return bridge.is_collider_type(ob) or runtime.instanced_collection(ob) is not None
 
 
 def _is_hair(self, ob):
@@ -170,9 +170,9 @@ class FurCollideCollider(PropertyGroup):
         poll=_is_collider_type,
         update=_invalidate_colliders,
         description="Mesh the hair must not pass through (or a curve with a bevel, such "
-        "as a rope, a surface, text or a metaball: its evaluated surface is used). Its "
-        "evaluated shape is used every frame, so armatures, shape keys, modifiers and "
-        "cloth all count",
+        "as a rope, a surface, text or a metaball; or a collection instance, such as a "
+        "linked asset: every such object in it collides). Its evaluated shape is used "
+        "every frame, so armatures, shape keys, modifiers and cloth all count",
     )
     enabled: _toggle(
         "Enabled", True,

@@ -276,24 +276,88 @@ def in_scene(o, scene=None) -> bool:
     return scene is not None and scene.objects.get(o.name) == o
 
 
-def collider_objects(ob, scene=None) -> list[tuple]:
-    """Enabled collider objects: (object, double_sided, offset or None)."""
+#: Collection instances nested deeper than this are not followed.
+_MAX_INSTANCE_DEPTH = 8
+
+
+@dataclass(frozen=True)
+class ColliderRef:
+    """One collider: ``object``'s evaluated surface, placed in the world by its
+    own matrix or, inside collection instances, through ``instancers`` (the
+    instancing empties, outermost first)."""
+
+    object: object
+    double_sided: bool
+    offset: float | None
+    instancers: tuple = ()
+
+    @property
+    def objects(self) -> tuple:
+        """Every object this collider reads (the instancers and the object)."""
+        return (*self.instancers, self.object)
+
+    @property
+    def name(self) -> str:
+        """``object``, or ``empty › object`` for an instance (reports, bake signatures)."""
+        return " › ".join(o.name for o in self.objects)
+
+    @property
+    def uid(self):
+        """Session key (an int for a scene object, as in earlier versions)."""
+        if not self.instancers:
+            return self.object.session_uid
+        return tuple(o.session_uid for o in self.objects)
+
+    def matrix(self, depsgraph):
+        """World matrix (4, 4) of the evaluated collider, or None for the object's own."""
+        if not self.instancers:
+            return None
+        M = np.eye(4)
+        for e in self.instancers:
+            M = M @ bridge.matrix(e.evaluated_get(depsgraph)) @ bridge.translation(
+                -np.asarray(e.instance_collection.instance_offset, np.float64))
+        return M @ bridge.matrix(self.object.evaluated_get(depsgraph))
+
+
+def instanced_collection(o):
+    """The collection an empty instances (None for any other object)."""
+    if o is None or o.type != "EMPTY" or o.instance_type != "COLLECTION":
+        return None
+    return o.instance_collection
+
+
+def _collider_refs(o, double_sided, offset, out, seen, exclude, instancers=()):
+    """Append ``o`` (or, for a collection instance, every collider in it) to ``out``."""
+    coll = instanced_collection(o)
+    if coll is not None:
+        if len(instancers) < _MAX_INSTANCE_DEPTH and o not in instancers:
+            for inner in coll.all_objects:
+                _collider_refs(inner, double_sided, offset, out, seen, exclude,
+                               (*instancers, o))
+        return
+    if not bridge.is_collider_type(o) or o == exclude:
+        return
+    ref = ColliderRef(o, double_sided, offset, instancers)
+    if ref.uid not in seen:
+        seen.add(ref.uid)
+        out.append(ref)
+
+
+def collider_objects(ob, scene=None) -> list[ColliderRef]:
+    """Enabled colliders of setup ``ob``: the list's, then the collider
+    collection's; collection instances (linked assets) are followed."""
     s = ob.furcollide
     out, seen = [], set()
     for c in s.colliders:
         o = c.object
-        if o is None or not c.enabled or not bridge.is_collider_type(o) or o == ob:
+        if o is None or not c.enabled or not in_scene(o, scene):
             continue
-        if not in_scene(o, scene):
-            continue
-        seen.add(o.name)
-        out.append((o, bool(c.double_sided), float(c.collision_offset) if c.use_offset else None))
+        offset = float(c.collision_offset) if c.use_offset else None
+        _collider_refs(o, bool(c.double_sided), offset, out, seen, ob)
     coll = s.collider_collection
     if coll is not None:
         for o in coll.all_objects:
-            if bridge.is_collider_type(o) and o.name not in seen:
-                seen.add(o.name)
-                out.append((o, bool(s.collection_double_sided), None))
+            _collider_refs(o, bool(s.collection_double_sided), None, out, seen, ob)
     return out
 
 
@@ -311,8 +375,8 @@ def signature(ob, stable=False, scene=None) -> str:
     """
     s = ob.furcollide
     cols = [
-        (o.name if stable else o.session_uid, ds, off)
-        for o, ds, off in collider_objects(ob, scene)
+        (r.name if stable else r.uid, r.double_sided, r.offset)
+        for r in collider_objects(ob, scene)
     ]
     kw = s.to_core_kwargs()
     kw.pop("threads", None)
@@ -376,7 +440,9 @@ def groom_owner(ob):
 def _dependency_refs(ob) -> list:
     """The objects the dependency modifier must reference: the source, the
     colliders (including the collider collection's meshes) and the surface."""
-    refs = [ob] + [o for o, _ds, _off in collider_objects(ob)]
+    refs = [ob]
+    for r in collider_objects(ob):
+        refs.extend(o for o in r.objects if o not in refs)
     if ob.data.surface is not None:
         refs.append(ob.data.surface)
     return refs
@@ -614,15 +680,17 @@ def read_inputs(ob, depsgraph) -> Inputs:
                   depsgraph=depsgraph)
 
 
-def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> ColliderEntry:
+def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None, matrix=None,
+                   name=None) -> ColliderEntry:
     """The core Collider of mesh object ``o`` at this frame.
 
     ``entry`` (from the previous frame) is kept while the evaluated mesh has the
     same topology and options: only its vertices and matrix are updated, so a
     rigid collider never rebuilds its BVH. Otherwise a new entry is built.
+    ``matrix``: the world matrix when it is not ``o``'s own (a collection instance).
     """
     oe = o.evaluated_get(depsgraph)
-    M = bridge.matrix(oe)
+    M = bridge.matrix(oe) if matrix is None else matrix
     deforming = is_deforming(o, depsgraph.scene)
     with bridge.evaluated_mesh(oe) as me:
         if me is None:  # a curve without bevel or extrusion: no surface, nothing collides
@@ -641,7 +709,8 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None) -> Coll
     if changed:
         col = _core().Collider(
             V, np.zeros((0, 3), np.int32) if F is None else F, double_sided=double_sided,
-            matrix=M, offset=offset, drop_degenerate=True, name=o.name, deforming=deforming,
+            matrix=M, offset=offset, drop_degenerate=True, name=name or o.name,
+            deforming=deforming,
         )
         return ColliderEntry(col, key, double_sided, offset, deforming)
     if not np.array_equal(V, entry.collider.vertices):  # deforming: the core refits
@@ -672,9 +741,9 @@ def is_deforming(o, scene) -> bool:
 
 def _collider_list(ob, rt, depsgraph):
     cols = {}
-    for o, ds, off in collider_objects(ob, depsgraph.scene):
-        uid = o.session_uid
-        cols[uid] = _sync_collider(rt.colliders.get(uid), o, depsgraph, ds, off)
+    for r in collider_objects(ob, depsgraph.scene):
+        cols[r.uid] = _sync_collider(rt.colliders.get(r.uid), r.object, depsgraph,
+                                     r.double_sided, r.offset, r.matrix(depsgraph), r.name)
     rt.colliders = cols  # forgets deleted colliders
     return [e.collider for e in cols.values()]
 
@@ -1292,7 +1361,7 @@ def on_depsgraph_update_post(scene, depsgraph=None):
                 update_dependencies(ob)  # (a no-op next time: no update loop)
             if rt is None or rt.baking or ob.furcollide.is_baked:
                 continue
-            inputs = {ob.name} | {o.name for o, _ds, _off in collider_objects(ob, scene)}
+            inputs = {ob.name} | {o.name for r in collider_objects(ob, scene) for o in r.objects}
             if ob.data.surface is not None:
                 inputs.add(ob.data.surface.name)
             if edited & inputs and len(rt.memory):

@@ -101,10 +101,11 @@ def redraw(context) -> None:
 
 # ---------------------------------------------------------------- operators
 def _selected_colliders(context, exclude=()):
-    """Selected objects that can collide (meshes, bevelled curves, text...), in
-    selection order, minus ``exclude``."""
+    """Selected objects that can collide (meshes, bevelled curves, text...,
+    collection instances), in selection order, minus ``exclude``."""
     return [o for o in context.selected_objects
-            if bridge.is_collider_type(o) and o not in exclude]
+            if (bridge.is_collider_type(o) or runtime.instanced_collection(o) is not None)
+            and o not in exclude]
 
 
 def new_hair_object_like(src, suffix, scene, fill):

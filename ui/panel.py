@@ -8,7 +8,7 @@ from ..operators.setup import active_setup, backend_message
 
 #: List icon per collider object type (a mesh, or what Blender turns into one).
 _TYPE_ICONS = {"CURVE": "CURVE_DATA", "SURFACE": "SURFACE_DATA", "FONT": "FONT_DATA",
-               "META": "META_DATA"}
+               "META": "META_DATA", "EMPTY": "OUTLINER_OB_GROUP_INSTANCE"}
 
 
 class FURCOLLIDE_UL_colliders(UIList):

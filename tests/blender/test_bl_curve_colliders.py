@@ -212,7 +212,7 @@ def test_text_and_surface_in_a_collider_collection(fc):
     out = setup_with(hair)
     hair.furcollide.collider_collection = coll
     coll.objects.link(hair)  # the source itself never collides with itself
-    names = {o.name for o, _ds, _off in fc.runtime.collider_objects(hair, scene)}
+    names = {r.name for r in fc.runtime.collider_objects(hair, scene)}
     assert names == {"Sign", ball.name}
     moved = 0
     for f in range(1, 7):
@@ -245,7 +245,7 @@ def test_add_collider_and_pointer_accept_curves_not_hair(fc):
         True, True, False, False, False]
     # a hair object put in the list from Python is skipped, never solved against
     hair.furcollide.colliders.add().object = other
-    names = [o.name for o, _ds, _off in fc.runtime.collider_objects(hair)]
+    names = [r.name for r in fc.runtime.collider_objects(hair)]
     assert names == [box.name, rope.name]
     assert out is not None
 
@@ -276,3 +276,145 @@ def test_collider_distance_and_bake_with_a_rope(fc, tmp_path):
     for f in range(1, 6):
         scene.frame_set(f)
         np.testing.assert_array_equal(world(out), played[f])
+
+
+# ------------------------------------------------------- collection instances
+def instance_meshes(empty):
+    """World meshes of everything ``empty`` instances, from Blender's own list of
+    instances (``depsgraph.object_instances``): the oracle for the placement."""
+    dg = bpy.context.evaluated_depsgraph_get()
+    out = []
+    for inst in dg.object_instances:
+        if not inst.is_instance or inst.parent is None or inst.parent.original != empty:
+            continue
+        oe = inst.object
+        if oe.type != "MESH":  # (a curve is listed twice: as a curve and as its mesh)
+            continue
+        me = oe.to_mesh()
+        try:
+            me.calc_loop_triangles()
+            V = np.array([v.co for v in me.vertices], np.float64).reshape(-1, 3)
+            F = np.array([t.vertices[:] for t in me.loop_triangles], np.int64).reshape(-1, 3)
+        finally:
+            oe.to_mesh_clear()
+        M = np.array(inst.matrix_world)
+        out.append((V @ M[:3, :3].T + M[:3, 3], F))
+    return out
+
+
+def prop_asset(name="Prop"):
+    """A collection not linked to the scene (as a linked asset is), holding a box
+    and a rope, with an instance offset."""
+    coll = bpy.data.collections.new(name)
+    box = make_box(name + "Box", size=0.4, location=(0.3, 0.0, 0.2))
+    rope = make_rope(name + "Rope", depth=0.06, x=0.3, z=0.7)
+    for o in (box, rope):
+        bpy.context.scene.collection.objects.unlink(o)
+        coll.objects.link(o)
+    coll.instance_offset = (0.3, 0.0, 0.0)
+    return coll, box, rope
+
+
+def instance_of(coll, name="PropInstance"):
+    empty = bpy.data.objects.new(name, None)
+    empty.instance_type = "COLLECTION"
+    empty.instance_collection = coll
+    bpy.context.scene.collection.objects.link(empty)
+    return empty
+
+
+def test_collection_instance_collides_where_blender_places_it(fc):
+    """A collection instance (a linked asset) swept through the fur, rotated and
+    scaled: everything in it collides where Blender draws it; moving the instance
+    never rebuilds; Collider Distance measures to it."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 8
+    hair = make_hair(nx=6, ny=6)
+    coll, box, rope = prop_asset()
+    empty = instance_of(coll)
+    empty.rotation_euler = (0.0, 0.0, 0.3)
+    empty.scale = (1.2, 1.0, 1.1)
+    empty.location.z = 0.1
+    sweep(empty, -1.0, 0.9, (1, 8))
+    scene.frame_set(1)
+    out = setup_with(hair, empty)
+    assert [c.object for c in hair.furcollide.colliders] == [empty]
+    refs = fc.runtime.collider_objects(hair, scene)
+    assert sorted(r.name for r in refs) == ["PropInstance › PropBox", "PropInstance › PropRope"]
+    rt = fc.runtime.get_runtime(hair)
+    moved = 0
+    for f in range(1, 9):
+        scene.frame_set(f)
+        assert fc.runtime.status_for(hair) == ("INFO", "")
+        meshes = instance_meshes(empty)
+        assert len(meshes) == 2
+        for V, F in meshes:
+            assert crossing_free_curves(out, V, F).size == 0, f
+        moved += int((np.abs(world(out) - world(hair)) > 1e-6).any(axis=1).sum())
+    assert moved > 0
+    assert all(e.collider.build_count == 1 for e in rt.colliders.values())
+    activate(hair)
+    assert bpy.ops.furcollide.collider_distance() == {"FINISHED"}
+    a = out.data.attributes["furcollide_collider_distance"]
+    d = np.empty(len(a.data), np.float32)
+    a.data.foreach_get("value", d)
+    assert np.isfinite(d).all() and d.min() < 0.05
+
+
+def test_nested_instances_in_the_collider_collection_and_edits(fc):
+    """An instance of a collection that itself holds an instance, put in the
+    collider collection, collides where Blender places it; editing the asset's
+    mesh at the current frame is seen on the next frames."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 6
+    hair = make_hair(nx=6, ny=6)
+    inner, box, _rope = prop_asset("Inner")
+    outer = bpy.data.collections.new("Outer")
+    nested = bpy.data.objects.new("Nested", None)
+    nested.instance_type = "COLLECTION"
+    nested.instance_collection = inner
+    nested.location = (0.0, 0.2, 0.0)
+    outer.objects.link(nested)
+    empty = instance_of(outer, "OuterInstance")
+    sweep(empty, -1.0, 0.8, (1, 6))
+    scene.frame_set(1)
+    out = setup_with(hair)
+    holder = bpy.data.collections.new("Colliders")
+    scene.collection.children.link(holder)
+    scene.collection.objects.unlink(empty)
+    holder.objects.link(empty)
+    hair.furcollide.collider_collection = holder
+    names = sorted(r.name for r in fc.runtime.collider_objects(hair, scene))
+    assert names == ["OuterInstance › Nested › InnerBox", "OuterInstance › Nested › InnerRope"]
+
+    def check():
+        for f in range(1, 7):
+            scene.frame_set(f)
+            assert fc.runtime.status_for(hair) == ("INFO", "")
+            dg = bpy.context.evaluated_depsgraph_get()
+            meshes = []
+            for inst in dg.object_instances:  # nested: the outermost parent is reported
+                if (inst.is_instance and inst.object.type == "MESH"
+                        and inst.object.original in (box, _rope)):
+                    me = inst.object.to_mesh()
+                    me.calc_loop_triangles()
+                    V = np.array([v.co for v in me.vertices], np.float64).reshape(-1, 3)
+                    F = np.array([t.vertices[:] for t in me.loop_triangles]).reshape(-1, 3)
+                    inst.object.to_mesh_clear()
+                    M = np.array(inst.matrix_world)
+                    meshes.append((V @ M[:3, :3].T + M[:3, 3], F))
+            assert len(meshes) == 2
+            for V, F in meshes:
+                assert crossing_free_curves(out, V, F).size == 0, f
+
+    check()
+    scene.frame_set(1)
+    for v in box.data.vertices:  # the asset's box grows (edited in place)
+        v.co = tuple(1.5 * c for c in v.co)
+    box.data.update()
+    bpy.context.view_layer.update()
+    check()
+    rt = fc.runtime.get_runtime(hair)
+    e = next(e for k, e in rt.colliders.items()
+             if isinstance(k, tuple) and k[-1] == box.session_uid)
+    assert np.abs(e.collider.vertices).max() > 0.29  # the grown box (half size 0.3)
