@@ -418,3 +418,25 @@ def test_nested_instances_in_the_collider_collection_and_edits(fc):
     e = next(e for k, e in rt.colliders.items()
              if isinstance(k, tuple) and k[-1] == box.session_uid)
     assert np.abs(e.collider.vertices).max() > 0.29  # the grown box (half size 0.3)
+
+
+def test_render_with_the_rope_and_the_instance_hidden(fc, tmp_path):
+    """The usual render set-up hides the colliders from render: the rope and the
+    instance (and the asset inside it) still reach the output through the
+    FurCollide Inputs modifier, and every rendered frame equals the viewport's."""
+    from conftest import render_camera
+    from test_bl_flows import _check_render, _node_objects, _render
+
+    scene = bpy.context.scene
+    hair, rope = rope_scene(frames=(1, 5))
+    coll, box, _ = prop_asset()
+    empty = instance_of(coll)
+    sweep(empty, 1.2, -0.2, (1, 5))
+    scene.frame_set(1)
+    out = setup_with(hair, rope, empty)
+    assert {rope, empty, box} <= _node_objects(out)
+    rope.hide_render = empty.hide_render = True
+    render_camera(scene)
+    seen, statuses = _render(tmp_path, "rope", [out], hair)
+    viewport = _check_render(seen, statuses, [out], range(1, 6))
+    assert any(np.abs(viewport[f][out.name] - world(hair)).max() > 0.05 for f in range(2, 6))
