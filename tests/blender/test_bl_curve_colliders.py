@@ -52,10 +52,8 @@ def sweep(ob, x0, x1, frames):
     _linear(ob)
 
 
-def evaluated_world_mesh(ob):
-    """World vertices and triangles of ``ob`` as the depsgraph evaluates it now."""
-    dg = bpy.context.evaluated_depsgraph_get()
-    oe = ob.evaluated_get(dg)
+def world_mesh(oe, M):
+    """Vertices (placed by the 4x4 ``M``) and triangles of evaluated object ``oe``."""
     me = oe.to_mesh()
     try:
         me.calc_loop_triangles()
@@ -63,8 +61,14 @@ def evaluated_world_mesh(ob):
         F = np.array([t.vertices[:] for t in me.loop_triangles], np.int64).reshape(-1, 3)
     finally:
         oe.to_mesh_clear()
-    M = np.array(oe.matrix_world)
+    M = np.array(M)
     return V @ M[:3, :3].T + M[:3, 3], F
+
+
+def evaluated_world_mesh(ob):
+    """World vertices and triangles of ``ob`` as the depsgraph evaluates it now."""
+    oe = ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    return world_mesh(oe, oe.matrix_world)
 
 
 def world(ob):
@@ -283,23 +287,9 @@ def instance_meshes(empty):
     """World meshes of everything ``empty`` instances, from Blender's own list of
     instances (``depsgraph.object_instances``): the oracle for the placement."""
     dg = bpy.context.evaluated_depsgraph_get()
-    out = []
-    for inst in dg.object_instances:
-        if not inst.is_instance or inst.parent is None or inst.parent.original != empty:
-            continue
-        oe = inst.object
-        if oe.type != "MESH":  # (a curve is listed twice: as a curve and as its mesh)
-            continue
-        me = oe.to_mesh()
-        try:
-            me.calc_loop_triangles()
-            V = np.array([v.co for v in me.vertices], np.float64).reshape(-1, 3)
-            F = np.array([t.vertices[:] for t in me.loop_triangles], np.int64).reshape(-1, 3)
-        finally:
-            oe.to_mesh_clear()
-        M = np.array(inst.matrix_world)
-        out.append((V @ M[:3, :3].T + M[:3, 3], F))
-    return out
+    return [world_mesh(inst.object, inst.matrix_world) for inst in dg.object_instances
+            if inst.is_instance and inst.parent is not None and inst.parent.original == empty
+            and inst.object.type == "MESH"]  # (a curve is listed as a curve and as its mesh)
 
 
 def prop_asset(name="Prop"):
@@ -391,18 +381,7 @@ def test_nested_instances_in_the_collider_collection_and_edits(fc):
         for f in range(1, 7):
             scene.frame_set(f)
             assert fc.runtime.status_for(hair) == ("INFO", "")
-            dg = bpy.context.evaluated_depsgraph_get()
-            meshes = []
-            for inst in dg.object_instances:  # nested: the outermost parent is reported
-                if (inst.is_instance and inst.object.type == "MESH"
-                        and inst.object.original in (box, _rope)):
-                    me = inst.object.to_mesh()
-                    me.calc_loop_triangles()
-                    V = np.array([v.co for v in me.vertices], np.float64).reshape(-1, 3)
-                    F = np.array([t.vertices[:] for t in me.loop_triangles]).reshape(-1, 3)
-                    inst.object.to_mesh_clear()
-                    M = np.array(inst.matrix_world)
-                    meshes.append((V @ M[:3, :3].T + M[:3, 3], F))
+            meshes = instance_meshes(empty)  # nested: the outermost parent is reported
             assert len(meshes) == 2
             for V, F in meshes:
                 assert crossing_free_curves(out, V, F).size == 0, f
