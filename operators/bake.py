@@ -198,6 +198,11 @@ class _BakeBase:
         except BakeError as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        unfinished = [ob.name for ob, *_ in job.jobs if ob not in baked]
+        if unfinished:  # (never expected: a frame file that cannot be found again)
+            self.report({"ERROR"}, f"FurCollide: the bake of {', '.join(unfinished)} is "
+                        "incomplete: frame files are missing after baking")
+            return {"CANCELLED"}
         self.report(
             {"INFO"},
             f"FurCollide: baked {', '.join(o.name for o in baked)} "

@@ -44,7 +44,17 @@ KEY_EVERY = 10
 DEFAULT_MEMORY_LIMIT_MB = 512
 
 FRAME_FILE = "frame_{:06d}.npz"
-_FRAME_RE = re.compile(r"^frame_(-?\d{6,})\.npz$")
+#: Frame files: the name :data:`FRAME_FILE` gives (``frame_-00004.npz`` for a
+#: negative pre-roll frame: the sign takes one of the six places).
+_FRAME_RE = re.compile(r"^frame_(-?\d+)\.npz$")
+
+
+def _frame_of(name: str) -> int | None:
+    """The frame of a bake file name, None for anything else."""
+    m = _FRAME_RE.match(name)
+    if m is None or FRAME_FILE.format(int(m.group(1))) != name:
+        return None
+    return int(m.group(1))
 _STATE_PREFIX = "state__"
 _ATTRIBUTE_PREFIX = "attr__"
 _FORMAT_VERSION = 1
@@ -299,9 +309,9 @@ def list_frames(directory: str) -> list[int]:
         return []
     frames = []
     for name in os.listdir(directory):
-        m = _FRAME_RE.match(name)
-        if m:
-            frames.append(int(m.group(1)))
+        f = _frame_of(name)
+        if f is not None:
+            frames.append(f)
     return sorted(frames)
 
 
@@ -377,7 +387,9 @@ def remove_frames(directory: str) -> int:
         return 0
     n = 0
     for name in os.listdir(directory):
-        if _FRAME_RE.match(name) or (name.startswith("frame_") and name.endswith(".npz.tmp")):
+        if _frame_of(name) is not None or (
+            name.startswith("frame_") and name.endswith(".npz.tmp")
+        ):
             os.remove(os.path.join(directory, name))
             n += 1
     try:

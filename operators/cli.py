@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 
 import bpy
@@ -33,7 +34,8 @@ def _parser():
     )
     p.add_argument("action", choices=("bake", "free", "info"))
     p.add_argument("blend", help=".blend file to open (saved back after bake/free)")
-    p.add_argument("--frames", help="frame range A-B (overrides the setups' ranges)")
+    p.add_argument("--frames", help="frame range A-B or one frame A (overrides the setups' "
+                   "ranges); a negative start needs the = form: --frames=-50-100")
     p.add_argument("--object", help="only the setup on this hair object")
     p.add_argument("--scene", help="scene name (default: the file's active scene)")
     p.add_argument("--force", action="store_true", help="free existing bakes first")
@@ -41,12 +43,18 @@ def _parser():
     return p
 
 
+#: ``A-B`` or ``A``; either may be negative (a pre-roll): ``--frames=-50-100``.
+_FRAMES_RE = re.compile(r"^\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?$")
+
+
 def _frames(text):
-    try:
-        a, _, b = text.partition("-")
-        a, b = int(a), int(b or a)
-    except ValueError:
-        raise ValueError(f"--frames must look like 1-240, got {text!r}") from None
+    m = _FRAMES_RE.match(text)
+    if m is None:
+        raise ValueError(
+            f"--frames must look like 1-240, got {text!r} (negative: --frames=-50-100)"
+        )
+    a = int(m.group(1))
+    b = a if m.group(2) is None else int(m.group(2))
     if b < a:
         raise ValueError(f"--frames end {b} is before start {a}")
     return a, b
@@ -71,7 +79,7 @@ def _run(argv) -> int:
         print(f"furcollide: no such file: {blend}", file=sys.stderr)
         return EXIT_USAGE
     try:
-        frames = _frames(args.frames) if args.frames else None
+        frames = _frames(args.frames) if args.frames is not None else None
     except ValueError as exc:
         print(f"furcollide: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -160,17 +160,18 @@ def _setup_state(path, name):
 
 
 @pytest.mark.parametrize("text, frames", [("3", (3, 3)), ("1-1", (1, 1)),
-                                          ("20-22", (20, 22)), (" 2 - 4 ", (2, 4))])
+                                          ("20-22", (20, 22)), (" 2 - 4 ", (2, 4)),
+                                          ("-2-1", (-2, 1))])
 def test_cli_frames_accepted(fc, tmp_path, capsys, text, frames):
     path = _two_setups_file(fc, tmp_path)
     # out of the scene's range is fine too: --frames overrides the baked range
-    assert fc.cli.run(["bake", path, "--frames", text, "--object", "FurA"]) == 0
+    assert fc.cli.run(["bake", path, f"--frames={text}", "--object", "FurA"]) == 0
     out = capsys.readouterr().out
     n = frames[1] - frames[0] + 1
     assert f"frame {frames[1]} ({n}/{n})" in out and "baked FurA" in out
     assert _setup_state(path, "FurA") == (True, frames)
     d = bpy.path.abspath(bpy.data.objects["FurA"].furcollide.bake_path)
-    assert _files(d) == [f"frame_{f:06d}.npz" for f in range(frames[0], frames[1] + 1)]
+    assert _files(d) == sorted(f"frame_{f:06d}.npz" for f in range(frames[0], frames[1] + 1))
 
 
 @pytest.mark.parametrize("text, message", [
@@ -179,7 +180,9 @@ def test_cli_frames_accepted(fc, tmp_path, capsys, text, frames):
     ("1-x", "--frames must look like 1-240, got '1-x'"),
     ("1-2-3", "--frames must look like 1-240"),
     ("1.5-3", "--frames must look like 1-240"),
-    ("-4", "--frames must look like 1-240"),
+    ("4--", "--frames must look like 1-240"),
+    ("", "--frames must look like 1-240"),
+    ("-3--5", "--frames end -5 is before start -3"),
 ])
 def test_cli_frames_rejected(fc, tmp_path, capsys, text, message):
     path = _two_setups_file(fc, tmp_path)

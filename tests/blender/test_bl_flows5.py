@@ -642,10 +642,6 @@ def test_negative_start_frame_plays_scrubs_and_holds(fc):
     assert "holding frame 3" in s.status_message
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: bake files of frames -1..-99999 are named "
-                   "'frame_-0000N.npz' (FRAME_FILE '{:06d}' counts the sign) but "
-                   "operators/cache.py _FRAME_RE wants 6 digits after '-': list_frames and "
-                   "remove_frames never see them, so the bake never completes")
 def test_negative_start_frame_bake_and_free(fc, tmp_path):
     """Baking a setup that starts at frame -4 marks it baked, writes one file per
     frame, reads back the played frames, and Free Bake removes every file."""
