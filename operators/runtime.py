@@ -86,6 +86,7 @@ class Runtime:
     written_status: tuple | None = None  # (data session uid, status, colours) last written
     attach: tuple | None = None  # (attach_id, core Binding, surface topology key): Fur Attach
     attach_state: tuple | None = None  # (use_fur_attach, attach_id) seen last
+    time_state: tuple | None = None  # (_time_key,) seen last
     history: stages.RootHistory = field(default_factory=stages.RootHistory)  # jiggle
     groom: tuple | None = None  # (bind_id, stages.GroomBinding): render groom
     groom_shown: tuple | None = None  # (frame, guides) the groom output shows
@@ -386,7 +387,17 @@ def signature(ob, stable=False, scene=None) -> str:
         parts.append(["fur_attach", s.attach_id])
     if s.motion.active:  # likewise
         parts.append(["motion", s.motion.fingerprint()])
+        t = _time_key(ob, scene or bpy.context.scene)
+        if t is not None:  # wind and jiggle run on seconds: frame / fps
+            parts.append(["fps", t])
     return json.dumps(parts)
+
+
+def _time_key(ob, scene):
+    """The scene's frames per second when the setup's result depends on it (wind,
+    jiggle), else None."""
+    m = ob.furcollide.motion
+    return stages.fps(scene) if (m.use_wind or m.use_jiggle) else None
 
 
 def apply_visibility(ob) -> None:
@@ -1002,6 +1013,11 @@ def _evaluate(scene, depsgraph, ob) -> str:
         # every frame's input changed, so no cached frame is valid.
         invalidate(ob, from_frame=s.frame_start - 1, refresh=False)
     rt.attach_state = att
+    tk = (_time_key(ob, scene),)
+    if rt.time_state is not None and tk != rt.time_state and not s.is_baked:
+        # The fps changed: wind and jiggle of every cached frame ran on the old seconds.
+        invalidate(ob, from_frame=s.frame_start - 1, refresh=False)
+    rt.time_state = tk
     sig = signature(ob, scene=scene)
     if rt.signature is not None and sig != rt.signature and not s.is_baked:
         # Changed without an update callback (deleted collider, undo, driver).
@@ -1029,9 +1045,7 @@ def _evaluate(scene, depsgraph, ob) -> str:
             _write(ob, inp, rt.hold[1], rt.hold[2])
             set_status(ob, level, msg or f"After the end frame: holding frame {end}")
             return "hold"
-        rt.outdated = True
-        set_status(ob, "WARNING", f"After the end frame and frame {end} is not cached")
-        return "outdated"
+        return _hold(ob, rt, inp, f, reason=f"after the end frame, and frame {end} is not")
 
     if f in rt.memory:
         out, status, stats = rt.memory.get(f, inp.raw, inp.offsets)
@@ -1099,6 +1113,11 @@ def _hold(ob, rt, inp, f, reason=""):
     k = rt.memory.newest_before(f)
     if rt.hold is not None and rt.hold[0] == k:
         _write(ob, inp, rt.hold[1], rt.hold[2])
+        held = f"holding frame {k}"
+    elif k is not None and k in rt.memory:  # (whatever frame was shown before the jump)
+        out, status, _stats = rt.memory.get(k, inp.raw, inp.offsets)
+        _write(ob, inp, out, status, attributes=rt.memory.attributes(k))
+        rt.hold = (k, out, status)
         held = f"holding frame {k}"
     else:
         held = "showing the last result"

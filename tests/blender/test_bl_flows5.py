@@ -477,10 +477,6 @@ def test_shape_key_collider_scrub_back_jump_ahead_then_play_on(fc):
     assert [k.name for k in blob.data.shape_keys.key_blocks] == ["Basis", "Press"]
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: operators/runtime.py _evaluate, branch f > "
-                   "frame_end with Frame End not cached, only sets a status and writes "
-                   "nothing: the output keeps whatever frame was shown last instead of "
-                   "holding the newest cached frame like every other jump past the cache")
 def test_jump_past_an_uncached_end_frame_holds_the_newest_cached_frame(fc):
     """Cached 1..5 of 1..12, then a jump to frame 20 (after the end): like any jump
     past the cache the newest cached frame (5) is held and the setup is outdated,
@@ -745,10 +741,6 @@ def _wind_setup(fc):
     return scene, hair, out
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: the scene fps (wind/jiggle time = frame/fps) "
-                   "is not in operators/runtime.py signature(), so an fps change leaves "
-                   "stale cached frames: a replay from the start frame differs from a "
-                   "clean solve (and from a bake)")
 def test_fps_change_with_wind_replays_like_a_clean_solve(fc):
     """Wind after collision depends on time (frame / fps). After the artist changes
     the fps, playing again from the start frame must show the new wind, the same as
