@@ -336,7 +336,7 @@ def _collider_refs(o, double_sided, offset, out, seen, exclude, instancers=()):
                 _collider_refs(inner, double_sided, offset, out, seen, exclude,
                                (*instancers, o))
         return
-    if not bridge.is_collider_type(o) or o == exclude:
+    if not bridge.is_collider_type(o) or o in exclude:
         return
     ref = ColliderRef(o, double_sided, offset, instancers)
     if ref.uid not in seen:
@@ -346,20 +346,37 @@ def _collider_refs(o, double_sided, offset, out, seen, exclude, instancers=()):
 
 def collider_objects(ob, scene=None) -> list[ColliderRef]:
     """Enabled colliders of setup ``ob``: the list's, then the collider
-    collection's; collection instances (linked assets) are followed."""
+    collection's; collection instances (linked assets) are followed. The source
+    and its growth Surface never collide (roots lie on the Surface: every curve
+    would be pinched): see :func:`surface_as_collider`."""
     s = ob.furcollide
     out, seen = [], set()
+    exclude = {ob, ob.data.surface}
     for c in s.colliders:
         o = c.object
         if o is None or not c.enabled or not in_scene(o, scene):
             continue
         offset = float(c.collision_offset) if c.use_offset else None
-        _collider_refs(o, bool(c.double_sided), offset, out, seen, ob)
+        _collider_refs(o, bool(c.double_sided), offset, out, seen, exclude)
     coll = s.collider_collection
     if coll is not None:
         for o in coll.all_objects:
-            _collider_refs(o, bool(s.collection_double_sided), None, out, seen, ob)
+            _collider_refs(o, bool(s.collection_double_sided), None, out, seen, exclude)
     return out
+
+
+def surface_as_collider(ob) -> str:
+    """A warning when the hair's Surface is among the setup's colliders (it is
+    left out of them), else ''."""
+    s, surf = ob.furcollide, ob.data.surface
+    if surf is None:
+        return ""
+    listed = any(c.object == surf and c.enabled for c in s.colliders)
+    coll = s.collider_collection
+    if listed or (coll is not None and surf.name in coll.all_objects):
+        return (f"'{surf.name}' is the hair's Surface: it does not collide (the roots lie "
+                "on it). Remove it from the colliders")
+    return ""
 
 
 def core_settings(ob):
@@ -381,7 +398,8 @@ def signature(ob, stable=False, scene=None) -> str:
     ]
     kw = s.to_core_kwargs()
     kw.pop("threads", None)
-    surface = ob.data.surface.name if ob.data.surface else ""
+    surf = ob.data.surface
+    surface = "" if surf is None else surf.name if stable else surf.session_uid
     parts = [cols, kw, s.enable_attribute, s.frame_start, surface, bool(s.enabled)]
     if s.use_fur_attach:  # only when on: signatures (and bakes) without it are unchanged
         parts.append(["fur_attach", s.attach_id])
@@ -763,10 +781,15 @@ def _growth(ob, rt, settings, depsgraph):
     if not (settings.attract_to_growth_surface or settings.pinch_resolution == "growth_surface"):
         return None
     surf = ob.data.surface
-    if surf is None or surf.type != "MESH":
+    if surf is None:
         raise ValueError(
             "Attract to Growth Surface / Put to Growth Surface need the hair's Surface "
             "object (Object Data > Surface)"
+        )
+    if surf.type != "MESH":
+        raise ValueError(
+            f"the hair's Surface '{surf.name}' is a {surf.type.lower()} object, not a mesh: "
+            "Attract to Growth Surface / Put to Growth Surface need a mesh Surface"
         )
     rt.growth = _sync_collider(rt.growth, surf, depsgraph)
     return rt.growth.collider
@@ -1028,6 +1051,8 @@ def _evaluate(scene, depsgraph, ob) -> str:
     level, msg = "INFO", ""
     if inp.warning:
         level, msg = "WARNING", inp.warning
+    elif warn := surface_as_collider(ob):
+        level, msg = "WARNING", warn
     start, end = s.frame_start, s.frame_end
 
     if not s.enabled or f < start:

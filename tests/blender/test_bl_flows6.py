@@ -282,9 +282,6 @@ def test_source_output_and_a_repeated_collider_in_the_list(fc, capsys):
     _no_traceback(capsys)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: runtime._growth raises the same 'need the hair's "
-                   "Surface object' message when a Surface is set but is not a mesh; it "
-                   "neither names the object nor says what is wrong with it")
 @pytest.mark.parametrize("surface", ["source", "output"])
 def test_hair_object_as_the_surface_is_named_in_the_error(fc, surface, capsys):
     scene = bpy.context.scene
@@ -305,10 +302,6 @@ def test_hair_object_as_the_surface_is_named_in_the_error(fc, surface, capsys):
     assert target.name in msg and "mesh" in msg.lower(), msg
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: runtime.collider_objects drops only the source "
-                   "itself, not ob.data.surface: the Surface in the list (open sheet or closed "
-                   "body) turns every curve UNRESOLVED, silently (README: the growth surface "
-                   "cannot be a collider)")
 @pytest.mark.parametrize("skin", ["open_sheet", "closed_body"])
 def test_surface_listed_as_a_collider(fc, skin, capsys):
     """The hair's Surface also selected as a collider (the usual mistake: select the
@@ -683,10 +676,6 @@ def test_renames_while_playing_and_after_a_bake(fc, tmp_path, capsys):
     _no_traceback(capsys)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: runtime.signature puts ob.data.surface.name into "
-                   "the session signature (colliders use session_uid there): renaming the "
-                   "Surface looks like a new input, _evaluate drops the cached frames after "
-                   "the shown frame - 1 and later frames say 'not cached'")
 def test_renaming_the_surface_keeps_the_playback_cache(fc, capsys):
     scene = bpy.context.scene
     hair, box, out = _scene(fc)
