@@ -308,6 +308,33 @@ def same_topology(now: tuple, bound: tuple) -> bool:
     return tuple(now[: len(bound)]) == tuple(bound)
 
 
+def write_refusal(target, what: str) -> str:
+    """Why FurCollide must not write into hair object ``target`` (its output or
+    render groom output, called ``what`` in the message), or ''.
+
+    An object in no scene (deleted in the UI, or not appended with the hair), linked
+    (read-only) data, and curves data that another, non-output object uses (the
+    data was swapped for a groom's: writing would destroy that groom).
+    """
+    if not target.users_scene:
+        return (f"the {what} '{target.name}' is in no scene (deleted, or not appended "
+                "with the hair): remove the setup and add it again")
+    lib = target.library or target.data.library
+    if lib is not None:
+        return (f"the {what} '{target.name}' is linked from '{lib.filepath}': FurCollide "
+                "cannot write into linked data (make it local, or work in that file)")
+    data = target.data
+    if data.users > 1:
+        import bpy
+
+        for o in bpy.data.objects:
+            if o.data == data and o != target and not o.furcollide.is_output:
+                return (f"the {what} '{target.name}' uses the curves data '{data.name}' "
+                        f"of '{o.name}': FurCollide would overwrite that groom. Give "
+                        f"'{target.name}' its own data, or remove the setup and add it again")
+    return ""
+
+
 def is_collider_type(ob) -> bool:
     """Can object ``ob`` be a collider (see :data:`COLLIDER_TYPES`)?"""
     return ob is not None and ob.type in COLLIDER_TYPES

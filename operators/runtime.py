@@ -1008,6 +1008,8 @@ def _evaluate(scene, depsgraph, ob) -> str:
             f"this object is a copy of the setup on '{_owner_name(s.output)}': "
             "use Add FurCollide to give it its own output"
         )
+    if problem := bridge.write_refusal(s.output, "output"):
+        raise ValueError(problem)
     if rt.baking:
         return "baking"
     if not _shown(s.output, depsgraph) and not _shown(s.groom.output, depsgraph):

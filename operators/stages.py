@@ -306,6 +306,8 @@ def groom_frame(ob, binding, guides_world, depsgraph, colliders):
 
 def write_groom(out, points_world, offsets, depsgraph) -> None:
     """Write the render groom's world points into the groom output's data."""
+    if problem := bridge.write_refusal(out, "render groom output"):
+        raise ValueError(problem)
     data = out.data
     have = bridge.curve_offsets(data)
     if len(have) != len(offsets) or not np.array_equal(have, offsets):

@@ -164,10 +164,6 @@ def test_output_removed_then_play_and_buttons(fc, what, capsys):
     _no_traceback(capsys)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: an output that is in no scene (deleted with X, "
-                   "which leaves it alive through the setup's pointer, or appended without "
-                   "its output) is treated as 'hidden': runtime._evaluate returns silently, "
-                   "no status, and Add FurCollide is refused")
 @pytest.mark.parametrize("how", ["deleted_in_the_ui", "appended_without_its_output"])
 def test_output_not_in_the_scene_is_reported(fc, how, tmp_path, capsys):
     scene = bpy.context.scene
@@ -199,9 +195,6 @@ def test_output_not_in_the_scene_is_reported(fc, how, tmp_path, capsys):
     assert "output" in msg.lower(), repr(msg)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: runtime._write/_sync_output write into "
-                   "s.output.data whatever it is; nothing checks that the output's data "
-                   "is not the source's (or another object's) curves")
 @pytest.mark.parametrize("whose", ["the_source", "another_groom"])
 def test_output_data_replaced_never_writes_a_groom(fc, whose, capsys):
     """The output's curves data swapped (Object Data > browse) for the source's own
@@ -611,10 +604,6 @@ def test_appended_setup_plays_and_bakes_in_another_file(fc, tmp_path, capsys):
     _no_traceback(capsys)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: a library-linked setup plays 'fine' (the panel "
-                   "counts collisions) but bridge.set_positions' foreach_set into the linked "
-                   "output data is silently ignored; runtime._evaluate never checks "
-                   "output.library / output.data.library")
 def test_library_linked_setup_is_reported(fc, tmp_path, capsys):
     hair, box, out = _scene(fc)
     ref = _reference(fc, bpy.context.scene, hair)
