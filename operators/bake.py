@@ -12,6 +12,8 @@ synchronous ``execute`` and print one line per frame.
 
 from __future__ import annotations
 
+import os
+
 import bpy
 from bpy.types import Operator
 
@@ -300,11 +302,27 @@ class FURCOLLIDE_OT_bake_all(_BakeBase, Operator):
         return _bakeable(context)
 
 
+def bake_sharers(ob) -> list:
+    """Other setups whose bake is in ``ob``'s bake directory (a copy of a baked
+    setup: Shift-D, a full copy of the scene) by name."""
+    path = ob.furcollide.bake_path
+    if not path:
+        return []
+    d = os.path.normcase(os.path.abspath(bpy.path.abspath(path)))
+    return [
+        o.name for o in bpy.data.objects
+        if o != ob and getattr(o, "furcollide", None) is not None and o.furcollide.is_setup
+        and o.furcollide.bake_path
+        and os.path.normcase(os.path.abspath(bpy.path.abspath(o.furcollide.bake_path))) == d
+    ]
+
+
 def free_bake(ob) -> int:
-    """Delete the bake files of the setup on ``ob``; returns how many."""
+    """Delete the bake files of the setup on ``ob``; returns how many. Files another
+    setup also reads (:func:`bake_sharers`) are kept: only ``ob`` forgets them."""
     s = ob.furcollide
     n = 0
-    if s.bake_path:
+    if s.bake_path and not bake_sharers(ob):
         n = cache.remove_frames(bpy.path.abspath(s.bake_path))
     s.is_baked = False
     s.bake_path = ""
@@ -332,9 +350,11 @@ class FURCOLLIDE_OT_free_bake(SetupOperator, Operator):
     @reports_errors
     def execute(self, context):
         src = active_setup(context)
+        sharers = bake_sharers(src)
         n = free_bake(src)
         refresh(context)
-        self.report({"INFO"}, f"FurCollide: freed the bake of '{src.name}' ({n} files)")
+        kept = f"; its files are kept: {', '.join(sharers)} reads them too" if sharers else ""
+        self.report({"INFO"}, f"FurCollide: freed the bake of '{src.name}' ({n} files){kept}")
         return {"FINISHED"}
 
 

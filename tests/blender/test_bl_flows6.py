@@ -375,9 +375,6 @@ def test_full_copy_each_output_references_its_own_inputs(fc):
     assert {hair_b, box_b} <= _node_objects(hair_b.furcollide.output)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: bake.free_bake deletes the files at the setup's "
-                   "bake_path, which a copy of the source (Shift-D, or a Full Copy scene) "
-                   "inherits: Free Bake on the copy deletes the original's bake")
 @pytest.mark.parametrize("copy", ["duplicated_source", "full_copy_scene"])
 def test_free_bake_on_a_copy_keeps_the_originals_bake(fc, copy, tmp_path, capsys):
     scene = bpy.context.scene
