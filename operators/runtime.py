@@ -1436,6 +1436,54 @@ def on_load_post(*_args):
         print(f"FurCollide: could not update the setups' inputs: {exc}", flush=True)
 
 
+_save_remap: dict = {}  # object name -> bake_path before save_pre rewrote it
+
+
+def _relative_bake_paths():
+    for ob in bpy.data.objects:
+        s = getattr(ob, "furcollide", None)
+        if s is not None and s.is_setup and s.bake_path.startswith("//") and ob.library is None:
+            yield ob, s
+
+
+@persistent
+def on_save_pre(filepath="", *_args):
+    """Save As to another folder: keep each bake's relative path pointing at the
+    same files (Blender remaps its own relative paths, not an add-on's)."""
+    _save_remap.clear()
+    try:
+        old = bpy.data.filepath
+        if not old or not filepath or os.path.dirname(old) == os.path.dirname(filepath):
+            return
+        start = os.path.dirname(os.path.abspath(filepath))
+        for ob, s in _relative_bake_paths():
+            target = bpy.path.abspath(s.bake_path)
+            try:
+                new = "//" + os.path.relpath(target, start).replace(os.sep, "/")
+            except ValueError:  # another drive (Windows): keep it absolute
+                new = target
+            _save_remap[ob.name] = s.bake_path
+            s.bake_path = new
+    except Exception as exc:  # noqa: BLE001 - a handler must never raise
+        print(f"FurCollide: could not remap the bake paths: {exc}", flush=True)
+
+
+@persistent
+def on_save_post(filepath="", *_args):
+    """A *copy* was saved (File > Save Copy: the open file keeps its path): put
+    back the bake paths :func:`on_save_pre` rewrote for it."""
+    try:
+        if filepath and os.path.abspath(bpy.data.filepath) != os.path.abspath(filepath):
+            for name, path in _save_remap.items():
+                ob = bpy.data.objects.get(name)
+                if ob is not None:
+                    ob.furcollide.bake_path = path
+    except Exception as exc:  # noqa: BLE001
+        print(f"FurCollide: could not restore the bake paths: {exc}", flush=True)
+    finally:
+        _save_remap.clear()
+
+
 def describe(exc: Exception) -> str:
     core = None
     try:
@@ -1453,6 +1501,8 @@ _HANDLERS = (
     ("frame_change_post", on_frame_change_post),
     ("depsgraph_update_post", on_depsgraph_update_post),
     ("load_post", on_load_post),
+    ("save_pre", on_save_pre),
+    ("save_post", on_save_post),
 )
 
 

@@ -513,10 +513,6 @@ def test_save_as_to_another_folder_mid_session(fc, tmp_path, capsys):
     _no_traceback(capsys)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: BakeJob stores bake_path relative to the .blend "
-                   "('//furcollide_cache/...') and no save handler remaps it, so after Save As "
-                   "to another folder the setup looks for its bake there: 'Bake files are "
-                   "missing'")
 def test_save_as_to_another_folder_keeps_the_bake(fc, tmp_path, capsys):
     scene = bpy.context.scene
     a, b = tmp_path / "a", tmp_path / "b"
@@ -541,6 +537,33 @@ def test_save_as_to_another_folder_keeps_the_bake(fc, tmp_path, capsys):
     for f in (2, 5):
         scene.frame_set(f)
         np.testing.assert_allclose(_pos(out), baked[f], atol=1e-6)
+
+
+def test_save_copy_to_another_folder_keeps_both_bakes_readable(fc, tmp_path, capsys):
+    """File > Save Copy into another folder: the copy reads the same bake files,
+    and the open file (still the original) keeps reading them too."""
+    a, c = tmp_path / "a", tmp_path / "c" / "deeper"
+    a.mkdir()
+    c.mkdir(parents=True)
+    hair, box, out = _scene(fc)
+    _save(a / "shot.blend")
+    activate(hair)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    path = hair.furcollide.bake_path
+    d = bpy.path.abspath(path)
+    baked = {f: fc.cache.read_frame(d, f)[0] for f in range(1, 7)}
+    bpy.ops.wm.save_as_mainfile(filepath=str(c / "copy.blend"), copy=True)
+    assert bpy.data.filepath == str(a / "shot.blend")
+    assert hair.furcollide.bake_path == path  # the open file is unchanged
+    bpy.ops.wm.open_mainfile(filepath=str(c / "copy.blend"))
+    hair = bpy.data.objects["Fur"]
+    assert os.path.normpath(bpy.path.abspath(hair.furcollide.bake_path)) == os.path.normpath(d)
+    out = hair.furcollide.output
+    for f in (4, 2):
+        bpy.context.scene.frame_set(f)
+        assert hair.furcollide.status_message == ""
+        np.testing.assert_allclose(_pos(out), baked[f], atol=1e-6)
+    _no_traceback(capsys)
 
 
 def test_revert_after_edits(fc, tmp_path, capsys):
