@@ -347,10 +347,13 @@ class Collider:
 
         Computed in world metric (the matrix's scale and shear included), so
         the shell keeps the offset in world units whatever the matrix. Each
-        vertex moves along its area-weighted normal, lengthened so that every
-        face around it moves by the full offset: a box keeps the offset on
-        its faces, not offset / sqrt(3). The lengthening is capped at
-        ``tol.OFFSET_MAX_STRETCH`` (needle-sharp vertices).
+        vertex moves along its angle-weighted normal (each face's normal
+        weighted by its corner angle at the vertex: the same direction however
+        the faces are triangulated), lengthened so that every face around it
+        moves by the full offset: a box keeps the offset on its faces, not
+        offset / sqrt(3), nor twice it at a corner split into two triangles.
+        The lengthening is capped at ``tol.OFFSET_MAX_STRETCH`` (needle-sharp
+        vertices).
         """
         S = self._M[:3, :3]
         Vw = apply(S, self._V.astype(np.float64) - self._center)
@@ -358,18 +361,18 @@ class Collider:
         fa = np.cross(Vw[F[:, 1]] - Vw[F[:, 0]], Vw[F[:, 2]] - Vw[F[:, 0]])
         if det3(S) < 0:  # a mirroring matrix flips the winding: keep normals outward
             fa = -fa
-        n = len(self._V)
-        vn = np.stack(
-            [
-                sum(np.bincount(F[:, k], weights=fa[:, i], minlength=n) for k in range(3))
-                for i in range(3)
-            ],
-            axis=1,
-        )
-        lv = np.linalg.norm(vn, axis=1, keepdims=True)
-        vn = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
         ln = np.linalg.norm(fa, axis=1, keepdims=True)
         fn = np.divide(fa, ln, out=np.zeros_like(fa), where=ln > 0)
+        n = len(self._V)
+        vn = np.zeros((n, 3))
+        for k in range(3):
+            e1 = Vw[F[:, (k + 1) % 3]] - Vw[F[:, k]]
+            e2 = Vw[F[:, (k + 2) % 3]] - Vw[F[:, k]]
+            angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1), rot_dot(e1, e2))
+            for i in range(3):
+                vn[:, i] += np.bincount(F[:, k], weights=fn[:, i] * angle, minlength=n)
+        lv = np.linalg.norm(vn, axis=1, keepdims=True)
+        vn = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
         # smallest cos(vertex normal, face normal) over the faces around each vertex
         corner = F.T.ravel()
         cos = np.concatenate([rot_dot(vn[F[:, k]], fn) for k in range(3)])

@@ -741,10 +741,6 @@ def test_extreme_valid_settings_give_finite_output(fc, name, capsys):
     _no_traceback(capsys)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: core/collider.py Collider._offset_directions "
-                   "lengthens area-weighted vertex normals by 1/min(cos): on a triangulated "
-                   "box a corner with two triangles on one face moves 2x the offset along "
-                   "that face's normal, so the shell bulges up to ~2x the Collision Offset")
 def test_collision_offset_keeps_the_offset_not_twice(fc, capsys):
     """Hair whose tips stop 0.35 below a static box, Collision Offset 0.3: the hair is
     farther than the offset from the box everywhere, so nothing may move or pinch."""

@@ -167,3 +167,31 @@ def test_offset_never_lets_a_curve_through_an_open_sheet(mode, double_sided, d):
     res = Solver(offs, Settings(mode=mode, collision_offset=d)).step(pts, [col])
     assert np.asarray(res.status)[0] != Status.FREE
     geom.assert_no_intersection(res.points, offs, res.status, [(V, F)])
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_offset_shell_of_a_box_is_the_offset_everywhere_on_a_face(flip):
+    """Curves whose tips stop 1.1 offsets below a box's bottom face, across the
+    whole face up to its corners, stay free, whatever the faces' triangulation
+    (a corner split into two triangles once pushed its face out by twice the
+    offset). 0.9 offsets below, every one of them is pushed."""
+    h, off = 0.5, 0.3
+    V = np.array([[x, y, z] for x in (-h, h) for y in (-h, h) for z in (-h, h)], float)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    F = []
+    for a, b, c, d in quads:  # each quad's diagonal either way
+        F += [(a, b, d), (b, c, d)] if flip else [(a, b, c), (a, c, d)]
+    xs = np.linspace(-h * 0.98, h * 0.98, 7)
+    roots = np.array([[x, y, -2.0] for x in xs for y in xs])
+    for gap, free in ((1.1, True), (0.9, False)):
+        tip_z = -h - gap * off
+        t = np.linspace(0.0, 1.0, 5)[:, None]
+        pts = (roots[:, None, :] + t * np.array([0.0, 0.0, tip_z + 2.0])).reshape(-1, 3)
+        offs = np.arange(0, len(pts) + 1, 5)
+        col = Collider(V, np.array(F), offset=off)
+        res = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+        if free:
+            assert (res.status == Status.FREE).all(), np.flatnonzero(res.status)
+            np.testing.assert_array_equal(res.points, pts)
+        else:
+            assert (res.status == Status.COLLIDING).all(), res.status
