@@ -86,7 +86,7 @@ class Runtime:
     written_status: tuple | None = None  # (data session uid, status, colours) last written
     attach: tuple | None = None  # (attach_id, core Binding, surface topology key): Fur Attach
     attach_state: tuple | None = None  # (use_fur_attach, attach_id) seen last
-    time_state: tuple | None = None  # (_time_key,) seen last
+    time_state: float | None = None  # _time_key seen last
     history: stages.RootHistory = field(default_factory=stages.RootHistory)  # jiggle
     groom: tuple | None = None  # (bind_id, stages.GroomBinding): render groom
     groom_shown: tuple | None = None  # (frame, guides) the groom output shows
@@ -477,14 +477,30 @@ def _dependency_refs(ob) -> list:
     return refs
 
 
+def _own_dependency_group(ob):
+    """(node group, shared) of the setup's dependency modifier: the group its
+    outputs' modifier uses (else the one named for it), and whether another
+    object's modifier uses it too (a full copy of the scene keeps the setup's
+    id and shares the group: each copy then needs its own)."""
+    s = ob.furcollide
+    ours = [t for t in (s.output, s.groom.output) if t is not None]
+    mods = [t.modifiers.get(DEPENDENCY_MODIFIER) for t in ours]
+    groups = [m.node_group for m in mods if m is not None and m.node_group is not None]
+    ng = groups[0] if groups else bpy.data.node_groups.get(dependency_group_name(ob))
+    if ng is None:
+        return None, False
+    mine = sum(1 for g in groups if g == ng) + int(ng.use_fake_user)
+    return ng, ng.users > mine
+
+
 def dependencies_stale(ob) -> bool:
     """Does the dependency modifier miss an input (a collider or a Surface set
     without an update callback, a render groom output of an older file)?"""
     s = ob.furcollide
     if not owns_output(ob):
         return False  # a copy of a setup: the outputs are the original's
-    ng = bpy.data.node_groups.get(dependency_group_name(ob))
-    if ng is None:
+    ng, shared = _own_dependency_group(ob)
+    if ng is None or shared:
         return True
     have = {
         n.inputs["Object"].default_value
@@ -516,10 +532,9 @@ def update_dependencies(ob) -> None:
     out = s.output
     if not owns_output(ob):
         return  # missing, or a copy of a setup: never touch the original's outputs
-    name = dependency_group_name(ob)
-    ng = bpy.data.node_groups.get(name)
-    if ng is None or ng.bl_idname != "GeometryNodeTree":
-        ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    ng, shared = _own_dependency_group(ob)
+    if ng is None or shared or ng.bl_idname != "GeometryNodeTree":
+        ng = bpy.data.node_groups.new(dependency_group_name(ob), "GeometryNodeTree")
         ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
         ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
     ng.nodes.clear()
@@ -1025,6 +1040,19 @@ def _evaluate(scene, depsgraph, ob) -> str:
         if s.is_baked and s.enabled:
             return _baked_subframe(ob, depsgraph, f, sub)
         return "subframe"
+    # Before the input is read: its root history for this frame must survive.
+    att = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
+    if rt.attach_state is not None and att != rt.attach_state and not s.is_baked:
+        # Fur Attach toggled or rebound without its update callback (undo, driver):
+        # every frame's input changed, so no cached frame is valid.
+        invalidate(ob, from_frame=s.frame_start - 1, refresh=False)
+    rt.attach_state = att
+    tk = _time_key(ob, scene)
+    if None not in (tk, rt.time_state) and tk != rt.time_state and not s.is_baked:
+        # The fps changed: wind and jiggle of every cached frame ran on the old
+        # seconds. (Turning them on or off goes through the signature.)
+        invalidate(ob, from_frame=s.frame_start - 1, refresh=False)
+    rt.time_state = tk
     inp = read_inputs(ob, depsgraph)
     if not _check_topology(ob, rt, inp):
         return "topology"
@@ -1032,17 +1060,6 @@ def _evaluate(scene, depsgraph, ob) -> str:
     if not s.is_baked:  # a bake checks its own curve layout first
         _sync_output(ob, inp, depsgraph)
 
-    att = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
-    if rt.attach_state is not None and att != rt.attach_state and not s.is_baked:
-        # Fur Attach toggled or rebound without its update callback (undo, driver):
-        # every frame's input changed, so no cached frame is valid.
-        invalidate(ob, from_frame=s.frame_start - 1, refresh=False)
-    rt.attach_state = att
-    tk = (_time_key(ob, scene),)
-    if rt.time_state is not None and tk != rt.time_state and not s.is_baked:
-        # The fps changed: wind and jiggle of every cached frame ran on the old seconds.
-        invalidate(ob, from_frame=s.frame_start - 1, refresh=False)
-    rt.time_state = tk
     sig = signature(ob, scene=scene)
     if rt.signature is not None and sig != rt.signature and not s.is_baked:
         # Changed without an update callback (deleted collider, undo, driver).

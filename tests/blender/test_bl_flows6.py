@@ -356,10 +356,6 @@ def test_scene_copy_plays_in_both_scenes(fc, kind, capsys):
     _no_traceback(capsys)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: runtime.dependency_group_name is "
-                   "'.FurCollide Inputs <uid[:8]>' and a Full Copy keeps the uid: both "
-                   "outputs share one node group, and update_dependencies rebuilds it for "
-                   "whichever scene updated last")
 def test_full_copy_each_output_references_its_own_inputs(fc):
     scene_a = bpy.context.scene
     hair, box, out = _scene(fc)
