@@ -594,14 +594,21 @@ def test_revert_after_edits(fc, tmp_path, capsys):
 
 
 # --------------------------------------------- 6. append and library link
-def test_appended_setup_plays_and_bakes_in_another_file(fc, tmp_path, capsys):
+def _library_then_new_file(fc, tmp_path):
+    """A setup saved as lib.blend, then a new empty file with the same frame range;
+    returns (the library's path, the setup's reference result)."""
     hair, box, out = _scene(fc)
     ref = _reference(fc, bpy.context.scene, hair)
     lib = _save(tmp_path / "lib.blend")
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy.context.scene.frame_start, bpy.context.scene.frame_end = FRAMES
+    return lib, ref
+
+
+def test_appended_setup_plays_and_bakes_in_another_file(fc, tmp_path, capsys):
+    lib, ref = _library_then_new_file(fc, tmp_path)
     _save(tmp_path / "shot.blend")
     scene = bpy.context.scene
-    scene.frame_start, scene.frame_end = FRAMES
     with bpy.data.libraries.load(lib, link=False) as (_src, dst):
         dst.objects = ["Fur", "Fur FurCollide", "Box"]
     for o in dst.objects:
@@ -621,12 +628,8 @@ def test_appended_setup_plays_and_bakes_in_another_file(fc, tmp_path, capsys):
 
 
 def test_library_linked_setup_is_reported(fc, tmp_path, capsys):
-    hair, box, out = _scene(fc)
-    ref = _reference(fc, bpy.context.scene, hair)
-    lib = _save(tmp_path / "lib.blend")
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    lib, ref = _library_then_new_file(fc, tmp_path)
     scene = bpy.context.scene
-    scene.frame_start, scene.frame_end = FRAMES
     with bpy.data.libraries.load(lib, link=True) as (_src, dst):
         dst.objects = ["Fur", "Fur FurCollide", "Box"]
     for o in dst.objects:
