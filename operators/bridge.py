@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 from contextlib import contextmanager
 
+import bpy
 import numpy as np
 
 from .cache import curve_point_mask
@@ -325,8 +326,6 @@ def write_refusal(target, what: str) -> str:
                 "cannot write into linked data (make it local, or work in that file)")
     data = target.data
     if data.users > 1:
-        import bpy
-
         for o in bpy.data.objects:
             if o.data == data and o != target and not o.furcollide.is_output:
                 return (f"the {what} '{target.name}' uses the curves data '{data.name}' "

@@ -738,7 +738,7 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None, matrix=
     deforming = is_deforming(o, depsgraph.scene)
     with bridge.evaluated_mesh(oe) as me:
         if me is None:  # a curve without bevel or extrusion: no surface, nothing collides
-            key, V, F = ("no surface",), np.zeros((0, 3), np.float32), None
+            key, V = ("no surface",), np.zeros((0, 3), np.float32)
         else:
             key, V = bridge.mesh_topology_key(me), bridge.mesh_vertices(me)
         changed = (
@@ -748,13 +748,12 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None, matrix=
             or entry.offset != offset
             or entry.deforming != deforming
         )
-        if changed and me is not None:
-            F = bridge.mesh_triangles(me)
+        if changed:
+            F = np.zeros((0, 3), np.int32) if me is None else bridge.mesh_triangles(me)
     if changed:
         col = _core().Collider(
-            V, np.zeros((0, 3), np.int32) if F is None else F, double_sided=double_sided,
-            matrix=M, offset=offset, drop_degenerate=True, name=name or o.name,
-            deforming=deforming,
+            V, F, double_sided=double_sided, matrix=M, offset=offset, drop_degenerate=True,
+            name=name or o.name, deforming=deforming,
         )
         return ColliderEntry(col, key, double_sided, offset, deforming)
     if not np.array_equal(V, entry.collider.vertices):  # deforming: the core refits
@@ -1092,10 +1091,9 @@ def _evaluate(scene, depsgraph, ob) -> str:
         return _hold(ob, rt, inp, f, reason=f"after the end frame, and frame {end} is not")
 
     if f in rt.memory:
-        out, status, stats = rt.memory.get(f, inp.raw, inp.offsets)
+        out, status, stats = _show_cached(ob, rt, inp, f)
         if rt.hold is None and f == max(rt.memory.frames):
             rt.hold = (f, out, status)
-        _write(ob, inp, out, status, attributes=rt.memory.attributes(f))
         rt.stats = dict(stats, source="cache")
         rt.outdated = False
         set_status(ob, level, msg)
@@ -1151,6 +1149,13 @@ def _finish(ob, rt, inp, res, f, scene, cols):
     return stages.output_stage(ob, res.points, inp.offsets, f, scene, rt.history, cols)
 
 
+def _show_cached(ob, rt, inp, f):
+    """Write memory-cached frame ``f`` to the output; returns (points, status, stats)."""
+    out, status, stats = rt.memory.get(f, inp.raw, inp.offsets)
+    _write(ob, inp, out, status, attributes=rt.memory.attributes(f))
+    return out, status, stats
+
+
 def _hold(ob, rt, inp, f, reason=""):
     """Jump ahead past the cache: hold the newest cached frame, mark outdated."""
     rt.outdated = True
@@ -1159,8 +1164,7 @@ def _hold(ob, rt, inp, f, reason=""):
         _write(ob, inp, rt.hold[1], rt.hold[2])
         held = f"holding frame {k}"
     elif k is not None and k in rt.memory:  # (whatever frame was shown before the jump)
-        out, status, _stats = rt.memory.get(k, inp.raw, inp.offsets)
-        _write(ob, inp, out, status, attributes=rt.memory.attributes(k))
+        out, status, _stats = _show_cached(ob, rt, inp, k)
         rt.hold = (k, out, status)
         held = f"holding frame {k}"
     else:
