@@ -18,7 +18,7 @@ import numpy as np
 
 from . import tolerances as tol
 from .errors import ColliderError
-from .rays import beside, make_backend
+from .rays import beside, make_backend, triangle_rows
 from .rotations import apply, apply_soa, det3, inv_affine, norm_bound
 from .rotations import dot as rot_dot
 
@@ -102,18 +102,10 @@ class Collider:
     name : str
         Used in error messages (e.g. the Blender object's name).
     deforming : bool or None
-        True: the vertices change every frame (skinning, shape keys, cloth),
-        so its BVH is built for speed (Embree's low-quality build, about
-        10 ms instead of 40 ms for 130k triangles on Linux) at 5-15 % slower
-        queries. False: always the standard build (rigid colliders).
-        None (default): decided by use: the standard build until
-        :attr:`vertices` is first set to new values, the fast build from then
-        on. Only the build quality depends on it, never a result's
-        correctness. With True or False the BVH is a function of the vertices
-        and the flag alone; with None it also depends on whether the collider
-        was ever deformed, which could in principle decide a tie between two
-        hits at exactly the same distance differently (pass the flag when a
-        re-run from a fresh Collider must match bit for bit).
+        A hint that the vertices change every frame (skinning, shape keys,
+        cloth). Accepted for compatibility; it changes nothing: the BVH is a
+        function of the vertices (and, with an offset, of the shell) alone,
+        so results never depend on the frames played before.
 
     Raises
     ------
@@ -171,6 +163,7 @@ class Collider:
         self._prefetching = None  # shell key of the last prefetch started
         self.build_count = 0
         self._geometry_cache = None
+        self._rows_cache = {}  # shell layout -> prepared triangles (see _rows)
         self._recenter()
 
     def _recenter(self):
@@ -533,13 +526,6 @@ class Collider:
         q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
         return (self._version, float(f"{offset_wo:.9g}"), q)
 
-    @property
-    def fast_build(self) -> bool:
-        """Whether the next BVH build is Embree's fast one (see ``deforming``)."""
-        if self.deforming is None:
-            return self._version > 0
-        return self.deforming
-
     def _backend(self, offset_wo: float):
         """The ray backend for the shell at ``offset_wo`` (built lazily).
 
@@ -596,11 +582,21 @@ class Collider:
                 blocks_F.append(F + n * len(blocks_F))
             V = np.concatenate(blocks_V)
             F = np.concatenate(blocks_F)
-        backend = make_backend(self._backend_name, V, F, fast_build=self.fast_build)
+        backend = make_backend(self._backend_name, V, F, rows=self._rows(F))
         self.build_count += 1
         self._built = [b for b in self._built if b[0][0] == self._version][-3:]
         self._built.append((key, backend, len(self._F)))
         return backend, len(self._F)
+
+    def _rows(self, F):
+        """:func:`.rays.triangle_rows` of the shell faces ``F`` (a topology
+        property: prepared once per layout, reused by every rebuild)."""
+        if self._backend_name == "numpy":
+            return None
+        key = len(F)  # the layout: 1 or 3 blocks of this collider's faces
+        if key not in self._rows_cache:
+            self._rows_cache[key] = triangle_rows(F)
+        return self._rows_cache[key]
 
     def bounds_world(self, offset_wo: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """World-space axis-aligned bounds (lo, hi), grown by the offset."""

@@ -21,7 +21,6 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from . import embree_native as _native
 from .errors import BackendUnavailable
 
 try:  # embreex wheels exist for linux-x64, windows-x64, macOS 13+ (arm64/x64) only
@@ -98,8 +97,36 @@ def beside(fn, threads: int):
     return _executor(threads).submit(fn).result
 
 
+def triangle_rows(F) -> np.ndarray:
+    """Triangles prepared for a fast :class:`EmbreeBackend` build, (m,) object.
+
+    embreex's ``TriangleMesh`` copies its input into Embree one element at a
+    time with Python indexing (``indices[i][0]``): on an ``(m, 3)`` integer
+    array each ``indices[i]`` makes a new array view, the bulk of the ~50 ms a
+    130k-triangle mesh takes. Handing it a 1-D object array of row tuples
+    instead makes each lookup a plain tuple access (about 3x faster), with
+    exactly the same values. Building the tuples costs about as much as one
+    slow build, so a collider prepares them once per topology and reuses them
+    for every rebuild (deformation).
+
+    Parameters
+    ----------
+    F : (m, 3) array_like of int
+        Triangles.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    rows = np.empty(len(F), dtype=object)
+    rows[:] = list(map(tuple, F.tolist()))
+    return rows
+
+
 class EmbreeBackend:
     """Embree BVH over one triangle mesh (in the mesh's own space).
+
+    Built only through embreex's public API (``EmbreeScene`` +
+    ``TriangleMesh``): never through the Embree library directly, which in a
+    Blender that links its own Embree can be another library than the one
+    that made embreex's device (a crash of the application).
 
     Parameters
     ----------
@@ -107,33 +134,63 @@ class EmbreeBackend:
         Vertices.
     F : (m, 3) array_like of int
         Triangles, ``m >= 1``.
-    fast_build : bool
-        Build a BVH meant to be rebuilt every frame (Embree's low quality,
-        dynamic scene): about 4x faster to build, slightly slower to query.
-        Used only on the zero-copy path (:mod:`.embree_native`).
+    rows : (m,) object ndarray, optional
+        :func:`triangle_rows` of ``F``, prepared once per topology: the fast
+        path (same BVH, same hits; see there).
     """
 
     name = "embree"
 
-    def __init__(self, V, F, fast_build=False):
+    def __init__(self, V, F, rows=None):
         if _EMBREE_ERROR is not None:
             raise BackendUnavailable(embree_error())
-        self.fast_build = bool(fast_build)
         V = np.ascontiguousarray(V, dtype=np.float32)
-        F = np.ascontiguousarray(F, dtype=np.int32)
+        self._scene = _rs.EmbreeScene()
+        if rows is None or len(rows) != len(F) or not self._build_fast(V, F, rows):
+            _mc.TriangleMesh(self._scene, V, np.ascontiguousarray(F, dtype=np.int32))
+        # Commit now (Embree commits lazily on the first query) so that the
+        # threads of a split batch never race to commit the same scene.
+        one = np.zeros((1, 3), np.float32)
+        self._scene.run(one, one + np.float32(1.0), dists=np.ones(1, np.float32))
+
+    def _build_fast(self, V, F, rows) -> bool:
+        """``TriangleMesh`` fed Python objects (see :func:`triangle_rows`).
+
+        The float32 vertices become Python floats, which convert back to the
+        same float32 values. Should an embreex release refuse these inputs,
+        or build something else from them (checked with one ray through the
+        middle of the first and last triangle), the scene is made again from
+        plain arrays: the fast path can cost time, never a result.
+        """
         try:
-            # Zero-copy geometry, same BVH (see embree_native): ~3x faster to build,
-            # which is what a deforming collider pays every frame.
-            self._scene, self._shared = _native.triangle_scene(V, F, fast_build)
-        except _native.NativeUnavailable:
-            self.fast_build = False  # TriangleMesh has one build quality
-            self._shared = None
+            _mc.TriangleMesh(self._scene, V.astype(object), rows)
+        except Exception:  # noqa: BLE001 - a refusal only means: build the slow way
             self._scene = _rs.EmbreeScene()
-            _mc.TriangleMesh(self._scene, V, F)
-            # Commit now (Embree commits lazily on the first query) so that the
-            # threads of a split batch never race to commit the same scene.
-            one = np.zeros((1, 3), np.float32)
-            self._scene.run(one, one + np.float32(1.0), dists=np.ones(1, np.float32))
+            return False
+        if not self._probe(V, F):
+            self._scene = _rs.EmbreeScene()
+            return False
+        return True
+
+    def _probe(self, V, F) -> bool:
+        """Do rays through the centroids of the first and last triangle hit a
+        triangle at the centroid? (non-degenerate ones only)"""
+        F = np.asarray(F)
+        pick = np.unique([0, len(F) - 1])
+        tri = V[F[pick]].astype(np.float64)  # (k, 3, 3)
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        ln = np.linalg.norm(n, axis=1)
+        ok = ln > 0
+        if not ok.any():
+            return True
+        c = tri[ok].mean(axis=1)
+        # a short ray across the plane (nothing else is likely that close)
+        size = 0.05 * np.sqrt(ln[ok])[:, None] * n[ok] / ln[ok][:, None]
+        o = (c + size).astype(np.float32)
+        d = (-2.0 * size).astype(np.float32)
+        r = self._scene.run(o, d, dists=np.ones(len(o), np.float32), query="INTERSECT", output=1)
+        t = np.asarray(r["tfar"], np.float64)
+        return bool(((np.asarray(r["primID"]) >= 0) & (np.abs(t - 0.5) < 0.25)).all())
 
     def _run(self, o, d, tmax):
         return self._scene.run(o, d, dists=tmax, query="INTERSECT")
@@ -254,14 +311,13 @@ class NumpyBackend:
         return self.hit_details(o, d, tmax)[0]
 
 
-def make_backend(name: str | None, V, F, fast_build=False):
+def make_backend(name: str | None, V, F, rows=None):
     """Build the backend called ``name`` ('embree', 'numpy'; None = embree).
 
-    ``fast_build``: a quicker, slightly slower to query BVH for meshes rebuilt
-    every frame (embree only, where the zero-copy path is available).
+    ``rows``: :func:`triangle_rows` of ``F`` (embree only: a faster build).
     """
     if name in (None, "embree"):
-        return EmbreeBackend(V, F, fast_build)
+        return EmbreeBackend(V, F, rows)
     if name == "numpy":
         return NumpyBackend(V, F)
     raise ValueError(f"unknown ray backend {name!r}; use 'embree' or 'numpy'")
