@@ -164,6 +164,7 @@ class Collider:
         self.build_count = 0
         self._geometry_cache = None
         self._rows_cache = {}  # shell layout -> prepared triangles (see _rows)
+        self._derived = {}  # name -> (key, value), see derived()
         self._recenter()
 
     def _recenter(self):
@@ -272,6 +273,28 @@ class Collider:
         self._version += 1
         self._geometry_cache = None
         self._recenter()
+
+    @property
+    def version(self) -> int:
+        """Shape version: 0 at construction, +1 each time :attr:`vertices`
+        changes. Derived data keyed on it stays valid while the collider only
+        moves (see :meth:`derived`)."""
+        return self._version
+
+    def derived(self, name: str, key, build):
+        """Data derived from this collider, cached on it under ``name``.
+
+        Returns the cached value when it was made for ``key`` (hashable, e.g.
+        ``(col.version, ...)``), else ``build()``, which is kept. For callers
+        that index a collider their own way (distance fields, closest-point
+        structures) without reaching into its attributes.
+        """
+        hit = self._derived.get(name)
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        value = build()
+        self._derived[name] = (key, value)
+        return value
 
     @property
     def matrix(self) -> np.ndarray:

@@ -503,16 +503,15 @@ def _collider_index(col):
     M = col.matrix
     M3, t = M[:3, :3], M[:3, 3]
     s = _similarity(M3)
-    key = (col._version, id(col._V), None if s is not None else M.tobytes())
-    cached = getattr(col, "_distance_index", None)
-    if cached is not None and cached[0] == key:
-        index = cached[1]
-    else:
+    key = (col.version, None if s is not None else M.tobytes())
+
+    def build():
         V = col.vertices.astype(np.float64)
         if s is None:
             V = V @ M3.T + t
-        index = _MeshIndex(V, col.faces.astype(np.int64))
-        col._distance_index = (key, index)
+        return _MeshIndex(V, col.faces.astype(np.int64))
+
+    index = col.derived("distance_index", key, build)
     if s is None:
         return index, np.eye(3), np.zeros(3), 1.0
     return index, M3, t, s
