@@ -41,53 +41,256 @@ def solve(ctx, idx, status):
     # One batch for the rotated curves (items 0..len(act)-1) and the new
     # colliding ones, so that every search below is one ray query per round.
     batch = RigidBatch(ctx, np.concatenate([act, cn]))
-    # 2. Rotated curves near a collider: their recovery step is tested first
-    #    (one ray query); only those it would make collide are tested at their
-    #    current angle, to tell a blocked recovery from a new collision.
     th0 = angle[act].copy()
     th1 = recovery_step(ctx, act)
-    moving = th1 < th0
-    hit_step = batch.hits(np.arange(len(act)), np.where(moving, th1, th0))
-    hit_act = hit_step & ~moving  # colliding at the current angle
-    again = np.flatnonzero(moving & hit_step)
-    hit_act[again] = batch.hits(again, th0[again])
-    blocked = moving & hit_step & ~hit_act
-
-    # 3. Collision: the smallest clearing angle above the current one.
-    cc = act[hit_act]
-    if len(cc):  # first probe: lift the current shape above the tangent plane
-        o, d, _, rep, starts = ctx.deform(cc, angle=angle[cc], axis=ctx.axis[cc])
-        k, point, push = ctx.first_hit_details(cc, o, d, rep, starts)
-        g = ctx._plane_guess(cc, o + d, rep, starts, point, push, ctx.axis[cc])
-        ctx.guess[cc] = np.where(k >= 0, g, ctx.guess[cc])
-    colliding = np.concatenate([np.flatnonzero(hit_act), len(act) + np.arange(len(cn))])
-    # 4. Recovery toward the (plasticity) target, stopping before contact:
-    #    blocked steps are bisected in the same search rounds as the collisions.
-    items = np.flatnonzero(~hit_act)
-    b = np.flatnonzero(blocked[items])
-    p = ctx.prec
-    lo_th, hi_th = th1[items[b]], th0[items[b]]
-    K = np.maximum(np.ceil((hi_th - lo_th) / p - 1e-9), 1).astype(np.int64)
-    k_rec = collide(ctx, batch, colliding, status, (items[b], lo_th, hi_th, K))
-    recover(ctx, act[items], th0[items], th1[items], b, k_rec, status)
+    plan = Plan(ctx, act, th0, th1)
+    if ctx.warm_start:
+        plan.first_round_warm(batch)
+    else:
+        plan.first_round_full(batch)
+    # 2. Collisions without a bracket yet: a first probe that lifts the
+    #    current shape above the tangent plane at the first hit.
+    cc = plan.collisions_to_guess()
+    if len(cc):
+        c = act[cc]
+        o, d, _, rep, starts = ctx.deform(c, angle=angle[c], axis=ctx.axis[c])
+        k, point, push = ctx.first_hit_details(c, o, d, rep, starts)
+        g = ctx._plane_guess(c, o + d, rep, starts, point, push, ctx.axis[c])
+        ctx.guess[c] = np.where(k >= 0, g, ctx.guess[c])
+    # 3. Every search left, collisions (new and old) and blocked recoveries,
+    #    in the same rounds (one ray query per round).
+    col_items, col_lo, col_hi, col_stride, col_guess = plan.collision_searches()
+    n_act = len(act)
+    items = np.concatenate([col_items, n_act + np.arange(len(cn))])
+    lo = np.concatenate([col_lo, np.zeros(len(cn), np.int64)])
+    hi = np.concatenate([col_hi, np.full(len(cn), -1, np.int64)])
+    stride = np.concatenate([col_stride, np.ones(len(cn), np.int64)])
+    guess = np.concatenate([col_guess, np.ones(len(cn), bool)])
+    k_col, k_rec = search_angles(ctx, batch, items, angle[batch.curves[items]], lo, hi, stride,
+                                 guess, plan.recovery_searches())
+    plan.recovery_found(k_rec)
+    resolve_collisions(ctx, batch, items, k_col, status)
+    rec = plan.recovered_items()
+    recover(ctx, act[rec], th0[rec], plan.recovered_angle(rec), plan.blocked(rec), status)
     rec = far[ctx.active[far]]  # far from every collider: nothing to check
-    recover(ctx, rec, angle[rec].copy(), recovery_step(ctx, rec), None, None, status)
+    th_far = angle[rec].copy()
+    recover(ctx, rec, th_far, recovery_step(ctx, rec), np.zeros(len(rec), bool), status)
     release(ctx, idx)
 
 
-def collide(ctx, batch, items, status, bisect=None):
-    """Resolve colliding curves ``batch.curves[items]`` (paper 3.2.1).
+class Plan:
+    """Where each rotated curve near a collider stands during a step.
 
-    ``bisect`` (batch items, low angle, high angle, steps): recovery steps to
-    bisect in the same search rounds (see :func:`search_angles`); their
-    results are returned.
+    Every curve ends in one of two regimes (paper 3.2.1, 3.2.3):
+
+    * collision: blocked at its current angle ``th0``; it turns further, to
+      the smallest clearing angle ``th0 + k p`` (``k >= 1``);
+    * recovery: clear at ``th0``; it turns back to the recovery step ``th1``
+      or, where that step collides, to the smallest clearing angle
+      ``min(th1 + k p, th0)`` (``0 <= k <= K``): recovery stops before
+      contact.
+
+    A search keeps per curve a known blocked step ``lo`` and a known
+    clearing step ``hi`` (-1: none yet) on its regime's grid; the answer is
+    the clearing step right above a blocked one (the first clearing step
+    wherever clearance is monotone in the angle).
+
+    The first round (:meth:`first_round_warm`) uses each curve's memory of
+    the last step (``Solver`` state ``contact``, ``delta``): a curve in
+    contact probes where last step's answer and change put it now, plus the
+    step below, so a lasting contact is confirmed in one round of two or
+    three probes instead of searched for from its current angle. The full
+    search (:meth:`first_round_full`, ``Solver.warm_start = False``) probes
+    the recovery step, then the current angle, as the reference.
     """
+
+    def __init__(self, ctx, act, th0, th1):
+        self.ctx, self.act, self.th0, self.th1 = ctx, act, th0, th1
+        p = ctx.prec
+        n = len(act)
+        self.moving = th1 < th0
+        # recovery grid th1 + k p, k in [0, K] (K: th0 itself, the cap)
+        self.K = np.where(
+            self.moving, np.maximum(np.ceil((th0 - th1) / p - 1e-9), 1), 0
+        ).astype(np.int64)
+        # collision grid th0 + k p, k in [1, kmax]
+        self.kmax = np.maximum(np.ceil((ctx.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
+        # per curve: regime (0 unknown, 1 collision, 2 recovery) and bracket
+        self.regime = np.zeros(n, np.int8)
+        self.lo = np.full(n, -1, np.int64)
+        self.hi = np.full(n, -1, np.int64)
+        self.stride = np.ones(n, np.int64)
+        self.k = np.full(n, -2, np.int64)  # recovery answers (-2: not a recovery)
+
+    # ---------------------------------------------------------- probing
+    def _theta(self, i, k, collision):
+        """Angle of step ``k`` of curves ``i`` on the collision or recovery grid."""
+        if collision:
+            return np.minimum(self.th0[i] + k * self.ctx.prec, self.ctx.max_angle)
+        return np.minimum(self.th1[i] + k * self.ctx.prec, self.th0[i])
+
+    def _probe(self, batch, probes):
+        """One ray query for ``probes``: a list of (curves i, steps k, collision
+        grid?) groups. Returns the clear flags, one array per group."""
+        items = [i for i, _, _ in probes]
+        theta = [self._theta(i, k, c) for i, k, c in probes]
+        clear = ~batch.hits(np.concatenate(items), np.concatenate(theta)) if items else []
+        out, a = [], 0
+        for i in items:
+            out.append(clear[a:a + len(i)])
+            a += len(i)
+        return out
+
+    def _regime_test(self, batch, i, lo_rec):
+        """Probe ``th0`` of curves ``i`` (recovery step ``lo_rec`` known blocked):
+        clear starts a recovery search, blocked a collision search."""
+        if len(i) == 0:
+            return
+        (clear,) = self._probe(batch, [(i, np.zeros(len(i), np.int64), True)])
+        r, c = i[clear], i[~clear]
+        self.regime[r] = 2
+        self.lo[r], self.hi[r] = lo_rec[clear], self.K[r]
+        self.regime[c] = 1
+        self.lo[c] = 0
+
+    def first_round_full(self, batch):
+        """Reference search: the recovery step, then (if it is blocked) the
+        current angle, then a collision or recovery search."""
+        n = len(self.act)
+        i = np.arange(n)
+        k = np.where(self.moving, 0, self.K)
+        # step 0 of the recovery grid is th1 (or th0 when not moving)
+        (clear,) = self._probe(batch, [(i, k, False)])
+        r = i[clear]
+        self.regime[r] = 2
+        self.k[r] = k[clear]  # clear at the recovery step: recovered
+        self.lo[r], self.hi[r] = k[clear] - 1, k[clear]
+        b = i[~clear]
+        m = self.moving[b]
+        self._regime_test(batch, b[m], np.zeros(int(m.sum()), np.int64))
+        c = b[~m]  # not moving and blocked at th0: a collision
+        self.regime[c] = 1
+        self.lo[c] = 0
+
+    def first_round_warm(self, batch):
+        """First round from the curves' memory (see the class docstring)."""
+        ctx, p = self.ctx, self.ctx.prec
+        sv = ctx.sv_
+        n = len(self.act)
+        i = np.arange(n)
+        contact = sv._contact[self.act]
+        delta = sv._delta[self.act]
+        # a contact that was turning further: it likely turns as much again
+        pred_col = contact & (delta > 0) & (self.kmax >= 1)
+        kc = np.clip(np.rint(delta / p), 1, np.maximum(self.kmax, 1)).astype(np.int64)
+        # a contact that held or gave way: the same change on the recovery grid
+        pred_rec = contact & ~pred_col & self.moving
+        kr = np.clip(np.ceil((self.th0 + np.minimum(delta, 0) - self.th1) / p - 1e-9),
+                     0, self.K).astype(np.int64)
+        rest = ~pred_col & ~pred_rec
+        ic, ir, io = i[pred_col], i[pred_rec], i[rest]
+        kc, kr = kc[pred_col], kr[pred_rec]
+        ko = np.where(self.moving[io], 0, self.K[io])  # as the full search
+        kc2 = np.maximum(kc - 1, 0)
+        two = kc > 1  # (kc - 1 == 0 is th0 itself)
+        kr1 = kr >= 1
+        clear = self._probe(batch, [
+            (io, ko, False),
+            (ic, np.zeros(len(ic), np.int64), True),
+            (ic[two], kc2[two], True),
+            (ic, kc, True),
+            (ir, kr, False),
+            (ir[kr1], kr[kr1] - 1, False),
+        ])
+        c_o, c_c0, c_c2, c_c, c_r, c_r1 = clear
+        # the rest: as the full search
+        r = io[c_o]
+        self.regime[r] = 2
+        self.k[r] = ko[c_o]
+        self.lo[r], self.hi[r] = ko[c_o] - 1, ko[c_o]
+        b = io[~c_o]
+        m = self.moving[b]
+        pend_i, pend_lo = [b[m]], [np.zeros(int(m.sum()), np.int64)]
+        c = b[~m]
+        self.regime[c] = 1
+        self.lo[c] = 0
+        # predicted collisions
+        rec = ic[c_c0]  # clear at th0 after all: a recovery, th0 clear
+        self.regime[rec] = 2
+        self.lo[rec], self.hi[rec] = -1, self.K[rec]
+        blk = ~c_c0
+        col = ic[blk]
+        self.regime[col] = 1
+        lo = np.zeros(len(ic), np.int64)
+        hi = np.full(len(ic), -1, np.int64)
+        mid = np.full(len(ic), True)  # kc - 1 clear (or untested)
+        mid[np.flatnonzero(two)] = c_c2
+        lo = np.where(two & ~mid, kc2, lo)
+        hi = np.where(c_c, kc, hi)
+        hi = np.where(two & mid, kc2, hi)
+        self.lo[col], self.hi[col] = lo[blk], hi[blk]
+        self.stride[col] = np.maximum(kc[blk] // 2, 1)
+        # predicted recoveries (th0 is clear wherever step kr is)
+        ok = c_r.copy()
+        below = np.full(len(ir), False)  # step kr - 1 clear
+        below[np.flatnonzero(kr1)] = c_r1
+        r = ir[ok]
+        self.regime[r] = 2
+        self.hi[r] = kr[ok]
+        self.lo[r] = np.where(below[ok], -1, kr[ok] - 1)
+        self.hi[r] = np.where(below[ok], kr[ok] - 1, kr[ok])
+        nb = ~ok  # blocked at step kr: th0 decides the regime
+        full = nb & (kr == self.K[ir])  # step K is th0: a collision
+        c = ir[full]
+        self.regime[c] = 1
+        self.lo[c] = 0
+        pend_i.append(ir[nb & ~full])
+        pend_lo.append(kr[nb & ~full])
+        self._regime_test(batch, np.concatenate(pend_i), np.concatenate(pend_lo))
+        # a recovery whose bracket is closed is found
+        done = (self.regime == 2) & (self.k == -2) & (self.hi >= 0) & (self.hi - self.lo <= 1)
+        self.k[done] = self.hi[done]
+
+    # --------------------------------------------------------- searches
+    def collisions_to_guess(self):
+        """Collisions with nothing known above ``th0``: they get the tangent-plane guess."""
+        return np.flatnonzero((self.regime == 1) & (self.hi < 0) & (self.lo == 0)
+                              & (self.stride == 1))
+
+    def collision_searches(self):
+        """(items, lo, hi, stride, use the guess) of the collision searches."""
+        c = np.flatnonzero(self.regime == 1)
+        guess = (self.hi[c] < 0) & (self.lo[c] == 0) & (self.stride[c] == 1)
+        return c, self.lo[c], self.hi[c], self.stride[c], guess
+
+    def recovery_searches(self):
+        """(items, base th1, cap th0, K, lo, hi) of the recoveries still searched."""
+        r = np.flatnonzero((self.regime == 2) & (self.k == -2))
+        self._searched = r
+        return r, self.th1[r], self.th0[r], self.K[r], self.lo[r], self.hi[r]
+
+    def recovery_found(self, k):
+        self.k[self._searched] = k
+
+    def recovered_items(self):
+        return np.flatnonzero(self.regime == 2)
+
+    def recovered_angle(self, r):
+        return self._theta(r, self.k[r], False)
+
+    def blocked(self, r):
+        """Recoveries stopped before contact (answer above the recovery step)."""
+        return (self.k[r] > 0) & self.moving[r]
+
+
+def resolve_collisions(ctx, batch, items, k, status):
+    """Apply the collision searches' answers ``k`` to ``batch.curves[items]``
+    (paper 3.2.1), with Bend's fall back to Stiff and the unresolved fallback."""
     p, angle = ctx.prec, ctx.angle
     c = batch.curves[items]
-    th0 = angle[c]
-    k, k_rec = search_angles(ctx, batch, items, th0, ctx.guess[c], bisect)
     if len(items) == 0:
-        return k_rec
+        return
+    th0 = angle[c].copy()
     if ctx.s.mode == "bend":
         # Bending turns the root segment by only 1/n of the angle: curves
         # hit near the root that bending cannot clear turn at the root (as
@@ -96,12 +299,17 @@ def collide(ctx, batch, items, status, bisect=None):
         if len(retry):
             cr = c[retry]
             ctx.sv_._stiff[cr] = True
+            ctx.restyled[cr] = True
             # seed: the Stiff estimate, plus about the mean bend already taken
             seed = ctx.guess_stiff[cr] + 0.5 * th0[retry]
+            n = len(cr)
             k2, _ = search_angles(
-                ctx, RigidBatch(ctx, cr), np.arange(len(cr)), np.zeros(len(cr)), seed
+                ctx, RigidBatch(ctx, cr), np.arange(n), np.zeros(n),
+                np.zeros(n, np.int64), np.full(n, -1, np.int64), np.ones(n, np.int64),
+                np.ones(n, bool), guess=seed,
             )
             ctx.sv_._stiff[cr[k2 < 0]] = False
+            ctx.restyled[cr[k2 < 0]] = False
             ok2 = k2 >= 0
             k[retry[ok2]] = k2[ok2]
             th0[retry[ok2]] = 0.0
@@ -116,7 +324,6 @@ def collide(ctx, batch, items, status, bisect=None):
     angle[bad] = th0[~ok]
     fresh = bad[ctx.sv_._angle[bad] == 0]
     ctx.active[fresh] = ctx.sv_._active[fresh]
-    return k_rec
 
 
 def recovery_step(ctx, rec):
@@ -137,69 +344,64 @@ def recovery_step(ctx, rec):
     return np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
 
 
-def recover(ctx, rec, th0, th1, b, k, status):
-    """Turn clear curves ``rec`` from ``th0`` to their recovery step ``th1``.
-
-    Where the step would collide (``rec[b]``) the largest safe step, ``k``
-    precision steps above ``th1`` (bisected by :func:`collide`), is taken
-    instead: recovery stops where the curve would collide again.
-    """
+def recover(ctx, rec, th0, th1, blocked, status):
+    """Turn clear curves ``rec`` from ``th0`` to ``th1`` (their recovery step,
+    or where that step collides, ``blocked``, the smallest clearing angle
+    above it found by the search: recovery stops before contact)."""
     if len(rec) == 0:
         return
-    p = ctx.prec
-    th1 = th1.copy()
-    if b is None:
-        b = np.zeros(0, np.int64)
-    if len(b):
-        th1[b] = np.minimum(th1[b] + k * p, th0[b])
     ctx.angle[rec] = th1
     # Back at exactly the input shape counts as FREE, not RECOVERING.
     st = np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE)
-    if len(b):
-        st[b] = Status.COLLIDING
+    st[blocked] = Status.COLLIDING
     status[rec] = np.maximum(status[rec], st)
 
 
-def search_angles(ctx, batch, items, th0, guess=None, bisect=None):
+def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None, guess=None):
     """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
 
-    ``guess`` (radians, per item) is an estimate of the increment (the
-    tangent-plane estimate of :meth:`StepContext._plane_guess`): the first
-    round probes 0.8, 1, 1.25 and 1.6 times it, and the search continues
-    from the bracket that gives (bisection) or from its top (gallop).
+    Steps ``k`` count from ``th0`` (angle ``min(th0 + k p, max_angle)``);
+    ``lo`` is a known blocked step, ``hi`` a known clearing one (-1: none
+    yet), ``stride`` the first gallop stride. Items with ``use_guess`` (and
+    nothing known) start from an estimate of the increment, ``guess``
+    (default ``ctx.guess`` of the curves: the tangent-plane estimate of
+    :meth:`StepContext._plane_guess`): one round probes 0.8, 1, 1.25 and 1.6
+    times it, and the search continues from the bracket that gives
+    (bisection) or from its top (gallop).
 
-    ``bisect`` (items ``bi``, angles ``lo``, ``hi``, steps ``K``): largest
-    clear angle ``min(lo + k p, hi)``, ``k`` in ``[0, K]``, of
-    ``batch.curves[bi]`` (``lo`` colliding, ``hi`` clear): a bisection run
-    in the same rounds (one ray query per round for both).
+    ``bisect`` (items ``bi``, base ``lo_th``, cap ``hi_th``, ``K``, ``lo``,
+    ``hi``): recovery searches for the smallest clearing ``min(lo_th + k p,
+    hi_th)``, ``k`` in ``(lo, K]``, of ``batch.curves[bi]``, run in the same
+    rounds (one ray query per round for both).
 
     Returns
     -------
     k : (n,) int
-        Steps ``k`` (angle ``min(th0 + k p, max_angle)``), -1 where no
-        angle up to ``max_angle`` clears the curve.
+        Steps of the collision searches, -1 where no angle up to
+        ``max_angle`` clears the curve.
     k_bisect : (m,) int
-        The bisected steps (empty without ``bisect``).
+        The recovery searches' steps (empty without ``bisect``).
     """
     p = ctx.prec
     n = len(items)
     kmax = np.maximum(np.ceil((ctx.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
     base, cap = th0, np.full(n, ctx.max_angle)
+    lo = lo.copy()
+    hi = hi.copy()
+    stride = stride.copy()
 
     def test(it, ks):
         return ~batch.hits(all_items[it], np.minimum(base[it] + ks * p, cap[it]))
 
     all_items = items
-    lo = np.zeros(n, np.int64)
-    hi = np.full(n, -1, np.int64)
-    stride = None
-    if guess is not None and n:
+    it = np.flatnonzero(use_guess & (kmax >= 1))
+    if len(it):
         # One round of probes spread around the guess; it leaves a bracket
         # to bisect, or a floor to gallop on from with a guess-sized stride.
-        kg = np.clip(np.rint(guess / p).astype(np.int64), 1, np.maximum(kmax, 1))
-        it = np.flatnonzero(kmax >= 1)
+        g = ctx.guess[batch.curves[items[it]]] if guess is None else guess[it]
+        kg = np.clip(np.rint(g / p).astype(np.int64), 1, kmax[it])
         spread = np.array([0.8, 1.0, 1.25, 1.6])
-        probes = np.clip(np.rint(kg[it][:, None] * spread).astype(np.int64), 1, kmax[it][:, None])
+        probes = np.clip(np.rint(kg[:, None] * spread).astype(np.int64), 1, kmax[it][:, None])
         probes = np.maximum.accumulate(probes, axis=1)
         good = test(np.repeat(it, len(spread)), probes.ravel()).reshape(probes.shape)
         anyg = good.any(axis=1)
@@ -208,20 +410,20 @@ def search_angles(ctx, batch, items, th0, guess=None, bisect=None):
         hi[it[anyg]] = probes[rows, first][anyg]
         lo[it[anyg]] = np.where(first > 0, probes[rows, np.maximum(first - 1, 0)], 0)[anyg]
         lo[it[~anyg]] = probes[~anyg, -1]
-        stride = np.maximum(kg // 2, 1)
+        stride[it] = np.maximum(kg // 2, 1)
+    m = 0
     if bisect is not None and len(bisect[0]):
-        bi, lo_th, hi_th, K = bisect
+        bi, lo_th, hi_th, K, blo, bhi = bisect
         m = len(bi)
         all_items = np.concatenate([items, bi])
         base = np.concatenate([th0, lo_th])
         cap = np.concatenate([cap, hi_th])
         kmax = np.concatenate([kmax, K])
-        lo = np.concatenate([lo, np.zeros(m, np.int64)])
-        hi = np.concatenate([hi, K])
-        stride = np.concatenate([np.ones(n, np.int64) if stride is None else stride,
-                                 np.ones(m, np.int64)])
+        lo = np.concatenate([lo, blo])
+        hi = np.concatenate([hi, bhi])
+        stride = np.concatenate([stride, np.ones(m, np.int64)])
     k = gallop_bisect(len(all_items), test, kmax, lo=lo, hi=hi, stride=stride, width=_WIDTH)
-    return k[:n], k[n:]
+    return k[:n], k[n:n + m]
 
 
 def release(ctx, idx):

@@ -127,6 +127,11 @@ class Solver:
         self._stiff = np.zeros(C, bool)  # Bend curves solved as Stiff (bending could not clear)
         self._quat = np.tile([1.0, 0.0, 0.0, 0.0], (S, 1))  # soft, local frame
         self._quat_max = self._quat.copy()
+        # Memory of the last step (Stiff/Bend), where its search starts next
+        # step (see rigid.Plan): in contact (COLLIDING), and by how much the
+        # angle changed.
+        self._contact = np.zeros(C, bool)
+        self._delta = np.zeros(C)
 
     _STATE_KEYS = {
         "angle": ("C",),
@@ -139,9 +144,20 @@ class Solver:
         "stiff": ("C",),
         "quat": ("S", 4),
         "quat_max": ("S", 4),
+        "contact": ("C",),
+        "delta": ("C",),
         "meta": (4,),
     }
     _SOFT_KEYS = ("quat", "quat_max")  # only Soft mode carries per-segment rotations
+    #: Keys a snapshot may lack (made before they existed): restored as a fresh
+    #: state has them. They only steer where the next search starts.
+    _OPTIONAL_KEYS = ("contact", "delta")
+
+    #: Stiff/Bend: start each step's angle search from the curves' memory of
+    #: the last step (rigid.Plan). False: the full search from the current
+    #: angle (the reference the warm start is tested against). Either gives
+    #: the same angles wherever clearance is monotone in the angle.
+    warm_start = True
 
     def _state_keys(self):
         soft = self._settings.mode == "soft"
@@ -166,6 +182,8 @@ class Solver:
             "hold": self._hold.copy(),
             "pinched": self._pinched.copy(),
             "stiff": self._stiff.copy(),
+            "contact": self._contact.copy(),
+            "delta": self._delta.copy(),
             "quat": self._quat.copy() if mode == 2 else None,
             "quat_max": self._quat_max.copy() if mode == 2 else None,
             "meta": np.array([_STATE_VERSION, self.n_curves, self.n_points, mode], np.int64),
@@ -192,12 +210,14 @@ class Solver:
         if int(meta[3]) != ("stiff", "bend", "soft").index(self._settings.mode):
             raise InputError("state was saved with another mode")
         keys = self._state_keys()
-        missing = set(keys) - set(s.keys())
+        missing = set(keys) - set(s.keys()) - set(self._OPTIONAL_KEYS)
         if missing:
             raise InputError(f"state is missing {sorted(missing)}")
         dims = {"C": self.n_curves, "S": len(self._seg_start)}
         arrs = {}
         for k, shape in keys.items():
+            if k not in s.keys():
+                continue
             a = np.asarray(s[k])
             want = tuple(dims.get(d, d) for d in shape)
             if a.shape != want:
@@ -215,6 +235,10 @@ class Solver:
         self._hold = arrs["hold"].astype(bool).copy()
         self._pinched = arrs["pinched"].astype(bool).copy()
         self._stiff = arrs["stiff"].astype(bool).copy()
+        self._contact = arrs["contact"].astype(bool).copy() if "contact" in arrs else (
+            np.zeros(self.n_curves, bool))
+        self._delta = arrs["delta"].astype(np.float64).copy() if "delta" in arrs else (
+            np.zeros(self.n_curves))
         if "quat" in keys:
             self._quat = arrs["quat"].astype(np.float64).copy()
             self._quat_max = arrs["quat_max"].astype(np.float64).copy()
@@ -364,6 +388,7 @@ class Solver:
         idx = np.flatnonzero(solve)
         if len(idx):
             ctx.solve(idx, status)
+        ctx.remember(status, enabled)
         timings["solve"] = (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()

@@ -17,6 +17,7 @@ from . import tolerances as tol
 from .errors import InputError
 from .rays import default_threads
 from .soft import SoftSolve
+from .status import Status
 
 
 class StepContext:
@@ -116,6 +117,7 @@ class StepContext:
         else:
             self.cand_any = np.zeros(solver.n_curves, bool)
         self.soft = s.mode == "soft"
+        self.warm_start = bool(solver.warm_start) and not self.soft
 
     def _candidates(self, c, off, rootsT):
         """Candidate curves of collider ``c`` (appended to ``self.cand``)."""
@@ -181,6 +183,7 @@ class StepContext:
             self.quat = sv._quat.copy()
             self.quat_max = sv._quat_max.copy()
         self.active = sv._active.copy()
+        self.restyled = np.zeros(sv.n_curves, bool)  # Bend curves switched to Stiff
         idx = np.flatnonzero(self.active)
         self.B = np.zeros((sv.n_curves, 3, 3))  # this step's frames (rows in use only)
         self.ref = None
@@ -260,8 +263,19 @@ class StepContext:
         out += e2 * a[:, 2]
         return out.T
 
+    def remember(self, status, enabled):
+        """The memory the next step's search starts from (``Solver`` state
+        ``contact``, ``delta``): curves COLLIDING now, and their angle change.
+        Disabled curves keep theirs (as their whole local state)."""
+        sv = self.sv_
+        contact = status == Status.COLLIDING
+        delta = np.where(contact & ~self.restyled, self.angle - sv._angle, 0.0)
+        self.contact_next = np.where(enabled, contact, sv._contact)
+        self.delta_next = np.where(enabled, delta, sv._delta)
+
     def store_state(self):
         sv = self.sv_
+        sv._contact, sv._delta = self.contact_next, self.delta_next
         idx = np.flatnonzero(self.active)
         frame = sv._frame  # the transported references (see rot.curve_frames)
         old = np.flatnonzero(sv._active)
