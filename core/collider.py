@@ -12,6 +12,7 @@ Naming: ``_wo`` is world space, ``_lo`` the collider's local space.
 from __future__ import annotations
 
 import threading
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
@@ -71,6 +72,18 @@ def _as_matrix(M) -> tuple[np.ndarray, np.ndarray]:
     if not abs(det) > 1e-12 * max(scale, 1e-30) ** 3:
         raise ColliderError("collider matrix is singular (zero scale on some axis)")
     return M, inv_affine(M)
+
+
+@dataclass(frozen=True)
+class ShellFaces:
+    """Which face of the collider each triangle of a built shell is.
+
+    ``real`` (k,) int: the collider face; ``flip`` (k,) bool: the triangle
+    faces the other way (the inner shell of an open or double-sided mesh).
+    """
+
+    real: np.ndarray
+    flip: np.ndarray
 
 
 class Collider:
@@ -155,7 +168,7 @@ class Collider:
         self._M, self._Minv = _as_matrix(matrix)
         self._version = 0
         self._normals_cache = (None, 0, None)  # see _face_normals
-        self._built = []  # [(key, backend, n_front_faces)], see _backend
+        self._built = []  # [(key, backend, ShellFaces)], see _backend
         # Builds may run on a ray thread (see prefetch): one lock for the BVHs,
         # one for the occupancy grid (built by whichever thread needs it first).
         self._build_lock = threading.Lock()
@@ -575,48 +588,115 @@ class Collider:
         if threads <= 1 or self.empty:
             return None
         key = self._shell_key(offset_wo)
-        if key == self._prefetching or any(k == key for k, _, _ in self._built):
+        if key == self._prefetching or any(b[0] == key for b in self._built):
             return None
         self._prefetching = key
         return beside(partial(self._backend, offset_wo), threads)
 
     def _backend_locked(self, offset_wo: float):
         key = self._shell_key(offset_wo)
-        for k, be, nf in self._built:
+        for k, be, faces in self._built:
             if k == key:
-                return be, nf
+                return be, faces
         V = self._V.astype(np.float64) - self._center
         F = self._F
+        m, n = len(F), len(self._V)
+        # Every shell keeps the clearance margin (see margin), plus the
+        # Collision Offset when there is one.
+        disp = self.margin * self._margin_directions()
         if offset_wo > 0:
-            # Face blocks, m faces each: [outer shell, (inner shell,) surface].
-            # A closed single-sided solid is only kept at a distance from
-            # outside (inside is a pinch). Anything else (open sheets,
-            # double-sided meshes) gets shells at +-offset, the inner one
-            # facing inward, and keeps its real surface too, so a curve
-            # slipping in between the shells from a rim still collides.
-            disp = offset_wo * self._offset_directions()
-            n = len(self._V)
-            blocks_V = [V + disp]
-            blocks_F = [F]
-            if self.double_sided or not self.closed:
-                blocks_V.append(V - disp)
-                blocks_F.append(F[:, ::-1] + n)
-                blocks_V.append(V)
-                blocks_F.append(F + n * len(blocks_F))
-            V = np.concatenate(blocks_V)
-            F = np.concatenate(blocks_F)
+            disp = disp + offset_wo * self._offset_directions()
+        # Face blocks: [outer shell, (inner shell, surface)]. A closed
+        # single-sided solid is only kept at a distance from outside (inside
+        # is a pinch). Anything else (open sheets, double-sided meshes) gets
+        # shells on both sides, the inner one facing inward, and keeps its
+        # real surface too, so a curve slipping in between the shells from a
+        # rim still collides: all of it with an offset, its rim faces only
+        # for the bare margin (a curve can only slip in within it of a rim).
+        blocks_V, blocks_F = [V + disp], [F]
+        real, flip = [np.arange(m)], [np.zeros(m, bool)]
+        if self.double_sided or not self.closed:
+            keep = np.arange(m) if offset_wo > 0 else self._rim_faces()
+            blocks_V += [V - disp, V]
+            blocks_F += [F[:, ::-1] + n, F[keep] + 2 * n]
+            real += [np.arange(m), keep]
+            flip += [np.ones(m, bool), np.zeros(len(keep), bool)]
+        V = np.concatenate(blocks_V)
+        F = np.concatenate(blocks_F)
+        faces = ShellFaces(np.concatenate(real), np.concatenate(flip))
         backend = make_backend(self._backend_name, V, F, rows=self._rows(F))
         self.build_count += 1
         self._built = [b for b in self._built if b[0][0] == self._version][-3:]
-        self._built.append((key, backend, len(self._F)))
-        return backend, len(self._F)
+        self._built.append((key, backend, faces))
+        return backend, faces
+
+    @property
+    def margin(self) -> float:
+        """The clearance margin, in the collider's own units: every shell the
+        curves are tested against lies this far out along the vertex
+        normals, even with no Collision Offset.
+
+        ``tol.CLEARANCE_ULPS`` float32 ulps of the collider's own coordinates
+        (the largest of its size and its vertices' distance from its origin,
+        rounded up to a power of two). A function of the vertices alone:
+        moving, turning or scaling a collider never changes it, so its BVH
+        is never rebuilt for motion.
+
+        Embree tests in float32 and a curve's output is rounded to float32:
+        without a margin a segment passing within rounding distance of a
+        sharp edge can be clear for the solver and crossing for another
+        (float64, or differently rounded) test of the same output.
+        """
+        lo, hi = self._geometry()
+        r = max(float(np.abs(lo).max()), float(np.abs(hi).max()), float(np.linalg.norm(hi - lo)))
+        r = 2.0 ** np.ceil(np.log2(max(r, 1e-30)))
+        return tol.CLEARANCE_ULPS * float(np.finfo(np.float32).eps) * float(r)
+
+    def _margin_directions(self):
+        """Unit area-weighted vertex normals, local space, (n, 3) (cached per
+        vertices): where the clearance margin moves each vertex.
+
+        Cheaper than :meth:`_offset_directions` (a deforming collider pays
+        it every frame): every face moves out by the margin times the cosine
+        between its normal and its vertices' normals, a positive fraction of
+        it wherever faces meet at less than 180 degrees.
+        """
+        if getattr(self, "_margin_key", None) == self._version:
+            return self._margin_dirs
+        V = self._V.astype(np.float64)
+        F = self._F
+        a, b, c = (V.take(F[:, k], axis=0) for k in range(3))
+        b -= a
+        c -= a
+        fa = np.cross(b, c)  # area-weighted face normals
+        corner = F.T.ravel()
+        n = len(self._V)
+        vn = np.empty((n, 3))
+        for i in range(3):
+            vn[:, i] = np.bincount(corner, weights=np.tile(fa[:, i], 3), minlength=n)
+        lv = np.linalg.norm(vn, axis=1, keepdims=True)
+        self._margin_dirs = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
+        self._margin_key = self._version
+        return self._margin_dirs
+
+    def _rim_faces(self):
+        """Faces with an edge no other face shares (an open mesh's rims;
+        topology only, cached)."""
+        if getattr(self, "_rim_cache", None) is None:
+            F = self._F.astype(np.int64)
+            e = np.sort(np.concatenate([F[:, [k, (k + 1) % 3]] for k in range(3)]), axis=1)
+            key = e[:, 0] * len(self._V) + e[:, 1]
+            _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+            once = (cnt[inv] == 1).reshape(3, -1).any(axis=0)
+            self._rim_cache = np.flatnonzero(once)
+        return self._rim_cache
 
     def _rows(self, F):
         """:func:`.rays.triangle_rows` of the shell faces ``F`` (a topology
         property: prepared once per layout, reused by every rebuild)."""
         if self._backend_name == "numpy":
             return None
-        key = len(F)  # the layout: 1 or 3 blocks of this collider's faces
+        key = len(F)  # the layout: 1 to 3 blocks of this collider's faces
         if key not in self._rows_cache:
             self._rows_cache[key] = triangle_rows(F)
         return self._rows_cache[key]
@@ -628,17 +708,20 @@ class Collider:
             [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
         )
         c_wo = apply(self._M[:3, :3], corners) + self._M[:3, 3]
-        # shell vertices move up to OFFSET_MAX_STRETCH times the offset
-        pad = offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 + 1e-6 * (float(np.abs(c_wo).max()) + 1.0)
+        # shell vertices move up to OFFSET_MAX_STRETCH times the offset, and
+        # out by the clearance margin
+        pad = (offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 + 1e-6 * (float(np.abs(c_wo).max()) + 1.0)
+               + 2.0 * self.margin * norm_bound(self._M[:3, :3]))
         return c_wo.min(0) - pad, c_wo.max(0) + pad
 
     def _to_local(self, o_wo, d_wo):
         A, b = self.local_map()
         return apply(A, o_wo) + b, apply(A, d_wo)
 
-    def _normals_world(self, prim, n_front):
-        idx = prim % n_front
-        flip = prim // n_front == 1  # the inner (-offset) shell faces inward
+    def _normals_world(self, prim, faces):
+        """Unit world normals of shell triangles ``prim`` (:class:`ShellFaces`
+        ``faces``), oriented as their shell (the inner one faces inward)."""
+        idx, flip = faces.real[prim], faces.flip[prim]
         n_lo = self._face_normals(idx) * np.where(flip, -1.0, 1.0)[:, None]
         n_wo = apply(self._Minv[:3, :3].T, n_lo)  # inverse-transpose for normals
         ln = np.linalg.norm(n_wo, axis=1, keepdims=True)
@@ -690,13 +773,13 @@ class Collider:
         k = len(o_wo)
         if self.empty or k == 0:
             return np.zeros(k, bool), np.full(k, np.inf), np.zeros((k, 3))
-        be, n_front = self._backend(offset_wo)
+        be, faces = self._backend(offset_wo)
         o_lo, d_lo = self._to_local(o_wo, d_wo)
         prim, t = be.hit_details(o_lo, d_lo, 1.0 + tol.T_SLACK)
         hit = prim >= 0
         n_wo = np.zeros((k, 3))
         if hit.any():
-            n_wo[hit] = self._normals_world(prim[hit], n_front)
+            n_wo[hit] = self._normals_world(prim[hit], faces)
         return hit, np.minimum(t, 1.0), n_wo
 
     @property
@@ -765,7 +848,7 @@ class Collider:
     def _parity(self, p_wo, offset_wo):
         """Ray-parity inside test of world points (three votes)."""
         k = len(p_wo)
-        be, n_front = self._backend(offset_wo)
+        be, faces = self._backend(offset_wo)
         p_lo = self._to_local(np.asarray(p_wo, np.float64), np.zeros((k, 3)))[0]
         lo, hi = self._geometry()
         diag = float(np.linalg.norm(hi - lo)) or 1.0
@@ -786,7 +869,7 @@ class Collider:
                 prim, t = be.hit_details(o[active], d[active], 1.0)
                 hit = prim >= 0
                 active, prim, t = active[hit], prim[hit], t[hit]
-                fn = self._face_normals(prim % n_front)
+                fn = self._face_normals(faces.real[prim])
                 front = rot_dot(fn, dirn) < 0
                 balance[active] += np.where(front, -1, 1)
                 o[active] = o[active] + (t * far + step)[:, None] * dirn
@@ -820,4 +903,5 @@ class Collider:
             self._V.astype(np.float64) - self._center, self._F, q_lo, self._closest
         )
         p_wo = apply(self._M[:3, :3], p_lo + self._center) + self._M[:3, 3]
-        return p_wo, self._normals_world(face, len(self._F) + 1)
+        m = len(self._F)
+        return p_wo, self._normals_world(face, ShellFaces(np.arange(m), np.zeros(m, bool)))

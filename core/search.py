@@ -73,3 +73,43 @@ def gallop_bisect(n, test, k_max, lo=None, hi=None, width=4, stride=None):
         lo[miss_i] = probes[~anyg, -1]
         stride[miss_i] *= 2**width
     return hi
+
+
+def scan_bisect(n, test, k_max, probes=16, width=4):
+    """Smallest integer ``k`` in ``[1, k_max]`` with ``test`` true, per item,
+    for tests that need not be monotone in ``k``.
+
+    One round probes ``probes`` evenly spread steps up to ``k_max`` (one
+    batched query); the search then bisects (``width`` probes per round,
+    :func:`gallop_bisect`) between the first clearing probe and the probe
+    before it. A window of clearing steps wider than ``k_max / probes`` is
+    always found, where a gallop from 1 can jump over it (Soft: a segment
+    starting right next to a collider clears only in a window of angles).
+    Where ``test`` is monotone the result is exactly the first good ``k``.
+
+    Returns
+    -------
+    (n,) int
+        The good ``k`` found, -1 where none of the scan's probes is good.
+    """
+    k_max = np.broadcast_to(np.asarray(k_max, np.int64), (n,))
+    hi = np.full(n, -1, np.int64)
+    lo = np.zeros(n, np.int64)
+    it = np.flatnonzero(k_max >= 1)
+    if len(it) == 0:
+        return hi
+    frac = np.arange(1, probes + 1) / probes
+    ks = np.maximum(np.ceil(k_max[it][:, None] * frac - 1e-9).astype(np.int64), 1)
+    ks = np.maximum.accumulate(ks, axis=1)
+    good = test(np.repeat(it, probes), ks.ravel()).reshape(ks.shape)
+    anyg = good.any(axis=1)
+    first = np.argmax(good, axis=1)
+    rows = np.arange(len(it))
+    g = it[anyg]
+    hi[g] = ks[rows, first][anyg]
+    lo[g] = np.where(first > 0, ks[rows, np.maximum(first - 1, 0)], 0)[anyg]
+    out = np.full(n, -1, np.int64)
+    if len(g):
+        out[g] = gallop_bisect(len(g), lambda i, k: test(g[i], k), k_max[g],
+                               lo=lo[g], hi=hi[g], width=width)
+    return out

@@ -6,7 +6,7 @@ import numpy as np
 
 from . import rotations as rot
 from . import tolerances as tol
-from .search import gallop_bisect
+from .search import gallop_bisect, scan_bisect
 from .status import Status
 
 
@@ -72,7 +72,7 @@ class SoftSolve:
                 return ~ctx.hits(todo[items], o_k[items], dd, np.arange(n), root_k[items])
 
             kmax = np.full(len(todo), int(np.ceil(ctx.max_angle / p - 1e-9)))
-            kk = gallop_bisect(len(todo), test, kmax)
+            kk = scan_bisect(len(todo), test, kmax)
             ok = kk >= 0
             if ok.any():
                 w = np.flatnonzero(ok)

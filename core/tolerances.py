@@ -55,3 +55,10 @@ OCCUPANCY_CELLS = 64
 #: moves by the full offset (a vertex where faces meet at a sharp angle moves
 #: farther than the offset), at most this many times the offset.
 OFFSET_MAX_STRETCH = 4.0
+
+#: Every collider keeps curves at least this many float32 ulps of its world
+#: coordinates away (``Collider.clearance``; a shell at that offset when the
+#: Collision Offset is smaller). Embree tests in float32 and the output is
+#: rounded to float32: a segment passing within rounding distance of a sharp
+#: edge must not be clear for the solver and crossing for a float64 test.
+CLEARANCE_ULPS = 4

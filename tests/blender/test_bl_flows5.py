@@ -980,4 +980,7 @@ def test_skinned_arm_placed_far_away_by_its_master_bone(fc):
 
     near, far = run(False), run(True)
     assert near[:, COLLIDING].sum() > 0 and near[:, PINCHED].sum() > 0
-    np.testing.assert_array_equal(far, near)
+    # Float32 resolves about 1 mm 10,000 units away, and every collider keeps a
+    # clearance margin of a few float32 ulps of its coordinates (Collider.margin):
+    # a curve at the very edge of a contact may be counted on the other side.
+    assert np.abs(far - near).max() <= 1, (far, near)

@@ -49,7 +49,7 @@ def _check_frame(pts, offs, res, specs, lengths=True, cols=None):
         geom.assert_lengths_kept(pts, out, offs, rtol=rtol)
     if cols is not None:
         # self-consistency: the colliders' own query agrees that resolved
-        # curves are clear
+        # curves are clear (of the clearance margin's shell, too)
         keep = ~np.isin(status, EXCLUDED)
         A, B, cid, _ = oracle.curve_segments(out, offs)
         for k, col in enumerate(cols):
