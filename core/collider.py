@@ -469,8 +469,7 @@ class Collider:
         max_edge = float(sq.max())
         # float32 edges: pad by a relative ulp margin to stay conservative
         max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
-        self._occ = (lo, h, dims, sat, max_edge, np.full(dims, -1, np.int8))
-        self._occ_inside_key = None
+        self._occ = (lo, h, dims, sat, max_edge)
         self._occ_key = self._version  # last: readers check it without the lock
 
     def near_surface(self, p_wo, radius_wo, offset_wo=0.0) -> np.ndarray:
@@ -510,7 +509,7 @@ class Collider:
         k = q.shape[1]
         if self.empty or k == 0:
             return np.zeros(k, bool)
-        lo, h, dims, sat, max_edge, _ = self._occupancy()
+        lo, h, dims, sat, max_edge = self._occupancy()
         A, b = self.local_map()
         stretch = norm_bound(A)  # at least the largest local length of a world unit
         reach = np.asarray(radius_wo, np.float64) + offset_wo * tol.OFFSET_MAX_STRETCH
@@ -757,7 +756,7 @@ class Collider:
         if self.empty or len(o_lo) == 0:
             return np.zeros(len(o_lo), bool)
         be, _ = self._backend(offset_wo)
-        return be.first_hit(o_lo, d_lo, 1.0 + tol.T_SLACK, threads) >= 0
+        return be.any_hit(o_lo, d_lo, 1.0 + tol.T_SLACK, threads)
 
     def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0):
         """First hit of each segment: parameter, point and unit normal.
@@ -813,37 +812,114 @@ class Collider:
         k = len(p_wo)
         if not self.detects_pinch or k == 0:
             return np.zeros(k, bool)
-        lo, h, dims, _, _, inside = self._occupancy()
-        # Points with no surface anywhere near their grid cell share the
-        # answer of the cell's centre: compute it once per cell (and per
-        # shape of the collider), trace the rest.
+        lo, h, dims, inside = self._inside_grid()
+        # Points in a grid cell no triangle of the tested shell touches share
+        # the answer of the cell's centre (the segment between them stays in
+        # the cell, so crosses nothing): computed once per cell (and shape of
+        # the collider; a rigid collider never recomputes it). The rest are
+        # traced.
         if self._occ_inside_key != (self._version, offset_wo):
             inside[:] = -1
             self._occ_inside_key = (self._version, offset_wo)
-        # near_surface pads by h + max_edge: a point it calls far has no vertex
-        # within max_edge of its own cell, so no triangle crosses that cell.
-        near = self.near_surface_grid(q, 0.0, offset_wo)
+        touched = self._surface_cells(offset_wo)
         cell = np.floor(np.clip(q.T / h, -1, dims + 1)).astype(np.int64)
         in_grid = ((cell >= 0) & (cell < dims)).all(axis=1)
+        flat_all = np.zeros(k, np.int64)
+        g = np.flatnonzero(in_grid)
+        flat_all[g] = np.ravel_multi_index(cell[g].T, inside.shape)
+        free = in_grid.copy()
+        free[g] = ~touched.reshape(-1)[flat_all[g]]
         out = np.zeros(k, bool)
-        far = np.flatnonzero(~near & in_grid)
+        far = np.flatnonzero(free)
         if len(far):
-            c = cell[far]
-            val = inside[c[:, 0], c[:, 1], c[:, 2]]
-            flat = np.unique(np.ravel_multi_index(c[val < 0].T, inside.shape))
-            unknown = np.stack(np.unravel_index(flat, inside.shape), axis=1)
+            flat = flat_all[far]
+            ins = inside.reshape(-1)
+            val = ins[flat]
+            unknown = np.unique(flat[val < 0])
             if len(unknown):
-                centre_lo = lo + (unknown + 0.5) * h + self._center
+                u = np.stack(np.unravel_index(unknown, inside.shape), axis=1)
+                centre_lo = lo + (u + 0.5) * h + self._center
                 centre_wo = apply(self._M[:3, :3], centre_lo) + self._M[:3, 3]
-                inside[unknown[:, 0], unknown[:, 1], unknown[:, 2]] = self._parity(
-                    centre_wo, offset_wo
-                )
-                val = inside[c[:, 0], c[:, 1], c[:, 2]]
+                ins[unknown] = self._parity(centre_wo, offset_wo)
+                val = ins[flat]
             out[far] = val > 0
-        traced = np.flatnonzero(near)  # (off the grid and not near: outside)
+        # off the grid: only an offset shell can reach there (the grid holds
+        # every vertex): traced where it may, else outside
+        off_grid = np.flatnonzero(~in_grid)
+        if len(off_grid):
+            off_grid = off_grid[self.near_surface_grid(q[:, off_grid], 0.0, offset_wo)]
+        traced = np.union1d(np.flatnonzero(in_grid & ~free), off_grid)
         if len(traced):
             out[traced] = self._parity(p_wo[traced], offset_wo)
         return out
+
+    def _inside_grid(self):
+        """``(lo, h, dims, inside)``: the occupancy grid subdivided
+        ``tol.INSIDE_SUBDIV`` times per axis, for the inside test's per-cell
+        answers ``inside`` (int8: -1 unknown, 0 outside, 1 inside)."""
+        occ = self._occupancy()
+        if getattr(self, "_inside_of", None) is not occ:
+            lo, h, dims = occ[0], occ[1] / tol.INSIDE_SUBDIV, occ[2] * tol.INSIDE_SUBDIV
+            self._inside = (lo, h, dims, np.full(tuple(dims), -1, np.int8))
+            self._inside_of = occ
+            self._occ_inside_key = None
+        return self._inside
+
+    def _surface_cells(self, offset_wo):
+        """(dims) bool grid: the cells of the occupancy grid that a triangle of
+        the shell at ``offset_wo`` may touch (each triangle's bounding box,
+        grown by how far the shell moves it; cached per shape and offset)."""
+        key = (self._version, offset_wo)
+        if getattr(self, "_touched_key", None) == key:
+            return self._touched
+        lo, h, dims, _ = self._inside_grid()
+        V = self._V.astype(np.float64) - self._center
+        grow = self.margin * 1.01 + offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 * norm_bound(
+            self._Minv[:3, :3]) + 1e-9 * h
+        F = self._F
+        span = []
+        start = []
+        for i in range(3):
+            c = V[:, i].take(F)  # (m, 3)
+            a = np.floor((c.min(axis=1) - grow - lo[i]) / h).astype(np.int64)
+            b = np.floor((c.max(axis=1) + grow - lo[i]) / h).astype(np.int64)
+            a = np.clip(a, 0, dims[i] - 1)
+            b = np.clip(b, 0, dims[i] - 1)
+            start.append(a)
+            span.append(b - a + 1)
+        n = span[0] * span[1] * span[2]
+        total = int(np.prod(dims))
+        small = np.flatnonzero(n <= 27)  # (most triangles: at most 3 cells a side)
+        ns = n[small]
+        rep = np.repeat(small, ns)
+        j = np.arange(int(ns.sum())) - np.repeat(np.cumsum(ns) - ns, ns)
+        sy, sz = span[1][rep], span[2][rep]
+        iz = j % sz
+        iy = (j // sz) % sy
+        ix = j // (sz * sy)
+        flat = ((start[0][rep] + ix) * dims[1] + start[1][rep] + iy) * dims[2] + start[2][rep] + iz
+        touched = np.zeros(total, bool)
+        touched[flat] = True
+        big = np.flatnonzero(n > 27)
+        if len(big):
+            # Large triangles (or a large offset): their boxes summed into a
+            # difference grid (8 corners each) and integrated, O(cells + m).
+            d1 = dims + 1
+            diff = np.zeros(int(np.prod(d1)), np.int64)
+            a = [start[i][big] for i in range(3)]
+            b = [start[i][big] + span[i][big] for i in range(3)]
+            for cx, sx in ((a[0], 1), (b[0], -1)):
+                for cy, sy_ in ((a[1], 1), (b[1], -1)):
+                    for cz, sz_ in ((a[2], 1), (b[2], -1)):
+                        idx = (cx * d1[1] + cy) * d1[2] + cz
+                        diff += np.bincount(idx, minlength=len(diff)) * (sx * sy_ * sz_)
+            g = diff.reshape(tuple(d1))
+            for ax in range(3):
+                np.cumsum(g, axis=ax, out=g)
+            touched |= (g[: dims[0], : dims[1], : dims[2]] > 0).reshape(-1)
+        self._touched = touched.reshape(tuple(dims))
+        self._touched_key = key
+        return self._touched
 
     def _parity(self, p_wo, offset_wo):
         """Ray-parity inside test of world points (three votes)."""

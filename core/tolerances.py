@@ -48,8 +48,14 @@ FRAME_SHAPE_HI = 0.05
 RAY_EXTEND_ULPS = 32
 
 #: Cells along the longest side of a collider's vertex occupancy grid (the
-#: tight "can this curve touch the mesh" test and the inside-test cache).
+#: tight "can this curve touch the mesh" test).
 OCCUPANCY_CELLS = 64
+
+#: The inside test's per-cell answers use the occupancy grid's cells split
+#: this many times per axis: a root in a cell no triangle touches takes its
+#: cell's answer (computed once per collider shape), finer cells leave fewer
+#: roots near a surface to trace.
+INSIDE_SUBDIV = 2
 
 #: Collision offset shells move each vertex so that every face around it
 #: moves by the full offset (a vertex where faces meet at a sharp angle moves

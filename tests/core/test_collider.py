@@ -273,3 +273,25 @@ def test_a_failing_step_leaves_no_build_running():
     del col.grid_coords
     r = solver.step(pts, [col])  # and the solver goes on
     assert col.build_count == 2 and np.isfinite(r.points).all()
+
+
+def test_inside_cell_cache_gives_the_answer_of_tracing_every_point():
+    """contains(): points in cells no triangle of the shell touches take their
+    cell's cached answer, the rest are traced; every answer equals tracing that
+    very point (with and without an offset shell, and on a second query that
+    reads the cache)."""
+    rng = np.random.default_rng(7)
+    for (V, F), M in (
+        (scenes.torus([0, 0, 0], 1.0, 0.35, 48, 16), scenes.affine(t=[0.2, 0, 0])),
+        (scenes.box([-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]),
+         scenes.affine(scenes.rotation_matrix([1, 1, 0], 0.3), s=1.3)),
+    ):
+        col = Collider(V, F, matrix=M)
+        lo, hi = col.bounds_world(0.3)
+        P = rng.uniform(lo - 0.2, hi + 0.2, size=(4000, 3))
+        for off in (0.0, 0.05):
+            for _ in range(2):
+                got = col.contains(P, off)
+                traced = col._parity(P, off)
+                np.testing.assert_array_equal(got, traced)
+            assert got.any() and not got.all()

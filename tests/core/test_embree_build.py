@@ -129,3 +129,17 @@ def test_nothing_calls_into_a_library_directly():
                 elif isinstance(node, ast.ImportFrom):
                     names = [node.module or ""]
                 assert not any(n.split(".")[0] == "ctypes" for n in names), path
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_any_hit_agrees_with_first_hit(seed):
+    """The occlusion query (any_hit, used by every probe) answers exactly as the
+    closest-hit query, rays grazing the mesh included."""
+    rng = np.random.default_rng(seed)
+    V, F = random_mesh(rng, 300, 600)
+    o, d = rays_through(rng, 20_000)
+    be = rays.EmbreeBackend(V, F, rays.triangle_rows(F))
+    for threads in (1, 2):
+        np.testing.assert_array_equal(be.any_hit(o, d, 1.0, threads),
+                                      be.first_hit(o, d, 1.0, threads) >= 0)
