@@ -7,17 +7,20 @@ update that angle for all curves of a step at once.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from . import rotations as rot
 from . import tolerances as tol
+from .rays import beside
 from .search import gallop_bisect
 from .status import Status
 
 #: Probes per curve per search round. Each probe of a Stiff/Bend curve casts
 #: all its segments: after the first (estimate-spread) round two probes per
 #: round cast fewest rays for the same main-thread time.
-_WIDTH = 2
+_WIDTH = 1
 
 #: Probes per block when building ray batches (working arrays stay in cache).
 _BLOCK = 1024
@@ -576,14 +579,29 @@ class RigidBatch:
             it = items[sub]
             th = theta[sub]
             k = len(it)
-            o32 = np.empty((ns, k, 3), np.float32)
-            d32 = np.empty((ns, k, 3), np.float32)
-            for lo in range(0, k, _BLOCK):
-                blk = slice(lo, lo + _BLOCK)
-                self._rays(it[blk], th[blk], root_lo, Y, V0, X, o32[:, blk], d32[:, blk])
-            h = c.segment_hits_local(o32.reshape(-1, 3), d32.reshape(-1, 3), off, ctx.threads)
-            ctx.n_rays += len(h)
-            hit[sub] |= h.reshape(ns, k).any(axis=0)
+            terms = (root_lo, Y, V0, X)
+
+            def part(a, b, threads, c=c, off=off, it=it, th=th, terms=terms):
+                o32 = np.empty((ns, b - a, 3), np.float32)
+                d32 = np.empty((ns, b - a, 3), np.float32)
+                for lo in range(a, b, _BLOCK):
+                    blk = slice(lo, min(lo + _BLOCK, b))
+                    w = slice(lo - a, min(lo + _BLOCK, b) - a)
+                    self._rays(it[blk], th[blk], *terms, o32[:, w], d32[:, w])
+                h = c.segment_hits_local(o32.reshape(-1, 3), d32.reshape(-1, 3), off, threads)
+                return h.reshape(ns, b - a).any(axis=0)
+
+            if ctx.threads > 1 and k >= 2 * _BLOCK:
+                # Two halves, each built and traced by one thread: numpy and
+                # embree release the GIL, so both halves' work overlaps.
+                half = k // 2
+                first = beside(partial(part, 0, half, 1), ctx.threads)
+                second = part(half, k, 1)
+                h = np.concatenate([first(), second])
+            else:
+                h = part(0, k, ctx.threads)
+            ctx.n_rays += k * ns
+            hit[sub] |= h
         return hit
 
     def _rays(self, it, theta, root_lo, Y, V0, X, o32, d32):
