@@ -284,3 +284,20 @@ def test_growth_surface_moved_on_a_cached_frame(fc, tmp_path):
     scene.frame_set(4)
     outdated(hair, "Frame 4 is outdated", "growth surface 'Skin' moved")
     same(play(scene, hair, out, range(1, 9), [box]), bake(fc, hair))
+
+
+def test_a_setting_changed_mid_shot_then_the_advice_works(fc, tmp_path):
+    """Play in Bend, switch Mode and Collision Offset at frame 5: the step from frame 5's
+    Bend state is refused, and going back to frame 1 as the message says solves the
+    shot with the new settings (frame 1's record has the old ones), never a stale frame."""
+    scene, hair, box, out = shot(fc, tmp_path)
+    s = hair.furcollide
+    before = play(scene, hair, out, range(1, 6), [box])
+    s.mode, s.collision_offset = "soft", 0.02
+    scene.frame_set(6)
+    outdated(hair, "Play from frame 1")
+    scene.frame_set(3)  # an earlier cached frame: solved with the old settings
+    outdated(hair, "Frame 3 is outdated", "the settings")
+    got = play(scene, hair, out, range(1, 9), [box])
+    assert not np.array_equal(got[3], before[3])
+    same(got, bake(fc, hair))
