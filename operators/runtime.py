@@ -866,7 +866,7 @@ def uses_growth(settings) -> bool:
                 or settings.pinch_resolution == "growth_surface")
 
 
-def frame_inputs(inp, sig, colliders, surface) -> dict:
+def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
     """The frame-inputs record of one frame: part name -> 64-bit digest.
 
     Parameters
@@ -879,16 +879,20 @@ def frame_inputs(inp, sig, colliders, surface) -> dict:
         geometry is digested; renaming an object or a new session never counts).
     colliders : list of (int, int)
         :func:`collider_inputs` of each collider, in :func:`collider_objects` order.
+    flags : list of (bool, float or None)
+        Each collider's Double Sided and Collision Offset, in the same order.
     surface : (int, int) or None
         The growth surface's, when the solve reads it.
 
     Returns
     -------
     dict
-        Ordered as :func:`describe_change` reports the first difference: settings,
-        source, enable mask, each collider's matrix and shape, the surface's.
+        Ordered as :func:`describe_change` reports the first difference: the
+        colliders' number and options, the settings, the source, the enable mask,
+        each collider's matrix and shape, the surface's.
     """
-    rec = {"settings": cache.text_digest(sig), "source": cache.digest(inp.raw, inp.offsets)}
+    rec = {"colliders": cache.text_digest(repr(list(flags))), "settings": cache.text_digest(sig),
+           "source": cache.digest(inp.raw, inp.offsets)}
     if inp.enabled is not None:
         rec["enabled"] = cache.digest(inp.enabled)
     for i, (matrix, shape) in enumerate(colliders):
@@ -902,8 +906,9 @@ def frame_inputs(inp, sig, colliders, surface) -> dict:
 def solved_inputs(ob, rt, inp, scene) -> dict:
     """The record of the frame just solved, from the colliders as the solve read them."""
     growth = rt.growth if rt.growth is not None and uses_growth(rt.settings) else None
+    entries = list(rt.colliders.values())
     return frame_inputs(inp, signature(ob, scene=scene, identities=False),
-                        [e.inputs for e in rt.colliders.values()],
+                        [e.inputs for e in entries], [(e.double_sided, e.offset) for e in entries],
                         growth.inputs if growth is not None else None)
 
 
@@ -917,13 +922,21 @@ def current_inputs(ob, inp, depsgraph) -> dict:
     surface = None
     if uses_growth(ob.furcollide) and surf is not None and surf.type == "MESH":
         surface = read_collider_inputs(surf, depsgraph)
-    return frame_inputs(inp, signature(ob, scene=scene, identities=False), cols, surface)
+    return frame_inputs(inp, signature(ob, scene=scene, identities=False), cols,
+                        [(r.double_sided, r.offset) for r in refs], surface)
 
 
-def describe_change(ob, part, scene) -> str:
-    """The change :func:`cache.first_change` found, in words naming the object."""
+def describe_change(ob, part, scene, old=None, new=None) -> str:
+    """The change :func:`cache.first_change` found between the records ``old`` and
+    ``new``, in words naming the object."""
+    if part == "colliders":
+        count = [sum(k.endswith(" matrix") and k.startswith("collider ") for k in r or {})
+                 for r in (old, new)]
+        if count[1] != count[0]:
+            return f"a collider was {'added' if count[1] > count[0] else 'removed'}"
+        return "a collider's Double Sided or Collision Offset changed"
     if part == "settings":
-        return "the settings or the list of colliders changed"
+        return "the settings changed"
     if part == "source":
         return f"the source hair '{ob.name}' changed (groom, modifiers or placement)"
     if part == "enabled":
@@ -944,8 +957,9 @@ def cached_frame_change(ob, rt, inp, depsgraph, f) -> str:
     old = rt.memory.inputs(f)
     if old is None:
         return ""
-    part = cache.first_change(old, current_inputs(ob, inp, depsgraph))
-    return describe_change(ob, part, depsgraph.scene) if part else ""
+    new = current_inputs(ob, inp, depsgraph)
+    part = cache.first_change(old, new)
+    return describe_change(ob, part, depsgraph.scene, old, new) if part else ""
 
 
 def baked_frame_change(ob, inp, depsgraph, directory, f) -> str:
@@ -954,8 +968,9 @@ def baked_frame_change(ob, inp, depsgraph, directory, f) -> str:
     old = cache.read_inputs(directory, f)
     if old is None:
         return ""
-    part = cache.first_change(old, current_inputs(ob, inp, depsgraph))
-    return describe_change(ob, part, depsgraph.scene) if part else ""
+    new = current_inputs(ob, inp, depsgraph)
+    part = cache.first_change(old, new)
+    return describe_change(ob, part, depsgraph.scene, old, new) if part else ""
 
 
 def _ensure_solver(ob, rt, inp):

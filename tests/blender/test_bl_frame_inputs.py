@@ -301,3 +301,19 @@ def test_a_setting_changed_mid_shot_then_the_advice_works(fc, tmp_path):
     got = play(scene, hair, out, range(1, 9), [box])
     assert not np.array_equal(got[3], before[3])
     same(got, bake(fc, hair))
+
+
+def test_collider_added_or_its_options_changed_on_a_cached_frame(fc, tmp_path):
+    scene, hair, box, out = shot(fc, tmp_path)
+    play(scene, hair, out, range(1, 6), [box])
+    wall = make_box("Wall", size=0.4, location=(0.3, 0.0, 0.3))
+    scene.frame_set(4)
+    activate(hair, wall)
+    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}  # shows frame 4 again
+    outdated(hair, "Frame 4 is outdated", "a collider was added")
+    activate(hair)
+    play(scene, hair, out, range(1, 6), [box, wall])
+    hair.furcollide.colliders[1].double_sided = True
+    scene.frame_set(2)
+    outdated(hair, "Frame 2 is outdated", "Double Sided or Collision Offset")
+    same(play(scene, hair, out, range(1, 9), [box, wall]), bake(fc, hair))
