@@ -123,6 +123,7 @@ def curves_with_any(point_flags: np.ndarray, offsets: np.ndarray) -> np.ndarray:
 
 # ------------------------------------------------------------ frame inputs
 _MASK64 = (1 << 64) - 1
+_SMALL = 4096  # bytes: smaller arrays are hashed as they are
 _weights = np.zeros(0, np.uint64)  # grows on demand; a prefix never changes
 
 
@@ -155,13 +156,13 @@ def digest(*arrays) -> int:
     for a in arrays:
         a = np.ascontiguousarray(a)
         b = a.reshape(-1).view(np.uint8)
+        h.update(a.dtype.str.encode() + len(b).to_bytes(8, "little"))
+        if len(b) <= _SMALL:  # a matrix, a key: the bytes themselves
+            h.update(b)
+            continue
         n = len(b) // 8
-        acc = 0
-        if n:
-            with np.errstate(over="ignore"):
-                acc = int(np.dot(b[: n * 8].view("<u8"), _digest_weights(n)))
-        h.update(np.array([len(b), acc & _MASK64], "<u8").tobytes())
-        h.update(str(a.dtype).encode() + bytes(b[n * 8:]))
+        acc = int(np.dot(b[: n * 8].view("<u8"), _digest_weights(n))) & _MASK64
+        h.update(acc.to_bytes(8, "little") + bytes(b[n * 8:]))
     return int.from_bytes(h.digest(), "little")
 
 

@@ -317,3 +317,40 @@ def test_collider_added_or_its_options_changed_on_a_cached_frame(fc, tmp_path):
     scene.frame_set(2)
     outdated(hair, "Frame 2 is outdated", "Double Sided or Collision Offset")
     same(play(scene, hair, out, range(1, 9), [box, wall]), bake(fc, hair))
+
+
+def test_digest_sees_any_change_and_any_reordering(fc):
+    """``cache.digest``: one flipped bit, a swap of two points, another dtype, a change
+    in the tail bytes (not a whole 8-byte word) and another length all count."""
+    digest = fc.cache.digest
+    rng = np.random.default_rng(3)
+    P = rng.random((40_001, 3), dtype=np.float32)  # 480,012 bytes: a 4-byte tail
+    d = digest(P)
+    assert digest(P.copy()) == d
+    for i in rng.integers(0, P.size, 50):
+        a = P.copy().reshape(-1)
+        a.view(np.uint32)[i] ^= np.uint32(1)  # one ulp
+        assert digest(a.reshape(-1, 3)) != d, i
+    for i, j in rng.integers(0, len(P), (50, 2)):
+        if i != j:
+            a = P.copy()
+            a[[i, j]] = a[[j, i]]
+            assert digest(a) != d, (i, j)
+    a = P.copy()
+    a[-1, 2] = -a[-1, 2]
+    assert digest(a) != d
+    assert digest(P[:-1]) != d and digest(P.view(np.int32)) != d
+    assert digest(np.zeros(3, np.float32)) != digest(np.zeros(3, np.int32))
+    assert digest(np.eye(4)) != digest(np.eye(4) * (1 + 1e-16 * 4))
+
+
+def test_records_compare_in_order_and_survive_a_bake_file(fc):
+    c = fc.cache
+    old = {"colliders": 1, "settings": 2, "source": 3, "collider 0 matrix": 4}
+    assert c.first_change(old, dict(old)) is None
+    assert c.first_change(old, {**old, "source": 9, "collider 0 matrix": 9}) == "source"
+    assert c.first_change(old, {k: v for k, v in old.items() if k != "source"}) == "source"
+    assert c.first_change(old, {**old, "surface matrix": 5}) == "surface matrix"
+    big = {**old, "source": (1 << 64) - 1}
+    assert c.decode_inputs(c.encode_inputs(big)) == big
+    assert c.decode_inputs(np.frombuffer(b"\xff\x00", np.uint8)) is None
