@@ -91,7 +91,10 @@ class Runtime:
     groom: tuple | None = None  # (bind_id, stages.GroomBinding): render groom
     groom_shown: tuple | None = None  # (frame, guides) the groom output shows
     written: tuple | None = None  # (world points, depsgraph) _write wrote in this evaluate
-    dropped: str = ""  # why the playback cache was dropped (until the start frame is solved)
+    #: Why the playback cache is empty (until the start frame is solved again): the
+    #: reason the frames that are not cached give, e.g. "'Box' moved: the playback
+    #: cache was dropped".
+    dropped: str = ""
 
     def forget_solver(self):
         self.solver = None
@@ -1333,7 +1336,7 @@ def _outdated(ob, rt, f, why) -> str:
     bake gives either), keep the output as it is and mark the setup outdated."""
     start = ob.furcollide.frame_start
     invalidate(ob, from_frame=start - 1, refresh=False)
-    rt.dropped = why
+    rt.dropped = f"{why}: the playback cache was dropped"
     rt.outdated = True
     set_status(ob, "WARNING", f"Frame {f} is outdated: {why} since it was cached. The playback "
                f"cache is dropped: go to frame {start} and play, or press Bake.")
@@ -1343,8 +1346,7 @@ def _outdated(ob, rt, f, why) -> str:
 def _hold(ob, rt, inp, f, reason=""):
     """Jump ahead past the cache: hold the newest cached frame, mark outdated."""
     rt.outdated = True
-    if not reason and rt.dropped:
-        reason = f"{rt.dropped}: the playback cache was dropped"
+    reason = reason or rt.dropped
     k = rt.memory.newest_before(f)
     if rt.hold is not None and rt.hold[0] == k:
         _write(ob, inp, rt.hold[1], rt.hold[2])
