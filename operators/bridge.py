@@ -291,16 +291,35 @@ def _copy_attribute(attr, dst) -> None:
 
 
 # ---------------------------------------------------------------- meshes
-def mesh_topology_key(me) -> tuple:
-    """Key that changes when a mesh's triangulation can change: its counts and a
-    64-bit hash of its corner vertex indices (same counts, reordered or rewired
-    faces: Sort Mesh Elements, a re-import, geometry nodes)."""
+def mesh_corner_verts(me) -> np.ndarray:
+    """(corners,) int32 vertex index of every face corner (``loops.vertex_index``).
+
+    Read from the mesh's ``.corner_vert`` attribute when it has one (Blender
+    3.6+): one copy, about 0.02 ms for 260,000 corners, where
+    ``loops.foreach_get`` takes about 10 ms.
+    """
     n = len(me.loops)
     corners = np.empty(n, np.int32)
     if n:
-        me.loops.foreach_get("vertex_index", corners)
+        attr = me.attributes.get(".corner_vert")
+        if attr is not None and attr.domain == "CORNER" and attr.data_type == "INT" and len(
+            attr.data
+        ) == n:
+            attr.data.foreach_get("value", corners)
+        else:
+            me.loops.foreach_get("vertex_index", corners)
+    return corners
+
+
+def mesh_topology_key(me) -> tuple:
+    """Key that changes when a mesh's triangulation can change: its counts and a
+    64-bit hash of its corner vertex indices (same counts, reordered or rewired
+    faces: Sort Mesh Elements, a re-import, geometry nodes). Fur Attach saves it
+    with a binding: the hash must stay the same from version to version."""
+    corners = mesh_corner_verts(me)
     digest = hashlib.blake2b(corners.tobytes(), digest_size=8).digest()
-    return (len(me.vertices), len(me.polygons), n, int.from_bytes(digest, "little", signed=True))
+    return (len(me.vertices), len(me.polygons), len(corners),
+            int.from_bytes(digest, "little", signed=True))
 
 
 def same_topology(now: tuple, bound: tuple) -> bool:
@@ -345,9 +364,11 @@ def evaluated_mesh(oe):
 
     A mesh object's own evaluated data; for curves, surfaces, text and
     metaballs a temporary mesh (``to_mesh``, freed on leaving the block), or
-    None where there is no surface (a curve without bevel or extrusion).
+    None where there is no surface (a curve without bevel or extrusion). So
+    is a mesh in edit mode: its evaluated data then shows no vertices at all
+    (Blender keeps the edits in a BMesh), ``to_mesh`` has them.
     """
-    if oe.type == "MESH":
+    if oe.type == "MESH" and not getattr(oe.data, "is_editmode", False):
         yield oe.data
         return
     try:

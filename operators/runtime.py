@@ -22,7 +22,6 @@ one console line, and the output keeps its last good result.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import os
@@ -59,6 +58,7 @@ class ColliderEntry:
     double_sided: bool
     offset: float | None
     deforming: bool = False
+    inputs: tuple = (0, 0)  # (matrix, shape) digests read this frame: collider_inputs
 
 
 @dataclass
@@ -91,6 +91,10 @@ class Runtime:
     groom: tuple | None = None  # (bind_id, stages.GroomBinding): render groom
     groom_shown: tuple | None = None  # (frame, guides) the groom output shows
     written: tuple | None = None  # (world points, depsgraph) _write wrote in this evaluate
+    #: Why the playback cache is empty (until the start frame is solved again): the
+    #: reason the frames that are not cached give, e.g. "'Box' moved: the playback
+    #: cache was dropped".
+    dropped: str = ""
 
     def forget_solver(self):
         self.solver = None
@@ -384,22 +388,27 @@ def core_settings(ob):
     return _core().Settings(**ob.furcollide.to_core_kwargs())
 
 
-def signature(ob, stable=False, scene=None) -> str:
+def signature(ob, stable=False, scene=None, identities=True) -> str:
     """Fingerprint of everything that changes the result except the input.
 
     ``stable=False`` identifies colliders by session id (renames do not
     count); ``stable=True`` by name, which survives saving and reloading
-    (bake files, so a bake resumes in a new session).
+    (bake files, so a bake resumes in a new session). ``identities=False``
+    leaves out which objects the colliders and the surface are (renames never
+    count, nor sessions): the frame-inputs record, which digests their
+    geometry instead.
     """
     s = ob.furcollide
     cols = [
-        (r.name if stable else r.uid, r.double_sided, r.offset)
+        ((r.name if stable else r.uid), r.double_sided, r.offset) if identities
+        else (r.double_sided, r.offset)
         for r in collider_objects(ob, scene)
     ]
     kw = s.to_core_kwargs()
     kw.pop("threads", None)
     surf = ob.data.surface
-    surface = "" if surf is None else surf.name if stable else surf.session_uid
+    surface = "" if surf is None else (surf.name if stable else surf.session_uid) if (
+        identities) else True
     parts = [cols, kw, s.enable_attribute, s.frame_start, surface, bool(s.enabled)]
     if s.use_fur_attach:  # only when on: signatures (and bakes) without it are unchanged
         parts.append(["fur_attach", s.attach_id])
@@ -737,10 +746,7 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None, matrix=
     M = bridge.matrix(oe) if matrix is None else matrix
     deforming = is_deforming(o, depsgraph.scene)
     with bridge.evaluated_mesh(oe) as me:
-        if me is None:  # a curve without bevel or extrusion: no surface, nothing collides
-            key, V = ("no surface",), np.zeros((0, 3), np.float32)
-        else:
-            key, V = bridge.mesh_topology_key(me), bridge.mesh_vertices(me)
+        key, V = _mesh_reading(me)
         changed = (
             entry is None
             or entry.key != key
@@ -755,11 +761,27 @@ def _sync_collider(entry, o, depsgraph, double_sided=False, offset=None, matrix=
             V, F, double_sided=double_sided, matrix=M, offset=offset, drop_degenerate=True,
             name=name or o.name, deforming=deforming,
         )
-        return ColliderEntry(col, key, double_sided, offset, deforming)
+        return ColliderEntry(col, key, double_sided, offset, deforming,
+                             collider_inputs(M, V, key))
     if not np.array_equal(V, entry.collider.vertices):  # deforming: the core refits
         entry.collider.vertices = V
     entry.collider.matrix = M
+    entry.inputs = collider_inputs(M, V, key)
     return entry
+
+
+def _mesh_reading(me) -> tuple:
+    """(shape key, local vertices (n, 3) float32) of an evaluated collider mesh.
+
+    The key (vertex, face and corner counts, and a digest of the corners' vertex
+    indices) changes when the triangulation can change; ``me`` None (a curve
+    without bevel or extrusion) has no surface: nothing collides.
+    """
+    if me is None:
+        return ("no surface",), np.zeros((0, 3), np.float32)
+    corners = bridge.mesh_corner_verts(me)
+    return (len(me.vertices), len(me.polygons), len(corners), cache.digest(corners)), \
+        bridge.mesh_vertices(me)
 
 
 def is_deforming(o, scene) -> bool:
@@ -807,6 +829,151 @@ def _growth(ob, rt, settings, depsgraph):
         )
     rt.growth = _sync_collider(rt.growth, surf, depsgraph)
     return rt.growth.collider
+
+
+# ------------------------------------------------------------ frame inputs
+# A cached frame (memory or bake) keeps a record of what it was solved from; it is
+# shown only while the current inputs give the same record (see README "Time").
+
+
+def collider_inputs(M, V, key) -> tuple[int, int]:
+    """(matrix digest, shape digest) of a collider as read at one frame.
+
+    Parameters
+    ----------
+    M : (4, 4) float64 ndarray
+        Its world matrix, compared bit for bit.
+    V : (n, 3) float32 ndarray
+        Its evaluated vertices in its own space (rigid or deforming alike: reading
+        and digesting 65,000 vertices takes about 0.05 ms).
+    key : tuple
+        The shape key of :func:`_mesh_reading` (counts, digest of the corners).
+    """
+    return (cache.digest(np.asarray(M, np.float64)),
+            cache.digest(V, np.frombuffer(repr(key).encode(), np.uint8)))
+
+
+def read_collider_inputs(o, depsgraph, matrix=None) -> tuple[int, int]:
+    """:func:`collider_inputs` of object ``o`` as ``depsgraph`` evaluates it now
+    (``matrix``: its world matrix when it is not its own, see :meth:`ColliderRef.matrix`)."""
+    oe = o.evaluated_get(depsgraph)
+    M = bridge.matrix(oe) if matrix is None else matrix
+    with bridge.evaluated_mesh(oe) as me:
+        key, V = _mesh_reading(me)
+    return collider_inputs(M, V, key)
+
+
+def uses_growth(settings) -> bool:
+    """Does the solve read the growth surface? (core Settings or the setup's properties)"""
+    return bool(settings.attract_to_growth_surface
+                or settings.pinch_resolution == "growth_surface")
+
+
+def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
+    """The frame-inputs record of one frame: part name -> 64-bit digest.
+
+    Parameters
+    ----------
+    inp : Inputs
+        The frame's input: world positions before motion (``raw``), offsets and
+        the per-curve enable mask.
+    sig : str
+        The settings: :func:`signature` without the objects' identities (their
+        geometry is digested; renaming an object or a new session never counts).
+    colliders : list of (int, int)
+        :func:`collider_inputs` of each collider, in :func:`collider_objects` order.
+    flags : list of (bool, float or None)
+        Each collider's Double Sided and Collision Offset, in the same order.
+    surface : (int, int) or None
+        The growth surface's, when the solve reads it.
+
+    Returns
+    -------
+    dict
+        Ordered as :func:`describe_change` reports the first difference: the
+        colliders' number and options, the settings, the source, the enable mask,
+        each collider's matrix and shape, the surface's.
+    """
+    rec = {"colliders": cache.text_digest(repr(list(flags))), "settings": cache.text_digest(sig),
+           "source": cache.digest(inp.raw, inp.offsets)}
+    if inp.enabled is not None:
+        rec["enabled"] = cache.digest(inp.enabled)
+    for i, (matrix, shape) in enumerate(colliders):
+        rec[f"collider {i} matrix"] = matrix
+        rec[f"collider {i} shape"] = shape
+    if surface is not None:
+        rec["surface matrix"], rec["surface shape"] = surface
+    return rec
+
+
+def solved_inputs(ob, rt, inp, scene) -> dict:
+    """The record of the frame just solved, from the colliders as the solve read them."""
+    growth = rt.growth if rt.growth is not None and uses_growth(rt.settings) else None
+    entries = list(rt.colliders.values())
+    return frame_inputs(inp, signature(ob, scene=scene, identities=False),
+                        [e.inputs for e in entries], [(e.double_sided, e.offset) for e in entries],
+                        growth.inputs if growth is not None else None)
+
+
+def current_inputs(ob, inp, depsgraph) -> dict:
+    """The record of the frame ``depsgraph`` shows now, read afresh (no solver needed):
+    what a cached frame's record must equal to be shown."""
+    scene = depsgraph.scene
+    refs = collider_objects(ob, scene)
+    cols = [read_collider_inputs(r.object, depsgraph, r.matrix(depsgraph)) for r in refs]
+    surf = ob.data.surface
+    surface = None
+    if uses_growth(ob.furcollide) and surf is not None and surf.type == "MESH":
+        surface = read_collider_inputs(surf, depsgraph)
+    return frame_inputs(inp, signature(ob, scene=scene, identities=False), cols,
+                        [(r.double_sided, r.offset) for r in refs], surface)
+
+
+def describe_change(ob, part, scene, old=None, new=None) -> str:
+    """The change :func:`cache.first_change` found between the records ``old`` and
+    ``new``, in words naming the object."""
+    if part == "colliders":
+        count = [sum(k.endswith(" matrix") and k.startswith("collider ") for k in r or {})
+                 for r in (old, new)]
+        if count[1] != count[0]:
+            return f"a collider was {'added' if count[1] > count[0] else 'removed'}"
+        return "a collider's Double Sided or Collision Offset changed"
+    if part == "settings":
+        return "the settings changed"
+    if part == "source":
+        return f"the source hair '{ob.name}' changed (groom, modifiers or placement)"
+    if part == "enabled":
+        return f"the enable attribute '{ob.furcollide.enable_attribute}' of '{ob.name}' changed"
+    what, _, kind = part.rpartition(" ")
+    change = "moved" if kind == "matrix" else "changed shape"
+    if what == "surface":
+        surf = ob.data.surface
+        return f"the growth surface '{surf.name if surf is not None else '?'}' {change}"
+    refs = collider_objects(ob, scene)
+    i = int(what.split()[-1]) if what.startswith("collider ") else len(refs)
+    return f"'{refs[i].name}' {change}" if i < len(refs) else "the colliders changed"
+
+
+def cached_frame_change(ob, rt, inp, depsgraph, f) -> str:
+    """Why memory-cached frame ``f`` no longer matches the current inputs ('' when it
+    does, or when it was stored without a record)."""
+    old = rt.memory.inputs(f)
+    if old is None:
+        return ""
+    new = current_inputs(ob, inp, depsgraph)
+    part = cache.first_change(old, new)
+    return describe_change(ob, part, depsgraph.scene, old, new) if part else ""
+
+
+def baked_frame_change(ob, inp, depsgraph, directory, f) -> str:
+    """Why baked frame ``f`` no longer matches the current inputs ('' when it does,
+    or for files baked before FurCollide stored their inputs: not checked)."""
+    old = cache.read_inputs(directory, f)
+    if old is None:
+        return ""
+    new = current_inputs(ob, inp, depsgraph)
+    part = cache.first_change(old, new)
+    return describe_change(ob, part, depsgraph.scene, old, new) if part else ""
 
 
 def _ensure_solver(ob, rt, inp):
@@ -1091,13 +1258,18 @@ def _evaluate(scene, depsgraph, ob) -> str:
         return _hold(ob, rt, inp, f, reason=f"after the end frame, and frame {end} is not")
 
     if f in rt.memory:
-        out, status, stats = _show_cached(ob, rt, inp, f)
-        if rt.hold is None and f == max(rt.memory.frames):
-            rt.hold = (f, out, status)
-        rt.stats = dict(stats, source="cache")
-        rt.outdated = False
-        set_status(ob, level, msg)
-        return "cache"
+        why = cached_frame_change(ob, rt, inp, depsgraph, f)
+        if not why:
+            out, status, stats = _show_cached(ob, rt, inp, f)
+            if rt.hold is None and f == max(rt.memory.frames):
+                rt.hold = (f, out, status)
+            rt.stats = dict(stats, source="cache")
+            rt.outdated = False
+            set_status(ob, level, msg)
+            return "cache"
+        if f != start:
+            return _outdated(ob, rt, f, why)
+        # the start frame is solved again (below), which drops every cached frame
 
     if f != start and (f - 1) not in rt.memory:
         return _hold(ob, rt, inp, f)
@@ -1105,6 +1277,7 @@ def _evaluate(scene, depsgraph, ob) -> str:
     if f == start:
         solver.reset()
         rt.memory.clear()
+        rt.dropped = ""
         rt.memory.start = start
         rt.memory.limit = int(s.memory_limit * 1024 * 1024)
     elif rt.solver_frame != f - 1:
@@ -1122,7 +1295,8 @@ def _evaluate(scene, depsgraph, ob) -> str:
     stats = _stats(res.status, f, res.timings.get("total", 0.0))
     changed = cache.rows_differ(points, inp.raw)  # points the stages moved
     rt.memory.put(
-        f, inp.raw, points, res.status, inp.offsets, solver.state, stats, changed, attrs
+        f, inp.raw, points, res.status, inp.offsets, solver.state, stats, changed, attrs,
+        solved_inputs(ob, rt, inp, scene),
     )
     rt.solver_frame = f
     if rt.hold is None or f >= rt.hold[0]:
@@ -1156,9 +1330,23 @@ def _show_cached(ob, rt, inp, f):
     return out, status, stats
 
 
+def _outdated(ob, rt, f, why) -> str:
+    """Cached frame ``f`` (not the start frame) was solved from inputs that no longer
+    hold: drop the playback cache (the frames stepped from it would not be what a
+    bake gives either), keep the output as it is and mark the setup outdated."""
+    start = ob.furcollide.frame_start
+    invalidate(ob, from_frame=start - 1, refresh=False)
+    rt.dropped = f"{why}: the playback cache was dropped"
+    rt.outdated = True
+    set_status(ob, "WARNING", f"Frame {f} is outdated: {why} since it was cached. The playback "
+               f"cache is dropped: go to frame {start} and play, or press Bake.")
+    return "outdated"
+
+
 def _hold(ob, rt, inp, f, reason=""):
     """Jump ahead past the cache: hold the newest cached frame, mark outdated."""
     rt.outdated = True
+    reason = reason or rt.dropped
     k = rt.memory.newest_before(f)
     if rt.hold is not None and rt.hold[0] == k:
         _write(ob, inp, rt.hold[1], rt.hold[2])
@@ -1207,7 +1395,12 @@ def _evaluate_baked(ob, rt, inp, f, level, msg, depsgraph):
     _sync_output(ob, inp, depsgraph)
     _write(ob, inp, points, status, attributes=cache.read_attributes(directory, fe))
     rt.stats = _stats(status, fe, source="bake")
-    if fe == min(f, s.frame_end):
+    why = baked_frame_change(ob, inp, depsgraph, directory, fe) if fe == f else ""
+    if why:  # still shown (it is what renders), never as if current
+        rt.outdated = True
+        set_status(ob, "WARNING", f"Frame {f} of the bake is outdated: {why} since it was "
+                   "baked. The baked frame is still shown: press Free Bake, then Bake.")
+    elif fe == min(f, s.frame_end):
         rt.outdated = False
         set_status(ob, level, msg)
     else:
@@ -1290,31 +1483,15 @@ def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
     res, cols = _step(ob, rt, solver, inp, depsgraph)
     rt.solver_frame = f
     points, attrs = _finish(ob, rt, inp, res, f, scene, cols)
-    fp = np.frombuffer(settings_fingerprint(ob).encode(), np.uint8)
+    fp = settings_fingerprint(ob)
     state = solver.state
-    state["fingerprint"] = fp
-    state["inputs"] = inputs_digest(inp, cols, _growth(ob, rt, solver.settings, depsgraph))
+    state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
     cache.write_frame(directory, f, points, res.status, inp.offsets, state, rt.memory.sparse,
-                      attrs)
+                      attrs, inputs=solved_inputs(ob, rt, inp, scene))
     _write(ob, inp, points, res.status, attributes=attrs)
     rt.solver_frame = f
     rt.stats = _stats(res.status, f, res.timings.get("total", 0.0), "bake")
     return rt.stats
-
-
-def inputs_digest(inp, cols, growth) -> np.ndarray:
-    """SHA-1 (20 bytes, uint8) of what a frame's solve reads: the input curves
-    and every collider's (and the growth surface's) vertices, faces, matrix
-    and flags. A bake stores it with each frame (see :func:`resume_inputs_match`)."""
-    h = hashlib.sha1()
-    for a in (inp.points, inp.offsets, inp.enabled):
-        if a is not None:
-            h.update(np.ascontiguousarray(a).tobytes())
-    for c in [*cols, *([growth] if growth is not None else [])]:
-        for a in (c.vertices, c.faces, c.matrix):
-            h.update(np.ascontiguousarray(a).tobytes())
-        h.update(repr((c.double_sided, c.offset)).encode())
-    return np.frombuffer(h.digest(), np.uint8).copy()
 
 
 def scene_depsgraph(scene):
@@ -1329,23 +1506,19 @@ def scene_depsgraph(scene):
 
 
 def resume_inputs_match(ob, directory, f, scene) -> bool:
-    """Are frame ``f``'s inputs (source, colliders, surface) what the partial
-    bake solved at ``f``? An edited collider or source means starting over:
-    the settings fingerprint does not see geometry."""
+    """Are frame ``f``'s inputs (source, colliders, surface, settings) what the
+    partial bake solved at ``f`` (its frame-inputs record)? An edited collider or
+    source means starting over: the settings fingerprint does not see geometry."""
     global _busy
     busy, _busy = _busy, True  # no live solve while looking
     try:
         scene.frame_set(f)
         depsgraph = scene_depsgraph(scene)
-        rt = get_runtime(ob)
-        inp = read_inputs(ob, depsgraph)
-        prepare_input(ob, rt, inp, scene, f)
-        cols = _collider_list(ob, rt, depsgraph)
-        growth = _growth(ob, rt, core_settings(ob), depsgraph)
-        digest = inputs_digest(inp, cols, growth)
-        with np.load(cache.frame_path(directory, f), allow_pickle=False) as z:
-            key = next((k for k in z.files if k.endswith("__inputs")), None)
-            return key is not None and np.array_equal(z[key], digest)
+        old = cache.read_inputs(directory, f)
+        if old is None:  # baked before FurCollide stored the record: start over
+            return False
+        now = current_inputs(ob, read_inputs(ob, depsgraph), depsgraph)
+        return cache.first_change(old, now) is None
     finally:
         _busy = busy
 

@@ -226,8 +226,9 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         total = max(0, s.frame_end - s.frame_start + 1)
         n, where = cached_count(src)
         layout.label(text=f"{n} of {total} frames {where}", icon="FILE_CACHE")
-        if s.is_outdated:
-            layout.label(text="Outdated: play from the start frame or bake", icon="ERROR")
+        if s.is_outdated:  # (the status above says why)
+            layout.label(text="Outdated bake: Free Bake, then Bake" if s.is_baked
+                         else "Outdated: play from the start frame or bake", icon="ERROR")
         row = layout.row(align=True)
         if s.is_baked:
             row.operator("furcollide.free_bake", icon="TRASH")

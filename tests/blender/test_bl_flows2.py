@@ -101,11 +101,15 @@ def test_setting_change_on_a_bake_then_free_and_bake_again(fc, tmp_path):
     assert ("prop", "mode", False) in log and ("prop", "rotation_precision", False) in log
     s.mode = "stiff"  # a script can still change it
     s.rotation_precision = 2.0
-    # the bake still shows its own frames, bit for bit, never a re-solve
+    # the bake still shows its own frames, bit for bit, never a re-solve, but
+    # marked outdated: they were baked with other settings (issue 14)
     for f in (3, 8, 1, 5, 6):
         scene.frame_set(f)
         np.testing.assert_array_equal(fc.positions(out), old[f], err_msg=f"frame {f}")
-        assert s.stat_frame == f and fc.runtime.status_for(hair) == ("INFO", "")
+        assert s.stat_frame == f and s.is_outdated
+        assert "settings" in s.status_message and "Free Bake" in s.status_message
+    assert ("label", "Outdated bake: Free Bake, then Bake", True) in _draw(
+        bpy.types.FURCOLLIDE_PT_cache)
     with pytest.raises(RuntimeError, match="Free Bake first"):
         bpy.ops.furcollide.bake()
 
