@@ -178,6 +178,7 @@ class Collider:
         self._geometry_cache = None
         self._rows_cache = {}  # shell layout -> prepared triangles (see _rows)
         self._derived = {}  # name -> (key, value), see derived()
+        self._inside_keys = {}  # fine/coarse inside cache -> what it holds (contains_grid)
         self._recenter()
 
     def _recenter(self):
@@ -470,6 +471,8 @@ class Collider:
         # float32 edges: pad by a relative ulp margin to stay conservative
         max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
         self._occ = (lo, h, dims, sat, max_edge)
+        self._coarse_inside = np.full(tuple(dims), -1, np.int8)
+        self._inside_keys.pop(False, None)
         self._occ_key = self._version  # last: readers check it without the lock
 
     def near_surface(self, p_wo, radius_wo, offset_wo=0.0) -> np.ndarray:
@@ -808,31 +811,46 @@ class Collider:
         return self.contains_grid(p_wo, self.grid_coords(p_wo.T), offset_wo)
 
     def contains_grid(self, p_wo, q, offset_wo=0.0) -> np.ndarray:
-        """:meth:`contains` with the points' :meth:`grid_coords` ``q`` given."""
+        """:meth:`contains` with the points' :meth:`grid_coords` ``q`` given.
+
+        Points in a grid cell no triangle of the tested shell touches share
+        the answer of the cell's centre (the segment between them stays in
+        the cell, so crosses nothing), computed once per cell and shape of
+        the collider; the rest are traced. A collider whose shape stays
+        (rigid: any motion) uses a fine grid whose touched cells are found
+        from the triangles once per shape, so only roots right next to the
+        surface are traced. A collider deformed since the last call uses the
+        coarse occupancy grid (no per-triangle work every frame): points
+        near a vertex are traced. Both give the answer of tracing every
+        point.
+        """
         k = len(p_wo)
         if not self.detects_pinch or k == 0:
             return np.zeros(k, bool)
-        lo, h, dims, inside = self._inside_grid()
-        # Points in a grid cell no triangle of the tested shell touches share
-        # the answer of the cell's centre (the segment between them stays in
-        # the cell, so crosses nothing): computed once per cell (and shape of
-        # the collider; a rigid collider never recomputes it). The rest are
-        # traced.
-        if self._occ_inside_key != (self._version, offset_wo):
-            inside[:] = -1
-            self._occ_inside_key = (self._version, offset_wo)
-        touched = self._surface_cells(offset_wo)
-        cell = np.floor(np.clip(q.T / h, -1, dims + 1)).astype(np.int64)
-        in_grid = ((cell >= 0) & (cell < dims)).all(axis=1)
-        flat_all = np.zeros(k, np.int64)
-        g = np.flatnonzero(in_grid)
-        flat_all[g] = np.ravel_multi_index(cell[g].T, inside.shape)
-        free = in_grid.copy()
-        free[g] = ~touched.reshape(-1)[flat_all[g]]
+        static = getattr(self, "_contains_version", None) == self._version
+        self._contains_version = self._version
+        if static:
+            lo, h, dims, inside = self._inside_grid()
+            cells = self._cells(q, h, dims)
+            touched = self._surface_cells(offset_wo).reshape(-1)
+            trace = cells < 0
+            trace[cells >= 0] = touched[cells[cells >= 0]]
+        else:
+            lo, h, dims, _, _ = self._occupancy()
+            inside = self._coarse_inside
+            cells = self._cells(q, h, dims)
+            # near_surface pads by h + max_edge: a point it calls far has no
+            # vertex within max_edge of its own cell: no triangle crosses it
+            trace = self.near_surface_grid(q, 0.0, offset_wo)
+        key = (self._version, offset_wo, static)
+        cache = self._inside_keys
+        if cache.get(static) != key:
+            inside[...] = -1
+            cache[static] = key
         out = np.zeros(k, bool)
-        far = np.flatnonzero(free)
+        far = np.flatnonzero(~trace & (cells >= 0))
         if len(far):
-            flat = flat_all[far]
+            flat = cells[far]
             ins = inside.reshape(-1)
             val = ins[flat]
             unknown = np.unique(flat[val < 0])
@@ -843,15 +861,26 @@ class Collider:
                 ins[unknown] = self._parity(centre_wo, offset_wo)
                 val = ins[flat]
             out[far] = val > 0
-        # off the grid: only an offset shell can reach there (the grid holds
-        # every vertex): traced where it may, else outside
-        off_grid = np.flatnonzero(~in_grid)
-        if len(off_grid):
-            off_grid = off_grid[self.near_surface_grid(q[:, off_grid], 0.0, offset_wo)]
-        traced = np.union1d(np.flatnonzero(in_grid & ~free), off_grid)
+        # off the grid only an offset shell can reach (the grid holds every
+        # vertex): those are traced where it may, else outside
+        traced = np.flatnonzero(trace)
+        off = traced[cells[traced] < 0]
+        if len(off):
+            near = self.near_surface_grid(q[:, off], 0.0, offset_wo)
+            traced = np.concatenate([traced[cells[traced] >= 0], off[near]])
         if len(traced):
             out[traced] = self._parity(p_wo[traced], offset_wo)
         return out
+
+    @staticmethod
+    def _cells(q, h, dims):
+        """Flat cell index of points ``q`` (3, k) in a grid of cell size ``h``
+        and ``dims`` cells (-1 off the grid)."""
+        c = [np.floor(np.clip(q[i] / h, -1, dims[i] + 1)).astype(np.int64) for i in range(3)]
+        ok = (c[0] >= 0) & (c[0] < dims[0]) & (c[1] >= 0) & (c[1] < dims[1])
+        ok &= (c[2] >= 0) & (c[2] < dims[2])
+        flat = (c[0] * dims[1] + c[1]) * dims[2] + c[2]
+        return np.where(ok, flat, -1)
 
     def _inside_grid(self):
         """``(lo, h, dims, inside)``: the occupancy grid subdivided
@@ -862,7 +891,7 @@ class Collider:
             lo, h, dims = occ[0], occ[1] / tol.INSIDE_SUBDIV, occ[2] * tol.INSIDE_SUBDIV
             self._inside = (lo, h, dims, np.full(tuple(dims), -1, np.int8))
             self._inside_of = occ
-            self._occ_inside_key = None
+            self._inside_keys.pop(True, None)
         return self._inside
 
     def _surface_cells(self, offset_wo):
@@ -876,31 +905,35 @@ class Collider:
         V = self._V.astype(np.float64) - self._center
         grow = self.margin * 1.01 + offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 * norm_bound(
             self._Minv[:3, :3]) + 1e-9 * h
-        F = self._F
+        F = [np.ascontiguousarray(self._F[:, k]) for k in range(3)]
         span = []
         start = []
         for i in range(3):
-            c = V[:, i].take(F)  # (m, 3)
-            a = np.floor((c.min(axis=1) - grow - lo[i]) / h).astype(np.int64)
-            b = np.floor((c.max(axis=1) + grow - lo[i]) / h).astype(np.int64)
+            x = np.ascontiguousarray(V[:, i])
+            c0, c1, c2 = x.take(F[0]), x.take(F[1]), x.take(F[2])
+            mn = np.minimum(np.minimum(c0, c1), c2)
+            mx = np.maximum(np.maximum(c0, c1), c2)
+            a = np.floor((mn - grow - lo[i]) / h).astype(np.int64)
+            b = np.floor((mx + grow - lo[i]) / h).astype(np.int64)
             a = np.clip(a, 0, dims[i] - 1)
             b = np.clip(b, 0, dims[i] - 1)
             start.append(a)
             span.append(b - a + 1)
-        n = span[0] * span[1] * span[2]
         total = int(np.prod(dims))
-        small = np.flatnonzero(n <= 27)  # (most triangles: at most 3 cells a side)
-        ns = n[small]
-        rep = np.repeat(small, ns)
-        j = np.arange(int(ns.sum())) - np.repeat(np.cumsum(ns) - ns, ns)
-        sy, sz = span[1][rep], span[2][rep]
-        iz = j % sz
-        iy = (j // sz) % sy
-        ix = j // (sz * sy)
-        flat = ((start[0][rep] + ix) * dims[1] + start[1][rep] + iy) * dims[2] + start[2][rep] + iz
         touched = np.zeros(total, bool)
-        touched[flat] = True
-        big = np.flatnonzero(n > 27)
+        # A box at most 2 cells a side (nearly every triangle) is covered by
+        # its 8 corner cells; larger ones are summed into a difference grid.
+        small = np.flatnonzero((span[0] <= 2) & (span[1] <= 2) & (span[2] <= 2))
+        a = [start[i][small] for i in range(3)]
+        b = [start[i][small] + span[i][small] - 1 for i in range(3)]
+        for cx in (a[0], b[0]):
+            for cy in (a[1], b[1]):
+                xy = (cx * dims[1] + cy) * dims[2]
+                touched[xy + a[2]] = True
+                touched[xy + b[2]] = True
+        n = span[0] * span[1] * span[2]
+        n[small] = 0
+        big = np.flatnonzero(n > 0)
         if len(big):
             # Large triangles (or a large offset): their boxes summed into a
             # difference grid (8 corners each) and integrated, O(cells + m).
@@ -922,35 +955,46 @@ class Collider:
         return self._touched
 
     def _parity(self, p_wo, offset_wo):
-        """Ray-parity inside test of world points (three votes)."""
+        """Ray-parity inside test of world points (three votes).
+
+        Each vote follows one fixed direction through the whole shell and
+        counts back faces minus front faces crossed (the winding number: a
+        point inside overlapping closed parts is inside). The first two
+        votes are cast together, the third only where they disagree.
+        """
         k = len(p_wo)
-        be, faces = self._backend(offset_wo)
+        be, _ = self._backend(offset_wo)
         p_lo = self._to_local(np.asarray(p_wo, np.float64), np.zeros((k, 3)))[0]
         lo, hi = self._geometry()
         diag = float(np.linalg.norm(hi - lo)) or 1.0
         step = tol.PARITY_STEP_REL * diag
         shell = offset_wo * tol.OFFSET_MAX_STRETCH * norm_bound(self._Minv[:3, :3])
         far = 4.0 * (diag + 2.0 * shell) + float(np.abs(p_lo).max(initial=0.0)) * 2.0
-        votes = np.zeros(k, np.int8)
-        for i, dirn in enumerate(_PARITY_DIRS):
-            # the third vote only matters where the first two disagree
-            pending = np.arange(k) if i < 2 else np.flatnonzero(votes == 1)
-            o = p_lo.copy()
-            balance = np.zeros(k, np.int32)  # back hits minus front hits
-            active = pending
-            d = np.broadcast_to(dirn * far, (k, 3))
+
+        def votes(points, dirs):
+            """(n,) bool per (point, direction) row: more back faces crossed."""
+            o = points.copy()
+            d = dirs * far
+            balance = np.zeros(len(o), np.int32)
+            active = np.arange(len(o))
             for _ in range(tol.PARITY_MAX_HITS):
                 if len(active) == 0:
                     break
-                prim, t = be.hit_details(o[active], d[active], 1.0)
+                prim, t, ng = be.hit_details(o[active], d[active], 1.0, normals=True)
                 hit = prim >= 0
-                active, prim, t = active[hit], prim[hit], t[hit]
-                fn = self._face_normals(faces.real[prim])
-                front = rot_dot(fn, dirn) < 0
-                balance[active] += np.where(front, -1, 1)
-                o[active] = o[active] + (t * far + step)[:, None] * dirn
-            votes += (balance > 0).astype(np.int8)
-        return votes >= 2
+                active, t, ng = active[hit], t[hit], ng[hit]
+                facing = rot_dot(ng.astype(np.float64), dirs[active])
+                balance[active] += np.where(facing < 0, -1, 1)
+                o[active] += (t * far + step)[:, None] * dirs[active]
+            return balance > 0
+
+        two = votes(np.concatenate([p_lo, p_lo]), np.repeat(_PARITY_DIRS[:2], k, axis=0))
+        v1, v2 = two[:k], two[k:]
+        out = v1 & v2
+        split = np.flatnonzero(v1 != v2)
+        if len(split):
+            out[split] = votes(p_lo[split], np.broadcast_to(_PARITY_DIRS[2], (len(split), 3)))
+        return out
 
     def closest_points(self, q_wo):
         """Closest point on the (un-inflated) mesh to each query and its normal.

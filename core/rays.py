@@ -246,7 +246,7 @@ class EmbreeBackend:
             raise
         return np.concatenate([np.asarray(f.result(), dtype=np.int32) for f in futs] + [last])
 
-    def hit_details(self, o, d, tmax):
+    def hit_details(self, o, d, tmax, normals=False):
         """First hit with its ray parameter.
 
         Returns
@@ -255,16 +255,22 @@ class EmbreeBackend:
             Triangle index, -1 for none.
         t : (k,) float64
             Ray parameter of the hit (``inf`` for none).
+        Ng : (k, 3) float32
+            With ``normals``: the hit triangle's unnormalized geometric
+            normal ``(v1 - v0) x (v2 - v0)`` (its winding's side).
         """
         o = np.ascontiguousarray(o, dtype=np.float32)
         d = np.ascontiguousarray(d, dtype=np.float32)
         k = len(o)
         if k == 0:
-            return np.empty(0, np.int32), np.empty(0)
+            empty = (np.empty(0, np.int32), np.empty(0))
+            return empty + (np.empty((0, 3), np.float32),) if normals else empty
         tmax = np.ascontiguousarray(np.broadcast_to(tmax, (k,)), dtype=np.float32)
         r = self._scene.run(o, d, dists=tmax, query="INTERSECT", output=1)
         prim = np.asarray(r["primID"], dtype=np.int32)
         t = np.where(prim >= 0, np.asarray(r["tfar"], dtype=np.float64), np.inf)
+        if normals:
+            return prim, t, np.asarray(r["Ng"])
         return prim, t
 
 
@@ -298,7 +304,7 @@ class NumpyBackend:
         hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= 0)
         return np.where(hit, t, np.inf)
 
-    def hit_details(self, o, d, tmax):
+    def hit_details(self, o, d, tmax, normals=False):
         o = np.asarray(o, dtype=np.float64)
         d = np.asarray(d, dtype=np.float64)
         k = len(o)
@@ -314,6 +320,9 @@ class NumpyBackend:
             hit = tj <= tmax[a : a + step]
             prim[a : a + step][hit] = j[hit]
             tt[a : a + step][hit] = tj[hit]
+        if normals:
+            ng = np.cross(self._e1, self._e2)[np.maximum(prim, 0)]
+            return prim, tt, np.where((prim >= 0)[:, None], ng, 0.0)
         return prim, tt
 
     def first_hit(self, o, d, tmax, threads: int = 1):
