@@ -265,3 +265,15 @@ def test_wrong_platform_zip_is_refused_though_operator_says_finished(tmp_path):
     assert rep["install_return"] == ["FINISHED"]  # the pitfall
     assert rep["enabled"] is False
     assert "windows-x64" in rep["_log"]
+
+
+def test_blender_version_min_is_the_lowest_tested_version():
+    """``blender_version_min`` is true: the oldest bpy any test lane pins (make test)."""
+    pins = []
+    for req in [ROOT / "requirements-dev.txt", *sorted((ROOT / "requirements").glob("bpy-*.txt"))]:
+        for line in req.read_text().splitlines():
+            if line.startswith("bpy=="):
+                pins.append(tuple(int(x) for x in line[5:].split(".")[:2]))
+    assert len(pins) == 4, pins  # 4.2, 4.5, 5.0, 5.2
+    low = ".".join(map(str, min(pins)))
+    assert pkg.read_manifest()["blender_version_min"] == f"{low}.0"
