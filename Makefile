@@ -1,13 +1,29 @@
 # FurCollide developer commands. Each target bootstraps the pinned .venv first.
 PY := .venv/bin/python
-.PHONY: venv test test-core lint bench demo package
+.PHONY: venv test test-main test-matrix test-app test-core lint bench demo package
 
 venv:
 	@./scripts/bootstrap.sh
 
-# The README's test command (CI runs exactly this through .ci/run).
+# The README's test command (CI runs exactly this through .ci/run): every lane, i.e. the
+# whole suite on bpy 5.0.1, 4.2 LTS, 4.5 LTS and 5.2 LTS, then the real Blender 4.3
+# application under Xvfb. Environments are built once, outside the repository
+# ($$FURCOLLIDE_CACHE, default /var/cache/furcollide). FURCOLLIDE_LANES=5.0 (or a list)
+# runs only some lanes locally.
 test: venv
+	$(PY) scripts/test_lanes.py all
+
+# Only the main lane (bpy 5.0.1), straight pytest: the quick local loop.
+test-main: venv
 	$(PY) -m pytest -q tests
+
+# The version matrix: the whole suite on each bpy (4.2, 4.5, 5.0, 5.2).
+test-matrix: venv
+	$(PY) scripts/test_lanes.py matrix
+
+# The real Blender application (Debian's Blender 4.3 in a trixie chroot, needs root).
+test-app: venv
+	$(PY) scripts/test_lanes.py app
 
 test-core: venv
 	$(PY) -m pytest -q tests/core

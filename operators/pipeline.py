@@ -36,7 +36,7 @@ from bpy.props import (
 )
 from bpy.types import Operator, PropertyGroup
 
-from . import bridge, cache, runtime, stages
+from . import bridge, cache, compat, runtime, stages
 from .setup import (
     SetupOperator,
     active_setup,
@@ -49,9 +49,10 @@ from .setup import (
 
 #: Per-point attribute written by ``furcollide.collider_distance``.
 DISTANCE_ATTRIBUTE = stages.DISTANCE_ATTRIBUTE
-#: Blender's bundled hair node-group assets (blender-facts 2.6).
-HAIR_ASSETS = os.path.join("assets", "nodes", "procedural_hair_node_assets.blend")
-INTERPOLATE_GROUP = "Interpolate Hair Curves"
+#: Where this Blender keeps its bundled hair node-group assets (under datafiles/,
+#: the expected folder first: it moved between 4.5 and 5.0; see :mod:`.compat`).
+HAIR_ASSETS = tuple(compat.hair_asset_candidates())
+INTERPOLATE_GROUP = compat.INTERPOLATE_GROUP
 #: Name of the modifier ``furcollide.children_from_guides`` adds.
 CHILDREN_MODIFIER = "FurCollide Children"
 NO_SURFACE_HAIR = "Active object must be a hair Curves object with a Surface"
@@ -172,23 +173,9 @@ def new_guides_object(src, data_eval, keep, context):
 
 
 def hair_assets_path() -> str:
-    """Path of Blender's bundled hair node-group assets ('' when not found)."""
-    roots = []
-    try:
-        roots.append(bpy.utils.system_resource("DATAFILES"))
-    except (ValueError, TypeError):
-        pass
-    for kind in ("LOCAL", "SYSTEM"):
-        try:
-            roots.append(os.path.join(bpy.utils.resource_path(kind), "datafiles"))
-        except (ValueError, TypeError):
-            pass
-    for root in roots:
-        if root:
-            path = os.path.join(root, HAIR_ASSETS)
-            if os.path.isfile(path):
-                return path
-    return ""
+    """Path of Blender's bundled hair node-group assets ('' when not found); where
+    they live depends on the version (:mod:`.compat`)."""
+    return compat.find_datafile(HAIR_ASSETS)
 
 
 def interpolate_group():
@@ -199,10 +186,9 @@ def interpolate_group():
             return ng
     path = hair_assets_path()
     if not path:
+        where = " or ".join("datafiles/" + rel.replace(os.sep, "/") for rel in HAIR_ASSETS)
         raise FileNotFoundError(
-            "Blender's hair node assets (datafiles/"
-            + HAIR_ASSETS.replace(os.sep, "/")
-            + ") were not found in this Blender installation"
+            f"Blender's hair node assets ({where}) were not found in this Blender installation"
         )
     with bpy.data.libraries.load(path, link=False) as (src, dst):
         if INTERPOLATE_GROUP not in src.node_groups:
@@ -215,13 +201,7 @@ def interpolate_group():
     return ng
 
 
-def group_inputs(ng) -> dict:
-    """``{(name, socket_type): identifier}`` of a node group's input sockets."""
-    out = {}
-    for item in ng.interface.items_tree:
-        if item.item_type == "SOCKET" and item.in_out == "INPUT":
-            out.setdefault((item.name, item.socket_type), item.identifier)
-    return out
+group_inputs = compat.group_inputs
 
 
 # ---------------------------------------------------------------- settings
@@ -452,41 +432,56 @@ class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
         src = active_setup(context)
         out = src.furcollide.output
         surf = src.data.surface
+        # Children are placed by the Surface's UV map (the asset samples it to attach
+        # and deform them); without one Blender makes no usable children (5.0.1 gave
+        # a single curve), so say so instead of a silent FINISHED.
+        uv_maps = compat.uv_map_names(surf.data)
+        uv_name = src.data.surface_uv_map
+        if not uv_name and out.data.surface_uv_map in uv_maps:
+            uv_name = out.data.surface_uv_map
+        if not uv_maps:
+            self.report(
+                {"ERROR"},
+                f"The Surface '{surf.name}' has no UV map: Children from Guides places "
+                "children by the Surface's UVs (add one: Object Data > UV Maps, then unwrap)",
+            )
+            return {"CANCELLED"}
+        if not uv_name:
+            uv_name = next((uv.name for uv in surf.data.uv_layers if uv.active_render), uv_maps[0])
+        elif uv_name not in uv_maps:
+            self.report(
+                {"ERROR"},
+                f"The Surface '{surf.name}' has no UV map '{uv_name}' (the hair's Surface UV "
+                f"Map); it has: {', '.join(uv_maps)}",
+            )
+            return {"CANCELLED"}
         try:
             ng = interpolate_group()
-        except FileNotFoundError as exc:
+            sockets = compat.interpolate_sockets(ng)
+        except (FileNotFoundError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        ids = group_inputs(ng)
-        surface_id = ids.get(("Surface", "NodeSocketObject"))
-        if surface_id is None:
-            self.report({"ERROR"}, f"'{ng.name}' has no Surface object input")
             return {"CANCELLED"}
         mod = out.modifiers.get(CHILDREN_MODIFIER)
         if mod is None or mod.type != "NODES":
             mod = out.modifiers.new(CHILDREN_MODIFIER, "NODES")
         mod.node_group = ng
-        mod[surface_id] = surf
-        values = {
-            ("Density", "NodeSocketFloat"): float(self.density),
-            ("Interpolation Guides", "NodeSocketInt"): int(self.guides),
-        }
-        for key, value in values.items():
-            if key in ids:
-                mod[ids[key]] = value
-        uv_id = ids.get(("Surface UV Map", "NodeSocketVector"))
-        uv_name = src.data.surface_uv_map or out.data.surface_uv_map
-        if uv_id is not None and uv_name and f"{uv_id}_attribute_name" in mod.keys():
-            mod[f"{uv_id}_use_attribute"] = True
-            mod[f"{uv_id}_attribute_name"] = uv_name
+        # 4.2-5.0: the Surface is an Object input; 5.2 reads the hair data's own
+        # surface and surface_uv_map (set below in every version).
+        if sockets.surface_object is not None:
+            compat.set_modifier_input(mod, sockets.surface_object, surf)
+        if sockets.density is not None:
+            compat.set_modifier_input(mod, sockets.density, float(self.density))
+        if sockets.guides is not None:
+            compat.set_modifier_input(mod, sockets.guides, int(self.guides))
+        if sockets.surface_uv_map is not None:
+            compat.set_modifier_input_attribute(mod, sockets.surface_uv_map, uv_name)
         out.data.surface = surf
-        if uv_name:
-            out.data.surface_uv_map = uv_name
+        out.data.surface_uv_map = uv_name
         out.update_tag()
         self.report(
             {"INFO"},
-            f"Children from guides on '{out.name}' (surface '{surf.name}', "
-            f"density {self.density:g})",
+            f"Children from guides on '{out.name}' (surface '{surf.name}', UV map "
+            f"'{uv_name}', density {self.density:g})",
         )
         redraw(context)
         return {"FINISHED"}

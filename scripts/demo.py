@@ -1060,4 +1060,11 @@ def main(argv=None) -> int:
 if __name__ == "__main__":
     # Inside a Blender binary (``blender -b --python scripts/demo.py -- --no-render``)
     # only the arguments after ``--`` are the demo's.
-    sys.exit(main(sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else None))
+    code = main(sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else None)
+    bpy = sys.modules.get("bpy")
+    if bpy is not None and bpy.app.version < (4, 5, 0) and not bpy.app.binary_path:
+        # bpy 4.2 (the module) segfaults at exit after enabling an extension (README, Tests)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code or 0)
+    sys.exit(code)

@@ -173,12 +173,17 @@ def test_children_from_guides_on_odd_setups(fc):
     with pytest.raises(RuntimeError, match="has no curves to collide"):
         bpy.ops.furcollide.add()
 
-    # 1 curve, on a Surface without a UV map: children grow, the handler is fine
+    # 1 curve, on a Surface without a UV map: a clear error, nothing added; with a
+    # UV map children grow, and the handler is fine
     one = hair_from_sizes("One", [5])
     surf = make_surface(uv=False)
     one.data.surface = surf
     out = fc.setup(one, [box])
     activate(one)
+    with pytest.raises(RuntimeError, match="'Skin' has no UV map"):
+        bpy.ops.furcollide.children_from_guides(density=50.0)
+    assert "FurCollide Children" not in out.modifiers
+    surf.data.uv_layers.new(name="UVMap")
     assert bpy.ops.furcollide.children_from_guides(density=50.0) == {"FINISHED"}
     dg = bpy.context.evaluated_depsgraph_get()
     assert len(out.evaluated_get(dg).data.curves) > 10

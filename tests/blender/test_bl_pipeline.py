@@ -253,9 +253,12 @@ def test_children_from_guides(fc):
     mod = out.modifiers["FurCollide Children"]
     assert mod.type == "NODES" and mod.node_group is not None
     assert out.modifiers[0].name == fc.runtime.DEPENDENCY_MODIFIER
-    ids = {(i.name, i.socket_type): i.identifier for i in mod.node_group.interface.items_tree
-           if i.item_type == "SOCKET" and i.in_out == "INPUT"}
-    assert mod[ids[("Surface", "NodeSocketObject")]] == surf
+    compat = sys.modules["bl_ext.fcdev.furcollide.operators.compat"]
+    sockets = compat.interpolate_sockets(mod.node_group)
+    if sockets.surface_object is not None:  # 4.2-5.0; 5.2 reads the hair data's Surface
+        assert compat.modifier_input(mod, sockets.surface_object) == surf
+    assert out.data.surface == surf and out.data.surface_uv_map == "UVMap"
+    assert compat.modifier_input(mod, sockets.density) == 100.0
     dg = bpy.context.evaluated_depsgraph_get()
     n_eval = len(out.evaluated_get(dg).data.curves)
     assert n_eval > len(out.data.curves) == 36
@@ -277,7 +280,7 @@ def test_children_needs_surface_and_assets(fc, monkeypatch):
         bpy.ops.furcollide.children_from_guides()
     hair.data.surface = make_surface()
     mod = sys.modules["bl_ext.fcdev.furcollide.operators.pipeline"]
-    monkeypatch.setattr(mod, "HAIR_ASSETS", "assets/nodes/missing.blend")
+    monkeypatch.setattr(mod, "HAIR_ASSETS", ("assets/nodes/missing.blend",))
     with pytest.raises(RuntimeError, match="were not found"):
         bpy.ops.furcollide.children_from_guides()
     assert "FurCollide Children" not in hair.furcollide.output.modifiers

@@ -211,5 +211,21 @@ def main():
     print("\nRESULT " + json.dumps(out), flush=True)
 
 
+def exit_without_bpy_teardown_crash():
+    """bpy 4.2 segfaults at interpreter exit in a process that enabled an extension
+    add-on (even one disabled again): its static ``SpaceType`` destructor frees
+    Python-defined UI classes (first Blender's own ``OUTLINER_PT_filter``) after Python
+    was finalized (``PyGILState_Ensure`` with no interpreter). Fixed in 4.5. The report
+    is printed; skip the teardown there."""
+    import bpy
+
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if bpy.app.version < (4, 5, 0):
+        os._exit(0)
+
+
 if __name__ == "__main__":
     main()
+    if "bpy" in sys.modules:
+        exit_without_bpy_teardown_crash()

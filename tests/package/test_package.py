@@ -1,7 +1,9 @@
 """Packaging: build the linux-x64 zip with Blender's own CLI, check it, install it.
 
-The zip is built once per session with ``scripts/package.py`` (linux-x64,
-cp311 wheel only, downloaded once into ``./wheels/`` and reused). The
+The zip is built once per session with ``scripts/package.py`` for linux-x64 and
+the Python running the tests (cp311 in the 4.2, 4.5 and 5.0 lanes, cp313 in the 5.2
+lane: ``make test-matrix``), so each zip is installed into a Blender that uses it; the
+wheel is downloaded once into ``./wheels/`` and reused. The
 install runs in a fresh subprocess with ``BLENDER_USER_RESOURCES`` set to a
 temporary folder *before* ``bpy`` is imported, so it never touches the
 developer's Blender nor the in-process dev-extension tests.
@@ -23,14 +25,16 @@ pytestmark = pytest.mark.blender
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
-LINUX_CP311 = "embreex-4.4.0.post1-cp311-cp311-manylinux_2_27_x86_64.manylinux_2_28_x86_64.whl"
+PY = f"{sys.version_info.major}.{sys.version_info.minor}"  # the lane's Python: 3.11 or 3.13
+CP = f"cp{sys.version_info.major}{sys.version_info.minor}"
+LINUX_WHEEL = f"embreex-4.4.0.post1-{CP}-{CP}-manylinux_2_27_x86_64.manylinux_2_28_x86_64.whl"
 
 
 @pytest.fixture(scope="module")
 def linux_zip(tmp_path_factory):
     out = tmp_path_factory.mktemp("dist")
     try:
-        results = pkg.build(platforms=["linux-x64"], pythons=["3.11"], output_dir=out)
+        results = pkg.build(platforms=["linux-x64"], pythons=[PY], output_dir=out)
     except pkg.PackageError as err:
         pytest.fail(f"packaging failed: {err}")
     assert len(results) == 1
@@ -160,7 +164,7 @@ def test_zip_contents(linux_zip):
     assert {"__init__.py", "blender_manifest.toml", "core", "operators", "ui"} <= tops
     assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
     wheels = [n for n in names if n.endswith(".whl")]
-    assert wheels == [f"wheels/{LINUX_CP311}"]
+    assert wheels == [f"wheels/{LINUX_WHEEL}"]  # only this Python's wheel
     assert not [n for n in names if "numpy" in n.lower()]
     assert manifest["build"]["generated"]["platforms"] == ["linux-x64"]
     assert manifest["platforms"] == ["linux-x64"]
@@ -181,7 +185,7 @@ def test_install_enables_the_addon(installed):
     assert Path(installed["module_file"]).resolve().is_relative_to(user / "extensions")
     # The bundled wheel (and nothing else) was unpacked into the isolated
     # user folder's .local site-packages.
-    site = user / "extensions" / ".local" / "lib" / "python3.11" / "site-packages"
+    site = user / "extensions" / ".local" / "lib" / f"python{PY}" / "site-packages"
     assert (site / "embreex" / "__init__.py").is_file()
     assert not list(site.glob("numpy*"))
     assert "embreex_file" in installed, installed.get("embreex_error")
@@ -261,3 +265,15 @@ def test_wrong_platform_zip_is_refused_though_operator_says_finished(tmp_path):
     assert rep["install_return"] == ["FINISHED"]  # the pitfall
     assert rep["enabled"] is False
     assert "windows-x64" in rep["_log"]
+
+
+def test_blender_version_min_is_the_lowest_tested_version():
+    """``blender_version_min`` is true: the oldest bpy any test lane pins (make test)."""
+    pins = []
+    for req in [ROOT / "requirements-dev.txt", *sorted((ROOT / "requirements").glob("bpy-*.txt"))]:
+        for line in req.read_text().splitlines():
+            if line.startswith("bpy=="):
+                pins.append(tuple(int(x) for x in line[5:].split(".")[:2]))
+    assert len(pins) == 4, pins  # 4.2, 4.5, 5.0, 5.2
+    low = ".".join(map(str, min(pins)))
+    assert pkg.read_manifest()["blender_version_min"] == f"{low}.0"

@@ -1,0 +1,159 @@
+#!/usr/bin/env python3
+"""Run the test lanes: the whole suite on every supported Blender, then the real app.
+
+``make test`` runs every lane (this is what CI runs through ``.ci/run``);
+``make test-matrix`` only the four ``bpy`` lanes; ``make test-app`` only the real
+application. ``FURCOLLIDE_LANES="5.0"`` (comma or space separated) picks lanes for a
+quick local run; it is refused when ``CI`` is set, so CI always runs every lane.
+
+=====  =========================================  ==========================================
+lane   environment                                what runs
+=====  =========================================  ==========================================
+5.0    .venv: bpy 5.0.1, Python 3.11, numpy 1.26  ``pytest tests`` (the main lane)
+4.2    bpy 4.2.23 LTS, Python 3.11, numpy 1.26    ``pytest tests``
+4.5    bpy 4.5.15 LTS, Python 3.11, numpy 1.26    ``pytest tests``
+5.2    bpy 5.2.3 LTS, Python 3.13 (built from     ``pytest tests``
+       Debian's source), numpy 2.5
+app    Debian's Blender 4.3.2 in a trixie chroot  ``pytest tests/app`` (``FURCOLLIDE_APP=1``)
+       (Python 3.13, numpy 2.2), UI under Xvfb
+=====  =========================================  ==========================================
+
+Each lane is judged by pytest's own JUnit report (counts of passed, failed, errors):
+a lane that cannot be prepared, collects no test, or reports a failure fails the run,
+loudly, with what is missing. The last line is ``N passed, N failed`` over all lanes.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+ALL = ("5.0", "4.2", "4.5", "5.2", "app")
+MATRIX = ("5.0", "4.2", "4.5", "5.2")
+
+
+def log(msg: str) -> None:
+    print(f"test_lanes: {msg}", flush=True)
+
+
+def prepare(lane: str) -> tuple[str | None, str]:
+    """Interpreter for ``lane`` (None and the reason when it cannot be prepared)."""
+    venv_lane = "5.0" if lane == "app" else lane  # the app lane's harness runs on the host
+    proc = subprocess.run(
+        [str(ROOT / "scripts" / "lane_venv.sh"), venv_lane], capture_output=True, text=True
+    )
+    noise = ("WARNING: Location", "is ignored: it is neither a file nor a directory")
+    err = "\n".join(ln for ln in proc.stderr.splitlines() if not any(n in ln for n in noise))
+    if err.strip():
+        print(err, flush=True)
+    if proc.returncode != 0 or not proc.stdout.strip():
+        return None, err.strip().splitlines()[-1] if err.strip() else "lane_venv.sh failed"
+    return proc.stdout.strip().splitlines()[-1], ""
+
+
+def junit_counts(path: Path) -> dict | None:
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError):
+        return None
+    suites = [root] if root.tag == "testsuite" else list(root.iter("testsuite"))
+    c = {k: sum(int(s.get(k, 0)) for s in suites) for k in ("tests", "failures", "errors",
+                                                             "skipped")}
+    c["passed"] = c["tests"] - c["failures"] - c["errors"] - c["skipped"]
+    # strict xfails that xpassed are failures; plain xfails count as skipped in JUnit
+    return c
+
+
+def run_lane(lane: str, extra: list[str]) -> dict:
+    t0 = time.time()
+    cpu0 = os.times()
+    py, why = prepare(lane)
+    row = {"lane": lane, "passed": 0, "failed": 0, "skipped": 0, "ok": False, "note": ""}
+    if py is None:
+        row["note"] = f"cannot be prepared: {why}"
+        row["failed"] = 1
+        return row
+    prep = time.time() - t0
+    env = dict(os.environ)
+    target = ["tests"]
+    if lane == "app":
+        env["FURCOLLIDE_APP"] = "1"
+        target = ["tests/app"]
+    else:
+        env.pop("FURCOLLIDE_APP", None)
+    with tempfile.TemporaryDirectory(prefix=f"furcollide_lane_{lane}_") as tmp:
+        xml = Path(tmp) / "junit.xml"
+        cmd = [py, "-m", "pytest", "-q", *target, "-p", "no:cacheprovider",
+               f"--junitxml={xml}", *extra]
+        log(f"lane {lane}: {' '.join(cmd[:1])} -m pytest -q {' '.join(target)}")
+        proc = subprocess.run(cmd, cwd=str(ROOT), env=env)
+        counts = junit_counts(xml)
+    cpu1 = os.times()
+    row["wall_s"] = round(time.time() - t0, 1)
+    row["prep_s"] = round(prep, 1)
+    row["cpu_s"] = round((cpu1.children_user - cpu0.children_user)
+                         + (cpu1.children_system - cpu0.children_system), 1)
+    if counts is None:
+        row["note"] = f"pytest exited {proc.returncode} without a report"
+        row["failed"] = 1
+        return row
+    row.update(passed=counts["passed"], failed=counts["failures"] + counts["errors"],
+               skipped=counts["skipped"])
+    rc = proc.returncode
+    if counts["tests"] == 0:
+        row["note"] = "no test ran"
+        row["failed"] = max(row["failed"], 1)
+    elif row["failed"] == 0 and rc == 0:
+        row["ok"] = True
+    elif row["failed"] == 0 and rc in (-11, 139) and lane == "4.2":
+        # bpy 4.2's teardown crash at interpreter exit (README, Tests): every test
+        # passed according to pytest's own report, written before the exit.
+        row["ok"] = True
+        row["note"] = f"pytest passed; the process then crashed at exit (rc {rc}, bpy 4.2)"
+    elif row["failed"] == 0:
+        row["note"] = f"pytest exited {rc}"
+        row["failed"] = 1
+    return row
+
+
+def main(argv: list[str]) -> int:
+    which = argv[0] if argv and argv[0] in ("all", "matrix", "app") else "all"
+    extra = argv[1:] if argv and argv[0] in ("all", "matrix", "app") else argv
+    lanes = {"all": ALL, "matrix": MATRIX, "app": ("app",)}[which]
+    pick = os.environ.get("FURCOLLIDE_LANES", "").replace(",", " ").split()
+    if pick:
+        if os.environ.get("CI"):
+            log("FURCOLLIDE_LANES is for local runs; CI runs every lane: refusing")
+            return 2
+        unknown = [p for p in pick if p not in ALL]
+        if unknown:
+            log(f"unknown lane(s) {unknown}; lanes: {', '.join(ALL)}")
+            return 2
+        lanes = tuple(p for p in ALL if p in pick)
+        log(f"FURCOLLIDE_LANES={','.join(lanes)}: only these lanes (not a full run)")
+    t0 = time.time()
+    rows = [run_lane(lane, extra) for lane in lanes]
+    print("\n" + "=" * 78)
+    print(f"{'lane':6s} {'passed':>7s} {'failed':>7s} {'skipped':>8s} {'wall s':>8s} "
+          f"{'cpu s':>7s}  result")
+    for r in rows:
+        status = "ok" if r["ok"] else "FAILED"
+        note = f" ({r['note']})" if r["note"] else ""
+        print(f"{r['lane']:6s} {r['passed']:7d} {r['failed']:7d} {r['skipped']:8d} "
+              f"{r.get('wall_s', 0):8.1f} {r.get('cpu_s', 0):7.1f}  {status}{note}")
+    total_p = sum(r["passed"] for r in rows)
+    total_f = sum(r["failed"] for r in rows)
+    total_s = sum(r["skipped"] for r in rows)
+    print(f"all lanes: {time.time() - t0:.0f} s wall")
+    print(f"{total_p} passed, {total_f} failed, {total_s} skipped", flush=True)
+    return 0 if all(r["ok"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
