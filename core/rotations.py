@@ -155,6 +155,19 @@ def aos(v, out=None):
     return out
 
 
+def quat_rotate_soa(q, v):
+    """:func:`quat_rotate` on component arrays: unit quaternions ``q`` (4, ...)
+    rotating vectors ``v`` (3, ...), returned as (3, ...) (the arithmetic of
+    :func:`quat_rotate`, term by term)."""
+    w, u = q[0], q[1:]
+    t = _cross3(u, v)
+    t *= 2.0
+    out = _cross3(u, t)
+    for i in range(3):
+        out[i] += v[i] + w * t[i]
+    return out
+
+
 def rows32(x):
     """Component arrays (3, ...) as float32 rows (k, 3) (rays for the tracer),
     in the order of ``x[0]``'s elements."""

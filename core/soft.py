@@ -109,8 +109,20 @@ class SoftSolve:
         return rep, sel, rot.quat_canonical(rot.quat_mul(r, ctx.quat[sel]))
 
     def recover(self, rec, status):
-        """Slerp every segment toward its target; stop before contact."""
+        """Slerp every segment toward its target; stop before contact.
+
+        The step is ``recovery_rate`` of the way to the target; where it
+        would collide, the largest safe fraction ``k / levels`` of it (16
+        levels, finer than the precision for any step a frame can take).
+        Curves that were blocked last step start from the level they took
+        then (``Solver`` state ``delta``: that fraction), testing it and the
+        level above: a lasting contact is confirmed with two probes instead
+        of bisected. Where clearance is monotone in the fraction both give
+        the same level.
+        """
         ctx, s, p = self.ctx, self.ctx.s, self.ctx.prec
+        sv = ctx.sv_
+        levels = _LEVELS
         seg, rep, starts = ctx.segments(rec)
         q0 = ctx.quat[seg]
         ident = np.zeros_like(q0)
@@ -119,8 +131,9 @@ class SoftSolve:
         hold = np.isnan(frac)
         qt = rot.quat_slerp(ident, ctx.quat_max[seg], np.nan_to_num(frac)[rep])
         qt = np.where(hold[rep][:, None], q0, qt)
+        path = _Slerp(q0, qt)  # the arc every probe of this step samples
 
-        q1 = rot.quat_slerp(q0, qt, np.full(len(q0), s.recovery_rate))
+        q1 = path(np.full(len(q0), s.recovery_rate))
         # Within half a precision step of the target (every segment): land on it.
         conj = qt * np.array([1.0, -1.0, -1.0, -1.0])
         near_t = rot.quat_angle(rot.quat_mul(q1, conj)) < tol.SNAP_FRACTION * p
@@ -128,44 +141,69 @@ class SoftSolve:
         q1 = np.where(snap[rep][:, None], qt, q1)
         moving = ~np.all(q1 == q0, axis=1)
         moving_c = np.logical_or.reduceat(moving, starts)
-        is_near = ctx.cand_any[rec]
-        chk = np.flatnonzero(moving_c & is_near)
+        chk = np.flatnonzero(moving_c & ctx.cand_any[rec])
+        q1_soa = np.ascontiguousarray(q1.T)
+
+        ns = sv._ns
+
+        def clear(items, ks):
+            """Is curve ``rec[chk[items]]`` clear at level ``ks`` (``levels``:
+            the full, possibly snapped, step)?"""
+            c = rec[chk[items]]
+            sseg, srep, _ = ctx.segments(c)
+            pos = np.searchsorted(seg, sseg)
+            full = (ks == levels)[srep]
+            q = path.soa((ks / levels * s.recovery_rate)[srep], pos)
+            q = np.where(full, q1_soa.take(pos, axis=1), q)
+            if ns:  # component arrays (4, ns, n)
+                return ~ctx.quat_curve_hits(c, q.reshape(4, len(c), ns).transpose(0, 2, 1))
+            return ~ctx.curve_hits(c, quat=np.ascontiguousarray(q.T))
+
+        # Per checked curve: the lowest level known blocked (``none``: not
+        # known) and the highest known clear (0: the current state is clear).
+        n = len(chk)
+        none = levels + 1
+        lo = np.full(n, none, np.int64)
+        hi = np.zeros(n, np.int64)
+        mem = sv._contact[rec[chk]] & ctx.warm_soft
+        m = np.clip(np.rint(sv._delta[rec[chk]] * levels), 0, levels - 1).astype(np.int64)
+        warm = np.flatnonzero(mem)
+        cold = np.flatnonzero(~mem)
+        above = warm[m[warm] > 0]
+        items = np.concatenate([cold, warm, above])
+        ks = np.concatenate([np.full(len(cold), levels), m[warm] + 1, m[above]])
+        ok = clear(items, ks) if len(items) else np.zeros(0, bool)
+        np.minimum.at(lo, items[~ok], ks[~ok])
+        np.maximum.at(hi, items[ok], ks[ok])
+        lo = np.where(lo <= hi, none, lo)  # (a blocked level below a clear one: not monotone)
+        # Where the full step's fate is unknown, it decides next.
+        unknown = np.flatnonzero((lo == none) & (hi < levels))
+        if len(unknown):
+            okf = clear(unknown, np.full(len(unknown), levels))
+            hi[unknown[okf]] = levels
+            lo[unknown[~okf]] = levels
+        # The rest: the largest clear level in [hi, lo), bisected (the
+        # smallest good k of the reversed grid).
+        todo = np.flatnonzero((hi < levels) & (lo - hi > 1))
+        if len(todo):
+            def test_rev(items, kk):
+                return clear(todo[items], levels - kk)
+
+            kr = gallop_bisect(len(todo), test_rev, levels - hi[todo],
+                               lo=levels - lo[todo], hi=levels - hi[todo])
+            hi[todo] = levels - kr
         blocked = np.zeros(len(rec), bool)
-        if len(chk):
-            sseg, srep, _ = ctx.segments(rec[chk])
+        level = np.full(len(rec), levels, np.int64)
+        level[chk] = hi
+        blocked[chk] = hi < levels
+        b = np.flatnonzero(blocked)
+        if len(b):
+            sseg, _, _ = ctx.segments(rec[b])
             pos = np.searchsorted(seg, sseg)
-            blocked[chk] = ctx.curve_hits(rec[chk], quat=q1[pos])
-        if blocked.any():
-            b = np.flatnonzero(blocked)
-            # Bisect the recovery fraction on 16 levels (finer than precision
-            # for any recovery step a frame can take).
-            levels = 16
-
-            def test(items, ks):
-                c = rec[b[items]]
-                sseg, srep, _ = ctx.segments(c)
-                pos = np.searchsorted(seg, sseg)
-                lamk = (ks / levels * s.recovery_rate)[srep]
-                q = rot.quat_slerp(q0[pos], qt[pos], lamk)
-                return ~ctx.curve_hits(c, quat=q)
-
-            # The largest safe fraction is the smallest good k of the reversed
-            # grid (fraction levels - k): k = levels (fraction 0) is known good.
-            def test_rev(items, ks):
-                return test(items, levels - ks)
-
-            kr = gallop_bisect(
-                len(b),
-                test_rev,
-                np.full(len(b), levels),
-                lo=np.zeros(len(b)),
-                hi=np.full(len(b), levels),
-            )
-            sseg, srep, _ = ctx.segments(rec[b])
-            pos = np.searchsorted(seg, sseg)
-            lamk = ((levels - kr) / levels * s.recovery_rate)[srep]
-            q1[pos] = rot.quat_slerp(q0[pos], qt[pos], lamk)
+            lam = np.repeat(level[b] / levels * s.recovery_rate, sv._nseg[rec[b]])
+            q1[pos] = path(lam, pos)
         ctx.quat[seg] = q1
+        ctx.soft_level[rec[b]] = level[b] / levels
         changed = np.logical_or.reduceat(~np.all(q1 == q0, axis=1), starts)
         identity = np.logical_and.reduceat(np.all(q1 == ident, axis=1), starts)
         st = np.where(
@@ -177,3 +215,48 @@ class SoftSolve:
         ctx.active[done] = False
         dseg, _, _ = ctx.segments(done)
         ctx.quat_max[dseg] = ident[: len(dseg)]
+
+
+#: Soft recovery: fractions of the recovery step tested when it collides.
+_LEVELS = 16
+
+
+class _Slerp:
+    """Spherical interpolation from ``p`` to ``q`` (k, 4), its arc set up once
+    (:func:`rotations.quat_slerp`'s arithmetic, bit for bit): each call only
+    evaluates two sines. Kept as component arrays (4, k): long contiguous
+    passes instead of rows of 4."""
+
+    def __init__(self, p, q):
+        d = rot.dot(p, q)
+        flip = d < 0
+        self.p = np.ascontiguousarray(p.T)
+        self.q = np.ascontiguousarray(np.where(flip[:, None], -q, q).T)
+        self.q_raw = np.ascontiguousarray(q.T)
+        d = np.abs(d)
+        self.theta = np.arccos(np.clip(d, -1.0, 1.0))
+        s = np.sin(self.theta)
+        self.small = s < 1e-9
+        self.s = np.where(self.small, 1.0, s)
+
+    def soa(self, t, rows=None):
+        """Rows ``rows`` (all if None) at fractions ``t`` (len(rows),), as
+        component quaternions (4, len(rows))."""
+        take = (lambda x: x) if rows is None else (lambda x: x.take(rows, axis=-1))
+        p, q, theta = take(self.p), take(self.q), take(self.theta)
+        small, s = take(self.small), take(self.s)
+        t = np.broadcast_to(np.asarray(t, np.float64), theta.shape)
+        a = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / s)
+        b = np.where(small, t, np.sin(t * theta) / s)
+        out = p * a
+        out += q * b
+        sq = out[0] * out[0]  # = norm(axis=1) of the rows: the same sums
+        for i in range(1, 4):
+            sq += out[i] * out[i]
+        out /= np.sqrt(sq)
+        out = np.where(t == 0, p, out)
+        return np.where(t == 1, take(self.q_raw), out)
+
+    def __call__(self, t, rows=None):
+        """:meth:`soa` as rows (len(rows), 4)."""
+        return np.ascontiguousarray(self.soa(t, rows).T)
