@@ -38,6 +38,15 @@ class SoftSolve:
         unresolved = np.zeros(sv.n_curves, bool)
         touched = np.zeros(sv.n_curves, bool)
         todo = near
+        if sv._ns and len(todo):
+            # Most curves near a collider are clear in their current state:
+            # find the ones that are not on component arrays first (the first
+            # round's details need rows).
+            q = ctx.quat.reshape(-1, sv._ns, 4)[todo]
+            qs = np.empty((4, sv._ns, len(todo)))
+            for i in range(4):
+                qs[i] = q[..., i].T
+            todo = todo[ctx.quat_curve_hits(todo, qs)]
         for _ in range(int(sv._nseg.max(initial=0)) + 1):
             if len(todo) == 0:
                 break
@@ -66,13 +75,9 @@ class SoftSolve:
             o_k, d_k = o[k], d[k]
             root_k = k == starts[hit]
 
-            def test(items, ks, o_k=o_k, d_k=d_k, axis=axis, root_k=root_k, todo=todo):
-                dd = rot.rotate(d_k[items], axis[items], ks * p)
-                n = len(items)
-                return ~ctx.hits(todo[items], o_k[items], dd, np.arange(n), root_k[items])
-
+            turn = _SegmentTurn(ctx, todo, o_k, d_k, axis, root_k)
             kmax = np.full(len(todo), int(np.ceil(ctx.max_angle / p - 1e-9)))
-            kk = scan_bisect(len(todo), test, kmax)
+            kk = scan_bisect(len(todo), lambda items, ks, t=turn: t.clear(items, ks * p), kmax)
             ok = kk >= 0
             if ok.any():
                 w = np.flatnonzero(ok)
@@ -215,6 +220,63 @@ class SoftSolve:
         ctx.active[done] = False
         dseg, _, _ = ctx.segments(done)
         ctx.quat_max[dseg] = ident[: len(dseg)]
+
+
+class _SegmentTurn:
+    """One segment per curve turned about its own axis (a Soft search round).
+
+    Only that segment moves (its start is fixed, the segments after it are
+    the next round's), so a probe is one ray. Rodrigues' terms of the turn
+    (``Y = a (a.d)``, ``V0 = d - Y``, ``X = a x d``) and the segment's start
+    are moved into each collider's space once; a probe at angle ``t`` is
+    then ``Y + V0 cos t + X sin t`` there, grown as
+    :meth:`~core.step.StepContext.extend` grows it (its length never
+    changes), on component arrays.
+    """
+
+    def __init__(self, ctx, curves, o, d, axis, root):
+        self.ctx = ctx
+        ax = np.ascontiguousarray(axis.T)
+        v = np.ascontiguousarray(d.T)
+        along = rot._dot3(ax, v)
+        Y = ax * along
+        V0 = v - Y
+        X = rot._cross3(ax, v)
+        length = rot._norm3(v)
+        self.back, self.grow = ctx.ray_growth(length, root)
+        o = np.ascontiguousarray(o.T)
+        self.per_col = []
+        for (c, off), cand in zip(ctx.cols, ctx.cand, strict=True):
+            m = cand[curves]
+            if not m.any():
+                continue
+            A, b = c.local_map()
+            o_lo = rot.apply_soa(A, o)
+            for i in range(3):
+                o_lo[i] += b[i]
+            terms = [rot.apply_soa(A, x) for x in (Y, V0, X)]
+            self.per_col.append((c, off, m, o_lo, *terms))
+
+    def clear(self, items, theta):
+        """Is segment ``items`` turned by ``theta`` clear of every collider."""
+        ctx = self.ctx
+        hit = np.zeros(len(items), bool)
+        cos, sin = np.cos(theta), np.sin(theta)
+        back, grow = self.back[items], self.grow[items]
+        for c, off, m, o_lo, Y, V0, X in self.per_col:
+            w = np.flatnonzero(m[items])
+            if len(w) == 0:
+                continue
+            it = items[w]
+            d = Y.take(it, axis=1)
+            d += V0.take(it, axis=1) * cos[w]
+            d += X.take(it, axis=1) * sin[w]
+            o = o_lo.take(it, axis=1)
+            o -= back[w] * d
+            d *= grow[w]
+            hit[w] |= c.segment_hits_local(rot.rows32(o), rot.rows32(d), off, ctx.threads)
+            ctx.n_rays += len(w)
+        return ~hit
 
 
 #: Soft recovery: fractions of the recovery step tested when it collides.

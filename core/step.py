@@ -307,8 +307,10 @@ class StepContext:
         sv._axis_lo = axis_lo
         sv._hold &= self.active
         if self.soft:
-            q = np.tile([1.0, 0.0, 0.0, 0.0], (len(self.quat), 1))
-            qm = q.copy()
+            # Rows of curves without state are the identity in any frame: only
+            # the active curves' rows move back to their local frames (into
+            # copies: the output reads the world rows meanwhile).
+            q, qm = self.quat.copy(), self.quat_max.copy()
             if len(idx):
                 Bi = B[idx]
                 self._quats_to(idx, Bi, self.quat, q, to_world=False)
@@ -372,21 +374,14 @@ class StepContext:
         ns, n = self.sv_._ns, len(idx)
         root = self.roots[idx]
         if quat is not None:
-            v = self.D3[idx].astype(np.float64)
-            v = rot.quat_rotate(quat, v.reshape(-1, 3)).reshape(n, ns, 3)
-            end = (np.cumsum(v, axis=1) + root[:, None, :]).astype(self.out_dtype)
-            end = end.astype(np.float64)
-            o = np.empty_like(end)
-            o[:, :1] = root[:, None, :]
-            o[:, 1:] = end[:, :-1]
-            d = end - o
+            end = self._ends_quat_soa(idx, quat).astype(np.float64)
         else:
             end = self._ends_soa(idx, angle, axis).astype(np.float64)
-            o = np.empty_like(end)
-            o[:, 0] = root.T
-            o[:, 1:] = end[:, :-1]
-            d = rot.aos(np.subtract(end, o, out=end))
-            o = rot.aos(o)
+        o = np.empty_like(end)
+        o[:, 0] = root.T
+        o[:, 1:] = end[:, :-1]
+        d = rot.aos(np.subtract(end, o, out=end))
+        o = rot.aos(o)
         seg = (idx[:, None] * ns + np.arange(ns)).ravel()
         rep = np.repeat(np.arange(n), ns)
         return o.reshape(-1, 3), d.reshape(-1, 3), seg, rep, np.arange(n) * ns
@@ -400,6 +395,18 @@ class StepContext:
         if scale is not None:
             v *= scale
         end = rot.cumsum_soa(v)
+        end += self.roots[idx].T[:, None, :]
+        return end.astype(self.out_dtype)
+
+    def _ends_quat_soa(self, idx, quat):
+        """Segment ends of uniform curves ``idx`` whose segments turn by the
+        quaternions ``quat`` (rows, n * ns), (3, ns, n) in the output dtype."""
+        ns, n = self.sv_._ns, len(idx)
+        q3 = np.asarray(quat).reshape(n, ns, 4)
+        q = np.empty((4, ns, n))
+        for i in range(4):
+            q[i] = q3[..., i].T
+        end = rot.cumsum_soa(rot.quat_rotate_soa(q, self.seg_soa(idx)))
         end += self.roots[idx].T[:, None, :]
         return end.astype(self.out_dtype)
 
@@ -732,11 +739,14 @@ class StepContext:
         out = self.points.copy()
         idx = np.flatnonzero(self.active)
         ns = self.sv_._ns
-        if len(idx) and ns and not self.soft and self.out_dtype == np.float32:
+        if len(idx) and ns and self.out_dtype == np.float32:
             # The points written are the deformed segments' float32 ends
             # (what ``o + d`` of :meth:`deform` rounds back to).
             out3 = out.reshape(-1, ns + 1, 3)
-            end = self._ends_soa(idx, self.angle[idx], self.axis[idx])
+            if self.soft:
+                end = self._ends_quat_soa(idx, self.quat.reshape(-1, ns, 4)[idx])
+            else:
+                end = self._ends_soa(idx, self.angle[idx], self.axis[idx])
             out3[idx, 1:] = rot.aos(end)
         elif len(idx):
             if self.soft:
