@@ -197,6 +197,10 @@ class Plan:
         kc2 = np.maximum(kc - 1, 0)
         two = kc > 1  # (kc - 1 == 0 is th0 itself)
         kr1 = kr >= 1
+        # The recovery step too, where it moves: clear there, a curve
+        # recovers to it, as in the full search (whatever the rest says).
+        mv = np.concatenate([ic, ir])
+        mv = mv[self.moving[mv]]
         clear = self._probe(batch, [
             (io, ko, False),
             (ic, np.zeros(len(ic), np.int64), True),
@@ -204,8 +208,9 @@ class Plan:
             (ic, kc, True),
             (ir, kr, False),
             (ir[kr1], kr[kr1] - 1, False),
+            (mv, np.zeros(len(mv), np.int64), False),
         ])
-        c_o, c_c0, c_c2, c_c, c_r, c_r1 = clear
+        c_o, c_c0, c_c2, c_c, c_r, c_r1, c_mv = clear
         # the rest: as the full search
         r = io[c_o]
         self.regime[r] = 2
@@ -249,7 +254,15 @@ class Plan:
         self.lo[c] = 0
         pend_i.append(ir[nb & ~full])
         pend_lo.append(kr[nb & ~full])
-        self._regime_test(batch, np.concatenate(pend_i), np.concatenate(pend_lo))
+        pend = np.concatenate(pend_i)
+        pend_k = np.concatenate(pend_lo)
+        # clear at the recovery step: recovered (as the full search decides first)
+        rec0 = mv[c_mv]
+        self.regime[rec0] = 2
+        self.k[rec0] = 0
+        self.lo[rec0], self.hi[rec0] = -1, 0
+        keep = ~np.isin(pend, rec0)
+        self._regime_test(batch, pend[keep], pend_k[keep])
         # a recovery whose bracket is closed is found
         done = (self.regime == 2) & (self.k == -2) & (self.hi >= 0) & (self.hi - self.lo <= 1)
         self.k[done] = self.hi[done]
@@ -301,9 +314,14 @@ def resolve_collisions(ctx, batch, items, k, status):
         retry = np.flatnonzero((k < 0) & ~ctx.sv_._stiff[c])
         if len(retry):
             cr = c[retry]
+            # seed: the Stiff estimate at the current shape (the tangent plane
+            # at its first hit, whatever path the search took), plus about
+            # the mean bend already taken
+            o, d, _, rep, starts = ctx.deform(cr, angle=angle[cr], axis=ctx.axis[cr])
+            kh, point, push = ctx.first_hit_details(cr, o, d, rep, starts)
+            ctx._plane_guess(cr, o + d, rep, starts, point, push, ctx.axis[cr])
             ctx.sv_._stiff[cr] = True
             ctx.restyled[cr] = True
-            # seed: the Stiff estimate, plus about the mean bend already taken
             seed = ctx.guess_stiff[cr] + 0.5 * th0[retry]
             n = len(cr)
             k2, _ = search_angles(

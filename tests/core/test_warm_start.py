@@ -1,0 +1,99 @@
+"""The warm-start angle search (issue 10): each Stiff/Bend curve's search starts
+from its memory of the last step (state ``contact``, ``delta``; ``rigid.Plan``),
+Soft's blocked recoveries from the level they took last step; the result must be
+that of the full search (``Solver.warm_start = False``).
+
+Each step is compared from the very same state: the full solver's state after
+the previous frame is loaded into both, so any difference is the search's, not
+a drift of histories. The colliders jump now and then (a cut, a teleport): the
+memory is then wrong and the search must still find the full search's answer.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scenes
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from core import Collider, Settings, Solver, Status
+
+BENCH = Path(__file__).resolve().parents[2] / "bench"
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+import scene  # noqa: E402  (numpy-only scene builders of make bench)
+
+
+def _same_steps(offsets, frames, mode, **kw):
+    """Step a warm and a full solver from the same state each frame; return how
+    many curves were COLLIDING (the searches had work to do)."""
+    full = Solver(offsets, Settings(mode=mode, **kw))
+    full.warm_start = False
+    warm = Solver(offsets, Settings(mode=mode, **kw))
+    contacts = 0
+    for pts, cols in frames:
+        warm.state = full.state
+        a = full.step(pts, cols)
+        b = warm.step(pts, cols)
+        np.testing.assert_array_equal(a.status, b.status)
+        np.testing.assert_array_equal(a.points, b.points)
+        sa, sb = full.state, warm.state
+        for key in sa:
+            np.testing.assert_array_equal(sa[key], sb[key], err_msg=key)
+        contacts += int(np.count_nonzero(a.status == Status.COLLIDING))
+    return contacts
+
+
+@pytest.mark.parametrize("mode", ["bend", "stiff", "soft"])
+def test_the_resting_hat_gives_the_full_search_answer(mode):
+    """The benchmark's sustained contact (5,000 curves), a jump every 6th frame."""
+    sh = scene.sustained_contact(5_000, 8, 20_000)
+    col = Collider(sh.V, sh.F, matrix=sh.matrix(0, 48))
+
+    def frames():
+        for f in range(14):
+            col.matrix = sh.matrix((f * 7) % 48 if f % 6 == 5 else f, 48)
+            yield sh.points(f, 48), [col]
+
+    assert _same_steps(sh.fur.offsets, frames(), mode) > 5_000
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    mode=st.sampled_from(["stiff", "bend", "soft"]),
+    kind=st.sampled_from(["sphere", "box", "plane"]),
+    rate=st.floats(0.05, 1.0),
+    plasticity=st.floats(0.0, 1.0),
+    speed=st.floats(0.0, 0.2),
+    jump_at=st.integers(1, 5),
+    jump=st.tuples(st.floats(-0.6, 0.6), st.floats(-0.6, 0.6), st.floats(-0.4, 0.2)),
+    lean=st.floats(0.0, 0.6),
+)
+def test_moving_and_jumping_colliders_give_the_full_search_answer(
+        mode, kind, rate, plasticity, speed, jump_at, jump, lean):
+    rng = np.random.default_rng(3)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=60, curly=0.0, lean=lean, extent=1.0,
+                                    n_cvs=(4, 8))
+    if kind == "sphere":
+        V, F = scenes.uv_sphere([0, 0, 0], 0.5, 24, 12)
+    elif kind == "box":
+        V, F = scenes.box([-0.4, -0.4, -0.4], [0.4, 0.4, 0.4])
+    else:
+        V, F = scenes.grid(size=3.0, n=4)
+    col = Collider(V, F, double_sided=kind == "plane")
+    base = np.array([0.1, -0.05, 0.75])
+
+    def frames():
+        for f in range(7):
+            t = base + np.array([speed * f, 0.3 * speed * f, -0.5 * speed * f])
+            if f >= jump_at:
+                t = t + np.asarray(jump)
+            col.matrix = scenes.affine(scenes.rotation_matrix([1, 0.2, 0], 0.1 * f), t=t)
+            yield pts, [col]
+
+    contacts = _same_steps(offs, frames(), mode, recovery_rate=rate, plasticity=plasticity)
+    assert contacts > 0  # the collider starts in the fur: the searches had work
