@@ -665,18 +665,27 @@ class Collider:
         """
         if getattr(self, "_margin_key", None) == self._version:
             return self._margin_dirs
-        V = self._V.astype(np.float64)
-        F = self._F
-        a, b, c = (V.take(F[:, k], axis=0) for k in range(3))
-        b -= a
-        c -= a
-        fa = np.cross(b, c)  # area-weighted face normals
-        corner = F.T.ravel()
+        comps = self._used_components() if self._all_used else [
+            np.ascontiguousarray(self._V[:, i]) for i in range(3)]
+        F = [np.ascontiguousarray(self._F[:, k]) for k in range(3)]
+        # face normals (area-weighted) as components, float64
+        p = [[c.take(F[k]).astype(np.float64) for c in comps] for k in range(3)]
+        e1 = [p[1][i] - p[0][i] for i in range(3)]
+        e2 = [p[2][i] - p[0][i] for i in range(3)]
+        fa = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+              e1[0] * e2[1] - e1[1] * e2[0]]
+        # sum over each vertex's corners: corners sorted by vertex once (topology)
+        if getattr(self, "_corner_sort", None) is None:
+            corner = self._F.T.ravel()
+            order = np.argsort(corner, kind="stable")
+            first = np.flatnonzero(np.r_[True, corner[order][1:] != corner[order][:-1]])
+            self._corner_sort = (order % len(self._F), first, corner[order][first])
+        face_of, first, verts = self._corner_sort
         n = len(self._V)
-        vn = np.empty((n, 3))
+        vn = np.zeros((n, 3))
         for i in range(3):
-            vn[:, i] = np.bincount(corner, weights=np.tile(fa[:, i], 3), minlength=n)
-        lv = np.linalg.norm(vn, axis=1, keepdims=True)
+            vn[verts, i] = np.add.reduceat(fa[i].take(face_of), first)
+        lv = np.sqrt(np.einsum("ij,ij->i", vn, vn))[:, None]
         self._margin_dirs = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
         self._margin_key = self._version
         return self._margin_dirs
