@@ -19,6 +19,7 @@ import numpy as np
 
 from . import tolerances as tol
 from .errors import ColliderError
+from .meshfix import Tidy, tidy
 from .rays import beside, make_backend, triangle_rows
 from .rotations import apply, apply_soa, det3, inv_affine, norm_bound
 from .rotations import dot as rot_dot
@@ -161,10 +162,14 @@ class Collider:
                 )
             self.dropped_faces = int(bad.sum())
             F = F[~bad]
+        # Welded seams, duplicated faces and windings repaired (meshfix): the
+        # faces used from here on; the vertices are never moved.
+        self.repairs = tidy(V, F) if len(F) else Tidy(F)
+        F = self.repairs.faces
         self._F = F
         self._used = np.unique(F)  # vertices referenced by a face (topology only)
         self._all_used = len(self._used) == len(V)
-        self.closed = self._is_closed(F, len(V))
+        self.closed = self.repairs.closed
         self._M, self._Minv = _as_matrix(matrix)
         self._version = 0
         self._normals_cache = (None, 0, None)  # see _face_normals
@@ -240,18 +245,6 @@ class Collider:
         area2 = np.einsum("ij,ij->i", a, a)
         rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
         return rep | (area2 <= (2 * tol.DEGENERATE_AREA_REL * diag**2) ** 2)
-
-    @staticmethod
-    def _is_closed(F, n):
-        """Every directed edge appears once and its reverse once."""
-        if len(F) == 0:
-            return False
-        a = F.astype(np.int64)
-        e0 = np.concatenate([a[:, 0], a[:, 1], a[:, 2]])
-        e1 = np.concatenate([a[:, 1], a[:, 2], a[:, 0]])
-        fwd = np.sort(e0 * n + e1)
-        rev = np.sort(e1 * n + e0)
-        return bool(np.all(fwd[1:] != fwd[:-1]) and np.array_equal(fwd, rev))
 
     # ------------------------------------------------------------ properties
     @property

@@ -68,3 +68,8 @@ OFFSET_MAX_STRETCH = 4.0
 #: rounded to float32: a segment passing within rounding distance of a sharp
 #: edge must not be clear for the solver and crossing for a float64 test.
 CLEARANCE_ULPS = 4
+
+#: Collider vertices closer than this fraction of the mesh's bounding-box
+#: diagonal are one vertex for its topology (closedness, windings): seams an
+#: import left unwelded still close the mesh (``core.meshfix``).
+WELD_REL = 1e-6

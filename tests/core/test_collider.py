@@ -17,8 +17,9 @@ def test_closed_flag():
         assert Collider(V, F, double_sided=True).closed  # topology only
         assert not Collider(V, F[1:]).closed  # a hole
         F2 = F.copy()
-        F2[0] = F2[0, ::-1]  # one face flipped: inconsistent
-        assert not Collider(V, F2).closed
+        F2[0] = F2[0, ::-1]  # one face flipped: repaired (meshfix), still closed
+        col = Collider(V, F2)
+        assert col.closed and col.repairs.flipped == 1
     V, F = scenes.grid()
     assert not Collider(V, F).closed
     # two disjoint closed boxes are closed
