@@ -173,10 +173,12 @@ class SoftSolve:
         mem = sv._contact[rec[chk]] & ctx.warm_soft
         m = np.clip(np.rint(sv._delta[rec[chk]] * levels), 0, levels - 1).astype(np.int64)
         warm = np.flatnonzero(mem)
-        cold = np.flatnonzero(~mem)
         above = warm[m[warm] > 0]
-        items = np.concatenate([cold, warm, above])
-        ks = np.concatenate([np.full(len(cold), levels), m[warm] + 1, m[above]])
+        below_full = warm[m[warm] + 1 < levels]
+        # every curve probes the full step, as the full search decides first;
+        # a remembered one also the level it took and the one above
+        items = np.concatenate([np.arange(n), below_full, above])
+        ks = np.concatenate([np.full(n, levels), m[below_full] + 1, m[above]])
         ok = clear(items, ks) if len(items) else np.zeros(0, bool)
         np.minimum.at(lo, items[~ok], ks[~ok])
         np.maximum.at(hi, items[ok], ks[ok])

@@ -41,6 +41,7 @@ import time
 
 import numpy as np
 
+from . import tolerances as tol
 from .collider import Collider
 from .errors import InputError, SettingsError
 from .layout import check_offsets
@@ -261,11 +262,84 @@ class Solver:
             raise InputError(
                 f"points has {len(points)} rows but offsets describe {self.n_points} points"
             )
-        if not np.isfinite(points).all():
-            i = int(np.argmax(~np.isfinite(points).all(axis=1)))
-            c = int(np.searchsorted(self._off, i, "right") - 1)
-            raise InputError(f"point {i} (curve {c}) is not finite: {points[i].tolist()}")
         return np.ascontiguousarray(points)
+
+    def _non_finite(self, points):
+        """Curves with a non-finite point: ``(mask (C,) bool, reason)``."""
+        finite = np.isfinite(points).all(axis=1)
+        if finite.all():
+            return np.zeros(self.n_curves, bool), ""
+        rows = np.flatnonzero(~finite)
+        owner = np.searchsorted(self._off, rows, "right") - 1
+        bad = np.zeros(self.n_curves, bool)
+        bad[owner] = True
+        i, c = int(rows[0]), int(owner[0])
+        return bad, f"curve {c}: point {i} is not finite ({points[i].tolist()})"
+
+    @staticmethod
+    def _problems(bad, reasons):
+        """The step's report on its INVALID curves (the first one's reason)."""
+        if not bad.any():
+            return []
+        first = min(reasons, key=lambda r: r[0])[1]
+        n = int(bad.sum())
+        more = (f" ({n} invalid curves: left as they are, not solved)" if n > 1
+                else " (left as it is, not solved)")
+        return [first + more]
+
+    _ROW_STATE = ("_angle", "_angle_max", "_axis_lo", "_frame", "_active", "_hold",
+                  "_pinched", "_stiff", "_contact", "_delta")
+
+    def _rows_of(self, bad):
+        """Copies of the per-curve (and, Soft, per-segment) state rows of ``bad``."""
+        rows = {k: getattr(self, k)[bad].copy() for k in self._ROW_STATE}
+        seg = np.repeat(bad, self._nseg)
+        rows["_quat"], rows["_quat_max"] = self._quat[seg].copy(), self._quat_max[seg].copy()
+        return rows
+
+    def _restore_rows(self, bad, rows):
+        """Put back :meth:`_rows_of` (an invalid curve keeps its local state)."""
+        for k in self._ROW_STATE:
+            getattr(self, k)[bad] = rows[k]
+        seg = np.repeat(bad, self._nseg)
+        self._quat[seg], self._quat_max[seg] = rows["_quat"], rows["_quat_max"]
+
+    def _stand_in(self, points, bad):
+        """``points`` with the invalid curves replaced by short straight ones at
+        their root (never solved; only so the step's arithmetic stays finite)."""
+        out = points.copy()
+        pts = np.flatnonzero(np.repeat(bad, np.diff(self._off)))
+        owner = np.searchsorted(self._off, pts, "right") - 1
+        root = points[self._off[owner]].astype(np.float64)
+        root = np.where(np.isfinite(root).all(axis=1)[:, None], root, 0.0)
+        j = pts - self._off[owner]
+        scale = 1e-6 * np.maximum(1.0, np.abs(root).max(axis=1))
+        out[pts] = root + (j * scale)[:, None] * np.array([0.0, 0.0, 1.0])
+        return out
+
+    def _as_given(self, points, bad):
+        """The invalid curves' own points, every non-finite point replaced by the
+        nearest finite one before it on its curve (after it for leading ones;
+        the origin when the curve has none): an output never holds NaN."""
+        pts = np.flatnonzero(np.repeat(bad, np.diff(self._off)))
+        p = points[pts].copy()
+        ok = np.isfinite(p).all(axis=1)
+        if ok.all():
+            return pts, p
+        owner = np.searchsorted(self._off, pts, "right") - 1
+        idx = np.where(ok, np.arange(len(p)), -1)
+        fwd = np.maximum.accumulate(idx)  # last finite point so far
+        start = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
+        first_of = np.repeat(start, np.diff(np.r_[start, len(p)]))
+        fwd = np.where(fwd >= first_of, fwd, -1)  # (not from an earlier curve)
+        # leading non-finite points: the first finite point of the curve
+        nxt = np.where(ok, np.arange(len(p)), len(p))
+        nxt = np.minimum.accumulate(nxt[::-1])[::-1]
+        last_of = np.repeat(np.r_[start[1:], len(p)] - 1, np.diff(np.r_[start, len(p)]))
+        nxt = np.where(nxt <= last_of, nxt, -1)
+        src = np.where(fwd >= 0, fwd, nxt)
+        fixed = np.where(src[:, None] >= 0, p[np.maximum(src, 0)], 0.0)
+        return pts, np.where(ok[:, None], p, fixed)
 
     def _check_enabled(self, enabled):
         if enabled is None:
@@ -312,6 +386,14 @@ class Solver:
         s = self._settings
         points = self._check_points(points)
         enabled = self._check_enabled(enabled)
+        # Curves the solver cannot work with (a non-finite point, a zero-length
+        # segment) are left as they are (INVALID) and every other curve is
+        # solved: the step works on stand-ins for them.
+        given = points
+        invalid, why = self._non_finite(points)
+        reasons = [(int(np.argmax(invalid)), why)] if invalid.any() else []
+        if invalid.any():
+            points = self._stand_in(given, invalid)
         if colliders is None:
             colliders = ()
         elif isinstance(colliders, Collider):
@@ -339,6 +421,15 @@ class Solver:
         try:
             ctx = StepContext(self, points, cols, growth)
             waits += ctx.builds
+            if ctx.degenerate.any():
+                reasons.append((int(np.argmax(ctx.degenerate)), ctx.degenerate_reason))
+                invalid = invalid | ctx.degenerate
+                points = self._stand_in(given, invalid)
+                ctx = StepContext(self, points, cols, growth)
+                waits += ctx.builds
+            enabled = enabled & ~invalid
+            problems = self._problems(invalid, reasons)
+            kept = self._rows_of(invalid) if invalid.any() else None
             timings = ctx.timings
             timings["setup"] = (time.perf_counter() - t_start) * 1e3
 
@@ -402,7 +493,12 @@ class Solver:
             out = ctx.output()
         finally:
             stored()
+        if invalid.any():
+            rows, own = self._as_given(given, invalid)
+            out[rows] = own
+            status[invalid] = Status.INVALID
+            self._restore_rows(invalid, kept)  # their state: as before this step
         timings["output"] = (time.perf_counter() - t0) * 1e3
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         timings["rays"] = ctx.n_rays
-        return StepResult(out, status, timings)
+        return StepResult(out, status, timings, problems)

@@ -17,6 +17,7 @@ class Status(IntEnum):
     PINCHED = 3  #: root inside a closed collider (not solved, see pinch_resolution)
     UNRESOLVED = 4  #: not clearable within max_angle: keeps the previous frame's local state
     DISABLED = 5  #: switched off by ``enabled``: prior local state kept
+    INVALID = 6  #: a zero-length segment or a non-finite point: left as its input, not solved
 
 
 @dataclass
@@ -31,11 +32,16 @@ class StepResult:
         :class:`Status` code per curve.
     timings : dict
         Milliseconds per phase (for benchmarks and the panel's stats).
+    problems : list of str
+        What is wrong with the curves marked ``INVALID`` this step: the first
+        such curve by index with its reason, and how many there are (empty
+        when every curve is fine).
     """
 
     points: np.ndarray
     status: np.ndarray
     timings: dict = field(default_factory=dict)
+    problems: list = field(default_factory=list)
 
     def count(self, status: Status) -> int:
         """Number of curves with ``status``."""

@@ -14,7 +14,6 @@ import numpy as np
 from . import rigid
 from . import rotations as rot
 from . import tolerances as tol
-from .errors import InputError
 from .rays import default_threads
 from .soft import SoftSolve
 from .status import Status
@@ -36,6 +35,7 @@ class StepContext:
         self.out_dtype = out_dtype
         self.timings = {}
         self.n_rays = 0
+        self.builds = []  # BVH builds started early (see _candidates)
         # Input segment vectors in the input dtype: (S, 3) segment-major, or
         # for a uniform CV count ``ns`` a (C, ns, 3) view of one flat
         # difference of all points (no per-curve gathers or copies).
@@ -68,15 +68,23 @@ class StepContext:
             L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg))
             self.curve_len = np.add.reduceat(L, solver._soff[:-1], dtype=np.float64)
             shortest = np.minimum.reduceat(L, solver._soff[:-1])
-        if not np.isfinite(self.curve_len).all():
-            c = int(np.argmax(~np.isfinite(self.curve_len)))
-            raise InputError(f"curve {c} is too large: its length overflows (coordinates ~1e19+)")
-        bad = shortest <= tol.ZERO_SEGMENT_REL * self.curve_len
-        if bad.any():
-            c = int(np.argmax(bad))
-            a, b = int(solver._soff[c]), int(solver._soff[c + 1])
-            k = int(solver._seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
-            raise InputError(f"curve {c} has a zero-length segment between points {k} and {k + 1}")
+        # Curves the step cannot work with (Solver.step marks them INVALID and
+        # steps again with stand-ins for them): a zero-length segment, or a
+        # length that overflows. (Non-finite points never get here.)
+        self.degenerate = ~(shortest > tol.ZERO_SEGMENT_REL * self.curve_len)
+        self.degenerate |= ~np.isfinite(self.curve_len)
+        self.degenerate_reason = ""
+        if self.degenerate.any():
+            c = int(np.argmax(self.degenerate))
+            if not np.isfinite(self.curve_len[c]):
+                self.degenerate_reason = (
+                    f"curve {c} is too large: its length overflows (coordinates ~1e19+)")
+            else:
+                a, b = int(solver._soff[c]), int(solver._soff[c + 1])
+                k = int(solver._seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
+                self.degenerate_reason = (
+                    f"curve {c} has a zero-length segment between points {k} and {k + 1}")
+            return  # (the caller steps again without them)
         if ns:
             self.roots = points.reshape(-1, ns + 1, 3)[:, 0].astype(np.float64)
         else:
@@ -100,7 +108,6 @@ class StepContext:
         # Roots are handled as components (3, C) here (long contiguous passes).
         self.cand = []
         self._near_roots = []  # per collider: (roots in its box, their grid coords)
-        self.builds = []  # BVH builds started early (see below)
         rootsT = np.ascontiguousarray(self.roots.T)
         try:
             for c, off in cols:

@@ -16,7 +16,7 @@ def test_status_values():
     assert issubclass(Status, enum.IntEnum)
     assert [(s.name, int(s)) for s in Status] == [
         ("FREE", 0), ("COLLIDING", 1), ("RECOVERING", 2), ("PINCHED", 3),
-        ("UNRESOLVED", 4), ("DISABLED", 5)]
+        ("UNRESOLVED", 4), ("DISABLED", 5), ("INVALID", 6)]
 
 
 def test_exports():

@@ -95,27 +95,72 @@ def test_bad_point_arrays(make):
     assert "point" in str(ei.value).lower()
 
 
+def _solved_without(pts, offs, col, c, mode="stiff"):
+    """The step's result for every curve but ``c`` (switched off)."""
+    enabled = np.ones(len(offs) - 1, bool)
+    enabled[c] = False
+    return Solver(offs, Settings(mode=mode)).step(pts, [col], enabled=enabled)
+
+
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
-def test_non_finite_points_named(bad):
+def test_a_non_finite_point_marks_its_curve_invalid(bad):
+    """One bad point (issue 15): its curve is INVALID and left as its input (the
+    bad value replaced by the point before it, never NaN), named with its point
+    in the step's problems; every other curve is solved as without it."""
     pts, offs = _fur()  # curves at points 0-2, 3-5, 6-8
     pts = pts.copy()
     pts[7, 1] = bad
-    solver = Solver(offs, Settings())
-    with pytest.raises(InputError) as ei:
-        solver.step(pts, [_sphere()])
-    msg = str(ei.value)
-    assert _names(msg, 7) or (_names(msg, 2) and "curve" in msg.lower()), msg
+    col = _sphere()
+    res = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+    assert res.status[2] == Status.INVALID
+    assert np.isfinite(res.points).all()
+    np.testing.assert_array_equal(res.points[6], pts[6])
+    np.testing.assert_array_equal(res.points[7], pts[6])  # the bad point: the one before
+    np.testing.assert_array_equal(res.points[8], pts[8])
+    msg = res.problems[0]
+    assert _names(msg, 7) and _names(msg, 2) and "not finite" in msg, msg
+    ref = _solved_without(pts, offs, col, 2)
+    np.testing.assert_array_equal(res.points[:6], ref.points[:6])
+    np.testing.assert_array_equal(res.status[:2], ref.status[:2])
 
 
-def test_zero_length_segment_named():
+def test_a_zero_length_segment_marks_its_curve_invalid():
     pts, offs = _fur()
     pts = pts.copy()
     pts[5] = pts[4]  # curve 1, segment 1
-    solver = Solver(offs, Settings())
-    with pytest.raises(InputError) as ei:
-        solver.step(pts, [_sphere()])
-    msg = str(ei.value)
-    assert "curve" in msg.lower() and _names(msg, 1), msg
+    col = _sphere()
+    res = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+    assert res.status[1] == Status.INVALID
+    np.testing.assert_array_equal(res.points[3:6], pts[3:6])
+    msg = res.problems[0]
+    assert "zero-length" in msg and _names(msg, 1) and _names(msg, 4), msg
+    ref = _solved_without(pts, offs, col, 1)
+    keep = np.r_[0:3, 6:9]
+    np.testing.assert_array_equal(res.points[keep], ref.points[keep])
+
+
+def test_an_invalid_curve_keeps_its_state():
+    """A curve invalid for a frame keeps its local state: when it is good again
+    the next frame equals a run in which that frame never happened for it."""
+    pts, offs = _fur()
+    col = _sphere()
+    s1 = Solver(offs, Settings(mode="stiff"))
+    s1.step(pts, [col])
+    before = s1.state
+    bad = pts.copy()
+    bad[4] = np.nan
+    r = s1.step(bad, [col])
+    assert r.status[1] == Status.INVALID
+    after = s1.state
+    for key in ("angle", "axis", "frame", "active"):
+        np.testing.assert_array_equal(after[key][1], before[key][1], err_msg=key)
+    s2 = Solver(offs, Settings(mode="stiff"))
+    s2.step(pts, [col])
+    s2.step(pts, [col], enabled=np.array([True, False, True]))
+    a, b = s1.step(pts, [col]), s2.step(pts, [col])
+    assert np.array_equal(a.points, b.points)
+    assert np.all(np.isfinite(a.points))
+    assert np.array_equal(np.asarray(a.status), np.asarray(b.status))
 
 
 def test_enabled_wrong_length_and_shape():
@@ -125,24 +170,6 @@ def test_enabled_wrong_length_and_shape():
         with pytest.raises(InputError) as ei:
             solver.step(pts, [_sphere()], enabled=enabled)
         assert "enabled" in str(ei.value).lower()
-
-
-def test_solver_usable_after_rejected_step():
-    """A rejected frame leaves no trace: the next good frame equals a fresh run."""
-    pts, offs = _fur()
-    col = _sphere()
-    s1 = Solver(offs, Settings(mode="stiff"))
-    s1.step(pts, [col])
-    bad = pts.copy()
-    bad[4] = np.nan
-    with pytest.raises(InputError):
-        s1.step(bad, [col])
-    s2 = Solver(offs, Settings(mode="stiff"))
-    s2.step(pts, [col])
-    a, b = s1.step(pts, [col]), s2.step(pts, [col])
-    assert np.array_equal(a.points, b.points)
-    assert np.all(np.isfinite(a.points))
-    assert np.array_equal(np.asarray(a.status), np.asarray(b.status))
 
 
 # ----------------------------------------------------------------- colliders
