@@ -41,7 +41,6 @@ import time
 
 import numpy as np
 
-from . import tolerances as tol
 from .collider import Collider
 from .errors import InputError, SettingsError
 from .layout import check_offsets

@@ -10,7 +10,7 @@ from geom import FAST
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core import Status, Collider, Settings, Solver
+from core import Collider, Settings, Solver, Status
 from core.errors import FurCollideError
 
 CORRUPTIONS = [
