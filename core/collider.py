@@ -179,6 +179,9 @@ class Collider:
         self._build_lock = threading.Lock()
         self._occ_lock = threading.Lock()
         self._prefetching = None  # shell key of the last prefetch started
+        #: Did the last solver step that saw this collider query it? (It then
+        #: starts the next rebuild early: timing only, never a result.)
+        self.queried = False
         self.build_count = 0
         self._geometry_cache = None
         self._rows_cache = {}  # shell layout -> prepared triangles (see _rows)

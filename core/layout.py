@@ -47,3 +47,59 @@ def check_offsets(offsets, min_curves=1) -> np.ndarray:
             raise InputError(f"offsets must increase: curve {i} has {int(sizes[i])} points")
         raise InputError(f"curve {i} has only 1 point; every curve needs at least 2")
     return off
+
+
+class CurveLayout:
+    """Where every curve's points and segments are (topology only, built once).
+
+    Attributes
+    ----------
+    offsets : (C+1,) int64
+        Curve ``i`` is ``points[offsets[i]:offsets[i + 1]]``.
+    n_curves, n_points : int
+    nseg : (C,) int64
+        Segments per curve.
+    soff : (C+1,) int64
+        Curve ``i``'s segments are ``soff[i]:soff[i + 1]`` (segment ids).
+    seg_start : (S,) int64
+        First point of each segment.
+    seg_curve, seg_j : (S,) int64
+        Owner curve of each segment, and its index along the curve.
+    w_bend : (S,) float64
+        Bend's share of a curve's angle turning each segment, ``(j + 1) / n``.
+    ns : int
+        Segments per curve when every curve has the same count (the usual
+        groom: the step then works on (C, ns) blocks), else 0.
+    """
+
+    def __init__(self, offsets):
+        off = check_offsets(offsets)
+        self.offsets = off
+        self.n_curves = C = len(off) - 1
+        self.n_points = int(off[-1])
+        self.nseg = nseg = np.diff(off) - 1
+        self.soff = np.concatenate([[0], np.cumsum(nseg)])
+        is_last = np.zeros(self.n_points, bool)
+        is_last[off[1:] - 1] = True
+        self.seg_start = np.flatnonzero(~is_last)
+        self.seg_curve = np.repeat(np.arange(C), nseg)
+        self.seg_j = np.arange(len(self.seg_start)) - self.soff[self.seg_curve]
+        self.w_bend = (self.seg_j + 1) / nseg[self.seg_curve]
+        self.ns = int(nseg[0]) if C and (nseg == nseg[0]).all() else 0
+
+    @property
+    def n_segments(self) -> int:
+        return len(self.seg_start)
+
+    def segments(self, idx):
+        """Segments of curves ``idx``: (segment ids, owner position in
+        ``idx``, each curve's first position)."""
+        cnt = self.nseg[idx]
+        starts = np.cumsum(cnt) - cnt
+        rep = np.repeat(np.arange(len(idx)), cnt)
+        seg = self.soff[idx][rep] + (np.arange(int(cnt.sum())) - starts[rep])
+        return seg, rep, starts
+
+    def owner(self, points):
+        """Curve of each point index in ``points`` (k,)."""
+        return np.searchsorted(self.offsets, points, "right") - 1

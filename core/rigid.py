@@ -37,7 +37,7 @@ def solve(ctx, idx, status):
     hit_new, seg_hit = ctx.input_hits(new)
     cn = new[hit_new]
     if len(cn):  # first hit: choose the axis (kept until recovered)
-        seg_hit = seg_hit[np.repeat(hit_new, ctx.sv_._nseg[new])]  # (the same rays)
+        seg_hit = seg_hit[np.repeat(hit_new, ctx.layout.nseg[new])]  # (the same rays)
         o, d, _, rep, starts = ctx.input_rays(cn)
         ctx.axis[cn] = ctx.new_axes(cn, o, d, rep, starts, seg_hit)
         ctx.active[cn] = True
@@ -58,7 +58,7 @@ def solve(ctx, idx, status):
         c = act[cc]
         o, d, _, rep, starts = ctx.deform(c, angle=angle[c], axis=ctx.axis[c])
         k, point, push = ctx.first_hit_details(c, o, d, rep, starts)
-        g = ctx._plane_guess(c, o + d, rep, starts, point, push, ctx.axis[c])
+        g = ctx.plane_guess(c, o + d, rep, starts, point, push, ctx.axis[c])
         ctx.guess[c] = np.where(k >= 0, g, ctx.guess[c])
     # 3. Every search left, collisions (new and old) and blocked recoveries,
     #    in the same rounds (one ray query per round).
@@ -178,11 +178,10 @@ class Plan:
     def first_round_warm(self, batch):
         """First round from the curves' memory (see the class docstring)."""
         ctx, p = self.ctx, self.ctx.prec
-        sv = ctx.sv_
         n = len(self.act)
         i = np.arange(n)
-        contact = sv._contact[self.act]
-        delta = sv._delta[self.act]
+        contact = ctx.state.contact[self.act]
+        delta = ctx.state.delta[self.act]
         # a contact that was turning further: it likely turns as much again
         pred_col = contact & (delta > 0) & (self.kmax >= 1)
         kc = np.clip(np.rint(delta / p), 1, np.maximum(self.kmax, 1)).astype(np.int64)
@@ -311,7 +310,7 @@ def resolve_collisions(ctx, batch, items, k, status):
         # Bending turns the root segment by only 1/n of the angle: curves
         # hit near the root that bending cannot clear turn at the root (as
         # Stiff) instead, until they have recovered.
-        retry = np.flatnonzero((k < 0) & ~ctx.sv_._stiff[c])
+        retry = np.flatnonzero((k < 0) & ~ctx.state.stiff[c])
         if len(retry):
             cr = c[retry]
             # seed: the Stiff estimate at the current shape (the tangent plane
@@ -319,8 +318,8 @@ def resolve_collisions(ctx, batch, items, k, status):
             # the mean bend already taken
             o, d, _, rep, starts = ctx.deform(cr, angle=angle[cr], axis=ctx.axis[cr])
             kh, point, push = ctx.first_hit_details(cr, o, d, rep, starts)
-            ctx._plane_guess(cr, o + d, rep, starts, point, push, ctx.axis[cr])
-            ctx.sv_._stiff[cr] = True
+            ctx.plane_guess(cr, o + d, rep, starts, point, push, ctx.axis[cr])
+            ctx.state.stiff[cr] = True
             ctx.restyled[cr] = True
             seed = ctx.guess_stiff[cr] + 0.5 * th0[retry]
             n = len(cr)
@@ -329,7 +328,7 @@ def resolve_collisions(ctx, batch, items, k, status):
                 np.zeros(n, np.int64), np.full(n, -1, np.int64), np.ones(n, np.int64),
                 np.ones(n, bool), guess=seed,
             )
-            ctx.sv_._stiff[cr[k2 < 0]] = False
+            ctx.state.stiff[cr[k2 < 0]] = False
             ctx.restyled[cr[k2 < 0]] = False
             ok2 = k2 >= 0
             k[retry[ok2]] = k2[ok2]
@@ -343,8 +342,8 @@ def resolve_collisions(ctx, batch, items, k, status):
     status[bad] = Status.UNRESOLVED
     # Fallback: the state of the previous frame (last collision-free).
     angle[bad] = th0[~ok]
-    fresh = bad[ctx.sv_._angle[bad] == 0]
-    ctx.active[fresh] = ctx.sv_._active[fresh]
+    fresh = bad[ctx.state.angle[bad] == 0]
+    ctx.active[fresh] = ctx.state.active[fresh]
 
 
 def recovery_step(ctx, rec):
@@ -386,7 +385,7 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
     yet), ``stride`` the first gallop stride. Items with ``use_guess`` (and
     nothing known) start from an estimate of the increment, ``guess``
     (default ``ctx.guess`` of the curves: the tangent-plane estimate of
-    :meth:`StepContext._plane_guess`): one round probes 0.8, 1, 1.25 and 1.6
+    :meth:`StepContext.plane_guess`): one round probes 0.8, 1, 1.25 and 1.6
     times it, and the search continues from the bracket that gives
     (bisection) or from its top (gallop).
 
@@ -453,7 +452,7 @@ def release(ctx, idx):
         return
     done = idx[ctx.active[idx] & (ctx.angle[idx] == 0)]
     ctx.active[done] = False
-    ctx.sv_._stiff[done] = False
+    ctx.state.stiff[done] = False
     ctx.axis[done] = 0.0
     ctx.angle_max[done] = 0.0
 
@@ -472,11 +471,10 @@ class RigidBatch:
     def __init__(self, ctx, curves):
         self.ctx = ctx
         self.curves = curves
-        sv = ctx.sv_
-        self.cnt = sv._nseg[curves]
+        self.cnt = ctx.layout.nseg[curves]
         # Uniform CV counts (the usual groom): component arrays (3, ns, n),
         # see :meth:`_hits_uniform`.
-        self.ns = ctx.sv_._ns if len(curves) else 0
+        self.ns = ctx.layout.ns if len(curves) else 0
         if self.ns:
             self._init_uniform(ctx, curves)
             return
@@ -488,7 +486,7 @@ class RigidBatch:
         X = np.cross(ax, v)
         V0 = v - Y
         if ctx.s.mode == "bend":
-            self.w = np.where(sv._stiff[curves][rep], 1.0, sv._w_bend[seg])
+            self.w = np.where(ctx.state.stiff[curves][rep], 1.0, ctx.layout.w_bend[seg])
         else:
             self.w = np.ones(len(seg))
         self.length = np.sqrt(rot.dot(v, v))

@@ -31,23 +31,22 @@ class SoftSolve:
 
     def run(self, idx, status):
         ctx, p = self.ctx, self.ctx.prec
-        sv = ctx.sv_
         near = idx[ctx.cand_any[idx]]
         far = idx[~ctx.cand_any[idx]]
         q0 = ctx.quat.copy()  # world, state at the start of the step
-        unresolved = np.zeros(sv.n_curves, bool)
-        touched = np.zeros(sv.n_curves, bool)
+        unresolved = np.zeros(ctx.layout.n_curves, bool)
+        touched = np.zeros(ctx.layout.n_curves, bool)
         todo = near
-        if sv._ns and len(todo):
+        if ctx.layout.ns and len(todo):
             # Most curves near a collider are clear in their current state:
             # find the ones that are not on component arrays first (the first
             # round's details need rows).
-            q = ctx.quat.reshape(-1, sv._ns, 4)[todo]
-            qs = np.empty((4, sv._ns, len(todo)))
+            q = ctx.quat.reshape(-1, ctx.layout.ns, 4)[todo]
+            qs = np.empty((4, ctx.layout.ns, len(todo)))
             for i in range(4):
                 qs[i] = q[..., i].T
             todo = todo[ctx.quat_curve_hits(todo, qs)]
-        for _ in range(int(sv._nseg.max(initial=0)) + 1):
+        for _ in range(int(ctx.layout.nseg.max(initial=0)) + 1):
             if len(todo) == 0:
                 break
             seg, rep, starts = ctx.segments(todo)
@@ -61,13 +60,13 @@ class SoftSolve:
             ctx.active[todo] = True
             seg_hit = seg[k]  # global segment id of the first hitting segment
             if ctx.s.attract_to_growth_surface:
-                mid = ctx._midpoints(todo, o, d, starts[hit])
+                mid = ctx.midpoints(todo, o, d, starts[hit])
                 cp, _ = ctx.growth.closest_points(mid)
                 pull = rot.normalize(cp - mid)
                 ok = np.linalg.norm(np.cross(rot.normalize(d[k]), pull), axis=1) > tol.PARALLEL_EPS
                 push = np.where(ok[:, None], pull, push)
             axis = rot.rotation_axis(d[k], push)
-            last = sv._soff[todo + 1]  # one past the curve's last segment
+            last = ctx.layout.soff[todo + 1]  # one past the curve's last segment
 
             # Only the solved segment needs testing: segments before it do not
             # move (so neither does its start), segments after it are the next
@@ -92,7 +91,7 @@ class SoftSolve:
         if len(bad):
             seg, _, _ = ctx.segments(bad)
             ctx.quat[seg] = q0[seg]
-            ctx.active[bad] = self.ctx.sv_._active[bad]
+            ctx.active[bad] = self.ctx.state.active[bad]
             status[bad] = Status.UNRESOLVED
         status[touched & ~unresolved] = Status.COLLIDING
         rec = np.sort(np.concatenate([near, far]))
@@ -126,7 +125,6 @@ class SoftSolve:
         the same level.
         """
         ctx, s, p = self.ctx, self.ctx.s, self.ctx.prec
-        sv = ctx.sv_
         levels = _LEVELS
         seg, rep, starts = ctx.segments(rec)
         q0 = ctx.quat[seg]
@@ -149,7 +147,7 @@ class SoftSolve:
         chk = np.flatnonzero(moving_c & ctx.cand_any[rec])
         q1_soa = np.ascontiguousarray(q1.T)
 
-        ns = sv._ns
+        ns = ctx.layout.ns
 
         def clear(items, ks):
             """Is curve ``rec[chk[items]]`` clear at level ``ks`` (``levels``:
@@ -170,8 +168,8 @@ class SoftSolve:
         none = levels + 1
         lo = np.full(n, none, np.int64)
         hi = np.zeros(n, np.int64)
-        mem = sv._contact[rec[chk]] & ctx.warm_soft
-        m = np.clip(np.rint(sv._delta[rec[chk]] * levels), 0, levels - 1).astype(np.int64)
+        mem = ctx.state.contact[rec[chk]] & ctx.warm_soft
+        m = np.clip(np.rint(ctx.state.delta[rec[chk]] * levels), 0, levels - 1).astype(np.int64)
         warm = np.flatnonzero(mem)
         above = warm[m[warm] > 0]
         below_full = warm[m[warm] + 1 < levels]
@@ -207,7 +205,7 @@ class SoftSolve:
         if len(b):
             sseg, _, _ = ctx.segments(rec[b])
             pos = np.searchsorted(seg, sseg)
-            lam = np.repeat(level[b] / levels * s.recovery_rate, sv._nseg[rec[b]])
+            lam = np.repeat(level[b] / levels * s.recovery_rate, ctx.layout.nseg[rec[b]])
             q1[pos] = path(lam, pos)
         ctx.quat[seg] = q1
         ctx.soft_level[rec[b]] = level[b] / levels

@@ -43,16 +43,14 @@ import numpy as np
 
 from .collider import Collider
 from .errors import InputError, SettingsError
-from .layout import check_offsets
+from .layout import CurveLayout
 from .rays import beside
 from .settings import Settings
+from .state import STATE_VERSION, SolverState
 from .status import Status, StepResult
 from .step import StepContext
 
 __all__ = ["Solver", "Status", "StepResult"]
-
-_STATE_VERSION = 1
-
 
 class Solver:
     """Frame-by-frame FurCollide solver for one set of curves.
@@ -72,25 +70,24 @@ class Solver:
     >>> res.points, res.status
     """
 
+    #: Stiff/Bend: start each step's angle search from the curves' memory of
+    #: the last step (rigid.Plan; Soft: its blocked recoveries). False: the
+    #: full search from the current angle (the reference the warm start is
+    #: tested against). Both give the same result.
+    warm_start = True
+
     def __init__(self, offsets, settings: Settings | None = None):
-        off = check_offsets(offsets)
-        self._off = off
-        self.n_curves = C = len(off) - 1
-        self.n_points = int(off[-1])
-        nseg = np.diff(off) - 1
-        self._nseg = nseg
-        self._soff = np.concatenate([[0], np.cumsum(nseg)])
-        is_last = np.zeros(self.n_points, bool)
-        is_last[off[1:] - 1] = True
-        self._seg_start = np.flatnonzero(~is_last)
-        self._seg_curve = np.repeat(np.arange(C), nseg)
-        seg_j = np.arange(len(self._seg_start)) - self._soff[self._seg_curve]
-        self._w_bend = (seg_j + 1) / nseg[self._seg_curve]
-        # Uniform CV count (the usual groom): lets the step work in blocks.
-        self._ns = int(nseg[0]) if C and (nseg == nseg[0]).all() else 0
-        self._seg_j = seg_j
+        self.layout = CurveLayout(offsets)
         self._settings = Settings() if settings is None else self._check_settings(settings)
         self.reset()
+
+    @property
+    def n_curves(self) -> int:
+        return self.layout.n_curves
+
+    @property
+    def n_points(self) -> int:
+        return self.layout.n_points
 
     # ------------------------------------------------------------ settings
     @staticmethod
@@ -116,52 +113,7 @@ class Solver:
     # --------------------------------------------------------------- state
     def reset(self):
         """Forget every curve's history (the next step starts afresh)."""
-        C, S = self.n_curves, len(self._seg_start)
-        self._angle = np.zeros(C)  # radians (stiff/bend)
-        self._angle_max = np.zeros(C)
-        self._axis_lo = np.zeros((C, 3))
-        self._frame = np.zeros((C, 3, 3))
-        self._active = np.zeros(C, bool)  # has a non-identity local state
-        self._hold = np.zeros(C, bool)  # no recovery (out of a pinch, recover_pinched off)
-        self._pinched = np.zeros(C, bool)
-        self._stiff = np.zeros(C, bool)  # Bend curves solved as Stiff (bending could not clear)
-        self._quat = np.tile([1.0, 0.0, 0.0, 0.0], (S, 1))  # soft, local frame
-        self._quat_max = self._quat.copy()
-        # Memory of the last step (Stiff/Bend), where its search starts next
-        # step (see rigid.Plan): in contact (COLLIDING), and by how much the
-        # angle changed.
-        self._contact = np.zeros(C, bool)
-        self._delta = np.zeros(C)
-
-    _STATE_KEYS = {
-        "angle": ("C",),
-        "angle_max": ("C",),
-        "axis": ("C", 3),
-        "frame": ("C", 3, 3),
-        "active": ("C",),
-        "hold": ("C",),
-        "pinched": ("C",),
-        "stiff": ("C",),
-        "quat": ("S", 4),
-        "quat_max": ("S", 4),
-        "contact": ("C",),
-        "delta": ("C",),
-        "meta": (4,),
-    }
-    _SOFT_KEYS = ("quat", "quat_max")  # only Soft mode carries per-segment rotations
-    #: Keys a snapshot may lack (made before they existed): restored as a fresh
-    #: state has them. They only steer where the next search starts.
-    _OPTIONAL_KEYS = ("contact", "delta")
-
-    #: Stiff/Bend: start each step's angle search from the curves' memory of
-    #: the last step (rigid.Plan). False: the full search from the current
-    #: angle (the reference the warm start is tested against). Either gives
-    #: the same angles wherever clearance is monotone in the angle.
-    warm_start = True
-
-    def _state_keys(self):
-        soft = self._settings.mode == "soft"
-        return {k: v for k, v in self._STATE_KEYS.items() if soft or k not in self._SOFT_KEYS}
+        self._state = SolverState.fresh(self.n_curves, self.layout.n_segments)
 
     @property
     def state(self) -> dict:
@@ -170,27 +122,15 @@ class Solver:
         Restoring it with ``solver.state = snapshot`` makes the next step
         bit-identical to what it was after the snapshot. Only numpy arrays:
         it can be written with ``np.savez`` and read without pickle. The
-        per-segment ``quat`` arrays are only present in Soft mode.
+        per-segment ``quat`` arrays are only present in Soft mode. See
+        :class:`core.state.SolverState` for what each holds.
         """
         mode = ("stiff", "bend", "soft").index(self._settings.mode)
-        state = {
-            "angle": self._angle.copy(),
-            "angle_max": self._angle_max.copy(),
-            "axis": self._axis_lo.copy(),
-            "frame": self._frame.copy(),
-            "active": self._active.copy(),
-            "hold": self._hold.copy(),
-            "pinched": self._pinched.copy(),
-            "stiff": self._stiff.copy(),
-            "contact": self._contact.copy(),
-            "delta": self._delta.copy(),
-            "quat": self._quat.copy() if mode == 2 else None,
-            "quat_max": self._quat_max.copy() if mode == 2 else None,
-            "meta": np.array([_STATE_VERSION, self.n_curves, self.n_points, mode], np.int64),
-        }
-        if mode != 2:
-            del state["quat"], state["quat_max"]
-        return state
+        st = self._state
+        out = {k: getattr(st, k).copy() for k in SolverState.SHAPES
+               if mode == 2 or k not in SolverState.SOFT}
+        out["meta"] = np.array([STATE_VERSION, self.n_curves, self.n_points, mode], np.int64)
+        return out
 
     @state.setter
     def state(self, s):
@@ -202,18 +142,19 @@ class Solver:
         if meta.shape != (4,) or not np.issubdtype(meta.dtype, np.integer):
             raise InputError("state['meta'] must be 4 integers (from Solver.state)")
         if (
-            int(meta[0]) != _STATE_VERSION
+            int(meta[0]) != STATE_VERSION
             or int(meta[1]) != self.n_curves
             or int(meta[2]) != self.n_points
         ):
             raise InputError("state was saved for other curves (curve/point count differs)")
         if int(meta[3]) != ("stiff", "bend", "soft").index(self._settings.mode):
             raise InputError("state was saved with another mode")
-        keys = self._state_keys()
-        missing = set(keys) - set(s.keys()) - set(self._OPTIONAL_KEYS)
+        soft = self._settings.mode == "soft"
+        keys = {k: v for k, v in SolverState.SHAPES.items() if soft or k not in SolverState.SOFT}
+        missing = set(keys) - set(s.keys()) - set(SolverState.OPTIONAL)
         if missing:
             raise InputError(f"state is missing {sorted(missing)}")
-        dims = {"C": self.n_curves, "S": len(self._seg_start)}
+        dims = {"C": self.n_curves, "S": self.layout.n_segments}
         arrs = {}
         for k, shape in keys.items():
             if k not in s.keys():
@@ -227,24 +168,7 @@ class Solver:
             if not np.isfinite(a).all():
                 raise InputError(f"state['{k}'] has non-finite values")
             arrs[k] = a
-        self._angle = arrs["angle"].astype(np.float64).copy()
-        self._angle_max = arrs["angle_max"].astype(np.float64).copy()
-        self._axis_lo = arrs["axis"].astype(np.float64).copy()
-        self._frame = arrs["frame"].astype(np.float64).copy()
-        self._active = arrs["active"].astype(bool).copy()
-        self._hold = arrs["hold"].astype(bool).copy()
-        self._pinched = arrs["pinched"].astype(bool).copy()
-        self._stiff = arrs["stiff"].astype(bool).copy()
-        self._contact = arrs["contact"].astype(bool).copy() if "contact" in arrs else (
-            np.zeros(self.n_curves, bool))
-        self._delta = arrs["delta"].astype(np.float64).copy() if "delta" in arrs else (
-            np.zeros(self.n_curves))
-        if "quat" in keys:
-            self._quat = arrs["quat"].astype(np.float64).copy()
-            self._quat_max = arrs["quat_max"].astype(np.float64).copy()
-        else:
-            self._quat[:] = (1.0, 0.0, 0.0, 0.0)
-            self._quat_max[:] = (1.0, 0.0, 0.0, 0.0)
+        self._state = SolverState.from_arrays(arrs, self.n_curves, self.layout.n_segments)
 
     # --------------------------------------------------------------- input
     def _check_points(self, points):
@@ -269,7 +193,7 @@ class Solver:
         if finite.all():
             return np.zeros(self.n_curves, bool), ""
         rows = np.flatnonzero(~finite)
-        owner = np.searchsorted(self._off, rows, "right") - 1
+        owner = self.layout.owner(rows)
         bad = np.zeros(self.n_curves, bool)
         bad[owner] = True
         i, c = int(rows[0]), int(owner[0])
@@ -286,32 +210,16 @@ class Solver:
                 else " (left as it is, not solved)")
         return [first + more]
 
-    _ROW_STATE = ("_angle", "_angle_max", "_axis_lo", "_frame", "_active", "_hold",
-                  "_pinched", "_stiff", "_contact", "_delta")
-
-    def _rows_of(self, bad):
-        """Copies of the per-curve (and, Soft, per-segment) state rows of ``bad``."""
-        rows = {k: getattr(self, k)[bad].copy() for k in self._ROW_STATE}
-        seg = np.repeat(bad, self._nseg)
-        rows["_quat"], rows["_quat_max"] = self._quat[seg].copy(), self._quat_max[seg].copy()
-        return rows
-
-    def _restore_rows(self, bad, rows):
-        """Put back :meth:`_rows_of` (an invalid curve keeps its local state)."""
-        for k in self._ROW_STATE:
-            getattr(self, k)[bad] = rows[k]
-        seg = np.repeat(bad, self._nseg)
-        self._quat[seg], self._quat_max[seg] = rows["_quat"], rows["_quat_max"]
-
     def _stand_in(self, points, bad):
         """``points`` with the invalid curves replaced by short straight ones at
         their root (never solved; only so the step's arithmetic stays finite)."""
+        off = self.layout.offsets
         out = points.copy()
-        pts = np.flatnonzero(np.repeat(bad, np.diff(self._off)))
-        owner = np.searchsorted(self._off, pts, "right") - 1
-        root = points[self._off[owner]].astype(np.float64)
+        pts = np.flatnonzero(np.repeat(bad, np.diff(off)))
+        owner = self.layout.owner(pts)
+        root = points[off[owner]].astype(np.float64)
         root = np.where(np.isfinite(root).all(axis=1)[:, None], root, 0.0)
-        j = pts - self._off[owner]
+        j = pts - off[owner]
         scale = 1e-6 * np.maximum(1.0, np.abs(root).max(axis=1))
         out[pts] = root + (j * scale)[:, None] * np.array([0.0, 0.0, 1.0])
         return out
@@ -320,12 +228,12 @@ class Solver:
         """The invalid curves' own points, every non-finite point replaced by the
         nearest finite one before it on its curve (after it for leading ones;
         the origin when the curve has none): an output never holds NaN."""
-        pts = np.flatnonzero(np.repeat(bad, np.diff(self._off)))
+        pts = np.flatnonzero(np.repeat(bad, np.diff(self.layout.offsets)))
         p = points[pts].copy()
         ok = np.isfinite(p).all(axis=1)
         if ok.all():
             return pts, p
-        owner = np.searchsorted(self._off, pts, "right") - 1
+        owner = self.layout.owner(pts)
         idx = np.where(ok, np.arange(len(p)), -1)
         fwd = np.maximum.accumulate(idx)  # last finite point so far
         start = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
@@ -416,19 +324,22 @@ class Solver:
                 "pinch_resolution='growth_surface' needs the growth surface (step(growth=...))"
             )
 
+        layout, state = self.layout, self._state
+        warm = bool(self.warm_start)
         waits = []  # background work of this step: never left running on error
         try:
-            ctx = StepContext(self, points, cols, growth)
+            ctx = StepContext(layout, state, s, points, cols, growth, warm)
             waits += ctx.builds
             if ctx.degenerate.any():
                 reasons.append((int(np.argmax(ctx.degenerate)), ctx.degenerate_reason))
                 invalid = invalid | ctx.degenerate
                 points = self._stand_in(given, invalid)
-                ctx = StepContext(self, points, cols, growth)
+                ctx = StepContext(layout, state, s, points, cols, growth, warm)
                 waits += ctx.builds
             enabled = enabled & ~invalid
             problems = self._problems(invalid, reasons)
-            kept = self._rows_of(invalid) if invalid.any() else None
+            seg_invalid = np.repeat(invalid, layout.nseg)
+            kept = state.rows(invalid, seg_invalid) if invalid.any() else None
             timings = ctx.timings
             timings["setup"] = (time.perf_counter() - t_start) * 1e3
 
@@ -464,17 +375,17 @@ class Solver:
             raise
 
         t0 = time.perf_counter()
-        was_pinched = self._pinched
+        was_pinched = state.pinched
         out_of_pinch = was_pinched & ~pinched & enabled
         if not s.recover_pinched:
-            self._hold |= out_of_pinch & self._active
+            state.hold |= out_of_pinch & state.active
         pin = np.flatnonzero(pinched)
         status[pin] = Status.PINCHED
         if len(pin) and s.pinch_resolution == "growth_surface":
             ctx.put_to_growth_surface(pin)
-        self._pinched = pinched & enabled | (was_pinched & ~enabled)
+        state.pinched = pinched & enabled | (was_pinched & ~enabled)
 
-        solve = enabled & ~pinched & (ctx.cand_any | self._active)
+        solve = enabled & ~pinched & (ctx.cand_any | state.active)
         idx = np.flatnonzero(solve)
         if len(idx):
             ctx.solve(idx, status)
@@ -496,7 +407,7 @@ class Solver:
             rows, own = self._as_given(given, invalid)
             out[rows] = own
             status[invalid] = Status.INVALID
-            self._restore_rows(invalid, kept)  # their state: as before this step
+            state.put_rows(invalid, seg_invalid, kept)  # their state: as before this step
         timings["output"] = (time.perf_counter() - t0) * 1e3
         timings["total"] = (time.perf_counter() - t_start) * 1e3
         timings["rays"] = ctx.n_rays

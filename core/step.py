@@ -22,9 +22,14 @@ from .status import Status
 class StepContext:
     """Everything one step needs; methods are the phases of the step."""
 
-    def __init__(self, solver, points, cols, growth):
-        self.sv_ = solver
-        self.s = s = solver.settings
+    def __init__(self, layout, state, settings, points, cols, growth, warm_start=True):
+        """``layout`` (:class:`core.layout.CurveLayout`) and ``state``
+        (:class:`core.state.SolverState`) are the solver's: the step reads the
+        state in :meth:`load_state` and writes the next one in
+        :meth:`store_state`."""
+        self.layout = layout
+        self.state = state
+        self.s = s = settings
         self.points = points  # the input, its own dtype (never modified)
         out_dtype = points.dtype
         self.cols = cols
@@ -39,7 +44,7 @@ class StepContext:
         # Input segment vectors in the input dtype: (S, 3) segment-major, or
         # for a uniform CV count ``ns`` a (C, ns, 3) view of one flat
         # difference of all points (no per-curve gathers or copies).
-        ns = solver._ns
+        ns = layout.ns
         if ns:
             Df = np.empty_like(points)
             flat = points.reshape(-1)
@@ -64,10 +69,10 @@ class StepContext:
             else:
                 self.curve_len = L.sum(axis=1, dtype=np.float64)
         else:
-            self.Dseg = np.diff(points, axis=0)[solver._seg_start]
+            self.Dseg = np.diff(points, axis=0)[layout.seg_start]
             L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg))
-            self.curve_len = np.add.reduceat(L, solver._soff[:-1], dtype=np.float64)
-            shortest = np.minimum.reduceat(L, solver._soff[:-1])
+            self.curve_len = np.add.reduceat(L, layout.soff[:-1], dtype=np.float64)
+            shortest = np.minimum.reduceat(L, layout.soff[:-1])
         # Curves the step cannot work with (Solver.step marks them INVALID and
         # steps again with stand-ins for them): a zero-length segment, or a
         # length that overflows. (Non-finite points never get here.)
@@ -80,15 +85,15 @@ class StepContext:
                 self.degenerate_reason = (
                     f"curve {c} is too large: its length overflows (coordinates ~1e19+)")
             else:
-                a, b = int(solver._soff[c]), int(solver._soff[c + 1])
-                k = int(solver._seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
+                a, b = int(layout.soff[c]), int(layout.soff[c + 1])
+                k = int(layout.seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
                 self.degenerate_reason = (
                     f"curve {c} has a zero-length segment between points {k} and {k + 1}")
             return  # (the caller steps again without them)
         if ns:
             self.roots = points.reshape(-1, ns + 1, 3)[:, 0].astype(np.float64)
         else:
-            self.roots = points[solver._off[:-1]].astype(np.float64)
+            self.roots = points[layout.offsets[:-1]].astype(np.float64)
         # Ray growth (tol.RAY_EXTEND_ULPS): float32 ulps at the size of the
         # largest collider (where embree works, centred), plus the output
         # dtype's rounding at the colliders' distance from the origin. It
@@ -122,10 +127,10 @@ class StepContext:
         if self.cand:
             self.cand_any = np.logical_or.reduce(self.cand)
         else:
-            self.cand_any = np.zeros(solver.n_curves, bool)
+            self.cand_any = np.zeros(layout.n_curves, bool)
         self.soft = s.mode == "soft"
-        self.warm_start = bool(solver.warm_start) and not self.soft
-        self.warm_soft = bool(solver.warm_start) and self.soft
+        self.warm_start = bool(warm_start) and not self.soft
+        self.warm_soft = bool(warm_start) and self.soft
 
     def _candidates(self, c, off, rootsT):
         """Candidate curves of collider ``c`` (appended to ``self.cand``)."""
@@ -148,13 +153,13 @@ class StepContext:
         # surface is out of their reach (a ring, a room) is not built every
         # frame; otherwise started once the grid test says it is needed.
         # Only timing depends on this, never a result.
-        early = len(w) and getattr(c, "_queried", False)
+        early = len(w) and c.queried
         if early:
             self._prefetch(c, off)
         q = c.grid_coords(rootsT.take(w, axis=1))  # (take: contiguous rows)
         cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
         needed = bool(cand.any() or (c.detects_pinch and in_box.any()))
-        c._queried = needed
+        c.queried = needed
         if needed and not early:
             self._prefetch(c, off)
         self.cand.append(cand)
@@ -168,7 +173,7 @@ class StepContext:
     def roots_inside(self, k, enabled):
         """Enabled curves whose root is inside collider ``k`` (paper 3.1: pinch)."""
         c, off = self.cols[k]
-        inside = np.zeros(self.sv_.n_curves, bool)
+        inside = np.zeros(self.layout.n_curves, bool)
         if not c.detects_pinch:
             return inside
         w, q, in_box = self._near_roots[k]
@@ -181,25 +186,24 @@ class StepContext:
 
     # ------------------------------------------------------------ frames
     def load_state(self):
-        sv = self.sv_
-        self.angle = sv._angle.copy()
-        self.angle_max = sv._angle_max.copy()
-        self.guess = np.zeros(sv.n_curves)  # first probe of the angle search
-        self.guess_stiff = np.zeros(sv.n_curves)
-        self.axis = np.zeros((sv.n_curves, 3))
+        self.angle = self.state.angle.copy()
+        self.angle_max = self.state.angle_max.copy()
+        self.guess = np.zeros(self.layout.n_curves)  # first probe of the angle search
+        self.guess_stiff = np.zeros(self.layout.n_curves)
+        self.axis = np.zeros((self.layout.n_curves, 3))
         if self.soft:
-            self.quat = sv._quat.copy()
-            self.quat_max = sv._quat_max.copy()
-        self.active = sv._active.copy()
-        self.restyled = np.zeros(sv.n_curves, bool)  # Bend curves switched to Stiff
-        self.soft_level = np.zeros(sv.n_curves)  # Soft: recovery fraction taken when blocked
+            self.quat = self.state.quat.copy()
+            self.quat_max = self.state.quat_max.copy()
+        self.active = self.state.active.copy()
+        self.restyled = np.zeros(self.layout.n_curves, bool)  # Bend curves switched to Stiff
+        self.soft_level = np.zeros(self.layout.n_curves)  # Soft: recovery fraction (blocked)
         idx = np.flatnonzero(self.active)
-        self.B = np.zeros((sv.n_curves, 3, 3))  # this step's frames (rows in use only)
+        self.B = np.zeros((self.layout.n_curves, 3, 3))  # this step's frames (rows in use only)
         self.ref = None
         if len(idx):
-            B, self.ref, rows = self._frames(idx, sv._frame[idx])
+            B, self.ref, rows = self._frames(idx, self.state.frame[idx])
             self.B[idx] = B
-            self.axis[idx] = self._from_frame(rows, sv._axis_lo[idx])
+            self.axis[idx] = self._from_frame(rows, self.state.axis[idx])
             if self.soft:
                 for q in (self.quat, self.quat_max):
                     self._quats_to(idx, B, q, q, to_world=True)
@@ -210,7 +214,7 @@ class StepContext:
         _quat_to(B[rep], src[seg], to_world)``. Uniform curves work on
         (n, ns) blocks, frame by frame (no per-segment copy of ``B``); both
         layouts add the same terms in the same order."""
-        ns = self.sv_._ns
+        ns = self.layout.ns
         if not ns:
             seg, rep, _ = self.segments(idx)
             dst[seg] = self._quat_to(B[rep], src[seg], to_world)
@@ -244,14 +248,13 @@ class StepContext:
     def _frames(self, idx, prev):
         """Local frames of curves ``idx`` (:func:`rot.curve_frames`), computed
         on component arrays; also returns their rows as components (3, 3, n)."""
-        sv = self.sv_
-        ns = sv._ns
+        ns = self.layout.ns
         if ns:  # root segments and tips straight from the (C, ns + 1, 3) blocks
             seg0 = self.D3[idx, 0]
             last = self.points.reshape(-1, ns + 1, 3)[idx, ns]
         else:
-            seg0 = self.Dseg[sv._soff[idx]]
-            last = self.points[sv._off[idx + 1] - 1]
+            seg0 = self.Dseg[self.layout.soff[idx]]
+            last = self.points[self.layout.offsets[idx + 1] - 1]
         t = rot._unit3(np.ascontiguousarray(seg0.T, dtype=np.float64))
         rootT = self.roots[idx].T
         chord = np.empty((3, len(idx)))
@@ -277,32 +280,30 @@ class StepContext:
         ``contact``, ``delta``): curves COLLIDING now, and their angle change
         (Soft: the fraction of the recovery step a blocked curve took).
         Disabled curves keep theirs (as their whole local state)."""
-        sv = self.sv_
         contact = status == Status.COLLIDING
         if self.soft:  # the fraction of the recovery step a blocked curve took
             delta = np.where(contact, self.soft_level, 0.0)
         else:
-            delta = np.where(contact & ~self.restyled, self.angle - sv._angle, 0.0)
-        self.contact_next = np.where(enabled, contact, sv._contact)
-        self.delta_next = np.where(enabled, delta, sv._delta)
+            delta = np.where(contact & ~self.restyled, self.angle - self.state.angle, 0.0)
+        self.contact_next = np.where(enabled, contact, self.state.contact)
+        self.delta_next = np.where(enabled, delta, self.state.delta)
 
     def store_state(self):
-        sv = self.sv_
-        sv._contact, sv._delta = self.contact_next, self.delta_next
+        self.state.contact, self.state.delta = self.contact_next, self.delta_next
         idx = np.flatnonzero(self.active)
-        frame = sv._frame  # the transported references (see rot.curve_frames)
-        old = np.flatnonzero(sv._active)
+        frame = self.state.frame  # the transported references (see rot.curve_frames)
+        old = np.flatnonzero(self.state.active)
         if len(old):
             frame[old] = self.ref
         dropped = old[~self.active[old]]
         frame[dropped] = 0.0
-        fresh = idx[~sv._active[idx]]
+        fresh = idx[~self.state.active[idx]]
         if len(fresh):
             self.B[fresh], frame[fresh], _ = self._frames(fresh, None)
         B = self.B
-        sv._angle = self.angle
-        sv._angle_max = self.angle_max
-        sv._active = self.active
+        self.state.angle = self.angle
+        self.state.angle_max = self.angle_max
+        self.state.active = self.active
         axis_lo = np.zeros_like(self.axis)
         if len(idx):
             Bi, ax = B[idx], self.axis[idx]  # = einsum("kij,kj->ki", Bi, ax)
@@ -311,8 +312,8 @@ class StepContext:
                 a += Bi[:, i, 1] * ax[:, 1]
                 a += Bi[:, i, 2] * ax[:, 2]
                 axis_lo[idx, i] = a
-        sv._axis_lo = axis_lo
-        sv._hold &= self.active
+        self.state.axis = axis_lo
+        self.state.hold &= self.active
         if self.soft:
             # Rows of curves without state are the identity in any frame: only
             # the active curves' rows move back to their local frames (into
@@ -322,22 +323,17 @@ class StepContext:
                 Bi = B[idx]
                 self._quats_to(idx, Bi, self.quat, q, to_world=False)
                 self._quats_to(idx, Bi, self.quat_max, qm, to_world=False)
-            sv._quat, sv._quat_max = q, qm
+            self.state.quat, self.state.quat_max = q, qm
 
     # ----------------------------------------------------------- geometry
     def segments(self, idx):
         """Segments of curves ``idx``: (seg ids, owner position in idx, starts)."""
-        sv = self.sv_
-        cnt = sv._nseg[idx]
-        starts = np.cumsum(cnt) - cnt
-        rep = np.repeat(np.arange(len(idx)), cnt)
-        seg = sv._soff[idx][rep] + (np.arange(int(cnt.sum())) - starts[rep])
-        return seg, rep, starts
+        return self.layout.segments(idx)
 
     def rigid_rotations(self, idx, angle, axis, seg, rep):
         """Per-segment (angle, axis) of stiff/bend curves ``idx``."""
         if self.s.mode == "bend":
-            w = np.where(self.sv_._stiff[idx][rep], 1.0, self.sv_._w_bend[seg])
+            w = np.where(self.state.stiff[idx][rep], 1.0, self.layout.w_bend[seg])
         else:
             w = 1.0
         return angle[rep] * w, axis[rep]
@@ -350,7 +346,7 @@ class StepContext:
         o, d : (k, 3) segment starts and vectors, world space
         seg, rep, starts : see :meth:`segments`
         """
-        if self.sv_._ns:
+        if self.layout.ns:
             return self._deform_uniform(idx, angle, axis, quat)
         seg, rep, starts = self.segments(idx)
         v = self.seg_in(seg)
@@ -378,7 +374,7 @@ class StepContext:
         Stiff/Bend work on component arrays (3, ns, n) (see
         :func:`rot.rotate_soa`); the arithmetic is that of :meth:`deform`.
         """
-        ns, n = self.sv_._ns, len(idx)
+        ns, n = self.layout.ns, len(idx)
         root = self.roots[idx]
         if quat is not None:
             end = self._ends_quat_soa(idx, quat).astype(np.float64)
@@ -408,7 +404,7 @@ class StepContext:
     def _ends_quat_soa(self, idx, quat):
         """Segment ends of uniform curves ``idx`` whose segments turn by the
         quaternions ``quat`` (rows, n * ns), (3, ns, n) in the output dtype."""
-        ns, n = self.sv_._ns, len(idx)
+        ns, n = self.layout.ns, len(idx)
         q3 = np.asarray(quat).reshape(n, ns, 4)
         q = np.empty((4, ns, n))
         for i in range(4):
@@ -420,9 +416,9 @@ class StepContext:
     def bend_weights(self, idx):
         """(ns, n) fraction of a curve's angle turning each segment (uniform
         curves): Bend ``(j + 1) / ns`` (1 for curves solved as Stiff), Stiff 1."""
-        ns = self.sv_._ns
+        ns = self.layout.ns
         if self.s.mode == "bend":
-            return np.where(self.sv_._stiff[idx], 1.0, ((np.arange(ns) + 1.0) / ns)[:, None])
+            return np.where(self.state.stiff[idx], 1.0, ((np.arange(ns) + 1.0) / ns)[:, None])
         return np.ones((ns, 1))
 
     def shrink_scale(self, a):
@@ -486,7 +482,7 @@ class StepContext:
         The arithmetic of :meth:`deform` (quat) then :meth:`hits`, on
         component arrays: long contiguous passes instead of rows of 3 and 4.
         """
-        ns, n = self.sv_._ns, len(idx)
+        ns, n = self.layout.ns, len(idx)
         hit = np.zeros(n, bool)
         if n == 0:
             return hit
@@ -581,7 +577,7 @@ class StepContext:
     # ----------------------------------------------------------- solving
     def target_fraction(self, idx):
         """Recovery target as a fraction of the maximum rotation (plasticity)."""
-        return np.where(self.sv_._hold[idx], np.nan, self.s.plasticity)
+        return np.where(self.state.hold[idx], np.nan, self.s.plasticity)
 
     def solve(self, idx, status):
         if self.soft:
@@ -600,7 +596,7 @@ class StepContext:
         c = point - self.roots[idx]
         normal = push
         if self.s.attract_to_growth_surface:
-            mid = self._midpoints(idx, o, d, starts)
+            mid = self.midpoints(idx, o, d, starts)
             cp, _ = self.growth.closest_points(mid)
             toward = cp - mid
             a = np.cross(c, toward)
@@ -609,10 +605,10 @@ class StepContext:
             )
             push = np.where(ok[:, None], rot.normalize(toward), push)
         axis = rot.rotation_axis(c, push)
-        self.guess[idx] = self._plane_guess(idx, o + d, rep, starts, point, normal, axis)
+        self.guess[idx] = self.plane_guess(idx, o + d, rep, starts, point, normal, axis)
         return axis
 
-    def _plane_guess(self, idx, ends, rep, starts, point, normal, axis):
+    def plane_guess(self, idx, ends, rep, starts, point, normal, axis):
         """Angle lifting each curve's CVs above the plane (point, normal)."""
         depth = -rot.dot(ends - point[rep], normal[rep])
         v = ends - self.roots[idx][rep]
@@ -625,20 +621,20 @@ class StepContext:
         self.guess_stiff[idx] = np.maximum.reduceat(lift, starts)
         if self.s.mode == "bend":  # a CV turns by about the mean weight up to it
             j = np.arange(len(rep)) - starts[rep]
-            n = self.sv_._nseg[idx][rep]
-            w = np.where(self.sv_._stiff[idx][rep], 1.0, (j + 2) / (2.0 * n))
+            n = self.layout.nseg[idx][rep]
+            w = np.where(self.state.stiff[idx][rep], 1.0, (j + 2) / (2.0 * n))
             lift = lift / w
         return np.maximum.reduceat(lift, starts)
 
-    def _midpoints(self, idx, o, d, starts):
-        nseg = self.sv_._nseg[idx]
+    def midpoints(self, idx, o, d, starts):
+        nseg = self.layout.nseg[idx]
         j = starts + nseg // 2
         return o[j] + np.where((nseg % 2 == 1)[:, None], 0.5 * d[j], 0.0)
 
     def input_rays(self, idx):
         """Segments of the *input* curves ``idx`` (float64), like :meth:`deform`."""
         seg, rep, starts = self.segments(idx)
-        ss = self.sv_._seg_start[seg]
+        ss = self.layout.seg_start[seg]
         return self.points[ss].astype(np.float64), self.seg_in(seg), seg, rep, starts
 
     def input_hits(self, idx):
@@ -655,7 +651,7 @@ class StepContext:
         (n,) bool per curve, and per segment (in the order of
         :meth:`input_rays`, as :meth:`hits` would give them).
         """
-        ns, n = self.sv_._ns, len(idx)
+        ns, n = self.layout.ns, len(idx)
         if not ns or n == 0:
             if n == 0:
                 return np.zeros(0, bool), np.zeros(0, bool)
@@ -704,7 +700,7 @@ class StepContext:
     def put_to_growth_surface(self, pin):
         """Rotate pinched curves down onto the growth surface (paper 3.2.5)."""
         _, n_g = self.growth.closest_points(self.roots[pin])
-        chord = self.points[self.sv_._off[pin + 1] - 1] - self.roots[pin]
+        chord = self.points[self.layout.offsets[pin + 1] - 1] - self.roots[pin]
         down = -n_g
         axis = rot.rotation_axis(chord, down)
         # Elevation of the deformed chord over the tangent plane, bisected on
@@ -714,7 +710,7 @@ class StepContext:
         for _ in range(24):
             mid = 0.5 * (lo + hi)
             o, d, seg, rep, starts = self._deform_mode(pin, mid, axis)
-            tip = o[starts + self.sv_._nseg[pin] - 1] + d[starts + self.sv_._nseg[pin] - 1]
+            tip = o[starts + self.layout.nseg[pin] - 1] + d[starts + self.layout.nseg[pin] - 1]
             above = rot.dot(tip - self.roots[pin], n_g) > 0
             lo = np.where(above, mid, lo)
             hi = np.where(above, hi, mid)
@@ -745,7 +741,7 @@ class StepContext:
     def output(self):
         out = self.points.copy()
         idx = np.flatnonzero(self.active)
-        ns = self.sv_._ns
+        ns = self.layout.ns
         if len(idx) and ns and self.out_dtype == np.float32:
             # The points written are the deformed segments' float32 ends
             # (what ``o + d`` of :meth:`deform` rounds back to).
@@ -766,14 +762,14 @@ class StepContext:
             if ns:  # uniform CV count: write whole curves as blocks
                 out.reshape(-1, ns + 1, 3)[idx, 1:] = (o + d).reshape(-1, ns, 3)
             else:
-                out[self.sv_._seg_start[seg] + 1] = o + d
+                out[self.layout.seg_start[seg] + 1] = o + d
         return out
 
     def seg_soa(self, idx):
         """Input segment vectors of uniform curves ``idx`` as float64
         components, shape (3, ns, n): elementwise work on them runs over long
         contiguous rows instead of rows of 3."""
-        ns = self.sv_._ns
+        ns = self.layout.ns
         g = self.D3[idx]
         out = np.empty((3, ns, len(idx)))
         for i in range(3):
@@ -783,7 +779,7 @@ class StepContext:
     def seg_in(self, seg):
         """Input segment vectors (float64) of segment ids ``seg``."""
         if self.Dseg is None:
-            ns = self.sv_._ns
+            ns = self.layout.ns
             return self._Dflat[seg + seg // ns].astype(np.float64)
         return self.Dseg[seg].astype(np.float64)
 
