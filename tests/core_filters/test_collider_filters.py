@@ -109,7 +109,8 @@ def test_input_curve_filter_equals_all_rays(seed, offset):
     pts = np.concatenate([roots, roots + np.cumsum(steps, axis=1)], axis=1)
     pts = pts.reshape(-1, 3).astype(np.float32)
     solver = Solver(np.arange(0, C * cvs + 1, cvs), Settings())
-    ctx = StepContext(solver, pts, [(col, col.effective_offset(0.0))], None)
+    ctx = StepContext(solver.layout, solver._state, solver.settings, pts,
+                      [(col, col.effective_offset(0.0))], None)
     idx = np.flatnonzero(ctx.cand_any)
     fast, fast_seg = ctx.input_hits(idx)
     o, d, _, rep, starts = ctx.input_rays(idx)
