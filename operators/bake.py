@@ -1,6 +1,6 @@
 """Bake operators: solve a frame range in order and write it to disk.
 
-A bake writes ``frame_NNNNNN.npz`` files (see :mod:`.cache`) into the
+A bake writes ``frame_NNNNNN.npz`` files (see :mod:`..core.framecache`) into the
 setup's folder under its Cache Directory. Finished frames survive a cancel
 or a crash and the next bake resumes after the last one whose settings
 match. A baked setup only reads its files until Free Bake.
@@ -17,7 +17,8 @@ import os
 import bpy
 from bpy.types import Operator
 
-from . import cache, runtime
+from ..core import framecache
+from . import runtime
 from .setup import (
     SetupOperator,
     active_setup,
@@ -153,7 +154,7 @@ class BakeJob:
             rt = runtime.get_runtime(ob)
             rt.baking = False
             s = ob.furcollide
-            have = set(cache.list_frames(directory))
+            have = set(framecache.list_frames(directory))
             complete = all(f in have for f in range(s.frame_start, s.frame_end + 1))
             if complete and not cancelled:
                 s.is_baked = True
@@ -323,7 +324,7 @@ def free_bake(ob) -> int:
     s = ob.furcollide
     n = 0
     if s.bake_path and not bake_sharers(ob):
-        n = cache.remove_frames(bpy.path.abspath(s.bake_path))
+        n = framecache.remove_frames(bpy.path.abspath(s.bake_path))
     s.is_baked = False
     s.bake_path = ""
     runtime.clear_runtime(ob)

@@ -14,7 +14,7 @@ from contextlib import contextmanager
 import bpy
 import numpy as np
 
-from .cache import curve_point_mask
+from ..core.framecache import curve_point_mask
 
 #: Per-curve status attribute written on the output (core ``Status`` codes).
 STATUS_ATTRIBUTE = "furcollide_status"

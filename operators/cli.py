@@ -20,7 +20,8 @@ import sys
 
 import bpy
 
-from . import bake, cache, runtime
+from ..core import framecache
+from . import bake, runtime
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -106,7 +107,7 @@ def _run(argv) -> int:
         for ob in sources:
             s = ob.furcollide
             try:
-                n = len(cache.list_frames(runtime.bake_directory(ob)))
+                n = len(framecache.list_frames(runtime.bake_directory(ob)))
             except ValueError:
                 n = 0
             state = "baked" if s.is_baked else ("partial" if n else "not baked")

@@ -36,7 +36,8 @@ from bpy.props import (
 )
 from bpy.types import Operator, PropertyGroup
 
-from . import bridge, cache, runtime, stages
+from ..core import framecache
+from . import bridge, runtime, stages
 from .setup import (
     SetupOperator,
     active_setup,
@@ -162,7 +163,7 @@ def new_guides_object(src, data_eval, keep, context):
     def fill(hc):
         if len(keep):
             hc.add_curves(sizes[keep].tolist())
-        point_idx = cache.curve_point_mask(offs, np.asarray(keep, np.int64))
+        point_idx = framecache.curve_point_mask(offs, np.asarray(keep, np.int64))
         bridge.set_positions(hc, P[point_idx])
         for name in _GUIDE_ATTRIBUTES:
             if not _copy_attribute(data_eval, hc, name, "CURVE", keep):

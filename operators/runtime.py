@@ -34,7 +34,8 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, cache, stages
+from ..core import framecache
+from . import bridge, stages
 
 #: Name of the pass-through geometry-nodes modifier FurCollide puts first on
 #: the output. It references the source, colliders and growth surface so the
@@ -73,7 +74,7 @@ class Runtime:
     offsets: np.ndarray | None = None
     colliders: dict = field(default_factory=dict)
     growth: ColliderEntry | None = None
-    memory: cache.MemoryCache = field(default_factory=cache.MemoryCache)
+    memory: framecache.MemoryCache = field(default_factory=framecache.MemoryCache)
     solver_frame: int | None = None  # frame whose result the solver state holds
     hold: tuple | None = None  # (frame, world positions, status) of newest frame
     signature: str | None = None  # colliders + settings seen last
@@ -129,7 +130,7 @@ def get_runtime(ob, create=True) -> Runtime | None:
     rt = registry.get(key)
     if rt is None and create:
         rt = registry[key] = Runtime(uid)
-        rt.memory = cache.MemoryCache(ob.furcollide.memory_limit)
+        rt.memory = framecache.MemoryCache(ob.furcollide.memory_limit)
     return rt
 
 
@@ -717,7 +718,7 @@ def read_inputs(ob, depsgraph) -> Inputs:
         raise RuntimeError("the source is not evaluated in this depsgraph")
     data = src.data
     offs = bridge.curve_offsets(data)
-    key = cache.topology_key(offs)
+    key = framecache.topology_key(offs)
     P = bridge.get_positions(data)
     M = bridge.matrix(src)
     out = s.output.evaluated_get(depsgraph)
@@ -780,7 +781,7 @@ def _mesh_reading(me) -> tuple:
     if me is None:
         return ("no surface",), np.zeros((0, 3), np.float32)
     corners = bridge.mesh_corner_verts(me)
-    return (len(me.vertices), len(me.polygons), len(corners), cache.digest(corners)), \
+    return (len(me.vertices), len(me.polygons), len(corners), framecache.digest(corners)), \
         bridge.mesh_vertices(me)
 
 
@@ -849,8 +850,8 @@ def collider_inputs(M, V, key) -> tuple[int, int]:
     key : tuple
         The shape key of :func:`_mesh_reading` (counts, digest of the corners).
     """
-    return (cache.digest(np.asarray(M, np.float64)),
-            cache.digest(V, np.frombuffer(repr(key).encode(), np.uint8)))
+    return (framecache.digest(np.asarray(M, np.float64)),
+            framecache.digest(V, np.frombuffer(repr(key).encode(), np.uint8)))
 
 
 def read_collider_inputs(o, depsgraph, matrix=None) -> tuple[int, int]:
@@ -894,10 +895,11 @@ def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
         colliders' number and options, the settings, the source, the enable mask,
         each collider's matrix and shape, the surface's.
     """
-    rec = {"colliders": cache.text_digest(repr(list(flags))), "settings": cache.text_digest(sig),
-           "source": cache.digest(inp.raw, inp.offsets)}
+    rec = {"colliders": framecache.text_digest(repr(list(flags))),
+           "settings": framecache.text_digest(sig),
+           "source": framecache.digest(inp.raw, inp.offsets)}
     if inp.enabled is not None:
-        rec["enabled"] = cache.digest(inp.enabled)
+        rec["enabled"] = framecache.digest(inp.enabled)
     for i, (matrix, shape) in enumerate(colliders):
         rec[f"collider {i} matrix"] = matrix
         rec[f"collider {i} shape"] = shape
@@ -930,7 +932,7 @@ def current_inputs(ob, inp, depsgraph) -> dict:
 
 
 def describe_change(ob, part, scene, old=None, new=None) -> str:
-    """The change :func:`cache.first_change` found between the records ``old`` and
+    """The change :func:`framecache.first_change` found between the records ``old`` and
     ``new``, in words naming the object."""
     if part == "colliders":
         count = [sum(k.endswith(" matrix") and k.startswith("collider ") for k in r or {})
@@ -961,18 +963,18 @@ def cached_frame_change(ob, rt, inp, depsgraph, f) -> str:
     if old is None:
         return ""
     new = current_inputs(ob, inp, depsgraph)
-    part = cache.first_change(old, new)
+    part = framecache.first_change(old, new)
     return describe_change(ob, part, depsgraph.scene, old, new) if part else ""
 
 
 def baked_frame_change(ob, inp, depsgraph, directory, f) -> str:
     """Why baked frame ``f`` no longer matches the current inputs ('' when it does,
     or for files baked before FurCollide stored their inputs: not checked)."""
-    old = cache.read_inputs(directory, f)
+    old = framecache.read_inputs(directory, f)
     if old is None:
         return ""
     new = current_inputs(ob, inp, depsgraph)
-    part = cache.first_change(old, new)
+    part = framecache.first_change(old, new)
     return describe_change(ob, part, depsgraph.scene, old, new) if part else ""
 
 
@@ -983,7 +985,7 @@ def _ensure_solver(ob, rt, inp):
         rt.solver = core.Solver(inp.offsets, settings)
         rt.solver_key = inp.key
         rt.solver_frame = None
-        rt.memory.sparse = cache.SparseState(rt.solver.state)
+        rt.memory.sparse = framecache.SparseState(rt.solver.state)
     elif rt.solver.settings != settings:
         if rt.solver.settings.mode != settings.mode:
             rt.solver_frame = None  # the solver resets on a mode change
@@ -1015,7 +1017,7 @@ def _output_local(inp, points_world, changed=None) -> np.ndarray:
     if bridge.is_identity(inp.m_out_inv):  # both at the world origin
         return points_world
     if changed is None:
-        changed = cache.rows_differ(points_world, inp.points)
+        changed = framecache.rows_differ(points_world, inp.points)
     local = inp.local.copy()
     idx = np.flatnonzero(changed)
     if len(idx):
@@ -1048,7 +1050,7 @@ def _write(ob, inp, points_world, status, changed=None, attributes=None) -> None
 def _sync_output(ob, inp, depsgraph) -> None:
     """Give the output the evaluated source's topology when it differs."""
     out = ob.furcollide.output
-    if cache.topology_key(bridge.curve_offsets(out.data)) != inp.key:
+    if framecache.topology_key(bridge.curve_offsets(out.data)) != inp.key:
         old = out.data
         if len(old.curves) and not hasattr(old, "remove_curves"):  # older Blender
             new = bpy.data.hair_curves.new(old.name)
@@ -1293,7 +1295,7 @@ def _evaluate(scene, depsgraph, ob) -> str:
     rt.solver_frame = f  # the solver holds frame f now, even if a stage below fails
     points, attrs = _finish(ob, rt, inp, res, f, scene, cols)
     stats = _stats(res.status, f, res.timings.get("total", 0.0))
-    changed = cache.rows_differ(points, inp.raw)  # points the stages moved
+    changed = framecache.rows_differ(points, inp.raw)  # points the stages moved
     rt.memory.put(
         f, inp.raw, points, res.status, inp.offsets, solver.state, stats, changed, attrs,
         solved_inputs(ob, rt, inp, scene),
@@ -1375,15 +1377,15 @@ def _evaluate_baked(ob, rt, inp, f, level, msg, depsgraph):
     s = ob.furcollide
     directory = bpy.path.abspath(s.bake_path)
     fe = min(f, s.frame_end)
-    if not os.path.exists(cache.frame_path(directory, fe)):
-        frames = [k for k in cache.list_frames(directory) if k < fe]
+    if not os.path.exists(framecache.frame_path(directory, fe)):
+        frames = [k for k in framecache.list_frames(directory) if k < fe]
         rt.outdated = True
         if frames:
             fe = frames[-1]
         else:
             set_status(ob, "ERROR", f"Bake files are missing in {directory}")
             return "outdated"
-    points, status, offsets, _state = cache.read_frame(directory, fe)
+    points, status, offsets, _state = framecache.read_frame(directory, fe)
     if not np.array_equal(offsets, inp.offsets):
         set_status(
             ob,
@@ -1393,7 +1395,7 @@ def _evaluate_baked(ob, rt, inp, f, level, msg, depsgraph):
         )
         return "topology"
     _sync_output(ob, inp, depsgraph)
-    _write(ob, inp, points, status, attributes=cache.read_attributes(directory, fe))
+    _write(ob, inp, points, status, attributes=framecache.read_attributes(directory, fe))
     rt.stats = _stats(status, fe, source="bake")
     why = baked_frame_change(ob, inp, depsgraph, directory, fe) if fe == f else ""
     if why:  # still shown (it is what renders), never as if current
@@ -1419,18 +1421,18 @@ def _baked_subframe(ob, depsgraph, f, sub):
     a, b = f, f + 1
     if not (s.frame_start <= a and b <= s.frame_end):
         return "subframe"
-    if not (os.path.exists(cache.frame_path(directory, a)) and os.path.exists(
-        cache.frame_path(directory, b)
+    if not (os.path.exists(framecache.frame_path(directory, a)) and os.path.exists(
+        framecache.frame_path(directory, b)
     )):
         return "subframe"
-    pa, status, offs, _ = cache.read_frame(directory, a)
-    pb = cache.read_frame(directory, b)[0]
+    pa, status, offs, _ = framecache.read_frame(directory, a)
+    pb = framecache.read_frame(directory, b)[0]
     data = s.output.data
     if pa.shape != pb.shape or len(data.points) != len(pa):
         return "subframe"
     w = np.float32(sub)
     points = pa + (pb - pa) * w
-    inp = Inputs(points, offs, cache.topology_key(offs),
+    inp = Inputs(points, offs, framecache.topology_key(offs),
                  bridge.matrix(s.output.evaluated_get(depsgraph), inverted=True), None, "",
                  depsgraph=depsgraph)
     _write(ob, inp, points, status)
@@ -1476,17 +1478,17 @@ def bake_frame(scene, depsgraph, ob, f, directory, trust_solver) -> dict:
     if f == s.frame_start:
         solver.reset()
     elif not trust_solver:
-        _p, _st, offsets, stored = cache.read_frame(directory, f - 1)
+        _p, _st, offsets, stored = framecache.read_frame(directory, f - 1)
         if not np.array_equal(offsets, inp.offsets):
             raise ValueError(f"bake frame {f - 1} was made for other curves")
-        solver.state = cache.decode_state(stored, rt.memory.sparse)
+        solver.state = framecache.decode_state(stored, rt.memory.sparse)
     res, cols = _step(ob, rt, solver, inp, depsgraph)
     rt.solver_frame = f
     points, attrs = _finish(ob, rt, inp, res, f, scene, cols)
     fp = settings_fingerprint(ob)
     state = solver.state
     state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
-    cache.write_frame(directory, f, points, res.status, inp.offsets, state, rt.memory.sparse,
+    framecache.write_frame(directory, f, points, res.status, inp.offsets, state, rt.memory.sparse,
                       attrs, inputs=solved_inputs(ob, rt, inp, scene))
     _write(ob, inp, points, res.status, attributes=attrs)
     rt.solver_frame = f
@@ -1514,11 +1516,11 @@ def resume_inputs_match(ob, directory, f, scene) -> bool:
     try:
         scene.frame_set(f)
         depsgraph = scene_depsgraph(scene)
-        old = cache.read_inputs(directory, f)
+        old = framecache.read_inputs(directory, f)
         if old is None:  # baked before FurCollide stored the record: start over
             return False
         now = current_inputs(ob, read_inputs(ob, depsgraph), depsgraph)
-        return cache.first_change(old, now) is None
+        return framecache.first_change(old, now) is None
     finally:
         _busy = busy
 
@@ -1528,13 +1530,13 @@ def resume_frame(ob, directory) -> int | None:
     s = ob.furcollide
     if stages.needs_history(ob):
         return None  # jiggle needs the roots of every frame since the start: start over
-    have = set(cache.list_frames(directory))
+    have = set(framecache.list_frames(directory))
     fp = settings_fingerprint(ob)
     last = None
     f = s.frame_start
     while f in have and f <= s.frame_end:
         try:
-            with np.load(cache.frame_path(directory, f), allow_pickle=False) as z:
+            with np.load(framecache.frame_path(directory, f), allow_pickle=False) as z:
                 key = next((k for k in z.files if k.endswith("__fingerprint")), None)
                 ok = key is not None and z[key].tobytes().decode() == fp
         except (OSError, ValueError, KeyError):

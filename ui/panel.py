@@ -3,7 +3,8 @@
 import bpy
 from bpy.types import Panel, UIList
 
-from ..operators import bake, cache, runtime
+from ..core import framecache
+from ..operators import bake, runtime
 from ..operators.setup import active_setup, backend_message
 
 #: List icon per collider object type (a mesh, or what Blender turns into one).
@@ -263,7 +264,7 @@ def cached_count(src) -> tuple[int, str]:
     s = src.furcollide
     if s.is_baked or s.bake_path:
         try:
-            frames = cache.list_frames(bpy.path.abspath(s.bake_path))
+            frames = framecache.list_frames(bpy.path.abspath(s.bake_path))
         except OSError:
             frames = []
         n = sum(1 for f in frames if s.frame_start <= f <= s.frame_end)

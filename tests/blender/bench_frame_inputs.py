@@ -52,7 +52,7 @@ def run(n_frames: int, repeat: int, deforming: bool):
     dev = Path(tempfile.mkdtemp(prefix="furcollide_dev_"))
     try:
         runtime = bench_glue.enable_addon(dev)
-        cache = sys.modules[bench_glue.ADDON + ".operators.cache"]
+        cache = sys.modules[bench_glue.ADDON + ".core.framecache"]
         scene, hair, n_tris = bench_glue.build_scene(n_frames)
         ball = next(o for o in scene.objects if o.type == "MESH")
         if deforming:

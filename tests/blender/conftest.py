@@ -69,7 +69,7 @@ def fc():
     pkg = ADDON
     ns = types.SimpleNamespace(
         runtime=sys.modules[pkg + ".operators.runtime"],
-        cache=sys.modules[pkg + ".operators.cache"],
+        cache=sys.modules[pkg + ".core.framecache"],
         bridge=sys.modules[pkg + ".operators.bridge"],
         cli=sys.modules[pkg + ".operators.cli"],
         core=sys.modules[pkg + ".core"],

@@ -89,25 +89,6 @@ def test_status_colour_attribute_follows_the_status(fc):
     assert np.array_equal(col.reshape(-1, 4), want)
 
 
-def test_rows_differ_compares_bits():
-    import sys
-
-    cache = sys.modules["bl_ext.fcdev.furcollide.operators.cache"]
-    a = np.zeros((5, 3), np.float32)
-    b = a.copy()
-    b[1, 2] = -0.0  # equal as a number, not as stored bits
-    b[3, 0] = 1.0
-    assert cache.rows_differ(a, b).tolist() == [False, True, False, True, False]
-    q = np.zeros((4, 4))
-    r = q.copy()
-    r[2, 3] = 5.0
-    assert cache.rows_differ(q, r).tolist() == [False, False, True, False]
-    f = np.zeros((3, 3, 3))
-    g = f.copy()
-    g[0, 2, 2] = 1.0
-    assert cache.rows_differ(f, g).tolist() == [True, False, False]
-
-
 def test_frame_handler_and_update_callbacks_never_raise(fc, monkeypatch, capsys):
     hair, box = fc.make_scene()
     fc.setup(hair, [box])
