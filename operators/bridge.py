@@ -15,25 +15,23 @@ import bpy
 import numpy as np
 
 from ..core.framecache import curve_point_mask
+from ..core.status import Status
 
 #: Per-curve status attribute written on the output (core ``Status`` codes).
 STATUS_ATTRIBUTE = "furcollide_status"
 #: Point colour attribute for the viewport's *Attribute* colour mode.
 COLOR_ATTRIBUTE = "furcollide_color"
 
-#: RGBA per core Status code: free, colliding, recovering, pinched,
-#: unresolved, disabled.
-STATUS_COLORS = np.array(
-    [
-        [0.60, 0.60, 0.60, 1.0],  # FREE: grey
-        [1.00, 0.45, 0.05, 1.0],  # COLLIDING: orange
-        [0.10, 0.55, 1.00, 1.0],  # RECOVERING: blue
-        [0.90, 0.05, 0.70, 1.0],  # PINCHED: magenta
-        [1.00, 0.00, 0.00, 1.0],  # UNRESOLVED: red
-        [0.15, 0.15, 0.15, 1.0],  # DISABLED: dark grey
-    ],
-    np.float32,
-)
+_RGBA = {
+    Status.FREE: (0.60, 0.60, 0.60, 1.0),  # grey
+    Status.COLLIDING: (1.00, 0.45, 0.05, 1.0),  # orange
+    Status.RECOVERING: (0.10, 0.55, 1.00, 1.0),  # blue
+    Status.PINCHED: (0.90, 0.05, 0.70, 1.0),  # magenta
+    Status.UNRESOLVED: (1.00, 0.00, 0.00, 1.0),  # red
+    Status.DISABLED: (0.15, 0.15, 0.15, 1.0),  # dark grey
+}
+#: RGBA (len(Status), 4) float32, one row per core ``Status`` code.
+STATUS_COLORS = np.array([_RGBA[s] for s in Status], np.float32)
 
 # Attributes never copied from the source to the output. Built-in curve
 # attributes with cached derived data must go through the API (writing

@@ -994,13 +994,12 @@ def _ensure_solver(ob, rt, inp):
     return rt.solver
 
 
-#: Panel statistics: curve counts per core Status code (0 = free is not counted).
-_STATUS_NAMES = ("colliding", "recovering", "pinched", "unresolved", "disabled")
-
-
 def _stats(status, frame, solve_ms=0.0, source="solved") -> dict:
-    counts = np.bincount(status.astype(np.intp, copy=False), minlength=6)
-    stats = {name: int(counts[code]) for code, name in enumerate(_STATUS_NAMES, 1)}
+    """Panel statistics: the number of curves per core ``Status`` (named in lower case;
+    free curves are not counted), the frame, the solve time and where it came from."""
+    Status = _core().Status
+    counts = np.bincount(status.astype(np.intp, copy=False), minlength=len(Status))
+    stats = {s.name.lower(): int(counts[s]) for s in Status if s != Status.FREE}
     stats.update(frame=int(frame), solve_ms=float(solve_ms), source=source)
     return stats
 

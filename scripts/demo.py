@@ -52,6 +52,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPTS = Path(__file__).resolve().parent
 ADDON = "bl_ext.furcollide_demo.furcollide"
+if str(ROOT) not in sys.path:  # the collision core, imported as ``core`` (no Blender needed)
+    sys.path.insert(0, str(ROOT))
+
+from core import Status  # noqa: E402  (the per-curve codes: their only definition)
 
 # Settings per setup, in the core's names (Settings fields). The same values
 # are applied to the add-on's per-object settings when it has them.
@@ -75,7 +79,8 @@ SETTINGS = {
     ),
 }
 
-STATUS_NAMES = ("free", "colliding", "recovering", "pinched", "unresolved", "disabled")
+#: The statistics' columns: col/rec/pin/unres.
+COUNTED = (Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED)
 
 
 def log(msg: str) -> None:
@@ -208,7 +213,7 @@ class Stats:
         self.rows.append((frame, per_setup))
         cells = []
         for counts, ms in per_setup:
-            c = "/".join(str(counts.get(k, 0)) for k in (1, 2, 3, 4))
+            c = "/".join(str(counts.get(k, 0)) for k in COUNTED)
             t = f"{ms:6.1f}" if ms is not None else "     -"
             cells.append(f"{c:>19s} {t}")
         print(f"demo: {frame:5d}  " + "  ".join(f"{c:>26s}" for c in cells), flush=True)
@@ -216,13 +221,13 @@ class Stats:
     def summary(self):
         for i, name in enumerate(self.names):
             peak = {
-                k: max((r[1][i][0].get(k, 0) for r in self.rows), default=0) for k in (1, 2, 3, 4)
+                k: max((r[1][i][0].get(k, 0) for r in self.rows), default=0) for k in COUNTED
             }
             ms = [r[1][i][1] for r in self.rows if r[1][i][1] is not None]
             tail = f", solve {sum(ms) / len(ms):.1f} ms/frame mean" if ms else ""
             log(
                 f"{name}: peak "
-                + ", ".join(f"{STATUS_NAMES[k]} {v}" for k, v in peak.items())
+                + ", ".join(f"{k.name.lower()} {v}" for k, v in peak.items())
                 + tail
             )
 
@@ -239,8 +244,6 @@ def collide_with_core(bpy, demo, frame_end):
     import demo_scene as ds
     import numpy as np
 
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
     from core import Collider, Settings, Solver
 
     scene = demo.scene
@@ -447,7 +450,7 @@ class Pipeline:
             if st is not None:  # pinched curves touch the pusher: leave them out
                 offs = np.empty(len(data.curves) + 1, np.int32)
                 data.curve_offset_data.foreach_get("value", offs)
-                d = d[np.repeat(st != 3, np.diff(offs))]
+                d = d[np.repeat(st != Status.PINCHED, np.diff(offs))]
             dist = float(d.min()) if len(d) else None
         s = self.guides.furcollide
         self.rows.append((f, counts, dist, int(s.stat_groom_fixed)))
@@ -460,7 +463,7 @@ class Pipeline:
         )
         log("pipeline  frame  guides col/rec/pin/unres  min collider dist* clearance fixed")
         for f, counts, dist, fixed in self.rows:
-            c = "/".join(str(counts.get(k, 0)) for k in (1, 2, 3, 4))
+            c = "/".join(str(counts.get(k, 0)) for k in COUNTED)
             d = f"{dist:17.4f}" if dist is not None else f"{'-':>17s}"
             log(f"pipeline  {f:5d}  {c:>23s}  {d}  {fixed:15d}")
         log("pipeline  (* of the guides' CVs, pinched guides left out, capped at "
@@ -490,7 +493,7 @@ class Pipeline:
         k = min(int(g.furcollide.groom.guides), len(q))
         d2 = ((r[:, None, :] - q[None, :, :]) ** 2).sum(-1)
         near = np.argpartition(d2, k - 1, axis=1)[:, :k]
-        return (st[near] == 3).any(1)
+        return (st[near] == Status.PINCHED).any(1)
 
     def check_crossings(self, frame):
         """Render groom curves that cross the pusher, the cloth or the body at ``frame``.
@@ -507,8 +510,6 @@ class Pipeline:
         import demo_scene as ds
         import numpy as np
 
-        if str(ROOT) not in sys.path:
-            sys.path.insert(0, str(ROOT))
         from core import Collider
 
         demo = self.demo

@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 from conftest import activate, make_box, make_hair, positions
 
+from core import Status
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
 import oracle  # noqa: E402  (the core tests' brute-force segment/triangle test)
 
 pytestmark = pytest.mark.blender
 
-PINCHED, UNRESOLVED = 3, 4
+PINCHED, UNRESOLVED = Status.PINCHED, Status.UNRESOLVED
 
 
 # ------------------------------------------------------------------ helpers
@@ -130,7 +132,7 @@ def test_rope_curve_with_a_bevel_collides(fc):
         assert len(F) > 50  # the bevel's tube and caps
         assert crossing_free_curves(out, V, F).size == 0, f
         np.testing.assert_array_equal(world(out)[offs[:-1]], world(hair)[offs[:-1]])
-        met += int((status(out) == 1).sum())
+        met += int((status(out) == Status.COLLIDING).sum())
         # the input itself crosses the rope where curves turned away
     assert met > 0
     np.testing.assert_array_equal(positions(hair), before)

@@ -13,9 +13,11 @@ from conftest import activate as _activate
 from conftest import bake_crashing_at, make_box, make_hair, render_camera
 from test_bl_stages import offsets_of, segments_in_box, world
 
+from core import Status
+
 pytestmark = pytest.mark.blender
 
-PINCHED, UNRESOLVED = 3, 4
+PINCHED, UNRESOLVED = Status.PINCHED, Status.UNRESOLVED
 
 
 # ------------------------------------------------------------------ helpers
@@ -466,7 +468,8 @@ def test_mirrored_collider_pushes_out_and_pinches(fc, scale):
     scene.frame_set(1)
     st = _status(out)
     assert hair.furcollide.status_message == ""
-    assert np.count_nonzero(st == 1) >= 4 and not np.isin(st, (PINCHED, UNRESOLVED)).any(), st
+    assert np.count_nonzero(st == Status.COLLIDING) >= 4, st
+    assert not np.isin(st, (PINCHED, UNRESOLVED)).any(), st
     assert len(segments_in_box(world(out), offsets_of(out), box.location)) == 0
     # pinch: the box swallows the roots of the 4 central curves only
     box.location = (0, 0, 0)

@@ -24,6 +24,8 @@ from test_bl_flows2 import _render_spy, _status
 from test_bl_flows3 import ragged_groom
 from test_bl_stages import offsets_of, world
 
+from core import Status
+
 pytestmark = pytest.mark.blender
 
 _spec = importlib.util.spec_from_file_location(
@@ -32,7 +34,8 @@ _spec = importlib.util.spec_from_file_location(
 oracle = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(oracle)
 
-FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED = 0, 1, 2, 3, 4
+FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED = (
+    Status.FREE, Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED)
 RESOLVED = (FREE, COLLIDING, RECOVERING)
 
 

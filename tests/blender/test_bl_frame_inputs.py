@@ -21,13 +21,15 @@ import numpy as np
 import pytest
 from conftest import activate, bake_crashing_at, make_box, make_hair, make_surface, positions
 
+from core import Status
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
 import oracle  # noqa: E402  (the core tests' brute-force segment/triangle test)
 
 pytestmark = pytest.mark.blender
 
 FRAMES = (1, 8)
-PINCHED, UNRESOLVED = 3, 4
+PINCHED, UNRESOLVED = Status.PINCHED, Status.UNRESOLVED
 
 
 # ------------------------------------------------------------------ helpers
