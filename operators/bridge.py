@@ -397,3 +397,17 @@ def mesh_triangles(me) -> np.ndarray:
     if m:
         me.loop_triangles.foreach_get("vertices", F)
     return F.reshape(-1, 3)
+
+
+def surface_mesh_world(ob, depsgraph, world_matrix=None):
+    """Evaluated mesh of object ``ob`` (a mesh, or a curve, text... turned into one):
+    world vertices (n, 3) float64, triangles (m, 3); none for a curve without a surface.
+    ``world_matrix``: its world matrix when not its own (a collection instance)."""
+    oe = ob.evaluated_get(depsgraph)
+    M = matrix(oe) if world_matrix is None else world_matrix
+    with evaluated_mesh(oe) as me:
+        if me is None:
+            return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+        V = mesh_vertices(me).astype(np.float64)
+        F = mesh_triangles(me).astype(np.int64)
+    return V @ M[:3, :3].T + M[:3, 3], F

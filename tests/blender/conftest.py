@@ -63,20 +63,27 @@ def clean_scene(furcollide_addon):
     yield
 
 
+#: The add-on's modules the tests reach (``fc.<name>``), in ``operators`` unless named.
+_MODULES = ("bake", "bridge", "cli", "colliders", "dependencies", "frame_inputs",
+            "frame_outputs", "frame_rules", "frame_solve", "fur_attach", "groom_stage",
+            "invalidation", "motion", "properties", "property_helpers", "registry")
+
+
 @pytest.fixture
 def fc():
-    """The add-on's modules (``fc.runtime``, ``fc.cache`` ...) and scene helpers."""
+    """The add-on's modules (``fc.registry``, ``fc.frame_rules``, ``fc.cache`` (the core's
+    frame cache) ...), ``fc.Setup`` and scene helpers."""
     pkg = ADDON
     ns = types.SimpleNamespace(
-        runtime=sys.modules[pkg + ".operators.runtime"],
         cache=sys.modules[pkg + ".core.framecache"],
-        bridge=sys.modules[pkg + ".operators.bridge"],
-        cli=sys.modules[pkg + ".operators.cli"],
         core=sys.modules[pkg + ".core"],
         package=sys.modules[pkg],
+        Setup=sys.modules[pkg + ".operators.setup"].Setup,
+        setup_module=sys.modules[pkg + ".operators.setup"],
         make_scene=make_scene,
         positions=positions,
         setup=setup,
+        **{name: sys.modules[f"{pkg}.operators.{name}"] for name in _MODULES},
     )
     return ns
 
@@ -205,14 +212,14 @@ def bake_crashing_at(fc, monkeypatch, frame, match="simulated crash"):
     it are kept on disk); the error message must match ``match``."""
     import pytest
 
-    real = fc.runtime.bake_frame
+    real = fc.bake.bake_frame
 
-    def crashing(scene, depsgraph, ob, f, directory, trust_solver):
-        if f == frame:
+    def crashing(setup, directory, trust_solver):
+        if setup.frame == frame:
             raise RuntimeError("simulated crash")
-        return real(scene, depsgraph, ob, f, directory, trust_solver)
+        return real(setup, directory, trust_solver)
 
     with monkeypatch.context() as m:
-        m.setattr(fc.runtime, "bake_frame", crashing)
+        m.setattr(fc.bake, "bake_frame", crashing)
         with pytest.raises(RuntimeError, match=match):
             bpy.ops.furcollide.bake()

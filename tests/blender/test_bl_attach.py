@@ -105,13 +105,13 @@ def seg_lengths(P, offs):
 
 def check_follows(fc, hair, surf, out, frames):
     """Every frame: roots exactly at their bound barycentric points, rigid curves."""
-    binding, _key = fc.runtime.load_binding(hair)
+    binding, _key = fc.fur_attach.load_binding(hair)
     offs = offsets_of(out)
     ref = seg_lengths(output_world(fc, out), offs)
     moved = 0.0
     for f in frames:
         bpy.context.scene.frame_set(f)
-        assert fc.runtime.status_for(hair)[0] == "INFO", fc.runtime.status_for(hair)
+        assert fc.registry.status_for(hair)[0] == "INFO", fc.registry.status_for(hair)
         V = surface_world(surf)
         P = output_world(fc, out)
         np.testing.assert_allclose(P[offs[:-1]], binding.roots(V), atol=1e-5)
@@ -153,7 +153,7 @@ def test_bind_at_another_reference_frame_restores_the_frame(fc):
     scene.frame_set(1)
     bind(hair, frame=5)
     assert scene.frame_current == 1
-    binding, _ = fc.runtime.load_binding(hair)
+    binding, _ = fc.fur_attach.load_binding(hair)
     assert binding.root_distance.max() < 1e-5
     for f in range(1, 6):  # play up to the reference frame
         scene.frame_set(f)
@@ -184,11 +184,11 @@ def test_attached_curves_still_collide(fc):
     bpy.context.scene.frame_set(1)
     bind(hair)
     offs = offsets_of(out)
-    binding, _ = fc.runtime.load_binding(hair)
+    binding, _ = fc.fur_attach.load_binding(hair)
     penetrating_input = 0
     for f in range(1, 9):
         bpy.context.scene.frame_set(f)
-        assert fc.runtime.status_for(hair)[0] != "ERROR", fc.runtime.status_for(hair)
+        assert fc.registry.status_for(hair)[0] != "ERROR", fc.registry.status_for(hair)
         V = surface_world(surf)
         P = output_world(fc, out)
         np.testing.assert_allclose(P[offs[:-1]], binding.roots(V), atol=1e-5)
@@ -213,14 +213,14 @@ def test_option_off_is_the_previous_behaviour(fc):
     box.keyframe_insert("location", frame=8)
     _linear(box)
     hair, surf, out = attached_scene(fc, colliders=[box], before_setup=animate_transform)
-    sig = fc.runtime.signature(hair)
+    sig = fc.setup_module.signature(hair)
     before = _play(fc, out, range(1, 9))
     bpy.context.scene.frame_set(1)
     bind(hair)
     attached = _play(fc, out, range(1, 9))
     assert max(np.abs(a - b).max() for a, b in zip(attached, before, strict=True)) > 0.1
     hair.furcollide.use_fur_attach = False
-    assert fc.runtime.signature(hair) == sig
+    assert fc.setup_module.signature(hair) == sig
     after = _play(fc, out, range(1, 9))
     for a, b in zip(after, before, strict=True):
         np.testing.assert_array_equal(a, b)
@@ -231,13 +231,13 @@ def test_save_reload_keeps_the_binding(fc, tmp_path):
     animate_shape_key(surf)
     bpy.context.scene.frame_set(1)
     bind(hair)
-    expected = fc.runtime.load_binding(hair)[0].arrays()
+    expected = fc.fur_attach.load_binding(hair)[0].arrays()
     path = str(tmp_path / "attach.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
     hair = bpy.data.objects["Fur"]
-    assert hair.furcollide.use_fur_attach and fc.runtime.has_binding(hair)
-    got = fc.runtime.load_binding(hair)[0].arrays()
+    assert hair.furcollide.use_fur_attach and fc.fur_attach.has_binding(hair)
+    got = fc.fur_attach.load_binding(hair)[0].arrays()
     for k, v in expected.items():
         np.testing.assert_array_equal(got[k], v)
     check_follows(fc, hair, bpy.data.objects["Skin"], hair.furcollide.output, range(1, 9))
@@ -255,7 +255,7 @@ def test_poll_and_errors(fc):
     # option on without a binding: a clear error, the output keeps its result
     hair.furcollide.use_fur_attach = True
     bpy.context.scene.frame_set(2)
-    level, msg = fc.runtime.status_for(hair)
+    level, msg = fc.registry.status_for(hair)
     assert level == "ERROR" and "press Bind" in msg
 
 
@@ -268,7 +268,7 @@ def test_surface_topology_change_is_an_error(fc):
     held = fc.positions(out).copy()
     surf.modifiers.new("Subdivide", "SUBSURF").levels = 1
     bpy.context.scene.frame_set(3)
-    level, msg = fc.runtime.status_for(hair)
+    level, msg = fc.registry.status_for(hair)
     assert level == "ERROR" and "changed topology" in msg and "Bind again" in msg
     np.testing.assert_array_equal(fc.positions(out), held)  # holds the last result
     # binding again on the new topology works
@@ -283,7 +283,7 @@ def test_panel_draws_attach(fc):
     hair, surf, out = attached_scene(fc)
     s = hair.furcollide
     assert s.use_fur_attach is False and s.attach_reference_frame == 1  # off by default
-    assert not fc.runtime.has_binding(hair)
+    assert not fc.fur_attach.has_binding(hair)
     panel = bpy.types.FURCOLLIDE_PT_pipeline
     _activate(hair)
     log = _draw(panel)
@@ -328,9 +328,9 @@ def test_rebinding_without_callback_drops_the_cache(fc):
     hair, surf, out = attached_scene(fc, before_setup=animate_transform)
     bind(hair)
     _play(fc, out, range(1, 6))
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     assert len(rt.memory) == 5
     hair.furcollide.attach_id = "rebound elsewhere"  # hidden: no update callback
     bpy.context.scene.frame_set(5)
-    assert len(rt.memory) == 0 and fc.runtime.is_outdated(hair)
+    assert len(rt.memory) == 0 and fc.registry.is_outdated(hair)
     check_follows(fc, hair, surf, out, range(1, 9))

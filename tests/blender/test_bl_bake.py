@@ -52,7 +52,7 @@ def test_bake_matches_playback_and_free(fc, tmp_path, capsys):
     assert "frame 12 (12/12)" in capsys.readouterr().out
     assert bpy.context.scene.frame_current == 4
     # a baked setup only reads: identical frames, in any order
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     for f in (12, 3, 7, 1, 12):
         bpy.context.scene.frame_set(f)
         assert np.array_equal(out_positions(out), live[f]), f
@@ -118,7 +118,7 @@ def test_resume_after_crash(fc, tmp_path, monkeypatch):
 
 def test_changed_settings_do_not_resume(fc, tmp_path, capsys):
     hair, box, out = saved_scene(fc, tmp_path)
-    real = fc.runtime.bake_frame
+    real = fc.bake.bake_frame
     calls = []
 
     def crash(scene, depsgraph, ob, f, directory, trust_solver):
@@ -127,12 +127,12 @@ def test_changed_settings_do_not_resume(fc, tmp_path, capsys):
             raise RuntimeError("boom")
         return real(scene, depsgraph, ob, f, directory, trust_solver)
 
-    fc.runtime.bake_frame = crash
+    fc.bake.bake_frame = crash
     try:
         with pytest.raises(RuntimeError):
             bpy.ops.furcollide.bake()
     finally:
-        fc.runtime.bake_frame = real
+        fc.bake.bake_frame = real
     hair.furcollide.recovery_rate = 0.9
     capsys.readouterr()
     assert bpy.ops.furcollide.bake() == {"FINISHED"}

@@ -100,7 +100,7 @@ def test_render_animation_sees_result(fc, tmp_path):
         bpy.app.handlers.frame_change_post.remove(spy)
     assert sorted(seen) == [1, 2, 3, 4]
     # every rendered frame got exactly the solved (cached) result
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     assert sorted(rt.memory.frames) == [1, 2, 3, 4]
     for f in range(1, 5):
         bpy.context.scene.frame_set(f)

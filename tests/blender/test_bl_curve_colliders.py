@@ -127,7 +127,7 @@ def test_rope_curve_with_a_bevel_collides(fc):
     met = 0
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.runtime.status_for(hair) == ("INFO", "")
+        assert fc.registry.status_for(hair) == ("INFO", "")
         V, F = evaluated_world_mesh(rope)
         assert len(F) > 50  # the bevel's tube and caps
         assert crossing_free_curves(out, V, F).size == 0, f
@@ -146,19 +146,19 @@ def test_rope_moving_as_a_whole_never_rebuilds(fc):
     scene = bpy.context.scene
     hair, rope = rope_scene()
     setup_with(hair, rope)
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     for f in range(1, 9):
         scene.frame_set(f)
     col = rt.colliders[rope.session_uid].collider
     assert col.build_count == 1
-    assert fc.runtime.is_deforming(rope, scene) is False
+    assert fc.colliders.is_deforming(rope, scene) is False
     scene.frame_set(1)
     rope.data.bevel_depth = 0.05
     rope.data.keyframe_insert("bevel_depth", frame=1)
     rope.data.bevel_depth = 0.15
     rope.data.keyframe_insert("bevel_depth", frame=8)
     bpy.context.view_layer.update()
-    assert fc.runtime.is_deforming(rope, scene) is True
+    assert fc.colliders.is_deforming(rope, scene) is True
     out = hair.furcollide.output
     for f in range(1, 9):
         scene.frame_set(f)
@@ -177,7 +177,7 @@ def test_curve_without_a_surface_is_an_empty_collider(fc):
     out = setup_with(hair, rope)
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.runtime.status_for(hair) == ("INFO", "")
+        assert fc.registry.status_for(hair) == ("INFO", "")
         np.testing.assert_allclose(world(out), world(hair), atol=1e-6)
     scene.frame_set(1)  # (an edit keeps the frames before the current one)
     rope.data.bevel_depth = 0.08
@@ -218,12 +218,12 @@ def test_text_and_surface_in_a_collider_collection(fc):
     out = setup_with(hair)
     hair.furcollide.collider_collection = coll
     coll.objects.link(hair)  # the source itself never collides with itself
-    names = {r.name for r in fc.runtime.collider_objects(hair, scene)}
+    names = {r.name for r in fc.colliders.collider_objects(hair, scene)}
     assert names == {"Sign", ball.name}
     moved = 0
     for f in range(1, 7):
         scene.frame_set(f)
-        assert fc.runtime.status_for(hair) == ("INFO", "")
+        assert fc.registry.status_for(hair) == ("INFO", "")
         for ob in (txt, ball):
             V, F = evaluated_world_mesh(ob)
             assert len(F) > 0
@@ -246,12 +246,12 @@ def test_add_collider_and_pointer_accept_curves_not_hair(fc):
     assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
     assert [c.object for c in hair.furcollide.colliders] == [box, rope]
     # the list's poll (what the eyedropper and search offer)
-    poll = fc.package.operators.properties._is_collider_type
+    poll = fc.property_helpers.poll_collider
     assert [poll(None, o) for o in (box, rope, empty, other, hair)] == [
         True, True, False, False, False]
     # a hair object put in the list from Python is skipped, never solved against
     hair.furcollide.colliders.add().object = other
-    names = [r.name for r in fc.runtime.collider_objects(hair)]
+    names = [r.name for r in fc.colliders.collider_objects(hair)]
     assert names == [box.name, rope.name]
     assert out is not None
 
@@ -331,13 +331,13 @@ def test_collection_instance_collides_where_blender_places_it(fc):
     scene.frame_set(1)
     out = setup_with(hair, empty)
     assert [c.object for c in hair.furcollide.colliders] == [empty]
-    refs = fc.runtime.collider_objects(hair, scene)
+    refs = fc.colliders.collider_objects(hair, scene)
     assert sorted(r.name for r in refs) == ["PropInstance › PropBox", "PropInstance › PropRope"]
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     moved = 0
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.runtime.status_for(hair) == ("INFO", "")
+        assert fc.registry.status_for(hair) == ("INFO", "")
         meshes = instance_meshes(empty)
         assert len(meshes) == 2
         for V, F in meshes:
@@ -376,13 +376,13 @@ def test_nested_instances_in_the_collider_collection_and_edits(fc):
     scene.collection.objects.unlink(empty)
     holder.objects.link(empty)
     hair.furcollide.collider_collection = holder
-    names = sorted(r.name for r in fc.runtime.collider_objects(hair, scene))
+    names = sorted(r.name for r in fc.colliders.collider_objects(hair, scene))
     assert names == ["OuterInstance › Nested › InnerBox", "OuterInstance › Nested › InnerRope"]
 
     def check():
         for f in range(1, 7):
             scene.frame_set(f)
-            assert fc.runtime.status_for(hair) == ("INFO", "")
+            assert fc.registry.status_for(hair) == ("INFO", "")
             meshes = instance_meshes(empty)  # nested: the outermost parent is reported
             assert len(meshes) == 2
             for V, F in meshes:
@@ -395,7 +395,7 @@ def test_nested_instances_in_the_collider_collection_and_edits(fc):
     box.data.update()
     bpy.context.view_layer.update()
     check()
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     e = next(e for k, e in rt.colliders.items()
              if isinstance(k, tuple) and k[-1] == box.session_uid)
     assert np.abs(e.collider.vertices).max() > 0.29  # the grown box (half size 0.3)

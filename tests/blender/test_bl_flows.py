@@ -213,7 +213,7 @@ def test_mesh_linked_into_the_collider_collection_reaches_the_groom_inputs(fc):
     coll.objects.link(new)
     bpy.context.view_layer.update()
     play(bpy.context.scene, range(1, 4))
-    assert new in {r.object for r in fc.runtime.collider_objects(guides)}
+    assert new in {r.object for r in fc.colliders.collider_objects(guides)}
     _same_inputs(out, gout, {guides, box, new})
 
 
@@ -284,7 +284,7 @@ def test_duplicated_setup_errors_and_leaves_the_original_alone(fc):
     dup = _duplicate(hair, dx=0.3)  # the copy's curves differ from the original's
     for f in range(1, 6):
         scene.frame_set(f)
-        level, msg = fc.runtime.status_for(dup)
+        level, msg = fc.registry.status_for(dup)
         assert level == "ERROR" and "copy of the setup on 'Fur'" in msg, msg
         assert hair.furcollide.status_message == ""
         np.testing.assert_array_equal(world(out), clean[f], err_msg=f"frame {f}")

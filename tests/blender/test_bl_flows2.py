@@ -123,7 +123,7 @@ def test_setting_change_on_a_bake_then_free_and_bake_again(fc, tmp_path):
     assert ("prop", "mode", True) in log  # editable again
     for f in (6, 7):
         scene.frame_set(f)
-        assert s.is_outdated and fc.runtime.status_for(hair)[0] == "WARNING"
+        assert s.is_outdated and fc.registry.status_for(hair)[0] == "WARNING"
         assert "not cached" in s.status_message
     assert ("label", "Outdated: play from the start frame or bake", True) in _draw(
         bpy.types.FURCOLLIDE_PT_cache)
@@ -154,7 +154,7 @@ def test_interrupted_bake_does_not_resume_over_an_edited_collider(fc, tmp_path, 
     hair, box, out = _small_scene(fc)
     _save(tmp_path)
     bake_crashing_at(fc, monkeypatch, 5)
-    d = fc.runtime.bake_directory(hair)
+    d = fc.bake.bake_directory(hair)
     assert fc.cache.list_frames(d) == [1, 2, 3, 4]
     for v in box.data.vertices:  # the artist makes the collider bigger
         v.co *= 1.5
@@ -181,7 +181,7 @@ def test_sub_range_bake_before_inside_after(fc, tmp_path):
     for f in range(1, 11):
         scene.frame_set(f)
         live[f] = fc.positions(out).copy()
-        assert fc.runtime.status_for(hair)[0] == "INFO", (f, s.status_message)
+        assert fc.registry.status_for(hair)[0] == "INFO", (f, s.status_message)
         assert not s.is_outdated, f
     for f in (1, 2, 3):
         np.testing.assert_array_equal(live[f], source, err_msg=f"frame {f}")
@@ -198,7 +198,7 @@ def test_sub_range_bake_before_inside_after(fc, tmp_path):
     for f in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 9, 2, 6, 10, 4, 3):
         scene.frame_set(f)
         P = fc.positions(out)
-        level, msg = fc.runtime.status_for(hair)
+        level, msg = fc.registry.status_for(hair)
         assert level == "INFO", (f, msg)
         if f < 4:  # README: before Frame Start the output follows the source
             np.testing.assert_array_equal(P, source, err_msg=f"frame {f}")
@@ -246,7 +246,7 @@ def test_moved_blend_with_its_bake_and_without(fc, tmp_path, capsys):
     s = hair.furcollide
     for f in (3, 4):
         bpy.context.scene.frame_set(f)
-        level, msg = fc.runtime.status_for(hair)
+        level, msg = fc.registry.status_for(hair)
         assert level == "ERROR" and "missing" in msg, msg
         assert str(c / "furcollide_cache") in msg  # where they were looked for
         assert s.is_outdated
@@ -278,7 +278,7 @@ def test_source_data_swapped_for_more_curves_mid_play(fc, capsys):
     hair.data = data  # a new hair data block with 25 curves instead of 16
     for f in (5, 6, 2):
         scene.frame_set(f)
-        level, msg = fc.runtime.status_for(hair)
+        level, msg = fc.registry.status_for(hair)
         assert level == "ERROR" and "16" in msg and "25" in msg and "Reset" in msg, msg
         np.testing.assert_array_equal(fc.positions(out), shown)  # keeps its last result
         assert len(out.data.curves) == 16
@@ -345,7 +345,7 @@ def test_two_setups_share_a_deforming_collider(fc):
     wall = make_box("Wall", size=0.5, location=(0.0, 0.45, 0.6))  # rigid, B only
     out_a = fc.setup(hair_a, [blob])
     out_b = fc.setup(hair_b, [blob, wall])
-    rt_a, rt_b = fc.runtime.get_runtime(hair_a), fc.runtime.get_runtime(hair_b)
+    rt_a, rt_b = fc.registry.get_runtime(hair_a), fc.registry.get_runtime(hair_b)
     contact = {hair_a.name: 0, hair_b.name: 0}
     alone = {}
     for f in range(1, 7):
@@ -364,7 +364,7 @@ def test_two_setups_share_a_deforming_collider(fc):
     flags_a = {e.collider.name: e.collider.deforming for e in rt_a.colliders.values()}
     flags_b = {e.collider.name: e.collider.deforming for e in rt_b.colliders.values()}
     assert flags_a == {"Blob": True} and flags_b == {"Blob": True, "Wall": False}
-    assert fc.runtime.is_deforming(blob, scene) and not fc.runtime.is_deforming(wall, scene)
+    assert fc.colliders.is_deforming(blob, scene) and not fc.colliders.is_deforming(wall, scene)
     # each setup owns its core collider; A's result does not depend on B
     assert rt_a.colliders[blob.session_uid].collider is not \
         rt_b.colliders[blob.session_uid].collider
@@ -513,7 +513,7 @@ def _render_spy(fc, tmp_path, hair, out, tag):
 
     def spy(sc, depsgraph):
         if depsgraph is not None and depsgraph.mode == "RENDER":
-            seen[sc.frame_current] = (world(out).copy(), fc.runtime.status_for(hair),
+            seen[sc.frame_current] = (world(out).copy(), fc.registry.status_for(hair),
                                       hair.furcollide.is_outdated)
 
     bpy.app.handlers.frame_change_post.append(spy)

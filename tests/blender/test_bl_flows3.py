@@ -183,7 +183,7 @@ def test_children_from_guides_on_odd_setups(fc):
     dg = bpy.context.evaluated_depsgraph_get()
     assert len(out.evaluated_get(dg).data.curves) > 10
     play(scene, range(1, 4))
-    assert fc.runtime.status_for(one) == ("INFO", "")
+    assert fc.registry.status_for(one) == ("INFO", "")
 
     # a Surface that is not a mesh: refused with the reason, nothing changed
     ctrl = bpy.data.objects.new("Ctrl", None)
@@ -229,9 +229,9 @@ def test_attach_bind_refuses_surfaces_it_cannot_use(fc):
         activate(hair)
         with pytest.raises(RuntimeError, match=why):
             bpy.ops.furcollide.fur_attach_bind()
-        assert not s.use_fur_attach and not fc.runtime.has_binding(hair)
+        assert not s.use_fur_attach and not fc.fur_attach.has_binding(hair)
     play(scene, range(1, 4))  # the setup still solves its source's own curves
-    assert fc.runtime.status_for(hair) == ("INFO", "")
+    assert fc.registry.status_for(hair) == ("INFO", "")
     np.testing.assert_allclose(world(out), world(hair), atol=1e-6)
     # not a mesh: the operator is not even offered
     ctrl = bpy.data.objects.new("Ctrl", None)
@@ -254,7 +254,7 @@ def test_attach_bind_far_from_the_surface_snaps_with_a_warning(fc, capsys):
     assert "9 roots were not on the Surface at frame 1 (up to 50 away)" in log, log
     assert "Traceback" not in log
     play(scene, range(1, 4))
-    assert fc.runtime.status_for(hair) == ("INFO", "")
+    assert fc.registry.status_for(hair) == ("INFO", "")
     P, offs = world(out), offsets_of(out)
     np.testing.assert_allclose(P[offs[:-1], 2], -50.0, atol=1e-5)  # roots on the Surface
     # the curves were translated whole: same shape
@@ -293,7 +293,7 @@ def test_attach_surface_edited_after_bind(fc, capsys, edit):
     capsys.readouterr()
     for f in (3, 4, 1):
         scene.frame_set(f)
-        level, msg = fc.runtime.status_for(hair)
+        level, msg = fc.registry.status_for(hair)
         assert level == "ERROR", (f, msg)
         assert "Surface 'Skin' changed topology since binding" in msg and want in msg, msg
         assert "press Bind again" in msg
@@ -305,7 +305,7 @@ def test_attach_surface_edited_after_bind(fc, capsys, edit):
     activate(hair)
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(scene, range(1, 4))
-    assert fc.runtime.status_for(hair) == ("INFO", "")
+    assert fc.registry.status_for(hair) == ("INFO", "")
 
 
 def test_attach_surface_vertex_order_change_is_reported(fc):
@@ -321,7 +321,7 @@ def test_attach_surface_vertex_order_change_is_reported(fc):
     me.from_pydata(V[perm].tolist(), [], [tuple(int(inv[i]) for i in f) for f in F])
     me.update()
     scene.frame_set(3)
-    level, msg = fc.runtime.status_for(hair)
+    level, msg = fc.registry.status_for(hair)
     # either the change is reported, or the hair stays where the (same) surface is
     assert level == "ERROR" or np.abs(fc.positions(out) - before).max() < 1e-5, msg
 
@@ -332,12 +332,12 @@ def test_attach_bind_again_then_reopen_keeps_the_binding(fc, tmp_path):
     surf.data.update()
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(bpy.context.scene, range(1, 3))
-    assert fc.runtime.status_for(hair) == ("INFO", "")
+    assert fc.registry.status_for(hair) == ("INFO", "")
     path = _save(tmp_path)
     bpy.ops.wm.open_mainfile(filepath=path)
     hair = bpy.data.objects["Fur"]
     play(bpy.context.scene, range(1, 3))
-    assert fc.runtime.status_for(hair) == ("INFO", "")
+    assert fc.registry.status_for(hair) == ("INFO", "")
 
 
 # ============================================================== 3. Presets
@@ -438,12 +438,12 @@ def test_broken_preset_files_report_clearly(fc, capsys):
         p = preset("nan", "settings.max_angle = float('nan')\n")
         assert _load(p) == {"FINISHED"}
         play(scene, range(1, 3))
-        level, msg = fc.runtime.status_for(hair)
+        level, msg = fc.registry.status_for(hair)
         assert level == "ERROR" and "max_angle must be finite" in msg, msg
         # a good preset fixes it: the setup solves again from the start frame
         assert _load(os.path.join(folder, "Long_Fur_(Bend).py")) == {"FINISHED"}
         play(scene, range(1, 4))
-        assert fc.runtime.status_for(hair) == ("INFO", "")
+        assert fc.registry.status_for(hair) == ("INFO", "")
         # no active object: a clear error, not a crash
         bpy.context.view_layer.objects.active = None
         with pytest.raises(RuntimeError, match="Failed to execute the preset.*NoneType"):
@@ -492,7 +492,7 @@ def test_motion_stages_bake_then_render_match_the_viewport(fc, tmp_path, capsys,
     live = {}
     for f in range(1, 7):
         scene.frame_set(f)
-        assert fc.runtime.status_for(hair) == ("INFO", ""), f
+        assert fc.registry.status_for(hair) == ("INFO", ""), f
         live[f] = world(out).copy()
     assert max(np.abs(live[f] - still[f]).max() for f in range(2, 7)) > 0.02
     _save(tmp_path)
@@ -514,7 +514,7 @@ def test_motion_stages_bake_then_render_match_the_viewport(fc, tmp_path, capsys,
 
     def spy(sc, depsgraph):
         if depsgraph is not None and depsgraph.mode == "RENDER":
-            seen[sc.frame_current] = (world(out).copy(), fc.runtime.status_for(hair))
+            seen[sc.frame_current] = (world(out).copy(), fc.registry.status_for(hair))
 
     scene.frame_set(1)
     capsys.readouterr()
@@ -592,7 +592,7 @@ def test_jiggle_bake_does_not_depend_on_frames_viewed_before_the_start(fc, tmp_p
     _save(tmp_path)
     activate(hair)
     scene.frame_set(4)
-    fc.runtime.clear_runtime(hair)  # a fresh session
+    fc.registry.clear_runtime(hair)  # a fresh session
     assert bpy.ops.furcollide.bake() == {"FINISHED"}
     d = bpy.path.abspath(hair.furcollide.bake_path)
     fresh = {f: fc.cache.read_frame(d, f)[0] for f in range(4, 9)}
@@ -615,7 +615,7 @@ def test_distance_attribute_max_distance_zero_is_exact_and_a_cap_clamps(fc):
     exact = {}
     for f in range(1, 5):
         scene.frame_set(f)
-        assert fc.runtime.status_for(hair) == ("INFO", "")
+        assert fc.registry.status_for(hair) == ("INFO", "")
         d = attribute(out, "furcollide_collider_distance")
         me = box.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
         V = np.array([box.matrix_world @ v.co for v in me.vertices])
@@ -656,7 +656,7 @@ def test_collider_of_zero_faces(fc, capsys):
     m = hair.furcollide.motion
     m.write_collider_distance = True
     play(scene, range(1, 4))
-    assert fc.runtime.status_for(hair) == ("INFO", "")
+    assert fc.registry.status_for(hair) == ("INFO", "")
     np.testing.assert_allclose(world(out), world(hair), atol=1e-6)
     assert np.isposinf(attribute(out, "furcollide_collider_distance")).all()
     m.distance_max = 0.2
@@ -669,7 +669,7 @@ def test_collider_of_zero_faces(fc, capsys):
     item.object = box
     m.distance_max = 0.0
     play(scene, range(1, 4))
-    assert fc.runtime.status_for(hair) == ("INFO", "")
+    assert fc.registry.status_for(hair) == ("INFO", "")
     with_wire = attribute(out, "furcollide_collider_distance")
     assert np.isfinite(with_wire).all()
     assert bpy.ops.furcollide.collider_distance() == {"FINISHED"}  # Now: the box counts
@@ -686,7 +686,7 @@ def test_distance_attribute_without_an_enabled_collider_honours_max_distance(fc)
     m.write_collider_distance, m.distance_max = True, 0.1
     hair.furcollide.colliders[0].enabled = False
     play(bpy.context.scene, range(1, 3))
-    assert fc.runtime.status_for(hair) == ("INFO", "")
+    assert fc.registry.status_for(hair) == ("INFO", "")
     np.testing.assert_array_equal(attribute(out, "furcollide_collider_distance"),
                                   np.float32(0.1))
 
@@ -710,7 +710,7 @@ def test_render_groom_ragged_groom(fc, capsys):
     moved = 0.0
     for f in range(1, 8):
         scene.frame_set(f)
-        assert fc.runtime.status_for(guides) == ("INFO", ""), f
+        assert fc.registry.status_for(guides) == ("INFO", ""), f
         P = world(gout)
         np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]], atol=1e-5)  # roots stay
         np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
@@ -748,7 +748,7 @@ def test_render_groom_on_another_surface_follows_the_guides(fc, capsys):
     np.testing.assert_allclose(world(gout), ref, atol=1e-5)
     for f in range(1, 8):
         scene.frame_set(f)
-        assert fc.runtime.status_for(guides) == ("INFO", ""), f
+        assert fc.registry.status_for(guides) == ("INFO", ""), f
         assert len(segments_in_box(world(gout), roff, box.matrix_world.translation)) == 0
     assert np.abs(world(gout) - ref).max() > 0.05
     # the other Surface moving does not move the roots (they follow the guides' roots)
@@ -767,13 +767,13 @@ def test_guides_per_curve_changed_after_binding_keeps_the_old_binding(fc):
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     play(scene, range(1, 5))
     before = world(g.output).copy()
-    rt = fc.runtime.get_runtime(guides)
-    assert fc.runtime._groom(guides, rt).weights.index.shape[1] == 4
+    rt = fc.registry.get_runtime(guides)
+    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 4
     g.guides = 1
     scene.frame_set(3)
     scene.frame_set(4)
-    assert fc.runtime.status_for(guides) == ("INFO", "")
-    assert fc.runtime._groom(guides, rt).weights.index.shape[1] == 4
+    assert fc.registry.status_for(guides) == ("INFO", "")
+    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 4
     np.testing.assert_array_equal(world(g.output), before)
 
 
@@ -788,6 +788,6 @@ def test_bind_groom_again_after_changing_guides_per_curve(fc):
     scene.frame_set(1)
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     play(scene, range(1, 6))
-    assert fc.runtime.status_for(guides) == ("INFO", ""), fc.runtime.status_for(guides)
-    rt = fc.runtime.get_runtime(guides)
-    assert fc.runtime._groom(guides, rt).weights.index.shape[1] == 1
+    assert fc.registry.status_for(guides) == ("INFO", ""), fc.registry.status_for(guides)
+    rt = fc.registry.get_runtime(guides)
+    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 1

@@ -67,17 +67,17 @@ def test_two_scenes_keep_their_setups_and_outputs_apart(fc, tmp_path):
     sc_b = bpy.data.scenes.new("B")
     win.scene = sc_b
     hair_b, _box_b, out_b = _build(fc, "B")
-    assert fc.runtime.setups(sc_a) == [hair_a] and fc.runtime.setups(sc_b) == [hair_b]
+    assert fc.registry.setups(sc_a) == [hair_a] and fc.registry.setups(sc_b) == [hair_b]
     path = _save(tmp_path / "two.blend")
 
     # playing B never evaluates A
     rest_a = fc.positions(out_a).copy()
-    rt_a = fc.runtime.get_runtime(hair_a)
+    rt_a = fc.registry.get_runtime(hair_a)
     frames_a = sorted(rt_a.memory.frames)  # the add operator solved frame 1
     for f in range(1, 7):
         sc_b.frame_set(f)
         assert hair_b.furcollide.status_message == "", (f, hair_b.furcollide.status_message)
-    assert len(fc.runtime.get_runtime(hair_b).memory) == 6
+    assert len(fc.registry.get_runtime(hair_b).memory) == 6
     assert sorted(rt_a.memory.frames) == frames_a and sc_a.frame_current == 1
     np.testing.assert_array_equal(fc.positions(out_a), rest_a)
     moved_b = fc.positions(out_b).copy()
@@ -89,7 +89,7 @@ def test_two_scenes_keep_their_setups_and_outputs_apart(fc, tmp_path):
     assert hair_a.furcollide.bake_path == ""
     dir_b = bpy.path.abspath(hair_b.furcollide.bake_path)
     assert len(_files(dir_b)) == 6
-    assert not os.path.exists(fc.runtime.bake_directory(hair_a))
+    assert not os.path.exists(fc.bake.bake_directory(hair_a))
     np.testing.assert_array_equal(fc.positions(out_a), rest_a)
 
     # now bake A from A: B's frame, bake and output stay as they were
@@ -212,7 +212,7 @@ def test_cli_info_lists_both_setups_and_object_bakes_one(fc, tmp_path, capsys):
     a, b = bpy.data.objects["FurA"].furcollide, bpy.data.objects["FurB"].furcollide
     assert b.is_baked and (b.frame_start, b.frame_end) == (2, 5)
     assert not a.is_baked and a.bake_path == "" and (a.frame_start, a.frame_end) == (1, 6)
-    assert not os.path.exists(fc.runtime.bake_directory(bpy.data.objects["FurA"]))
+    assert not os.path.exists(fc.bake.bake_directory(bpy.data.objects["FurA"]))
     assert fc.cli.run(["info", path]) == 0
     info = capsys.readouterr().out
     assert "FurA: frames 1-6, not baked, 0 files" in info
@@ -396,6 +396,6 @@ def test_linked_duplicate_colliders_both_collide(fc):
     P = fc.positions(out)
     moved = np.linalg.norm(P - rest, axis=1) > 1e-4
     assert moved[rest[:, 0] < 0].any() and moved[rest[:, 0] > 0].any()
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     assert {e.collider.name for e in rt.colliders.values()} == {"Left", "Right"}
     assert hair.furcollide.stat_colliding > 0

@@ -217,7 +217,7 @@ def _render_local_spy(fc, tmp_path, hair, out, tag):
     def spy(sc, depsgraph):
         if depsgraph is not None and depsgraph.mode == "RENDER":
             seen[sc.frame_current] = (fc_positions(out).copy(), _status(out).copy(),
-                                      fc.runtime.status_for(hair))
+                                      fc.registry.status_for(hair))
 
     bpy.app.handlers.frame_change_post.append(spy)
     try:
@@ -239,7 +239,7 @@ def test_armature_arm_presses_into_fur_played_then_baked(fc, tmp_path):
     rig, arm = _arm_rig([(1, 0.0), (8, -0.8)])
     n_verts = len(arm.data.vertices)
     out = fc.setup(hair, [arm])
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     seen = np.zeros(6, int)
     for f in range(1, 9):
         scene.frame_set(f)
@@ -321,7 +321,7 @@ def test_scrub_back_change_a_setting_then_play_on_with_a_skinned_arm(fc):
     for f in (7, 2, 9, 4):  # scrubbing back and forth over cached frames
         scene.frame_set(f)
     s.recovery_rate = 0.6
-    assert sorted(fc.runtime.get_runtime(hair).memory.frames) == [1, 2, 3, 4]
+    assert sorted(fc.registry.get_runtime(hair).memory.frames) == [1, 2, 3, 4]
     rec = _play(scene, out, range(5, 10))
     assert not s.is_outdated and s.status_message == ""
     # fresh: the same sequence from the start frame
@@ -400,7 +400,7 @@ def test_cloth_collider_played_from_start_then_baked_then_rendered(fc, tmp_path)
     cloth.point_cache.frame_end = 8
     out = fc.setup(hair, [sheet])
     hair.furcollide.colliders[0].double_sided = True
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     z = {}
     played = {}
     for f in range(1, 9):
@@ -458,7 +458,7 @@ def test_shape_key_collider_scrub_back_jump_ahead_then_play_on(fc):
         _check_frame(hair, out, [blob])
         clean[f] = (fc_positions(out).copy(), _status(out).copy())
     assert any((clean[f][1] == COLLIDING).any() for f in clean)
-    assert fc.runtime.is_deforming(blob, scene)
+    assert fc.colliders.is_deforming(blob, scene)
     # start over and play a little, then scrub and jump around
     scene.frame_set(1)
     assert bpy.ops.furcollide.reset() == {"FINISHED"}
@@ -526,7 +526,7 @@ def test_collider_parented_to_an_animated_non_uniformly_scaled_empty(fc, offset)
         s.colliders[0].use_offset = True
         s.colliders[0].collision_offset = offset
     scene.frame_set(1)
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     hits = 0
     for f in range(1, 9):
         scene.frame_set(f)
@@ -545,7 +545,7 @@ def test_collider_parented_to_an_animated_non_uniformly_scaled_empty(fc, offset)
             assert d.min() > 0.9 * offset, (f, d.min())
     assert hits > 0
     (entry,) = rt.colliders.values()
-    assert not entry.deforming and not fc.runtime.is_deforming(box, scene)
+    assert not entry.deforming and not fc.colliders.is_deforming(box, scene)
     if not offset:
         assert entry.collider.build_count == 1  # moved and stretched, never rebuilt
 
@@ -634,7 +634,7 @@ def test_negative_start_frame_plays_scrubs_and_holds(fc):
         _check_frame(hair, out, [box])
         rec[f] = (fc_positions(out).copy(), _status(out).copy())
     assert any(rec[f][1].any() for f in rec)
-    assert sorted(fc.runtime.get_runtime(hair).memory.frames) == list(range(-4, 4))
+    assert sorted(fc.registry.get_runtime(hair).memory.frames) == list(range(-4, 4))
     _assert_same(rec, scene, out, [0, -3, 2, -4, 3], "scrubbed")
     scene.frame_set(5)
     np.testing.assert_array_equal(fc_positions(out), rec[3][0])
@@ -921,7 +921,7 @@ def test_animator_edits_the_rig_mid_session(fc, how):
         rig, colliders = ctrl, [box]
     scene.frame_set(1)
     out = fc.setup(hair, colliders)
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     _play(scene, out, range(1, 9))
     scene.frame_set(4)
     if how == "key":

@@ -342,7 +342,7 @@ def test_scene_copy_plays_in_both_scenes(fc, kind, capsys):
     assert bpy.ops.scene.new(type=kind) == {"FINISHED"}
     scene_b = bpy.context.scene
     assert scene_b != scene_a
-    (hair_b,) = fc.runtime.setups(scene_b)
+    (hair_b,) = fc.registry.setups(scene_b)
     if kind == "FULL_COPY":
         assert hair_b != hair and hair_b.furcollide.output not in (None, out)
         assert hair_b.furcollide.output.furcollide.source == hair_b

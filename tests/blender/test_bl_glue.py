@@ -28,8 +28,9 @@ def _turned_setup(fc):
 
 def _world_result(fc, hair):
     """This frame's solved world positions, as the memory cache rebuilds them."""
-    rt = fc.runtime.get_runtime(hair)
-    inp = fc.runtime.read_inputs(hair, bpy.context.evaluated_depsgraph_get())
+    rt = fc.registry.get_runtime(hair)
+    inp = fc.frame_inputs.read_inputs(
+        fc.Setup(hair, bpy.context.scene, bpy.context.evaluated_depsgraph_get()))
     points, _status, _stats = rt.memory.get(bpy.context.scene.frame_current, inp.points,
                                             inp.offsets)
     return inp, points
@@ -53,7 +54,7 @@ def test_moved_output_gets_every_point_transformed(fc):
     hair, out = _turned_setup(fc)
     out.location = (2.0, 0.0, 0.0)  # the artist moves the output away
     bpy.context.view_layer.update()
-    fc.runtime.clear_runtime(hair)
+    fc.registry.clear_runtime(hair)
     play(range(1, 7))
     inp, world = _world_result(fc, hair)
     assert inp.local is None
@@ -96,25 +97,24 @@ def test_frame_handler_and_update_callbacks_never_raise(fc, monkeypatch, capsys)
     def broken(*_args, **_kw):
         raise RuntimeError("simulated failure")
 
-    monkeypatch.setattr(fc.runtime, "setups", broken)
+    monkeypatch.setattr(fc.registry, "setups", broken)
     play(range(1, 3))  # the handler cannot even list the setups: one line, no raise
     assert "frame handler failed: simulated failure" in capsys.readouterr().out
     monkeypatch.undo()
-    monkeypatch.setattr(fc.runtime, "invalidate", broken)
+    monkeypatch.setattr(fc.invalidation, "invalidate", broken)
     hair.furcollide.plasticity = 0.3  # the update callback fails: one line, no raise
     assert "failed: simulated failure" in capsys.readouterr().out
     assert hair.furcollide.plasticity == pytest.approx(0.3)
 
 
 def test_solver_properties_mirror_core_settings(fc):
-    import sys
 
-    props = sys.modules["bl_ext.fcdev.furcollide.operators.properties"]
+    props = fc.properties
     rna = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
     defaults = fc.core.Settings()
     for name in props.SOLVER_PROPERTIES:
         assert rna.properties[name].default == pytest.approx(getattr(defaults, name)), name
     hair, box = fc.make_scene()
     fc.setup(hair, [box])
-    got = dataclasses.asdict(fc.runtime.core_settings(hair))  # threads 0 -> None (all CPUs)
+    got = dataclasses.asdict(fc.setup_module.core_settings(hair))  # threads 0 -> None (all CPUs)
     assert got == pytest.approx(dataclasses.asdict(defaults))  # RNA floats are float32

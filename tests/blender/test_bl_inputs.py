@@ -145,10 +145,10 @@ def test_output_keeps_user_modifiers_and_remove_keep_output(fc):
     bpy.context.scene.frame_set(1)
     bpy.ops.furcollide.reset()
     assert out.modifiers.get("My Smooth") == user
-    assert out.modifiers[0].name == fc.runtime.DEPENDENCY_MODIFIER
+    assert out.modifiers[0].name == fc.dependencies.DEPENDENCY_MODIFIER
     assert bpy.ops.furcollide.remove(keep_output=True) == {"FINISHED"}
     assert out.name in bpy.data.objects and out.modifiers.get("My Smooth")
-    assert out.modifiers.get(fc.runtime.DEPENDENCY_MODIFIER) is None
+    assert out.modifiers.get(fc.dependencies.DEPENDENCY_MODIFIER) is None
     assert not out.furcollide.is_output
 
 
@@ -176,7 +176,7 @@ def test_double_sided_sheet_and_own_offset(fc):
     c.collision_offset = 0.05
     bpy.context.scene.frame_set(1)
     assert s.status_message == "" and s.stat_colliding == len(hair.data.curves)
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     col = rt.colliders[sheet.session_uid].collider
     assert col.double_sided and col.offset == pytest.approx(0.05)
 
@@ -207,6 +207,6 @@ def test_deforming_colliders_get_the_fast_bvh_build(fc):
     box.shape_key_add(name="Squash").value = 0.5
     fc.setup(hair, [box, still])
     bpy.context.scene.frame_set(2)
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     flags = {e.collider.name: e.collider.deforming for e in rt.colliders.values()}
     assert flags == {"Box": True, "Still": False}

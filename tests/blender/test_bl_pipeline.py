@@ -252,7 +252,7 @@ def test_children_from_guides(fc):
     assert bpy.ops.furcollide.children_from_guides(density=100.0) == {"FINISHED"}
     mod = out.modifiers["FurCollide Children"]
     assert mod.type == "NODES" and mod.node_group is not None
-    assert out.modifiers[0].name == fc.runtime.DEPENDENCY_MODIFIER
+    assert out.modifiers[0].name == fc.dependencies.DEPENDENCY_MODIFIER
     ids = {(i.name, i.socket_type): i.identifier for i in mod.node_group.interface.items_tree
            if i.item_type == "SOCKET" and i.in_out == "INPUT"}
     assert mod[ids[("Surface", "NodeSocketObject")]] == surf

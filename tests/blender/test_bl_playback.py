@@ -19,7 +19,7 @@ def play(fc, out, frames):
 def test_scrub_back_is_exact_and_jump_holds(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     rec = play(fc, out, range(1, 13))
     assert len(rt.memory) == 12
     assert any(not np.array_equal(rec[f], fc.positions(hair)) for f in rec)
@@ -45,7 +45,7 @@ def test_scrub_back_is_exact_and_jump_holds(fc):
 def test_subframes_and_repeats_do_not_step(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     rec = play(fc, out, range(1, 7))
     sc = bpy.context.scene
     sc.frame_set(6, subframe=0.5)
@@ -60,7 +60,7 @@ def test_subframes_and_repeats_do_not_step(fc):
 def test_setting_change_invalidates_after_current(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     rec = play(fc, out, range(1, 13))
     bpy.context.scene.frame_set(6)
     hair.furcollide.mode = "stiff"
@@ -151,7 +151,7 @@ def test_collider_deleted_in_the_ui_stops_colliding(fc):
 def test_source_topology_change_is_reported_and_nothing_lost(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     rec = play(fc, out, range(1, 7))
     n = len(hair.data.curves)
     hair.data.add_curves([5])
@@ -212,7 +212,7 @@ def test_animated_per_curve_enable(fc):
 def test_rigid_collider_never_rebuilds_deforming_does(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     play(fc, out, range(1, 13))
     col = rt.colliders[box.session_uid].collider
     assert col.build_count == 1

@@ -31,7 +31,7 @@ def test_add_creates_output(fc):
     assert hair.hide_render and not out.hide_render
     assert [c.object for c in s.colliders] == [box]
     assert len(out.data.curves) == len(hair.data.curves)
-    assert out.modifiers[0].name == fc.runtime.DEPENDENCY_MODIFIER
+    assert out.modifiers[0].name == fc.dependencies.DEPENDENCY_MODIFIER
     # evaluated right away at the start frame
     assert s.stat_frame == bpy.context.scene.frame_start
     st = out.data.attributes[fc.bridge.STATUS_ATTRIBUTE]
@@ -101,7 +101,7 @@ def test_hidden_setup_is_skipped_quietly(fc):
     sc = bpy.context.scene
     hair.hide_viewport = out.hide_viewport = True
     dg = bpy.context.evaluated_depsgraph_get()
-    assert fc.runtime.evaluate(sc, dg, hair) == "hidden"
+    assert fc.frame_rules.evaluate(fc.Setup(hair, sc, dg)) == fc.frame_rules.Outcome.HIDDEN
     for f in range(sc.frame_start, sc.frame_start + 4):
         sc.frame_set(f)
         assert hair.furcollide.status_message == ""

@@ -127,7 +127,7 @@ def test_motion_settings_invalidate_the_cache(fc):
     scene = bpy.context.scene
     hair, box, out = box_scene(fc, location=(2.0, 0.0, 0.6))
     play(scene, range(1, 4))
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     assert 3 in rt.memory
     hair.furcollide.motion.use_wind = True
     assert len(rt.memory) == 0
@@ -213,7 +213,7 @@ def test_collider_distance_attribute_is_baked(fc, tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "d.blend"))
     bpy.context.view_layer.objects.active = hair
     assert bpy.ops.furcollide.bake() == {"FINISHED"}
-    d = fc.runtime.bake_directory(hair)
+    d = fc.bake.bake_directory(hair)
     attrs = fc.cache.read_attributes(d, 3)
     assert "furcollide_collider_distance" in attrs
     scene.frame_set(3)
@@ -240,7 +240,7 @@ def test_fur_attach_unbind(fc):
     assert abs(world(out)[0, 2] - 1.0) < 1e-5
     assert bpy.ops.furcollide.fur_attach_unbind() == {"FINISHED"}
     assert not hair.furcollide.use_fur_attach
-    assert not fc.runtime.has_binding(hair)
+    assert not fc.fur_attach.has_binding(hair)
     scene.frame_set(1)
     assert abs(world(out)[0, 2]) < 1e-6  # back to the source's own curves
 
@@ -347,15 +347,15 @@ def test_a_failing_stage_is_reported_and_the_frame_solves_again(fc, monkeypatch)
     clean = world(out)
     bpy.ops.furcollide.reset()
     play(scene, range(1, 5))
-    real = fc.runtime.stages.output_stage
+    real = fc.motion.output_stage
 
     def boom(*a, **k):
         raise ValueError("stage exploded")
 
-    monkeypatch.setattr(fc.runtime.stages, "output_stage", boom)
+    monkeypatch.setattr(fc.motion, "output_stage", boom)
     scene.frame_set(5)
     assert "stage exploded" in hair.furcollide.status_message
-    monkeypatch.setattr(fc.runtime.stages, "output_stage", real)
+    monkeypatch.setattr(fc.motion, "output_stage", real)
     scene.frame_set(5)
     np.testing.assert_array_equal(world(out), clean)
 
@@ -416,7 +416,7 @@ def test_render_groom_output_of_an_older_file_gets_its_inputs_on_load(fc, tmp_pa
     guides, groom, box, out = groom_scene(fc)
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     gout = guides.furcollide.groom.output
-    name = fc.runtime.DEPENDENCY_MODIFIER
+    name = fc.dependencies.DEPENDENCY_MODIFIER
     assert gout.modifiers[0].name == name  # the bind gives it the modifier
     gout.modifiers.remove(gout.modifiers[name])  # as saved by an earlier version
     path = str(tmp_path / "old.blend")

@@ -256,5 +256,5 @@ def test_collider_collection_holding_everything(fc):
         bpy.context.scene.frame_set(f)
         assert hair.furcollide.status_message == ""
     assert hair.furcollide.stat_colliding > 0
-    names = {r.name for r in fc.runtime.collider_objects(hair)}
+    names = {r.name for r in fc.colliders.collider_objects(hair)}
     assert names == {"Box"}
