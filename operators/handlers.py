@@ -63,9 +63,9 @@ def on_depsgraph_update_post(scene, depsgraph=None):
             if ob.data.surface is not None:
                 inputs.add(ob.data.surface.name)
             if edited & inputs and len(rt.memory):
-                invalidation.invalidate(ob, reason="source or collider edited")
+                invalidation.invalidate(ob, scene, reason="source or collider edited")
             elif rt.signature is not None and signature(ob, scene=scene) != rt.signature:
-                invalidation.invalidate(ob, reason="colliders changed", colliders=True)
+                invalidation.invalidate(ob, scene, reason="colliders changed", colliders=True)
     except Exception as exc:  # noqa: BLE001
         print(f"FurCollide: depsgraph update check failed: {exc}")
 

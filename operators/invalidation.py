@@ -16,8 +16,9 @@ from .dependencies import update_dependencies
 from .setup import Setup
 
 
-def invalidate(ob, reason="", from_frame=None, colliders=False, refresh=True) -> None:
-    """Drop the memory-cached frames after ``from_frame`` (default: current).
+def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=True) -> None:
+    """Drop the memory-cached frames after ``from_frame`` (default: the current frame of
+    ``scene``, the scene the change was seen in).
 
     A baked setup is not affected (its bake is read-only until freed).
     ``colliders`` also forgets the core Colliders and updates the output's
@@ -33,7 +34,6 @@ def invalidate(ob, reason="", from_frame=None, colliders=False, refresh=True) ->
             update_dependencies(ob)
         return
     s = ob.furcollide
-    scene = bpy.context.scene
     f = scene.frame_current if from_frame is None else from_frame
     rt.drop_frames_after(f, s.frame_start)
     if colliders:

@@ -192,7 +192,7 @@ class FURCOLLIDE_OT_collider_add(SetupOperator, Operator):
         for o in new:
             s.colliders.add().object = o
         s.collider_index = len(s.colliders) - 1
-        invalidate(src, reason="collider added", colliders=True)
+        invalidate(src, context.scene, reason="collider added", colliders=True)
         refresh(context)
         names = ", ".join(o.name for o in new) or "an empty slot"
         self.report({"INFO"}, f"Added {names}")
@@ -221,7 +221,7 @@ class FURCOLLIDE_OT_collider_remove(SetupOperator, Operator):
         name = s.colliders[i].object.name if s.colliders[i].object else "empty slot"
         s.colliders.remove(i)
         s.collider_index = min(i, max(0, len(s.colliders) - 1))
-        invalidate(src, reason="collider removed", colliders=True)
+        invalidate(src, context.scene, reason="collider removed", colliders=True)
         refresh(context)
         self.report({"INFO"}, f"Removed collider {name}")
         return {"FINISHED"}

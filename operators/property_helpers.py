@@ -32,12 +32,13 @@ def never_raises(update):
 
 @never_raises
 def update_settings(self, context):
-    invalidation.invalidate(self.id_data, reason="settings changed")
+    invalidation.invalidate(self.id_data, context.scene, reason="settings changed")
 
 
 @never_raises
 def update_colliders(self, context):
-    invalidation.invalidate(self.id_data, reason="colliders changed", colliders=True)
+    invalidation.invalidate(self.id_data, context.scene, reason="colliders changed",
+                            colliders=True)
 
 
 @never_raises
@@ -50,9 +51,11 @@ def update_range(self, context):
     rt = registry.get_runtime(ob, create=False)
     if rt is not None and rt.memory.start == s.frame_start:
         # Only the end moved: frames inside the new range stay valid.
-        invalidation.invalidate(ob, reason="frame range changed", from_frame=s.frame_end)
+        invalidation.invalidate(ob, context.scene, reason="frame range changed",
+                                from_frame=s.frame_end)
     else:
-        invalidation.invalidate(ob, reason="frame range changed", from_frame=s.frame_start - 1)
+        invalidation.invalidate(ob, context.scene, reason="frame range changed",
+                                from_frame=s.frame_start - 1)
 
 
 def update_every_frame(reason):
@@ -64,7 +67,8 @@ def update_every_frame(reason):
     @never_raises
     def update(self, context):
         ob = self.id_data
-        invalidation.invalidate(ob, reason=reason, from_frame=ob.furcollide.frame_start - 1)
+        invalidation.invalidate(ob, context.scene, reason=reason,
+                                from_frame=ob.furcollide.frame_start - 1)
 
     return update
 

@@ -229,3 +229,26 @@ def test_rigid_collider_never_rebuilds_deforming_does(fc):
     play(fc, out, range(1, 13))
     col = rt.colliders[box.session_uid].collider
     assert col.build_count > 3
+
+
+def test_an_edit_in_a_scene_the_window_does_not_show_drops_after_its_own_frame(fc):
+    """The depsgraph check of scene B, while the window shows scene A at another frame,
+    drops B's cached frames after B's current frame (nothing, at its last cached
+    frame), not after A's."""
+    win = bpy.context.window
+    sc_a = bpy.context.scene
+    sc_b = bpy.data.scenes.new("B")
+    win.scene = sc_b
+    hair, box = fc.make_scene(frames=(1, 8))  # in B, the window's scene now
+    fc.setup(hair, [box])
+    for f in range(1, 7):
+        sc_b.frame_set(f)
+    rt = fc.registry.get_runtime(hair)
+    assert sorted(rt.memory.frames) == [1, 2, 3, 4, 5, 6]
+    win.scene = sc_a
+    sc_a.frame_set(2)
+    assert bpy.context.scene == sc_a and sc_b.frame_current == 6
+    box.data.vertices[0].co.z += 0.01  # an edit of B's collider, seen by B's depsgraph
+    box.data.update()
+    sc_b.view_layers[0].depsgraph.update()
+    assert sorted(rt.memory.frames) == [1, 2, 3, 4, 5, 6]
