@@ -2,6 +2,8 @@
 
 * ``frame_change_post``: every setup of the scene runs the frame rules
   (:func:`frame_rules.evaluate`); an error becomes the setup's status message.
+  Both this and the depsgraph check first prune the registry (:func:`registry.prune`):
+  a deleted source's runtime and memory cache go.
 * ``depsgraph_update_post``: an edited source or collider drops the cached frames
   after the current one (:func:`invalidation.invalidate`), and the dependency
   modifiers follow the setups' inputs. It never writes hair data.
@@ -30,6 +32,7 @@ def on_frame_change_post(scene, depsgraph=None):
         return
     with registry.handlers_held():
         try:
+            registry.prune()  # a deleted source's runtime and cache go
             for ob in registry.setups(scene):
                 try:
                     frame_rules.evaluate(Setup(ob, scene, depsgraph))
@@ -45,6 +48,7 @@ def on_depsgraph_update_post(scene, depsgraph=None):
     if registry.busy() or depsgraph is None or getattr(depsgraph, "mode", "VIEWPORT") == "RENDER":
         return
     try:
+        registry.prune()  # a source deleted in the UI: its runtime and cache go
         edited = set()
         for u in depsgraph.updates:
             if (u.is_updated_geometry or u.is_updated_transform) and isinstance(

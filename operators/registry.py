@@ -21,6 +21,8 @@ import uuid
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+import bpy
+
 from .. import core
 from ..core import framecache
 from . import bridge
@@ -32,6 +34,7 @@ class Runtime:
     """Session-only state of one setup."""
 
     uid: str
+    name: str = ""  # the source object's name when last looked up (see prune)
     solver: object = None  # core.Solver, built for ``topology`` (its settings: solver.settings)
     #: The source's curve layout (``framecache.topology_key``) the solver, the cached
     #: frames and the jiggle history belong to: :meth:`adopt_topology` changes it.
@@ -120,12 +123,45 @@ def get_runtime(ob, create=True) -> Runtime | None:
     if rt is None and create:
         rt = registry[key] = Runtime(uid)
         rt.memory = framecache.MemoryCache(ob.furcollide.memory_limit)
+    if rt is not None:
+        rt.name = ob.name
     return rt
 
 
 def clear_runtime(ob) -> None:
     """Forget everything held in memory for the setup on ``ob``."""
     registry.pop(_key(ob), None)
+
+
+def prune() -> int:
+    """Forget the runtimes (memory caches included) of setups that are gone: their
+    source was removed from the file or is in no scene any more (a source deleted in
+    the UI stays alive while its output points at it), or is no longer that setup.
+    Returns how many were forgotten.
+
+    Cheap when nothing is gone (one name look-up per runtime); a renamed source
+    costs one pass over the file's hair objects.
+    """
+    if not registry:
+        return 0
+    alive = set()
+    for key, rt in registry.items():
+        ob = bpy.data.objects.get(rt.name)
+        if ob is not None and _alive(ob) and _key(ob) == key:
+            alive.add(key)
+    if len(alive) < len(registry):  # gone, or renamed: look at every hair object
+        for ob in bpy.data.objects:
+            if ob.type == "CURVES" and _alive(ob) and _key(ob) in registry:
+                alive.add(_key(ob))
+    gone = [key for key in registry if key not in alive]
+    for key in gone:
+        del registry[key]
+    return len(gone)
+
+
+def _alive(ob) -> bool:
+    s = getattr(ob, "furcollide", None)
+    return s is not None and s.is_setup and bool(s.uid) and bool(ob.users_scene)
 
 
 def source_of(ob):

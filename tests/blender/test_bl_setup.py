@@ -112,3 +112,39 @@ def test_hidden_setup_is_skipped_quietly(fc):
         assert hair.furcollide.status_message == ""
         moved += int(hair.furcollide.stat_colliding > 0)
     assert moved > 0
+
+
+def test_a_deleted_source_drops_its_runtime_and_memory_cache(fc):
+    """The registry is pruned: a source deleted in the UI (kept alive by its output's
+    pointer, in no scene) or removed from the file loses its runtime and playback
+    cache at the next depsgraph check or frame change; other setups keep theirs."""
+    scene = bpy.context.scene
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    other = fc.make_scene()[0]
+    other.name = "Other"
+    fc.setup(other, [box])
+    for f in range(1, 7):
+        scene.frame_set(f)
+    rt = fc.registry.get_runtime(hair, create=False)
+    kept = fc.registry.get_runtime(other, create=False)
+    assert len(rt.memory) == 6 and len(kept.memory) == 6
+    assert len(fc.registry.registry) == 2
+
+    hair.furcollide.show_result = False  # the source shows (and can be selected)
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    hair.select_set(True)
+    bpy.context.view_layer.objects.active = hair
+    assert bpy.ops.object.delete() == {"FINISHED"}  # the output's pointer keeps it alive
+    assert hair.name in bpy.data.objects and not hair.users_scene
+    bpy.context.view_layer.update()  # the depsgraph check
+    assert list(fc.registry.registry.values()) == [kept] and len(kept.memory) == 6
+    assert fc.registry.get_runtime(hair, create=False) is None
+
+    other.name = "Renamed"  # a rename is not a deletion
+    scene.frame_set(3)
+    assert list(fc.registry.registry.values()) == [kept]
+    bpy.data.objects.remove(other)  # removed from the file by a script
+    scene.frame_set(4)  # the frame handler prunes too
+    assert fc.registry.registry == {}
