@@ -78,85 +78,137 @@ def evaluate(setup) -> Outcome:
 
 
 def _rules(setup):
-    """(Outcome, the world points written into the output or None)."""
-    s, rt = setup.s, setup.rt
+    """(Outcome, the world points written into the output or None), rule by rule."""
+    skipped = _not_evaluated(setup)
+    if skipped is not None:
+        return skipped
+    inp = _read_frame(setup)
+    if inp is None:
+        return Outcome.TOPOLOGY, None
+    note = _input_warning(setup, inp)
+    s, rt, f = setup.s, setup.rt, setup.frame
+    if not s.enabled or f < s.frame_start:
+        return _pass_through(setup, inp, note)
+    if s.is_baked:
+        return _show_baked(setup, inp, note)
+    if f > s.frame_end:
+        return _after_the_end(setup, inp, note)
+    if f in rt.memory:
+        shown = _show_cached_if_current(setup, inp, note)
+        if shown is not None:
+            return shown
+    if f != s.frame_start and (f - 1) not in rt.memory:
+        return _hold(setup, inp)
+    held = _prepare_solver(setup, inp)
+    if held is not None:
+        return held
+    return _solve(setup, inp, note)
+
+
+def _not_evaluated(setup):
+    """The outcome when the frame is not evaluated at all (a bake runs, the outputs
+    are hidden from this depsgraph, a subframe), else None. Raises ValueError when the
+    output must not be written (:func:`check_output`)."""
+    s = setup.s
     check_output(setup.ob)
-    if rt.baking:
+    if setup.rt.baking:
         return Outcome.BAKING, None
     if not shown(s.output, setup.depsgraph) and not shown(s.groom.output, setup.depsgraph):
         # Nothing of this setup is in this depsgraph (its outputs are hidden from
         # it, e.g. from the render): nothing to show, so nothing to compute or to
         # report (its source is usually hidden too).
         return Outcome.HIDDEN, None
-    f = setup.frame
     if setup.subframe != 0.0:
         # Never step on subframes (motion blur). A bake is blended between its
         # whole frames; otherwise the output keeps the whole frame.
         if s.is_baked and s.enabled:
             return Outcome.SUBFRAME, _baked_subframe(setup)
         return Outcome.SUBFRAME, None
+    return None
+
+
+def _read_frame(setup):
+    """The frame's inputs (motion before collision applied), or None when the source's
+    curves changed (the status says so). Drops the cached frames that changes made
+    without an update callback invalidate."""
+    s, rt = setup.s, setup.rt
     _changes_without_callbacks(setup)  # before the input is read: see there
     inp = read_inputs(setup)
     if not _check_topology(setup, inp):
-        return Outcome.TOPOLOGY, None
+        return None
     prepare_input(setup, inp)
     if not s.is_baked:  # a bake checks its own curve layout first
         frame_outputs.sync_output(setup, inp)
-
     sig = setup.signature()
     if rt.signature is not None and sig != rt.signature and not s.is_baked:
         # Changed without an update callback (deleted collider, undo, driver).
-        rt.drop_frames_after(f - 1, s.frame_start)
+        rt.drop_frames_after(setup.frame - 1, s.frame_start)
         rt.colliders.clear()
     rt.signature = sig
+    return inp
 
-    level, msg = "INFO", ""
+
+def _input_warning(setup, inp) -> tuple[str, str]:
+    """(level, message) the status shows when the frame is fine: a warning about the
+    enable attribute or a Surface listed as a collider, else ("INFO", "")."""
     if inp.warning:
-        level, msg = "WARNING", inp.warning
-    elif warn := surface_as_collider(setup.ob):
-        level, msg = "WARNING", warn
-    start, end = s.frame_start, s.frame_end
+        return "WARNING", inp.warning
+    if warn := surface_as_collider(setup.ob):
+        return "WARNING", warn
+    return "INFO", ""
 
-    if not s.enabled or f < start:
-        frame_outputs.sync_output(setup, inp)
-        written = frame_outputs.write(setup, inp, inp.points,
-                                      np.zeros(len(inp.offsets) - 1, np.int8))
+
+def _pass_through(setup, inp, note):
+    """Disabled, or before the start frame: the output follows the source."""
+    frame_outputs.sync_output(setup, inp)
+    written = frame_outputs.write(setup, inp, inp.points, np.zeros(len(inp.offsets) - 1, np.int8))
+    setup.rt.outdated = False
+    level, msg = note
+    setup.set_status(level, msg or ("Disabled" if not setup.s.enabled
+                                    else "Before the start frame"))
+    return Outcome.PASSTHROUGH, written
+
+
+def _after_the_end(setup, inp, note):
+    """After the end frame: hold the end frame (or, not cached, the newest cached one)."""
+    rt, end = setup.rt, setup.s.frame_end
+    if rt.hold is not None and rt.hold[0] == end:
+        written = frame_outputs.write(setup, inp, rt.hold[1], rt.hold[2])
+        level, msg = note
+        setup.set_status(level, msg or f"After the end frame: holding frame {end}")
+        return Outcome.HOLD, written
+    return _hold(setup, inp, reason=f"after the end frame, and frame {end} is not")
+
+
+def _show_cached_if_current(setup, inp, note):
+    """A memory-cached frame: shown while its inputs still hold; else the setup is
+    outdated (or, at the start frame, None: it is solved again, which drops every
+    cached frame)."""
+    rt, f = setup.rt, setup.frame
+    why = cached_frame_change(setup, inp, f)
+    if not why:
+        written, status, stats = _show_cached(setup, inp, f)
+        if rt.hold is None and f == max(rt.memory.frames):
+            rt.hold = (f, written, status)
+        rt.stats = dict(stats, source="cache")
         rt.outdated = False
-        setup.set_status(level, msg or ("Disabled" if not s.enabled else "Before the start frame"))
-        return Outcome.PASSTHROUGH, written
+        setup.set_status(*note)
+        return Outcome.CACHE, written
+    if f != setup.s.frame_start:
+        return _outdated(setup, why)
+    return None
 
-    if s.is_baked:
-        return _show_baked(setup, inp, level, msg)
 
-    if f > end:
-        if rt.hold is not None and rt.hold[0] == end:
-            written = frame_outputs.write(setup, inp, rt.hold[1], rt.hold[2])
-            setup.set_status(level, msg or f"After the end frame: holding frame {end}")
-            return Outcome.HOLD, written
-        return _hold(setup, inp, reason=f"after the end frame, and frame {end} is not")
-
-    if f in rt.memory:
-        why = cached_frame_change(setup, inp, f)
-        if not why:
-            written, status, stats = _show_cached(setup, inp, f)
-            if rt.hold is None and f == max(rt.memory.frames):
-                rt.hold = (f, written, status)
-            rt.stats = dict(stats, source="cache")
-            rt.outdated = False
-            setup.set_status(level, msg)
-            return Outcome.CACHE, written
-        if f != start:
-            return _outdated(setup, why)
-        # the start frame is solved again (below), which drops every cached frame
-
-    if f != start and (f - 1) not in rt.memory:
-        return _hold(setup, inp)
+def _prepare_solver(setup, inp):
+    """Reset the solver at the start frame, else give it frame ``f - 1``'s state; the
+    hold outcome when that state is not known, else None."""
+    s, rt, f = setup.s, setup.rt, setup.frame
     solver = setup.ensure_solver(inp)  # a mode change resets it: state unknown
-    if f == start:
+    if f == s.frame_start:
         solver.reset()
         rt.memory.clear()
         rt.dropped = ""
-        rt.memory.start = start
+        rt.memory.start = f
         rt.memory.limit = int(s.memory_limit * 1024 * 1024)
     elif rt.solver_frame != f - 1:
         state = rt.memory.state(f - 1)
@@ -167,7 +219,7 @@ def _rules(setup):
         except ValueError as exc:  # saved with another mode
             rt.solver_frame = None
             return _hold(setup, inp, reason=str(exc))
-    return _solve(setup, inp, level, msg)
+    return None
 
 
 def check_output(ob) -> None:
@@ -229,7 +281,7 @@ def _check_topology(setup, inp) -> bool:
     return False
 
 
-def _solve(setup, inp, level, msg):
+def _solve(setup, inp, note):
     """Solve frame ``f`` (the solver holds ``f - 1``, or was reset), cache it, show it."""
     rt, f = setup.rt, setup.frame
     read_for_solve(setup, inp)
@@ -247,7 +299,7 @@ def _solve(setup, inp, level, msg):
     rt.stats = result.stats
     rt.error = ""
     rt.outdated = False
-    setup.set_status(level, msg)
+    setup.set_status(*note)
     return (Outcome.RESET if f == setup.s.frame_start else Outcome.STEP), written
 
 
@@ -301,7 +353,7 @@ def _hold(setup, inp, reason=""):
     return Outcome.OUTDATED, written
 
 
-def _show_baked(setup, inp, level, msg):
+def _show_baked(setup, inp, note):
     """A baked setup: show the baked frame (the newest one before it when missing)."""
     s, rt, f = setup.s, setup.rt, setup.frame
     directory = bpy.path.abspath(s.bake_path)
@@ -333,7 +385,7 @@ def _show_baked(setup, inp, level, msg):
                          "baked. The baked frame is still shown: press Free Bake, then Bake.")
     elif fe == min(f, s.frame_end):
         rt.outdated = False
-        setup.set_status(level, msg)
+        setup.set_status(*note)
     else:
         setup.set_status("WARNING", f"Frame {f} is missing from the bake: holding frame {fe}")
     return Outcome.BAKE, written
