@@ -12,19 +12,22 @@ cached frame, and check with the real operators and ``scene.frame_set``:
 """
 
 import os
-import sys
-from pathlib import Path
 
 import bmesh
 import bpy
 import numpy as np
 import pytest
-from conftest import activate, bake_crashing_at, make_box, make_hair, make_surface, positions
+from helpers import (
+    activate,
+    bake_crashing_at,
+    make_box,
+    make_hair,
+    make_surface,
+    oracle,
+    positions,
+)
 
 from core import Status
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
-import oracle  # noqa: E402  (the core tests' brute-force segment/triangle test)
 
 pytestmark = pytest.mark.blender
 

@@ -27,7 +27,7 @@ import os
 import bpy
 import numpy as np
 import pytest
-from conftest import activate, positions
+from helpers import activate, positions
 
 pytestmark = pytest.mark.blender
 

@@ -1,6 +1,6 @@
 """Cost of the frame-inputs check at paper scale (not a test).
 
-Run: ``.venv/bin/python tests/blender/bench_frame_inputs.py [--frames 10] [--repeat 5]
+Run: ``.venv/bin/python bench/bench_frame_inputs.py [--frames 10] [--repeat 5]
 [--deforming]``
 
 Scene (``bench_glue.build_scene``): 50,000 hair curves x 8 CVs on a moved and turned

@@ -1,6 +1,6 @@
 """Per-frame cost of FurCollide's Blender glue at paper scale (not a test).
 
-Run: ``.venv/bin/python tests/blender/bench_glue.py [--frames 10] [--profile] [--identity]
+Run: ``.venv/bin/python bench/bench_glue.py [--frames 10] [--profile] [--identity]
 [--repeat 3]``
 
 Scene: 50,000 hair curves x 8 CVs on a moved and turned hair object (``--identity``:
@@ -33,7 +33,7 @@ os.environ["BLENDER_USER_RESOURCES"] = _USER
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
 import numpy as np  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 ADDON = "bl_ext.fcbench.furcollide"
 
 
