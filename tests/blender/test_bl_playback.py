@@ -8,6 +8,7 @@ import pytest
 from helpers import (
     assert_same_frames,
     check_frame,
+    offsets_of,
     positions,
     positions_per_frame,
     preroll_scene,
@@ -207,3 +208,37 @@ def test_fps_change_mid_session_keeps_a_plain_setup_exact(fc):
     scene.render.fps_base = 1.001
     assert_same_frames(clean, scene, out, range(5, 11), "after the fps change")
     assert hair.furcollide.status_message == ""
+
+
+def test_one_solve_serves_playback_and_scripts(fc):
+    """``frame_solve.solve_frame`` on a ``Setup.for_script`` (scripts/demo.py's core
+    path: no Blender object, no frame handler) gives, bit for bit, what playback wrote:
+    one solve serves both."""
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 8))
+    out = fc.setup(hair, [box])
+    played = positions_per_frame(out, range(1, 9))  # source and output at the origin
+    offsets = offsets_of(hair)
+    setup = fc.Setup.for_script(
+        fc.core.Solver(offsets, fc.setup_module.core_settings(hair)))
+    me = box.data
+    V = np.empty(len(me.vertices) * 3, np.float32)
+    me.attributes["position"].data.foreach_get("vector", V)
+    me.calc_loop_triangles()
+    F = np.empty(len(me.loop_triangles) * 3, np.int32)
+    me.loop_triangles.foreach_get("vertices", F)
+    collider = None
+    for f in range(1, 9):
+        scene.frame_set(f)
+        M = np.array(box.matrix_world, np.float64)
+        if collider is None:
+            collider = fc.core.Collider(V.reshape(-1, 3), F.reshape(-1, 3), matrix=M,
+                                        drop_degenerate=True, name=box.name)
+        else:
+            collider.matrix = M  # rigid: the BVH is kept, as in playback
+        inputs = fc.frame_inputs.FrameInputs(positions(hair), offsets, frame=f,
+                                             colliders=[collider])
+        result = fc.frame_solve.solve_frame(setup, inputs)
+        np.testing.assert_array_equal(result.points, played[f], err_msg=f"frame {f}")
+        assert result.stats["frame"] == f
+    assert any((p != positions(hair)).any() for p in played.values())  # the box met the hair
