@@ -1,7 +1,10 @@
-"""FurCollide for Blender: register/unregister only.
+"""FurCollide for Blender: hair, fur and grass curves collide with meshes without a
+physics simulation (SIGGRAPH 2017 "FurCollide"). This module only registers and
+unregisters the extension.
 
-All collision math lives in :mod:`.core` (pure numpy + embreex); the Blender
-glue lives in :mod:`.operators` and :mod:`.ui`.
+All collision math lives in :mod:`.core` (pure numpy + embreex, no Blender); the
+Blender glue lives in :mod:`.operators` (settings, operators, the frame handler) and
+:mod:`.ui` (the sidebar panel). README "How the code is organised" maps every module.
 """
 
 ADDON_ID = __package__

@@ -1,20 +1,60 @@
-"""Blender operators, settings and the frame handler (thin glue around :mod:`..core`).
+"""The Blender glue: settings, operators and the frame handler around :mod:`..core`.
+
+Thin: read evaluated Blender data into numpy (``foreach_get``), call the core, write
+the result into the output hair (``foreach_set``), report errors. A frame reads top to
+bottom: ``handlers`` -> ``frame_rules`` -> ``frame_inputs`` -> ``frame_solve`` ->
+``frame_outputs`` -> ``groom_stage``.
 
 Modules
 -------
-properties  settings stored on the source hair object (``Object.furcollide``)
-bridge      numpy <-> bpy transfers with size checks
-cache       bounded memory cache and atomic disk bake files
-runtime     per-setup registry and the ``frame_change_post`` handler
-setup       add / remove / collider add & remove / reset operators
-bake        bake / bake all / free bake / free all operators
-cli         ``blender -b --command furcollide ...``
-pipeline    fur pipeline operators (sampler, collider distance, children)
+handlers             Blender's handlers: thin loops over the setups, never raise
+frame_rules          what a frame does (solve, show cached, hold, pass through): Outcome
+frame_inputs         the evaluated source read into FrameInputs; the frame-inputs record
+frame_solve          solve_frame(setup, inputs) -> FrameResult (playback, bake, CLI, demo)
+frame_outputs        writing the output hair: positions, status, colours, attributes
+groom_stage          the render groom follows the collided guides (+ clearance pass)
+motion               wind, jiggle, Region of Influence, collider distance (no Blender)
+colliders            which objects collide; their core Colliders kept across frames
+fur_attach           Fur Attach's binding (storage) and the attached input curves
+setup                Setup (one setup as one evaluation sees it), settings, signature
+registry             per-setup session state (Runtime), status messages, errors
+invalidation         what an edit drops (cached frames), and the refresh after it
+dependencies         the output's "FurCollide Inputs" modifier (render dependencies)
+bake                 bake and resume (BakeJob), bake directories, free
+bridge               numpy <-> bpy transfers with size checks
+properties           the settings on the source hair object (Object.furcollide)
+properties_pipeline  the fur pipeline stages' settings (motion, render groom)
+property_helpers     the settings' update callbacks and property factories
+ops_common           what every operator shares (poll messages, reports, refresh)
+ops_setup            Add / Remove FurCollide, Add / Remove Collider, Reset Cache
+ops_bake             Bake, Bake All, Free Bake, Free All Bakes
+ops_sampler          Fur Sampler
+ops_attach           Fur Attach Bind / Unbind
+ops_groom            Bind Groom, Remove Groom Output
+pipeline             Collider Distance, Children from Guides, the pipeline scene settings
+cli                  ``blender -b --command furcollide ...``
 """
 
-from . import bake, cli, pipeline, properties, runtime, setup
+from . import (
+    cli,
+    handlers,
+    ops_attach,
+    ops_bake,
+    ops_groom,
+    ops_sampler,
+    ops_setup,
+    pipeline,
+    properties,
+)
 
-classes = setup.classes + bake.classes + pipeline.classes
+classes = (
+    ops_setup.classes
+    + ops_bake.classes
+    + ops_sampler.classes
+    + ops_attach.classes
+    + ops_groom.classes
+    + pipeline.classes
+)
 
 
 def register():
@@ -24,7 +64,7 @@ def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     pipeline.register()
-    runtime.register()
+    handlers.register()
     cli.register()
 
 
@@ -32,7 +72,7 @@ def unregister():
     import bpy
 
     cli.unregister()
-    runtime.unregister()
+    handlers.unregister()
     pipeline.unregister()
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -1,34 +1,147 @@
-"""Bake operators: solve a frame range in order and write it to disk.
+"""Bake and resume: solve a frame range in order and write it to disk.
 
-A bake writes ``frame_NNNNNN.npz`` files (see :mod:`.cache`) into the
-setup's folder under its Cache Directory. Finished frames survive a cancel
-or a crash and the next bake resumes after the last one whose settings
-match. A baked setup only reads its files until Free Bake.
-
-Interactive runs are modal (one frame per timer tick, progress in the
-cursor and status bar, Esc cancels); background runs and tests use the
-synchronous ``execute`` and print one line per frame.
+A bake writes ``frame_NNNNNN.npz`` files (see :mod:`..core.framecache`) into the
+setup's folder under its Cache Directory (:func:`bake_directory`). Each frame is solved
+by :func:`bake_frame` through the same :func:`frame_solve.solve_frame` as playback.
+Finished frames survive a cancel or a crash and the next bake resumes after the last
+one whose settings match (:func:`resume_frame`) and whose inputs still hold
+(:func:`resume_inputs_match`). A baked setup only reads its files until Free Bake.
+:class:`BakeJob` bakes several setups of a scene in one pass over the frames; the bake
+operators (:mod:`.ops_bake`) and the command line (:mod:`.cli`) drive it.
 """
 
 from __future__ import annotations
 
 import os
+import re
 
 import bpy
-from bpy.types import Operator
+import numpy as np
 
-from . import cache, runtime
-from .setup import (
-    SetupOperator,
-    active_setup,
-    backend_message,
-    refresh,
-    refuse,
-    reports_errors,
-)
+from ..core import framecache
+from . import frame_outputs, frame_rules, frame_solve, motion, registry
+from .colliders import read_for_solve
+from .frame_inputs import current_inputs, prepare_input, read_inputs, solved_inputs
+from .setup import Setup, core_settings, signature
 
-#: Running interactive bakes: scene name -> (frames done, total). Drawn by the panel.
-PROGRESS: dict = {}
+
+def bake_directory(ob) -> str:
+    """Absolute bake directory of the setup (raises ValueError if unsaved)."""
+    s = ob.furcollide
+    if s.bake_path:
+        return bpy.path.abspath(s.bake_path)
+    if not bpy.data.filepath and s.cache_directory.startswith("//"):
+        raise ValueError(
+            "Save the .blend file first: the bake cache is written next to it "
+            f"('{s.cache_directory}')"
+        )
+    root = bpy.path.abspath(s.cache_directory)
+    blend = os.path.splitext(os.path.basename(bpy.data.filepath))[0] or "untitled"
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", ob.name)
+    return os.path.join(root, blend, f"{name}_{registry.ensure_uid(ob)[:8]}")
+
+
+def settings_fingerprint(ob) -> str:
+    """What a bake file must match to be resumed from."""
+    return signature(ob, stable=True)
+
+
+def bake_frame(setup, directory, trust_solver) -> dict:
+    """Solve the current frame ``f`` of ``setup`` for a bake and write it to ``directory``.
+
+    Parameters
+    ----------
+    setup : setup.Setup
+        The setup in the baked scene, at frame ``f`` (``frame_start`` resets the solver).
+    directory : str
+        Absolute bake directory.
+    trust_solver : bool
+        The solver's state is frame ``f - 1``'s (just solved by this bake);
+        otherwise that state is read from ``f - 1``'s file.
+
+    Returns
+    -------
+    dict
+        The frame's stats (curve counts per status, ``solve_ms``).
+    """
+    s, rt, f = setup.s, setup.rt, setup.frame
+    inp = read_inputs(setup)
+    rt.adopt_topology(inp.key)
+    prepare_input(setup, inp)
+    frame_outputs.sync_output(setup, inp)
+    solver = setup.ensure_solver(inp)
+    if f == s.frame_start:
+        solver.reset()
+    elif not trust_solver:
+        _p, _st, offsets, stored = framecache.read_frame(directory, f - 1)
+        if not np.array_equal(offsets, inp.offsets):
+            raise ValueError(f"bake frame {f - 1} was made for other curves")
+        solver.state = framecache.decode_state(stored, rt.memory.sparse)
+    read_for_solve(setup, inp)
+    rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
+    result = frame_solve.solve_frame(setup, inp)
+    rt.solver_frame = f
+    fp = settings_fingerprint(setup.ob)
+    state = solver.state
+    state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
+    framecache.write_frame(directory, f, result.points, result.status, inp.offsets, state,
+                           rt.memory.sparse, result.attributes,
+                           inputs=solved_inputs(setup, inp))
+    frame_outputs.write(setup, inp, result.points, result.status, result.changed,
+                        result.attributes)
+    rt.stats = dict(result.stats, source="bake")
+    rt.invalid_note = frame_rules.invalid_note(result.problems)
+    if rt.invalid_note:
+        setup.set_status(*rt.invalid_note)
+    return rt.stats
+
+
+def scene_depsgraph(scene):
+    """The evaluated depsgraph of ``scene`` (the context's one when it is the
+    context scene; else its first view layer's, brought up to date): the CLI's
+    ``--scene`` may name a scene no window shows."""
+    if scene == bpy.context.scene:
+        return bpy.context.evaluated_depsgraph_get()
+    depsgraph = scene.view_layers[0].depsgraph
+    depsgraph.update()
+    return depsgraph
+
+
+def resume_inputs_match(ob, directory, f, scene) -> bool:
+    """Are frame ``f``'s inputs (source, colliders, surface, settings) what the
+    partial bake solved at ``f`` (its frame-inputs record)? An edited collider or
+    source means starting over: the settings fingerprint does not see geometry."""
+    with registry.handlers_held():  # no live solve while looking
+        scene.frame_set(f)
+        setup = Setup(ob, scene, scene_depsgraph(scene))
+        old = framecache.read_inputs(directory, f)
+        if old is None:  # baked before FurCollide stored the record: start over
+            return False
+        now = current_inputs(setup, read_inputs(setup))
+        return framecache.first_change(old, now) is None
+
+
+def resume_frame(ob, directory) -> int | None:
+    """Last frame of a contiguous, matching partial bake (None: start over)."""
+    s = ob.furcollide
+    if motion.needs_history(s.motion):
+        return None  # jiggle needs the roots of every frame since the start: start over
+    have = set(framecache.list_frames(directory))
+    fp = settings_fingerprint(ob)
+    last = None
+    f = s.frame_start
+    while f in have and f <= s.frame_end:
+        try:
+            with np.load(framecache.frame_path(directory, f), allow_pickle=False) as z:
+                key = next((k for k in z.files if k.endswith("__fingerprint")), None)
+                ok = key is not None and z[key].tobytes().decode() == fp
+        except (OSError, ValueError, KeyError):
+            ok = False
+        if not ok:
+            break
+        last = f
+        f += 1
+    return last
 
 
 class BakeError(RuntimeError):
@@ -60,15 +173,15 @@ class BakeJob:
             if s.output is None:
                 raise BakeError(f"'{ob.name}': the output hair object is missing")
             try:
-                runtime.core_settings(ob)
+                core_settings(ob)
             except ValueError as exc:
                 raise BakeError(f"'{ob.name}': {exc}") from None
             try:
-                directory = runtime.bake_directory(ob)
+                directory = bake_directory(ob)
             except ValueError as exc:
                 raise BakeError(str(exc)) from None
-            last = runtime.resume_frame(ob, directory)
-            if last is not None and not runtime.resume_inputs_match(ob, directory, last, scene):
+            last = resume_frame(ob, directory)
+            if last is not None and not resume_inputs_match(ob, directory, last, scene):
                 if verbose:
                     print(
                         f"FurCollide bake '{ob.name}': the source or a collider changed since "
@@ -91,7 +204,7 @@ class BakeJob:
                 s.bake_path = directory
             if nxt > s.frame_start and self.verbose:
                 print(f"FurCollide bake '{ob.name}': resuming after frame {nxt - 1}", flush=True)
-            runtime.get_runtime(ob).baking = True
+            registry.get_runtime(ob).baking = True
 
     @property
     def total(self) -> int:
@@ -105,19 +218,18 @@ class BakeJob:
         """Bake the next frame of every setup that needs it (raises BakeError)."""
         f = self.frame
         self.scene.frame_set(f)
-        depsgraph = runtime.scene_depsgraph(self.scene)
+        depsgraph = scene_depsgraph(self.scene)
         for job in self.jobs:
             ob, directory, nxt, last = job
             s = ob.furcollide
             if f < nxt or f > s.frame_end:
                 continue
             try:
-                st = runtime.bake_frame(
-                    self.scene, depsgraph, ob, f, directory, trust_solver=(last == f - 1)
-                )
+                st = bake_frame(Setup(ob, self.scene, depsgraph), directory,
+                                trust_solver=(last == f - 1))
             except Exception as exc:  # noqa: BLE001 - becomes a report
                 raise BakeError(
-                    f"'{ob.name}' frame {f}: {runtime.describe(exc)} (frames before {f} "
+                    f"'{ob.name}' frame {f}: {registry.describe(exc)} (frames before {f} "
                     f"are kept; bake again to resume)"
                 ) from exc
             job[3] = f
@@ -150,10 +262,10 @@ class BakeJob:
         """Mark finished setups baked, restore the frame; returns the baked sources."""
         baked = []
         for ob, directory, _nxt, _last in self.jobs:
-            rt = runtime.get_runtime(ob)
+            rt = registry.get_runtime(ob)
             rt.baking = False
             s = ob.furcollide
-            have = set(cache.list_frames(directory))
+            have = set(framecache.list_frames(directory))
             complete = all(f in have for f in range(s.frame_start, s.frame_end + 1))
             if complete and not cancelled:
                 s.is_baked = True
@@ -163,143 +275,6 @@ class BakeJob:
         f, sub = self.orig_frame
         self.scene.frame_set(f, subframe=sub)
         return baked
-
-
-def _bakeable(context):
-    return [
-        ob
-        for ob in runtime.setups(context.scene)
-        if not ob.furcollide.is_baked and ob.furcollide.enabled
-    ]
-
-
-class _BakeBase:
-    """Shared modal/synchronous driver of the two bake operators."""
-
-    _job = None
-    _timer = None
-
-    def sources(self, context):  # pragma: no cover - overridden
-        raise NotImplementedError
-
-    def _start(self, context, verbose):
-        try:
-            self._job = BakeJob(context.scene, self.sources(context), verbose=verbose)
-        except Exception as exc:  # noqa: BLE001 - BakeError or unexpected: a report
-            self.report({"ERROR"}, runtime.describe(exc))
-            return False
-        return True
-
-    @reports_errors
-    def execute(self, context):
-        if not self._start(context, verbose=True):
-            return {"CANCELLED"}
-        job = self._job
-        try:
-            baked = job.run()
-        except BakeError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        unfinished = [ob.name for ob, *_ in job.jobs if ob not in baked]
-        if unfinished:  # (never expected: a frame file that cannot be found again)
-            self.report({"ERROR"}, f"FurCollide: the bake of {', '.join(unfinished)} is "
-                        "incomplete: frame files are missing after baking")
-            return {"CANCELLED"}
-        self.report(
-            {"INFO"},
-            f"FurCollide: baked {', '.join(o.name for o in baked)} "
-            f"({job.frames_done} frames solved)",
-        )
-        return {"FINISHED"}
-
-    def invoke(self, context, event):
-        if bpy.app.background or context.window is None:
-            return self.execute(context)
-        if not self._start(context, verbose=False):
-            return {"CANCELLED"}
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.0, window=context.window)
-        wm.modal_handler_add(self)
-        wm.progress_begin(0, max(1, self._job.total))
-        return {"RUNNING_MODAL"}
-
-    def modal(self, context, event):
-        job = self._job
-        if event.type == "ESC":
-            self._end(context, cancelled=True)
-            self.report({"WARNING"}, f"Bake cancelled at frame {job.frame}: finished frames kept")
-            return {"CANCELLED"}
-        if event.type != "TIMER":
-            return {"PASS_THROUGH"}
-        try:
-            job.step()
-        except Exception as exc:  # noqa: BLE001 - BakeError or unexpected: a report
-            self._end(context, cancelled=True)
-            self.report({"ERROR"}, runtime.describe(exc))
-            return {"CANCELLED"}
-        context.window_manager.progress_update(job.frames_done)
-        PROGRESS[context.scene.name] = (job.frames_done, max(1, job.total))
-        for area in context.screen.areas if context.screen else ():
-            if area.type == "VIEW_3D":
-                area.tag_redraw()
-        if context.workspace is not None:
-            context.workspace.status_text_set(
-                f"FurCollide: baking frame {job.frame - 1} of {job.last} (Esc to cancel)"
-            )
-        if job.done:
-            baked = self._end(context, cancelled=False)
-            self.report({"INFO"}, f"FurCollide: baked {', '.join(o.name for o in baked)}")
-            return {"FINISHED"}
-        return {"RUNNING_MODAL"}
-
-    def _end(self, context, cancelled):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        PROGRESS.pop(context.scene.name, None)
-        if context.workspace is not None:
-            context.workspace.status_text_set(None)
-        return self._job.finish(cancelled=cancelled)
-
-
-class FURCOLLIDE_OT_bake(_BakeBase, SetupOperator, Operator):
-    """Solve the setup's frame range in order and write it to the disk cache next to the
-    saved .blend file. A cancelled or crashed bake resumes from its last finished frame"""
-
-    bl_idname = "furcollide.bake"
-    bl_label = "Bake"
-    bl_options = {"REGISTER"}
-
-    @classmethod
-    def refusal(cls, context, src):
-        if src.furcollide.is_baked:
-            return "Already baked: Free Bake first"
-        if not src.furcollide.enabled:
-            return "The setup is disabled: enable it to bake"
-        return backend_message()
-
-    def sources(self, context):
-        return [active_setup(context)]
-
-
-class FURCOLLIDE_OT_bake_all(_BakeBase, Operator):
-    """Bake every FurCollide setup of the scene that is not baked yet"""
-
-    bl_idname = "furcollide.bake_all"
-    bl_label = "Bake All"
-    bl_options = {"REGISTER"}
-
-    @classmethod
-    def poll(cls, context):
-        if context.scene is None or not _bakeable(context):
-            return refuse(cls, "No unbaked FurCollide setup in this scene")
-        msg = backend_message()
-        return refuse(cls, msg) if msg else True
-
-    def sources(self, context):
-        return _bakeable(context)
 
 
 def bake_sharers(ob) -> list:
@@ -323,70 +298,8 @@ def free_bake(ob) -> int:
     s = ob.furcollide
     n = 0
     if s.bake_path and not bake_sharers(ob):
-        n = cache.remove_frames(bpy.path.abspath(s.bake_path))
+        n = framecache.remove_frames(bpy.path.abspath(s.bake_path))
     s.is_baked = False
     s.bake_path = ""
-    runtime.clear_runtime(ob)
+    registry.clear_runtime(ob)
     return n
-
-
-def _has_bake(ob) -> bool:
-    s = ob.furcollide
-    return bool(s.is_baked or s.bake_path)
-
-
-class FURCOLLIDE_OT_free_bake(SetupOperator, Operator):
-    """Delete this setup's bake files (only the files FurCollide wrote) so it can be
-    changed and simulated again"""
-
-    bl_idname = "furcollide.free_bake"
-    bl_label = "Free Bake"
-    bl_options = {"REGISTER"}
-
-    @classmethod
-    def refusal(cls, context, src):
-        return "" if _has_bake(src) else "Nothing baked"
-
-    @reports_errors
-    def execute(self, context):
-        src = active_setup(context)
-        sharers = bake_sharers(src)
-        n = free_bake(src)
-        refresh(context)
-        kept = f"; its files are kept: {', '.join(sharers)} reads them too" if sharers else ""
-        self.report({"INFO"}, f"FurCollide: freed the bake of '{src.name}' ({n} files){kept}")
-        return {"FINISHED"}
-
-
-class FURCOLLIDE_OT_free_bake_all(Operator):
-    """Delete the bake files of every FurCollide setup in the scene"""
-
-    bl_idname = "furcollide.free_bake_all"
-    bl_label = "Free All Bakes"
-    bl_options = {"REGISTER"}
-
-    @classmethod
-    def poll(cls, context):
-        if context.scene is None or not any(_has_bake(o) for o in runtime.setups(context.scene)):
-            return refuse(cls, "No baked FurCollide setup in this scene")
-        return True
-
-    @reports_errors
-    def execute(self, context):
-        n = 0
-        names = []
-        for ob in runtime.setups(context.scene):
-            if _has_bake(ob):
-                n += free_bake(ob)
-                names.append(ob.name)
-        refresh(context)
-        self.report({"INFO"}, f"FurCollide: freed {', '.join(names)} ({n} files)")
-        return {"FINISHED"}
-
-
-classes = (
-    FURCOLLIDE_OT_bake,
-    FURCOLLIDE_OT_bake_all,
-    FURCOLLIDE_OT_free_bake,
-    FURCOLLIDE_OT_free_bake_all,
-)

@@ -14,26 +14,25 @@ from contextlib import contextmanager
 import bpy
 import numpy as np
 
-from .cache import curve_point_mask
+from ..core.framecache import curve_point_mask
+from ..core.status import Status
 
 #: Per-curve status attribute written on the output (core ``Status`` codes).
 STATUS_ATTRIBUTE = "furcollide_status"
 #: Point colour attribute for the viewport's *Attribute* colour mode.
 COLOR_ATTRIBUTE = "furcollide_color"
 
-#: RGBA per core Status code: free, colliding, recovering, pinched,
-#: unresolved, disabled.
-STATUS_COLORS = np.array(
-    [
-        [0.60, 0.60, 0.60, 1.0],  # FREE: grey
-        [1.00, 0.45, 0.05, 1.0],  # COLLIDING: orange
-        [0.10, 0.55, 1.00, 1.0],  # RECOVERING: blue
-        [0.90, 0.05, 0.70, 1.0],  # PINCHED: magenta
-        [1.00, 0.00, 0.00, 1.0],  # UNRESOLVED: red
-        [0.15, 0.15, 0.15, 1.0],  # DISABLED: dark grey
-    ],
-    np.float32,
-)
+_RGBA = {
+    Status.FREE: (0.60, 0.60, 0.60, 1.0),  # grey
+    Status.COLLIDING: (1.00, 0.45, 0.05, 1.0),  # orange
+    Status.RECOVERING: (0.10, 0.55, 1.00, 1.0),  # blue
+    Status.PINCHED: (0.90, 0.05, 0.70, 1.0),  # magenta
+    Status.UNRESOLVED: (1.00, 0.00, 0.00, 1.0),  # red
+    Status.DISABLED: (0.15, 0.15, 0.15, 1.0),  # dark grey
+    Status.INVALID: (1.00, 0.85, 0.00, 1.0),  # yellow: fix the source curve
+}
+#: RGBA (len(Status), 4) float32, one row per core ``Status`` code.
+STATUS_COLORS = np.array([_RGBA[s] for s in Status], np.float32)
 
 # Attributes never copied from the source to the output. Built-in curve
 # attributes with cached derived data must go through the API (writing
@@ -399,3 +398,17 @@ def mesh_triangles(me) -> np.ndarray:
     if m:
         me.loop_triangles.foreach_get("vertices", F)
     return F.reshape(-1, 3)
+
+
+def surface_mesh_world(ob, depsgraph, world_matrix=None):
+    """Evaluated mesh of object ``ob`` (a mesh, or a curve, text... turned into one):
+    world vertices (n, 3) float64, triangles (m, 3); none for a curve without a surface.
+    ``world_matrix``: its world matrix when not its own (a collection instance)."""
+    oe = ob.evaluated_get(depsgraph)
+    M = matrix(oe) if world_matrix is None else world_matrix
+    with evaluated_mesh(oe) as me:
+        if me is None:
+            return np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+        V = mesh_vertices(me).astype(np.float64)
+        F = mesh_triangles(me).astype(np.int64)
+    return V @ M[:3, :3].T + M[:3, 3], F

@@ -20,7 +20,8 @@ import sys
 
 import bpy
 
-from . import bake, cache, runtime
+from ..core import framecache
+from . import bake, registry
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -65,7 +66,7 @@ def run(argv) -> int:
     try:
         return _run(argv)
     except Exception as exc:  # noqa: BLE001 - a farm needs an exit code, not a traceback
-        print(f"furcollide: failed: {runtime.describe(exc)}", file=sys.stderr)
+        print(f"furcollide: failed: {registry.describe(exc)}", file=sys.stderr)
         return EXIT_FAILED
 
 
@@ -92,7 +93,7 @@ def _run(argv) -> int:
     if scene is None:
         print(f"furcollide: no scene named {args.scene!r}", file=sys.stderr)
         return EXIT_USAGE
-    sources = runtime.setups(scene)
+    sources = registry.setups(scene)
     if args.object:
         sources = [o for o in sources if o.name == args.object]
         if not sources:
@@ -106,7 +107,7 @@ def _run(argv) -> int:
         for ob in sources:
             s = ob.furcollide
             try:
-                n = len(cache.list_frames(runtime.bake_directory(ob)))
+                n = len(framecache.list_frames(bake.bake_directory(ob)))
             except ValueError:
                 n = 0
             state = "baked" if s.is_baked else ("partial" if n else "not baked")

@@ -52,6 +52,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPTS = Path(__file__).resolve().parent
 ADDON = "bl_ext.furcollide_demo.furcollide"
+if str(ROOT) not in sys.path:  # the collision core, imported as ``core`` (no Blender needed)
+    sys.path.insert(0, str(ROOT))
+
+from core import Status  # noqa: E402  (the per-curve codes: their only definition)
 
 # Settings per setup, in the core's names (Settings fields). The same values
 # are applied to the add-on's per-object settings when it has them.
@@ -75,7 +79,8 @@ SETTINGS = {
     ),
 }
 
-STATUS_NAMES = ("free", "colliding", "recovering", "pinched", "unresolved", "disabled")
+#: The statistics' columns: col/rec/pin/unres.
+COUNTED = (Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED)
 
 
 def log(msg: str) -> None:
@@ -208,7 +213,7 @@ class Stats:
         self.rows.append((frame, per_setup))
         cells = []
         for counts, ms in per_setup:
-            c = "/".join(str(counts.get(k, 0)) for k in (1, 2, 3, 4))
+            c = "/".join(str(counts.get(k, 0)) for k in COUNTED)
             t = f"{ms:6.1f}" if ms is not None else "     -"
             cells.append(f"{c:>19s} {t}")
         print(f"demo: {frame:5d}  " + "  ".join(f"{c:>26s}" for c in cells), flush=True)
@@ -216,13 +221,13 @@ class Stats:
     def summary(self):
         for i, name in enumerate(self.names):
             peak = {
-                k: max((r[1][i][0].get(k, 0) for r in self.rows), default=0) for k in (1, 2, 3, 4)
+                k: max((r[1][i][0].get(k, 0) for r in self.rows), default=0) for k in COUNTED
             }
             ms = [r[1][i][1] for r in self.rows if r[1][i][1] is not None]
             tail = f", solve {sum(ms) / len(ms):.1f} ms/frame mean" if ms else ""
             log(
                 f"{name}: peak "
-                + ", ".join(f"{STATUS_NAMES[k]} {v}" for k, v in peak.items())
+                + ", ".join(f"{k.name.lower()} {v}" for k, v in peak.items())
                 + tail
             )
 
@@ -234,14 +239,40 @@ def counts_of(status):
     return {int(v): int(c) for v, c in zip(vals, n, strict=True)}
 
 
+def addon_package():
+    """The add-on's package: the registered one, else this checkout imported as a plain
+    package (its modules import ``bpy``; nothing is registered)."""
+    import importlib
+    import importlib.util
+
+    if ADDON in sys.modules:
+        return sys.modules[ADDON]
+    name = "furcollide_checkout"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(
+            name, ROOT / "__init__.py", submodule_search_locations=[str(ROOT)]
+        )
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return importlib.import_module(name)
+
+
 def collide_with_core(bpy, demo, frame_end):
-    """Run the core solver frame by frame; return (outputs, per-frame points)."""
+    """Solve frame by frame with the core, through the add-on's own per-frame solve
+    (``operators.frame_solve.solve_frame``, the one playback and bakes use) but without
+    its operators or frame handler; return (outputs, per-frame points)."""
+    import importlib
+
     import demo_scene as ds
     import numpy as np
 
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
-    from core import Collider, Settings, Solver
+    package = addon_package().__name__
+    core = importlib.import_module(package + ".core")
+    Collider, Settings, Solver = core.Collider, core.Settings, core.Solver
+    Setup = importlib.import_module(package + ".operators.setup").Setup
+    FrameInputs = importlib.import_module(package + ".operators.frame_inputs").FrameInputs
+    solve_frame = importlib.import_module(package + ".operators.frame_solve").solve_frame
 
     scene = demo.scene
     setups = []
@@ -262,8 +293,8 @@ def collide_with_core(bpy, demo, frame_end):
             V, F = ds.mesh_world(surf)
             growth = Collider(V, F, matrix=np.array(surf.matrix_world), name=surf.name)
         settings = Settings(**SETTINGS[kind])
-        solver = Solver(ds.curve_offsets(hair), settings)
-        setups.append((hair, out, colliders, cols, growth, solver))
+        setup = Setup.for_script(Solver(ds.curve_offsets(hair), settings))
+        setups.append((hair, out, colliders, cols, growth, setup))
 
     stats = Stats([hair.name for hair, *_ in setups])
     stats.header()
@@ -271,13 +302,15 @@ def collide_with_core(bpy, demo, frame_end):
     for f in range(scene.frame_start, frame_end + 1):
         scene.frame_set(f)
         row, pts_f = [], []
-        for hair, _out, colliders, cols, growth, solver in setups:
+        for hair, _out, colliders, cols, growth, setup in setups:
             for ob, col in zip(colliders, cols, strict=True):
                 col.matrix = np.array(ob.matrix_world)  # rigid motion: no BVH rebuild
             if growth is not None:
                 growth.matrix = np.array(hair.data.surface.matrix_world)
             t0 = time.perf_counter()
-            res = solver.step(ds.hair_points(hair), cols, growth=growth)
+            inputs = FrameInputs(ds.hair_points(hair), ds.curve_offsets(hair), frame=f,
+                                 colliders=cols, growth=growth)
+            res = solve_frame(setup, inputs)
             ms = (time.perf_counter() - t0) * 1e3
             row.append((counts_of(res.status), ms))
             pts_f.append(res.points)
@@ -447,7 +480,7 @@ class Pipeline:
             if st is not None:  # pinched curves touch the pusher: leave them out
                 offs = np.empty(len(data.curves) + 1, np.int32)
                 data.curve_offset_data.foreach_get("value", offs)
-                d = d[np.repeat(st != 3, np.diff(offs))]
+                d = d[np.repeat(st != Status.PINCHED, np.diff(offs))]
             dist = float(d.min()) if len(d) else None
         s = self.guides.furcollide
         self.rows.append((f, counts, dist, int(s.stat_groom_fixed)))
@@ -460,7 +493,7 @@ class Pipeline:
         )
         log("pipeline  frame  guides col/rec/pin/unres  min collider dist* clearance fixed")
         for f, counts, dist, fixed in self.rows:
-            c = "/".join(str(counts.get(k, 0)) for k in (1, 2, 3, 4))
+            c = "/".join(str(counts.get(k, 0)) for k in COUNTED)
             d = f"{dist:17.4f}" if dist is not None else f"{'-':>17s}"
             log(f"pipeline  {f:5d}  {c:>23s}  {d}  {fixed:15d}")
         log("pipeline  (* of the guides' CVs, pinched guides left out, capped at "
@@ -490,7 +523,7 @@ class Pipeline:
         k = min(int(g.furcollide.groom.guides), len(q))
         d2 = ((r[:, None, :] - q[None, :, :]) ** 2).sum(-1)
         near = np.argpartition(d2, k - 1, axis=1)[:, :k]
-        return (st[near] == 3).any(1)
+        return (st[near] == Status.PINCHED).any(1)
 
     def check_crossings(self, frame):
         """Render groom curves that cross the pusher, the cloth or the body at ``frame``.
@@ -507,8 +540,6 @@ class Pipeline:
         import demo_scene as ds
         import numpy as np
 
-        if str(ROOT) not in sys.path:
-            sys.path.insert(0, str(ROOT))
         from core import Collider
 
         demo = self.demo
@@ -685,10 +716,10 @@ def attached_guides(bpy, demo, pipe):
     import demo_scene as ds
     import numpy as np
 
-    runtime = importlib.import_module(ADDON + ".operators.runtime")
+    fur_attach = importlib.import_module(ADDON + ".operators.fur_attach")
     g = pipe.guides
     offs = ds.curve_offsets(g)
-    pts = runtime.attached_points(g, bpy.context.evaluated_depsgraph_get(), offs)
+    pts = fur_attach.attached_points(g, bpy.context.evaluated_depsgraph_get(), offs)
     ref = ds.hair_points(g)
     rad = None
     src = g.data.attributes.get("radius")

@@ -1,4 +1,6 @@
-"""Sidebar panel, colliders list and presets (thin glue around :mod:`..operators`)."""
+"""The user interface: View3D > Sidebar > FurCollide (``panel``), its Fur Pipeline
+sub-panel (``pipeline_panel``), the colliders list and the setting presets (``presets``).
+Thin: it draws the settings and calls the operators of :mod:`..operators`."""
 
 from . import panel, pipeline_panel, presets
 

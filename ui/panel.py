@@ -3,8 +3,10 @@
 import bpy
 from bpy.types import Panel, UIList
 
-from ..operators import bake, cache, runtime
-from ..operators.setup import active_setup, backend_message
+from ..core import framecache
+from ..operators import ops_bake, registry
+from ..operators.colliders import in_scene
+from ..operators.ops_common import active_setup, backend_message
 
 #: List icon per collider object type (a mesh, or what Blender turns into one).
 _TYPE_ICONS = {"CURVE": "CURVE_DATA", "SURFACE": "SURFACE_DATA", "FONT": "FONT_DATA",
@@ -17,7 +19,7 @@ class FURCOLLIDE_UL_colliders(UIList):
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
         row = layout.row(align=True)
         ob = item.object
-        missing = ob is not None and not runtime.in_scene(ob, context.scene)
+        missing = ob is not None and not in_scene(ob, context.scene)
         row.alert = missing
         icon = "ERROR" if missing else _TYPE_ICONS.get(getattr(ob, "type", ""), "MESH_DATA")
         row.prop(item, "object", text="", emboss=False, icon=icon)
@@ -91,7 +93,7 @@ class FURCOLLIDE_PT_main(Panel):
         row = col.row()
         row.enabled = False
         row.prop(s, "output")
-        level, message = runtime.status_for(src)
+        level, message = registry.status_for(src)
         if message:
             icon = {"ERROR": "ERROR", "WARNING": "ERROR"}.get(level, "INFO")
             box = layout.box()
@@ -219,7 +221,7 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         col.enabled = not s.is_baked
         col.prop(s, "cache_directory", text="Directory")
         col.prop(s, "memory_limit", text="Memory (MB)")
-        running = bake.PROGRESS.get(context.scene.name)
+        running = ops_bake.PROGRESS.get(context.scene.name)
         if running and hasattr(layout, "progress"):
             done, of = running
             layout.progress(factor=done / of, type="BAR", text=f"Baking {done} / {of} (Esc)")
@@ -255,6 +257,8 @@ class FURCOLLIDE_PT_stats(_Sub, Panel):
         col.label(text=f"Pinched: {s.stat_pinched}")
         col.label(text=f"Unresolved: {s.stat_unresolved}")
         col.label(text=f"Disabled: {s.stat_disabled}")
+        if s.stat_invalid:
+            col.label(text=f"Invalid: {s.stat_invalid}", icon="ERROR")
         col.label(text=f"Solve: {s.stat_solve_ms:.1f} ms")
 
 
@@ -263,12 +267,12 @@ def cached_count(src) -> tuple[int, str]:
     s = src.furcollide
     if s.is_baked or s.bake_path:
         try:
-            frames = cache.list_frames(bpy.path.abspath(s.bake_path))
+            frames = framecache.list_frames(bpy.path.abspath(s.bake_path))
         except OSError:
             frames = []
         n = sum(1 for f in frames if s.frame_start <= f <= s.frame_end)
         return n, "baked" if s.is_baked else "on disk (partial bake)"
-    rt = runtime.get_runtime(src, create=False)
+    rt = registry.get_runtime(src, create=False)
     return (len(rt.memory) if rt else 0), "cached"
 
 

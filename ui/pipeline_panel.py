@@ -3,9 +3,9 @@ jiggle, Region of Influence and Fur Collider Distance, children and the render g
 
 from bpy.types import Panel
 
-from ..operators import runtime
-from ..operators.pipeline import NO_SURFACE_HAIR
-from ..operators.setup import active_setup
+from ..operators.fur_attach import has_binding
+from ..operators.ops_common import active_setup
+from ..operators.ops_sampler import NO_SURFACE_HAIR
 from .panel import FURCOLLIDE_PT_main
 
 
@@ -16,7 +16,7 @@ def draw_attach(layout, src):
     box.label(text="Fur Attach (Input)", icon="SNAP_FACE")
     col = box.column()
     has_surface = src.data.surface is not None and src.data.surface.type == "MESH"
-    bound = runtime.has_binding(src)
+    bound = has_binding(src)
     row = col.row()
     row.enabled = bound or s.use_fur_attach
     row.prop(s, "use_fur_attach")

@@ -7,7 +7,7 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from conftest import make_box, make_hair, make_surface
+from helpers import make_box, make_hair, make_surface
 
 COMPAT = "bl_ext.fcdev.furcollide.operators.compat"
 PIPELINE = "bl_ext.fcdev.furcollide.operators.pipeline"

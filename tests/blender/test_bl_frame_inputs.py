@@ -12,22 +12,27 @@ cached frame, and check with the real operators and ``scene.frame_set``:
 """
 
 import os
-import sys
-from pathlib import Path
 
 import bmesh
 import bpy
 import numpy as np
 import pytest
-from conftest import activate, bake_crashing_at, make_box, make_hair, make_surface, positions
+from helpers import (
+    activate,
+    bake_crashing_at,
+    make_box,
+    make_hair,
+    make_surface,
+    oracle,
+    positions,
+)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
-import oracle  # noqa: E402  (the core tests' brute-force segment/triangle test)
+from core import Status
 
 pytestmark = pytest.mark.blender
 
 FRAMES = (1, 8)
-PINCHED, UNRESOLVED = 3, 4
+PINCHED, UNRESOLVED = Status.PINCHED, Status.UNRESOLVED
 
 
 # ------------------------------------------------------------------ helpers
@@ -145,7 +150,7 @@ def test_add_on_an_unkeyed_pose_then_the_start_frame_is_solved_again(fc, tmp_pat
     scene.frame_set(1)
     box.location = (3.0, 0.0, 0.6)  # explored after keying: far from the fur
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     assert 1 in rt.memory and hair.furcollide.stat_colliding == 0  # solved un-keyed
 
     scene.frame_set(1)
@@ -161,7 +166,7 @@ def test_add_on_an_unkeyed_pose_then_the_start_frame_is_solved_again(fc, tmp_pat
 
 def test_collider_moved_without_keying_on_a_cached_frame(fc, tmp_path):
     scene, hair, box, out = shot(fc, tmp_path)
-    rt = fc.runtime.get_runtime(hair)
+    rt = fc.registry.get_runtime(hair)
     before = play(scene, hair, out, range(1, 9), [box])
     scene.frame_set(5)
     box.location.z = 0.45  # z is not keyed: the move stays on every frame
@@ -267,9 +272,9 @@ def test_bake_resumes_only_when_the_inputs_still_hold(fc, tmp_path, monkeypatch)
     before = {f: os.stat(fc.cache.frame_path(d, f)).st_mtime_ns for f in range(1, 5)}
     baked = bake(fc, hair)
     assert all(os.stat(fc.cache.frame_path(d, f)).st_mtime_ns != before[f] for f in before)
-    assert fc.runtime.baked_frame_change(
-        hair, fc.runtime.read_inputs(hair, bpy.context.evaluated_depsgraph_get()),
-        bpy.context.evaluated_depsgraph_get(), d, scene.frame_current) == ""
+    setup = fc.Setup(hair, scene, bpy.context.evaluated_depsgraph_get())
+    inputs = fc.frame_inputs.read_inputs(setup)
+    assert fc.frame_inputs.baked_frame_change(setup, inputs, d, scene.frame_current) == ""
     activate(hair)
     assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
     same(play(scene, hair, out, range(1, 9), [box]), baked)
@@ -318,40 +323,3 @@ def test_collider_added_or_its_options_changed_on_a_cached_frame(fc, tmp_path):
     scene.frame_set(2)
     outdated(hair, "Frame 2 is outdated", "Double Sided or Collision Offset")
     same(play(scene, hair, out, range(1, 9), [box, wall]), bake(fc, hair))
-
-
-def test_digest_sees_any_change_and_any_reordering(fc):
-    """``cache.digest``: one flipped bit, a swap of two points, another dtype, a change
-    in the tail bytes (not a whole 8-byte word) and another length all count."""
-    digest = fc.cache.digest
-    rng = np.random.default_rng(3)
-    P = rng.random((40_001, 3), dtype=np.float32)  # 480,012 bytes: a 4-byte tail
-    d = digest(P)
-    assert digest(P.copy()) == d
-    for i in rng.integers(0, P.size, 50):
-        a = P.copy().reshape(-1)
-        a.view(np.uint32)[i] ^= np.uint32(1)  # one ulp
-        assert digest(a.reshape(-1, 3)) != d, i
-    for i, j in rng.integers(0, len(P), (50, 2)):
-        if i != j:
-            a = P.copy()
-            a[[i, j]] = a[[j, i]]
-            assert digest(a) != d, (i, j)
-    a = P.copy()
-    a[-1, 2] = -a[-1, 2]
-    assert digest(a) != d
-    assert digest(P[:-1]) != d and digest(P.view(np.int32)) != d
-    assert digest(np.zeros(3, np.float32)) != digest(np.zeros(3, np.int32))
-    assert digest(np.eye(4)) != digest(np.eye(4) * (1 + 1e-16 * 4))
-
-
-def test_records_compare_in_order_and_survive_a_bake_file(fc):
-    c = fc.cache
-    old = {"colliders": 1, "settings": 2, "source": 3, "collider 0 matrix": 4}
-    assert c.first_change(old, dict(old)) is None
-    assert c.first_change(old, {**old, "source": 9, "collider 0 matrix": 9}) == "source"
-    assert c.first_change(old, {k: v for k, v in old.items() if k != "source"}) == "source"
-    assert c.first_change(old, {**old, "surface matrix": 5}) == "surface matrix"
-    big = {**old, "source": (1 << 64) - 1}
-    assert c.decode_inputs(c.encode_inputs(big)) == big
-    assert c.decode_inputs(np.frombuffer(b"\xff\x00", np.uint8)) is None

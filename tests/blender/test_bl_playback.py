@@ -1,26 +1,31 @@
-"""Frame handler rules: reset, step, cache hits, jumps, subframes, invalidation."""
+"""The frame rules in playback: scrubbing back is exact, jumps ahead hold, subframes and
+repeated frames never step, setting and mode changes mid-shot, deleted colliders,
+negative start frames, jumps past the end, fps changes."""
 
 import bpy
 import numpy as np
 import pytest
+from helpers import (
+    assert_same_frames,
+    check_frame,
+    offsets_of,
+    positions,
+    positions_per_frame,
+    preroll_scene,
+    record,
+    status_of,
+)
 
 pytestmark = pytest.mark.blender
 
 
-def play(fc, out, frames):
-    sc = bpy.context.scene
-    rec = {}
-    for f in frames:
-        sc.frame_set(f)
-        rec[f] = fc.positions(out).copy()
-    return rec
 
 
 def test_scrub_back_is_exact_and_jump_holds(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
-    rec = play(fc, out, range(1, 13))
+    rt = fc.registry.get_runtime(hair)
+    rec = positions_per_frame(out, range(1, 13))
     assert len(rt.memory) == 12
     assert any(not np.array_equal(rec[f], fc.positions(hair)) for f in rec)
     for f in (5, 1, 12, 7):
@@ -36,7 +41,7 @@ def test_scrub_back_is_exact_and_jump_holds(fc):
     assert "not cached" in hair.furcollide.status_message
     assert np.array_equal(fc.positions(out), rec[1])  # holds the newest cached frame
     # playing on from the cache gives bit-identical frames again
-    rec2 = play(fc, out, range(2, 13))
+    rec2 = positions_per_frame(out, range(2, 13))
     for f in rec2:
         assert np.array_equal(rec2[f], rec[f]), f
     assert not hair.furcollide.is_outdated
@@ -45,8 +50,8 @@ def test_scrub_back_is_exact_and_jump_holds(fc):
 def test_subframes_and_repeats_do_not_step(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
-    rec = play(fc, out, range(1, 7))
+    rt = fc.registry.get_runtime(hair)
+    rec = positions_per_frame(out, range(1, 7))
     sc = bpy.context.scene
     sc.frame_set(6, subframe=0.5)
     assert np.array_equal(fc.positions(out), rec[6])
@@ -60,8 +65,8 @@ def test_subframes_and_repeats_do_not_step(fc):
 def test_setting_change_invalidates_after_current(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
-    rec = play(fc, out, range(1, 13))
+    rt = fc.registry.get_runtime(hair)
+    rec = positions_per_frame(out, range(1, 13))
     bpy.context.scene.frame_set(6)
     hair.furcollide.mode = "stiff"
     assert sorted(rt.memory.frames) == list(range(1, 7))
@@ -70,7 +75,7 @@ def test_setting_change_invalidates_after_current(fc):
     assert hair.furcollide.is_outdated and "settings" in hair.furcollide.status_message
     assert len(rt.memory) == 0
     assert np.array_equal(fc.positions(out), rec[6])  # the output is left as it was
-    play(fc, out, range(1, 13))
+    positions_per_frame(out, range(1, 13))
     # range changes invalidate: a shorter end drops the frames after it...
     hair.furcollide.frame_end = 4
     assert sorted(rt.memory.frames) == [1, 2, 3, 4]
@@ -82,7 +87,7 @@ def test_setting_change_invalidates_after_current(fc):
 def test_mode_change_mid_animation_needs_the_start_frame(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    play(fc, out, range(1, 7))
+    positions_per_frame(out, range(1, 7))
     hair.furcollide.mode = "soft"
     bpy.context.scene.frame_set(7)
     assert hair.furcollide.is_outdated and "another mode" in hair.furcollide.status_message
@@ -97,10 +102,10 @@ def test_mode_change_mid_animation_needs_the_start_frame(fc):
 def test_mode_change_then_play_from_start(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    play(fc, out, range(1, 8))
+    positions_per_frame(out, range(1, 8))
     bpy.context.scene.frame_set(1)
     hair.furcollide.mode = "soft"
-    rec = play(fc, out, range(1, 8))
+    rec = positions_per_frame(out, range(1, 8))
     assert hair.furcollide.status_message == ""
     assert not hair.furcollide.is_outdated
     assert len(rec) == 7
@@ -109,7 +114,7 @@ def test_mode_change_then_play_from_start(fc):
 def test_deleted_and_renamed_collider(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    ref = play(fc, out, range(1, 13))
+    ref = positions_per_frame(out, range(1, 13))
     hits = {}
     for f in range(6, 13):
         bpy.context.scene.frame_set(f)
@@ -118,9 +123,9 @@ def test_deleted_and_renamed_collider(fc):
     # renaming mid-animation changes nothing
     bpy.context.scene.frame_set(1)
     bpy.ops.furcollide.reset()
-    play(fc, out, range(2, 6))
+    positions_per_frame(out, range(2, 6))
     box.name = "Renamed Box"
-    rec = play(fc, out, range(6, 13))
+    rec = positions_per_frame(out, range(6, 13))
     for f in rec:
         assert np.array_equal(rec[f], ref[f]), f
     # deleting it mid-animation: no error, later frames solved without it
@@ -148,84 +153,92 @@ def test_collider_deleted_in_the_ui_stops_colliding(fc):
     assert np.array_equal(fc.positions(out), fc.positions(hair))
 
 
-def test_source_topology_change_is_reported_and_nothing_lost(fc):
-    hair, box = fc.make_scene()
+def test_jump_past_an_uncached_end_frame_holds_the_newest_cached_frame(fc):
+    """Cached 1..5 of 1..12, then a jump to frame 20 (after the end): like any jump
+    past the cache the newest cached frame (5) is held and the setup is outdated,
+    whichever frame was on screen before the jump."""
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 12), nx=5, ny=5)
     out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
-    rec = play(fc, out, range(1, 7))
-    n = len(hair.data.curves)
-    hair.data.add_curves([5])
-    P = fc.positions(hair)
-    P[-5:] = [(2.0, 2.0, z) for z in np.linspace(0, 1, 5)]
-    hair.data.position_data.foreach_set("vector", P.ravel())
-    bpy.context.scene.frame_set(7)
-    msg = hair.furcollide.status_message
-    assert "changed" in msg and str(n) in msg and str(n + 1) in msg
-    assert np.array_equal(fc.positions(out), rec[6])
-    assert len(rt.memory) == 6
-    assert len(out.data.curves) == n
-    bpy.context.scene.frame_set(1)
+    s = hair.furcollide
+    rec = record(scene, out, range(1, 6))
+    assert not np.array_equal(rec[5][0], rec[2][0])
+    shown = {}
+    for before in (2, 5):
+        scene.frame_set(before)
+        scene.frame_set(20)
+        assert s.is_outdated and "not cached" in s.status_message, s.status_message
+        shown[before] = positions(out).copy()
+    np.testing.assert_array_equal(shown[5], rec[5][0])
+    np.testing.assert_array_equal(shown[2], shown[5], err_msg="depends on the frame shown before")
+
+
+def test_negative_start_frame_plays_scrubs_and_holds(fc):
+    """A setup starting at frame -4: before it the output is the source, frames
+    from -4 on are solved, scrubbing back over negative frames is exact."""
+    scene, hair, box, out = preroll_scene(fc)
+    s = hair.furcollide
+    scene.frame_set(-6)
+    assert s.status_message == "Before the start frame"
+    np.testing.assert_array_equal(positions(out), positions(hair))
+    rec = {}
+    for f in range(-4, 4):
+        scene.frame_set(f)
+        check_frame(hair, out, [box])
+        rec[f] = (positions(out).copy(), status_of(out).copy())
+    assert any(rec[f][1].any() for f in rec)
+    assert sorted(fc.registry.get_runtime(hair).memory.frames) == list(range(-4, 4))
+    assert_same_frames(rec, scene, out, [0, -3, 2, -4, 3], "scrubbed")
+    scene.frame_set(5)
+    np.testing.assert_array_equal(positions(out), rec[3][0])
+    assert "holding frame 3" in s.status_message
+
+
+def test_fps_change_mid_session_keeps_a_plain_setup_exact(fc):
+    """Without motion stages nothing depends on the fps: changing it mid-play keeps
+    the cache, and playing on equals a clean play."""
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 10), nx=5, ny=5)
+    out = fc.setup(hair, [box])
+    clean = record(scene, out, range(1, 11))
+    scene.frame_set(1)
     assert bpy.ops.furcollide.reset() == {"FINISHED"}
-    assert len(out.data.curves) == n + 1
-    play(fc, out, range(2, 5))
+    record(scene, out, range(1, 5))
+    scene.render.fps = 30
+    scene.render.fps_base = 1.001
+    assert_same_frames(clean, scene, out, range(5, 11), "after the fps change")
     assert hair.furcollide.status_message == ""
 
 
-def _enable_by_frame_modifier(hair, until):
-    """GN modifier storing furcollide_enable = frame < until on every curve."""
-    ng = bpy.data.node_groups.new("enable", "GeometryNodeTree")
-    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    gi, go = ng.nodes.new("NodeGroupInput"), ng.nodes.new("NodeGroupOutput")
-    store = ng.nodes.new("GeometryNodeStoreNamedAttribute")
-    store.data_type = "BOOLEAN"
-    store.domain = "CURVE"
-    store.inputs["Name"].default_value = "furcollide_enable"
-    t = ng.nodes.new("GeometryNodeInputSceneTime")
-    cmp = ng.nodes.new("FunctionNodeCompare")
-    cmp.data_type = "FLOAT"
-    cmp.operation = "LESS_THAN"
-    cmp.inputs[1].default_value = until
-    ng.links.new(t.outputs["Frame"], cmp.inputs[0])
-    ng.links.new(cmp.outputs[0], store.inputs["Value"])
-    ng.links.new(gi.outputs[0], store.inputs[0])
-    ng.links.new(store.outputs[0], go.inputs[0])
-    mod = hair.modifiers.new("enable", "NODES")
-    mod.node_group = ng
-
-
-def test_animated_per_curve_enable(fc):
-    hair, box = fc.make_scene()
-    _enable_by_frame_modifier(hair, until=6)
+def test_one_solve_serves_playback_and_scripts(fc):
+    """``frame_solve.solve_frame`` on a ``Setup.for_script`` (scripts/demo.py's core
+    path: no Blender object, no frame handler) gives, bit for bit, what playback wrote:
+    one solve serves both."""
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 8))
     out = fc.setup(hair, [box])
-    sc = bpy.context.scene
-    for f in range(1, 6):
-        sc.frame_set(f)
-        assert hair.furcollide.stat_disabled == 0
-    sc.frame_set(6)
-    assert hair.furcollide.stat_disabled == len(hair.data.curves)
-    st = np.zeros(len(out.data.curves), np.int32)
-    out.data.attributes["furcollide_status"].data.foreach_get("value", st)
-    assert (st == fc.core.Status.DISABLED).all()
-
-
-def test_rigid_collider_never_rebuilds_deforming_does(fc):
-    hair, box = fc.make_scene()
-    out = fc.setup(hair, [box])
-    rt = fc.runtime.get_runtime(hair)
-    play(fc, out, range(1, 13))
-    col = rt.colliders[box.session_uid].collider
-    assert col.build_count == 1
-    # a deforming collider (animated modifier) is rebuilt when its shape changes;
-    # editing a collider invalidates the frames after the current one
-    bpy.context.scene.frame_set(1)
-    mod = box.modifiers.new("grow", "DISPLACE")
-    mod.strength = 0.0
-    mod.keyframe_insert("strength", frame=1)
-    mod.strength = 0.2
-    mod.keyframe_insert("strength", frame=12)
-    bpy.context.view_layer.update()  # fires depsgraph_update_post, as the UI does
-    assert len(rt.memory) == 0
-    play(fc, out, range(1, 13))
-    col = rt.colliders[box.session_uid].collider
-    assert col.build_count > 3
+    played = positions_per_frame(out, range(1, 9))  # source and output at the origin
+    offsets = offsets_of(hair)
+    setup = fc.Setup.for_script(
+        fc.core.Solver(offsets, fc.setup_module.core_settings(hair)))
+    me = box.data
+    V = np.empty(len(me.vertices) * 3, np.float32)
+    me.attributes["position"].data.foreach_get("vector", V)
+    me.calc_loop_triangles()
+    F = np.empty(len(me.loop_triangles) * 3, np.int32)
+    me.loop_triangles.foreach_get("vertices", F)
+    collider = None
+    for f in range(1, 9):
+        scene.frame_set(f)
+        M = np.array(box.matrix_world, np.float64)
+        if collider is None:
+            collider = fc.core.Collider(V.reshape(-1, 3), F.reshape(-1, 3), matrix=M,
+                                        drop_degenerate=True, name=box.name)
+        else:
+            collider.matrix = M  # rigid: the BVH is kept, as in playback
+        inputs = fc.frame_inputs.FrameInputs(positions(hair), offsets, frame=f,
+                                             colliders=[collider])
+        result = fc.frame_solve.solve_frame(setup, inputs)
+        np.testing.assert_array_equal(result.points, played[f], err_msg=f"frame {f}")
+        assert result.stats["frame"] == f
+    assert any((p != positions(hair)).any() for p in played.values())  # the box met the hair

@@ -8,6 +8,8 @@ import numpy as np
 import oracle
 from hypothesis import HealthCheck, settings
 
+from core import Status
+
 #: Property-test presets: reproducible (derandomize) and without deadline.
 #: FURCOLLIDE_TEST_SCALE=10 (environment) multiplies the number of examples
 #: for a deeper local run; CI uses the default (1).
@@ -22,8 +24,10 @@ MEDIUM = settings(max_examples=max(1, int(30 * _SCALE)), deadline=None,
                   derandomize=_DERANDOMIZE, database=None,
                   suppress_health_check=list(HealthCheck))
 
-#: Status values (mirrors the documented IntEnum; checked in test_api.py).
-FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED, DISABLED = range(6)
+#: The core's status codes, by name (``core.Status`` is their only definition).
+FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED, DISABLED = (
+    Status.FREE, Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED,
+    Status.DISABLED)
 EXCLUDED = (PINCHED, UNRESOLVED, DISABLED)
 
 

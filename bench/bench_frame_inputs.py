@@ -1,6 +1,6 @@
 """Cost of the frame-inputs check at paper scale (not a test).
 
-Run: ``.venv/bin/python tests/blender/bench_frame_inputs.py [--frames 10] [--repeat 5]
+Run: ``.venv/bin/python bench/bench_frame_inputs.py [--frames 10] [--repeat 5]
 [--deforming]``
 
 Scene (``bench_glue.build_scene``): 50,000 hair curves x 8 CVs on a moved and turned
@@ -9,7 +9,7 @@ hair object, a 130k-triangle UV sphere (rigid, keyframed) sweeping through them;
 
 Plays the frames once (solving them), then scrubs through the cached frames and
 prints what the check that runs before a cached frame is shown costs per frame
-(``runtime.cached_frame_change``: reading every collider's matrix and shape, digesting
+(``frame_inputs.cached_frame_change``: reading every collider's matrix and shape, digesting
 them, the source's positions and the settings, and comparing with the frame's record),
 in wall-clock and main-thread CPU time, with its parts and its share of the handler.
 """
@@ -51,31 +51,32 @@ def _best(fn, repeat=50):
 def run(n_frames: int, repeat: int, deforming: bool):
     dev = Path(tempfile.mkdtemp(prefix="furcollide_dev_"))
     try:
-        runtime = bench_glue.enable_addon(dev)
-        cache = sys.modules[bench_glue.ADDON + ".operators.cache"]
+        ops = bench_glue.enable_addon(dev)
+        cache = sys.modules[bench_glue.ADDON + ".core.framecache"]
         scene, hair, n_tris = bench_glue.build_scene(n_frames)
         ball = next(o for o in scene.objects if o.type == "MESH")
         if deforming:
             ball.modifiers.new("Displace", "DISPLACE").strength = 0.01
-            runtime.clear_runtime(hair)
+            ops.registry.clear_runtime(hair)
         print(f"{len(hair.data.curves)} curves, {len(hair.data.points)} points, collider "
               f"{n_tris} triangles, {'deforming' if deforming else 'rigid'}")
         for f in range(1, n_frames + 2):  # solve (not measured)
             scene.frame_set(f)
-        rt = runtime.get_runtime(hair)
+        rt = ops.registry.get_runtime(hair)
         assert len(rt.memory) == n_frames + 1, len(rt.memory)
 
         checks, handler = [], []
-        real_check, real_eval = runtime.cached_frame_change, runtime.evaluate
-        runtime.cached_frame_change = _clock(real_check, checks)
-        runtime.evaluate = _clock(real_eval, handler)
+        rules = ops.frame_rules
+        real_check, real_eval = rules.cached_frame_change, rules.evaluate
+        rules.cached_frame_change = _clock(real_check, checks)
+        rules.evaluate = _clock(real_eval, handler)
         try:
             for _ in range(repeat):
                 for f in range(1, n_frames + 2):
                     scene.frame_set(f)
-                    assert runtime.stats_for(hair).get("source") == "cache", f
+                    assert ops.registry.stats_for(hair).get("source") == "cache", f
         finally:
-            runtime.cached_frame_change, runtime.evaluate = real_check, real_eval
+            rules.cached_frame_change, rules.evaluate = real_check, real_eval
         wall, cpu = np.median(np.array(checks), axis=0)
         h = np.median(np.array(handler)[:, 0])
         print(f"check per cached frame: median {wall:.3f} ms wall, {cpu:.3f} ms main-thread "
@@ -84,15 +85,16 @@ def run(n_frames: int, repeat: int, deforming: bool):
 
         # its parts, on the last frame
         dg = bpy.context.evaluated_depsgraph_get()
-        inp = runtime.read_inputs(hair, dg)
-        ref = runtime.collider_objects(hair, scene)[0]
+        setup = ops.setup.Setup(hair, scene, dg)
+        inp = ops.frame_inputs.read_inputs(setup)
+        ref = ops.colliders.collider_objects(hair, scene)[0]
         parts = {
             "source digest (positions + offsets)": lambda: cache.digest(inp.raw, inp.offsets),
-            "collider read + digests": lambda: runtime.read_collider_inputs(
+            "collider read + digests": lambda: ops.colliders.read_collider_inputs(
                 ref.object, dg, ref.matrix(dg)),
-            "settings signature": lambda: runtime.signature(hair, scene=scene,
-                                                            identities=False),
-            "whole record (current_inputs)": lambda: runtime.current_inputs(hair, inp, dg),
+            "settings signature": lambda: ops.setup.signature(hair, scene=scene,
+                                                              identities=False),
+            "whole record (current_inputs)": lambda: ops.frame_inputs.current_inputs(setup, inp),
         }
         for name, fn in parts.items():
             print(f"  {name:38s} {_best(fn):.3f} ms")

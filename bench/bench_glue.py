@@ -1,6 +1,6 @@
 """Per-frame cost of FurCollide's Blender glue at paper scale (not a test).
 
-Run: ``.venv/bin/python tests/blender/bench_glue.py [--frames 10] [--profile] [--identity]
+Run: ``.venv/bin/python bench/bench_glue.py [--frames 10] [--profile] [--identity]
 [--repeat 3]``
 
 Scene: 50,000 hair curves x 8 CVs on a moved and turned hair object (``--identity``:
@@ -8,7 +8,7 @@ at the origin), a 130k-triangle UV sphere (rigid, keyframed) sweeping through th
 Plays ``scene.frame_set`` forward and prints per frame:
 
 * ``frame_set``: the whole call (Blender's depsgraph + our handler),
-* ``handler``: FurCollide's ``evaluate`` for the setup,
+* ``handler``: FurCollide's ``frame_rules.evaluate`` for the setup,
 * ``core``: ``Solver.step`` (the core's own work),
 * ``glue``: handler - core (reading inputs, colliders, cache, writing the output),
 * ``glue CPU``: the same in main-thread CPU time (less sensitive to a busy machine).
@@ -33,7 +33,7 @@ os.environ["BLENDER_USER_RESOURCES"] = _USER
 import bpy  # noqa: E402  (after BLENDER_USER_RESOURCES)
 import numpy as np  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 ADDON = "bl_ext.fcbench.furcollide"
 
 
@@ -45,7 +45,7 @@ def enable_addon(dev_dir: Path):
     repos.new(name="fcbench", module="fcbench", custom_directory=str(dev_dir), source="USER")
     mod = addon_utils.enable(ADDON, default_set=True, handle_error=None)
     assert mod is not None, "FurCollide add-on failed to enable"
-    return sys.modules[ADDON + ".operators.runtime"]
+    return sys.modules[ADDON + ".operators"]
 
 
 def build_scene(n_frames: int, identity: bool = False):
@@ -91,13 +91,13 @@ def build_scene(n_frames: int, identity: bool = False):
 def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
     dev = Path(tempfile.mkdtemp(prefix="furcollide_dev_"))
     try:
-        runtime = enable_addon(dev)
+        ops = enable_addon(dev)
         scene, hair, n_tris = build_scene(n_frames, identity)
         print(f"{len(hair.data.curves)} curves, {len(hair.data.points)} points, "
               f"collider {n_tris} triangles")
         core_mod = sys.modules[ADDON + ".core"]
         spent, in_core = [], []  # (wall ms, main-thread CPU ms) per call
-        real, real_step = runtime.evaluate, core_mod.Solver.step
+        real, real_step = ops.frame_rules.evaluate, core_mod.Solver.step
 
         def clocked(fn, into):
             def wrapper(*args, **kw):
@@ -108,7 +108,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
                     into.append(((time.perf_counter() - t) * 1e3, (time.thread_time() - c) * 1e3))
             return wrapper
 
-        runtime.evaluate = clocked(real, spent)
+        ops.frame_rules.evaluate = clocked(real, spent)
         core_mod.Solver.step = clocked(real_step, in_core)
         prof = None
         if profile:
@@ -117,7 +117,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
             prof = cProfile.Profile()
         best = {}
         for _ in range(repeat):  # the best of each frame filters out a busy machine
-            runtime.clear_runtime(hair)  # solve again, do not replay the cache
+            ops.registry.clear_runtime(hair)  # solve again, do not replay the cache
             scene.frame_set(1)  # reset frame (not measured as a step)
             for f in range(2, n_frames + 2):
                 spent.clear()
@@ -132,7 +132,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
                 handler, handler_cpu = np.sum(spent, axis=0)
                 core, core_cpu = np.sum(in_core, axis=0)
                 row = (f, total, handler, core, handler - core, handler_cpu - core_cpu,
-                       runtime.stats_for(hair).get("colliding", 0))
+                       ops.registry.stats_for(hair).get("colliding", 0))
                 if f not in best or row[4] < best[f][4]:
                     best[f] = row
         rows = [best[f] for f in sorted(best)]
@@ -141,9 +141,9 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
             for f in range(2, n_frames + 2):
                 spent.clear()
                 scene.frame_set(f)
-                assert runtime.stats_for(hair).get("source") == "cache"
+                assert ops.registry.stats_for(hair).get("source") == "cache"
                 cached.append(spent[0][0])
-        runtime.evaluate, core_mod.Solver.step = real, real_step
+        ops.frame_rules.evaluate, core_mod.Solver.step = real, real_step
         print(f"{'frame':>5} {'frame_set':>10} {'handler':>8} {'core':>8} {'glue':>7} "
               f"{'glue CPU':>8} {'colliding':>9}")
         for r in rows:
@@ -158,7 +158,10 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
             import pstats
 
             stats = pstats.Stats(prof).sort_stats("cumulative")
-            stats.print_callees(r"runtime.py.*\((evaluate|_step|_write|read_inputs)\)|cache.py.*\((put|encode)\)|bridge.py.*\(write_status\)")
+            stats.print_callees(
+                r"frame_rules.py.*\((evaluate|_solve)\)|frame_solve.py.*\(solve_frame\)"
+                r"|frame_outputs.py.*\(write\)|frame_inputs.py.*\(read_inputs\)"
+                r"|framecache.py.*\((put|encode)\)|bridge.py.*\(write_status\)")
     finally:
         link = dev / "furcollide"
         if link.is_symlink():

@@ -1,5 +1,9 @@
 """Frame caches: a bounded in-memory cache and an atomic on-disk bake.
 
+Pure numpy and the standard library (no Blender): the add-on's frame rules
+(``operators/``) keep one :class:`MemoryCache` per setup and bake through
+:func:`write_frame` / :func:`read_frame`; pipeline scripts may use both directly.
+
 Memory cache (interactive playback)
 -----------------------------------
 A frame stores only what differs from that frame's *input* (the evaluated
@@ -65,6 +69,8 @@ def _frame_of(name: str) -> int | None:
     if m is None or FRAME_FILE.format(int(m.group(1))) != name:
         return None
     return int(m.group(1))
+
+
 _STATE_PREFIX = "state__"
 _ATTRIBUTE_PREFIX = "attr__"
 _INPUTS_KEY = "inputs"

@@ -1,5 +1,7 @@
-"""Panel registration, presets, poll messages, tooltips, missing ray tracer."""
+"""The panels, operators' polls and messages, tooltips, presets (shipped, round trip,
+broken files), the settings mirroring ``core.Settings`` and the console messages."""
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -7,10 +9,29 @@ import textwrap
 
 import bpy
 import pytest
+from helpers import activate, dense_groom, draw_panel, groom_scene, play
 
 pytestmark = pytest.mark.blender
 
+PRESETS = "FURCOLLIDE_MT_presets"
+PRESET_HEAD = (
+    "import bpy\n"
+    "fc = bpy.context.object.furcollide\n"
+    "settings = fc.source.furcollide if fc.is_output and fc.source else fc\n"
+)
 SHIPPED = ["Short Fur (Stiff)", "Long Fur (Bend)", "Tight Cloth Contact (Soft)", "Grass Trampling"]
+
+
+def _preset_folder():
+    return bpy.utils.user_resource("SCRIPTS", path="presets/furcollide")
+
+
+def _load(path):
+    return bpy.ops.script.execute_preset(filepath=path, menu_idname=PRESETS)
+
+
+def _furcollide_operators():
+    return [getattr(bpy.types, n) for n in dir(bpy.types) if n.startswith("FURCOLLIDE_OT_")]
 
 
 def test_panels_registered_and_poll(fc):
@@ -44,10 +65,6 @@ def test_every_property_has_a_tooltip():
                  motion.properties["wind_stage"], motion.properties["jiggle_stage"]):
         for item in enum.enum_items:
             assert len(item.description) > 15, item.identifier
-
-
-def _furcollide_operators():
-    return [getattr(bpy.types, n) for n in dir(bpy.types) if n.startswith("FURCOLLIDE_OT_")]
 
 
 def test_every_operator_polls_with_a_message_and_runs_synchronously():
@@ -147,13 +164,168 @@ def test_errors_print_one_console_line(fc, capsys):
     assert "Surface" in hair.furcollide.status_message
 
 
-def test_remove_setup(fc):
-    hair, box = fc.make_scene()
+def test_pipeline_panel_and_settings(fc):
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    assert panel.bl_parent_id == "FURCOLLIDE_PT_main"
+    hair, _ = dense_groom(fc)
+    activate(hair)
+    assert panel.poll(bpy.context)
+    s = bpy.context.scene.furcollide_pipeline
+    assert s.fraction == pytest.approx(0.15) and s.guides == 4
+    for prop in s.bl_rna.properties:
+        if prop.identifier not in {"rna_type", "name"}:
+            assert len(prop.description) > 15, prop.identifier
+
+
+def test_pipeline_panel_draws(fc):
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    hair, _ = dense_groom(fc)
+    box = bpy.data.objects["Box"]
+    activate(hair)
+    log = draw_panel(panel)
+    assert ("operator", "furcollide.fur_sampler") in log
+    assert ("operator", "furcollide.collider_distance") not in log
+    fc.setup(hair, [box])
+    activate(hair)
+    log = draw_panel(panel)
+    for idname in ("furcollide.fur_sampler", "furcollide.collider_distance",
+                   "furcollide.children_from_guides"):
+        assert ("operator", idname) in log
+    for name in ("fraction", "seed", "use_selection", "area", "density", "guides"):
+        assert ("prop", name) in log
+
+
+def test_pipeline_panel_draws_the_stages(fc):
+
+    guides, groom, box, out = groom_scene(fc)
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    log = draw_panel(panel)
+    for idname in ("furcollide.fur_attach_unbind", "furcollide.groom_bind",
+                   "furcollide.groom_remove"):
+        assert ("operator", idname) in log
+    for name in ("use_wind", "wind_stage", "wind_strength", "use_jiggle", "jiggle_stage",
+                 "use_region_of_influence", "roi_margin", "write_collider_distance",
+                 "distance_max", "groom", "use_clearance"):
+        assert ("prop", name) in log
+    assert ("label", "Restricts motion After Collision (none is on)") in log
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    guides.furcollide.motion.use_wind = True
+    guides.furcollide.motion.use_region_of_influence = False
+    log = draw_panel(panel)
+    assert any(k == "label" and v and v.startswith("Render curves fixed") for k, v in log)
+    assert ("label", "Motion after collision may push hair into colliders") in log
+
+
+def test_preset_round_trip_restores_every_setting_exactly(fc):
+    hair, box = fc.make_scene(frames=(1, 4))
     out = fc.setup(hair, [box])
-    name = out.name
-    assert bpy.ops.furcollide.remove() == {"FINISHED"}
-    assert name not in bpy.data.objects
-    assert not hair.furcollide.is_setup and not hair.hide_render
+    s = hair.furcollide
+    names = fc.package.operators.properties.SOLVER_PROPERTIES
+    look = dict(
+        mode="soft", rotation_precision=0.7, max_angle=77.7, affected_connected_cvs=4,
+        cv_falloff=0.33, attract_to_growth_surface=True, shrink=True, scale_minimum=0.42,
+        scale_angle=33.3, recovery_rate=0.123, plasticity=0.37,
+        pinch_resolution="growth_surface", recover_pinched=False, collision_offset=0.0123,
+    )
+    assert set(look) == set(names)
+    for k, v in look.items():
+        setattr(s, k, v)
+    saved = {k: getattr(s, k) for k in names}
+    others = dict(threads=s.threads, frame_end=s.frame_end, wind=s.motion.wind_strength,
+                  colliders=len(s.colliders))
+    activate(out)  # saved from the output: it stores its source's settings
+    assert bpy.ops.furcollide.preset_add(name="Round Trip 3") == {"FINISHED"}
+    path = os.path.join(_preset_folder(), "Round_Trip_3.py")
+    try:
+        assert os.path.isfile(path)
+        activate(hair)
+        assert _load(os.path.join(_preset_folder(), "Short_Fur_(Stiff).py")) == {"FINISHED"}
+        s.cv_falloff, s.attract_to_growth_surface, s.pinch_resolution = 0.9, False, "stop"
+        s.recover_pinched, s.affected_connected_cvs, s.shrink = True, 1, False
+        assert all(getattr(s, k) != saved[k] for k in names)
+        assert _load(path) == {"FINISHED"}
+        for k in names:
+            assert getattr(s, k) == saved[k], k  # bit for bit
+        assert others == dict(threads=s.threads, frame_end=s.frame_end,
+                              wind=s.motion.wind_strength, colliders=len(s.colliders))
+    finally:
+        if os.path.exists(path):
+            os.remove(path)
+
+
+def test_broken_preset_files_report_clearly(fc, capsys):
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 4))
+    fc.setup(hair, [box])
+    s = hair.furcollide
+    activate(hair)
+    folder = _preset_folder()
+    written = []
+
+    def preset(name, body):
+        path = os.path.join(folder, f"Broken_{name}.py")
+        with open(path, "w") as fh:
+            fh.write(PRESET_HEAD + body)
+        written.append(path)
+        return path
+
+    try:
+        # a bad enum value: a clear error naming the value and the valid ones
+        p = preset("enum", "settings.mode = 'warp'\n")
+        with pytest.raises(RuntimeError, match=r"Failed to execute the preset.*warp.*stiff"):
+            _load(p)
+        assert s.mode == "bend"
+        # a value of the wrong type
+        p = preset("type", "settings.affected_connected_cvs = 'three'\n")
+        with pytest.raises(RuntimeError, match="Failed to execute the preset.*expected an int"):
+            _load(p)
+        assert s.affected_connected_cvs == 2
+        # a syntax error
+        p = preset("syntax", "settings.max_angle = = 3\n")
+        with pytest.raises(RuntimeError, match="Failed to execute the preset.*SyntaxError"):
+            _load(p)
+        # an unknown key (a newer or older version's setting) is ignored, the rest applies
+        p = preset("unknown", "settings.wobble = 3\nsettings.plasticity = 0.25\n")
+        assert _load(p) == {"FINISHED"}
+        assert s.plasticity == pytest.approx(0.25)
+        assert "wobble" not in s.keys()  # nothing stored in the file
+        # out of range values are clamped to the property's limits
+        p = preset("range", "settings.max_angle = 1e9\nsettings.rotation_precision = -5.0\n")
+        assert _load(p) == {"FINISHED"}
+        assert s.max_angle == pytest.approx(360.0)
+        assert s.rotation_precision == pytest.approx(0.001)
+        # a non-finite value the properties accept: a clear status when solving, no crash
+        p = preset("nan", "settings.max_angle = float('nan')\n")
+        assert _load(p) == {"FINISHED"}
+        play(scene, range(1, 3))
+        level, msg = fc.registry.status_for(hair)
+        assert level == "ERROR" and "max_angle must be finite" in msg, msg
+        # a good preset fixes it: the setup solves again from the start frame
+        assert _load(os.path.join(folder, "Long_Fur_(Bend).py")) == {"FINISHED"}
+        play(scene, range(1, 4))
+        assert fc.registry.status_for(hair) == ("INFO", "")
+        # no active object: a clear error, not a crash
+        bpy.context.view_layer.objects.active = None
+        with pytest.raises(RuntimeError, match="Failed to execute the preset.*NoneType"):
+            _load(p)
+    finally:
+        for path in written:
+            os.remove(path)
+    log = capsys.readouterr()
+    assert "Traceback" not in log.out + log.err
+
+
+def test_solver_properties_mirror_core_settings(fc):
+
+    props = fc.properties
+    rna = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
+    defaults = fc.core.Settings()
+    for name in props.SOLVER_PROPERTIES:
+        assert rna.properties[name].default == pytest.approx(getattr(defaults, name)), name
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    got = dataclasses.asdict(fc.setup_module.core_settings(hair))  # threads 0 -> None (all CPUs)
+    assert got == pytest.approx(dataclasses.asdict(defaults))  # RNA floats are float32
 
 
 def test_shipped_presets(fc):
@@ -193,6 +365,7 @@ def test_missing_ray_tracer_reports_clearly(tmp_path):
         f"""
         import sys
         sys.path.insert(0, {str(tmp_path / 'stub')!r})
+        sys.path.insert(1, {os.path.dirname(conftest)!r})  # conftest imports helpers
         import importlib.util
         spec = importlib.util.spec_from_file_location("fcconf", {conftest!r})
         conf = importlib.util.module_from_spec(spec); spec.loader.exec_module(conf)
@@ -222,43 +395,3 @@ def test_missing_ray_tracer_reports_clearly(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     assert "FurCollide needs the embreex ray tracer" in r.stdout
     assert "POLL:" in r.stdout and "embreex" in r.stdout.split("POLL:")[1]
-
-
-def test_disable_enable_cleans_up_and_keeps_data(fc):
-    import addon_utils
-
-    hair, box = fc.make_scene()
-    fc.setup(hair, [box])
-    hair.furcollide.plasticity = 0.7
-    name = fc.package.__name__
-    addon_utils.disable(name, default_set=True)
-    try:
-        for lst in (bpy.app.handlers.frame_change_post, bpy.app.handlers.load_post,
-                    bpy.app.handlers.depsgraph_update_post):
-            assert not any("furcollide" in getattr(h, "__module__", "") for h in lst)
-        assert not hasattr(bpy.types.Object, "furcollide")
-        assert not hasattr(bpy.types, "FURCOLLIDE_OT_add")
-        assert not hasattr(bpy.types, "FURCOLLIDE_PT_main")
-        bpy.context.scene.frame_set(3)  # nothing runs, nothing breaks
-    finally:
-        assert addon_utils.enable(name, default_set=True, handle_error=None) is not None
-    s = bpy.data.objects["Fur"].furcollide
-    assert s.is_setup and s.plasticity == pytest.approx(0.7)
-    bpy.context.scene.frame_set(1)
-    assert s.stat_frame == 1
-
-
-def test_collider_collection_holding_everything(fc):
-    hair, box = fc.make_scene()
-    coll = bpy.data.collections.new("Everything")
-    bpy.context.scene.collection.children.link(coll)
-    out = fc.setup(hair, [])
-    for o in (hair, box, out):
-        coll.objects.link(o)
-    hair.furcollide.collider_collection = coll
-    for f in range(1, 8):
-        bpy.context.scene.frame_set(f)
-        assert hair.furcollide.status_message == ""
-    assert hair.furcollide.stat_colliding > 0
-    names = {r.name for r in fc.runtime.collider_objects(hair)}
-    assert names == {"Box"}

@@ -1,39 +1,33 @@
-"""Fur pipeline operators: Fur Sampler, Collider Distance, Children from Guides."""
+"""The fur pipeline operators: Fur Sampler (counts, determinism, selection, area of
+interest, generated and odd grooms), Collider Distance, Children from Guides."""
 
 import sys
 
 import bpy
 import numpy as np
 import pytest
-from conftest import make_surface
+from helpers import activate, dense_groom, make_box, make_hair, make_surface, no_faces, play
 
 pytestmark = pytest.mark.blender
 
 
+
+
+def hair_from_sizes(name, sizes, spacing=0.1):
+    """A hair object with one vertical curve of ``sizes[i]`` points per entry."""
+    hc = bpy.data.hair_curves.new(name)
+    if len(sizes):
+        hc.add_curves(list(sizes))
+        P = [(spacing * i - 0.3, 0.05 * i - 0.2, 0.1 * j)
+             for i, n in enumerate(sizes) for j in range(n)]
+        hc.position_data.foreach_set("vector", np.array(P, np.float32).ravel())
+    ob = bpy.data.objects.new(name, hc)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
 def _pipeline():
     return sys.modules["bl_ext.fcdev.furcollide.core.pipeline"]
-
-
-def groom(fc, nx=10, ny=10, uv=True):
-    """Hair grid (roots on z = 0) attached to a surface, with surface UVs."""
-    hair = fc.make_scene(nx=nx, ny=ny, animate=False)[0]
-    surf = make_surface()
-    hair.data.surface = surf
-    hair.data.surface_uv_map = "UVMap"
-    if uv:
-        C = len(hair.data.curves)
-        uvs = np.random.default_rng(3).random((C, 2)).astype(np.float32)
-        hair.data.attributes.new("surface_uv_coordinate", "FLOAT2", "CURVE").data.foreach_set(
-            "vector", uvs.ravel()
-        )
-    return hair, surf
-
-
-def _activate(ob):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    ob.select_set(True)
-    bpy.context.view_layer.objects.active = ob
 
 
 def _roots(ob):
@@ -46,16 +40,15 @@ def _roots(ob):
 
 
 def _sample(ob, **kw):
-    _activate(ob)
+    activate(ob)
     assert bpy.ops.furcollide.fur_sampler(**kw) == {"FINISHED"}
     guides = bpy.context.view_layer.objects.active
     assert guides != ob and guides.type == "CURVES"
     return guides
 
 
-# ------------------------------------------------------------ Fur Sampler
 def test_sampler_count_surface_and_source_untouched(fc):
-    hair, surf = groom(fc)
+    hair, surf = dense_groom(fc)
     C = len(hair.data.curves)
     before = fc.positions(hair).copy()
     guides = _sample(hair, fraction=0.2, seed=7)
@@ -85,7 +78,7 @@ def test_sampler_count_surface_and_source_untouched(fc):
 
 
 def test_sampler_deterministic_and_matches_core(fc):
-    hair, surf = groom(fc)
+    hair, surf = dense_groom(fc)
     a = fc.positions(_sample(hair, fraction=0.15, seed=3))
     b = fc.positions(_sample(hair, fraction=0.15, seed=3))
     c = fc.positions(_sample(hair, fraction=0.15, seed=4))
@@ -102,7 +95,7 @@ def test_sampler_deterministic_and_matches_core(fc):
 
 
 def test_sampler_world_space_transform(fc):
-    hair, surf = groom(fc, uv=False)
+    hair, surf = dense_groom(fc, uv=False)
     parent = bpy.data.objects.new("Rig", None)
     bpy.context.scene.collection.objects.link(parent)
     parent.location = (3, 0, 1)
@@ -120,7 +113,7 @@ def test_sampler_world_space_transform(fc):
 
 
 def test_sampler_selection(fc):
-    hair, _ = groom(fc)
+    hair, _ = dense_groom(fc)
     C = len(hair.data.curves)
     sel = np.zeros(C, bool)
     sel[:40] = True
@@ -137,7 +130,7 @@ def test_sampler_selection(fc):
 
 
 def test_sampler_area_of_interest(fc):
-    hair, surf = groom(fc)
+    hair, surf = dense_groom(fc)
     vg = surf.vertex_groups.new(name="Back")
     vg.add([v.index for v in surf.data.vertices if v.co.x < -1e-6], 1.0, "REPLACE")
     guides = _sample(hair, fraction=0.25, seed=5, area="Back")
@@ -150,7 +143,7 @@ def test_sampler_area_of_interest(fc):
     a.data.foreach_set("value", np.array([v.co.x > 1e-6 for v in surf.data.vertices], np.float32))
     roots = _roots(_sample(hair, fraction=0.5, seed=5, area="front"))[0]
     assert (roots[:, 0] > 0).all() and len(roots) == 20
-    _activate(hair)
+    activate(hair)
     with pytest.raises(RuntimeError, match="no vertex group or float point attribute"):
         bpy.ops.furcollide.fur_sampler(area="Nope")
 
@@ -158,7 +151,7 @@ def test_sampler_area_of_interest(fc):
 def test_sampler_generated_hair(fc):
     """Quick Fur: the original data has (almost) no curves, the evaluated one many."""
     surf = make_surface(n=4)
-    _activate(surf)
+    activate(surf)
     assert bpy.ops.object.quick_fur(density="LOW") == {"FINISHED"}
     fur = bpy.context.active_object
     dg = bpy.context.evaluated_depsgraph_get()
@@ -184,34 +177,33 @@ def test_sampler_generated_hair(fc):
 
 
 def test_sampler_poll_and_errors(fc):
-    hair, _ = groom(fc)
+    hair, _ = dense_groom(fc)
     hair.data.surface = None
-    _activate(hair)
+    activate(hair)
     with pytest.raises(RuntimeError, match="must be a hair Curves object with a Surface"):
         bpy.ops.furcollide.fur_sampler()
     mesh = make_surface("Other")
-    _activate(mesh)
+    activate(mesh)
     with pytest.raises(RuntimeError, match="must be a hair Curves object with a Surface"):
         bpy.ops.furcollide.fur_sampler()
     # a surface without faces: reported, nothing created
     empty = bpy.data.objects.new("Empty", bpy.data.meshes.new("Empty"))
     bpy.context.scene.collection.objects.link(empty)
     hair.data.surface = empty
-    _activate(hair)
+    activate(hair)
     n = len(bpy.data.objects)
     with pytest.raises(RuntimeError, match="has no faces"):
         bpy.ops.furcollide.fur_sampler()
     assert len(bpy.data.objects) == n
 
 
-# ------------------------------------------------------- Collider Distance
 def test_collider_distance(fc):
     hair, box = fc.make_scene(animate=False)
     out = fc.setup(hair, [box])
-    _activate(box)
+    activate(box)
     with pytest.raises(RuntimeError, match="no FurCollide setup"):
         bpy.ops.furcollide.collider_distance()
-    _activate(out)
+    activate(out)
     assert bpy.ops.furcollide.collider_distance() == {"FINISHED"}
     attr = out.data.attributes["furcollide_collider_distance"]
     assert attr.domain == "POINT" and attr.data_type == "FLOAT"
@@ -237,22 +229,21 @@ def test_collider_distance_needs_a_collider(fc):
     hair, box = fc.make_scene(animate=False)
     fc.setup(hair, [box])
     hair.furcollide.colliders[0].enabled = False
-    _activate(hair)
+    activate(hair)
     with pytest.raises(RuntimeError, match="no enabled collider"):
         bpy.ops.furcollide.collider_distance()
     assert "furcollide_collider_distance" not in hair.furcollide.output.data.attributes
 
 
-# ----------------------------------------------------- Children from Guides
 def test_children_from_guides(fc):
-    hair, surf = groom(fc, nx=6, ny=6)
+    hair, surf = dense_groom(fc, nx=6, ny=6)
     box = bpy.data.objects["Box"]  # made by fc.make_scene
     out = fc.setup(hair, [box])
-    _activate(hair)
+    activate(hair)
     assert bpy.ops.furcollide.children_from_guides(density=100.0) == {"FINISHED"}
     mod = out.modifiers["FurCollide Children"]
     assert mod.type == "NODES" and mod.node_group is not None
-    assert out.modifiers[0].name == fc.runtime.DEPENDENCY_MODIFIER
+    assert out.modifiers[0].name == fc.dependencies.DEPENDENCY_MODIFIER
     compat = sys.modules["bl_ext.fcdev.furcollide.operators.compat"]
     sockets = compat.interpolate_sockets(mod.node_group)
     if sockets.surface_object is not None:  # 4.2-5.0; 5.2 reads the hair data's Surface
@@ -275,7 +266,7 @@ def test_children_from_guides(fc):
 def test_children_needs_surface_and_assets(fc, monkeypatch):
     hair, box = fc.make_scene(animate=False)
     fc.setup(hair, [box])
-    _activate(hair)
+    activate(hair)
     with pytest.raises(RuntimeError, match="no Surface"):
         bpy.ops.furcollide.children_from_guides()
     hair.data.surface = make_surface()
@@ -286,72 +277,109 @@ def test_children_needs_surface_and_assets(fc, monkeypatch):
     assert "FurCollide Children" not in hair.furcollide.output.modifiers
 
 
-# ------------------------------------------------------------------ panel
-def test_pipeline_panel_and_settings(fc):
-    panel = bpy.types.FURCOLLIDE_PT_pipeline
-    assert panel.bl_parent_id == "FURCOLLIDE_PT_main"
-    hair, _ = groom(fc)
-    _activate(hair)
-    assert panel.poll(bpy.context)
-    s = bpy.context.scene.furcollide_pipeline
-    assert s.fraction == pytest.approx(0.15) and s.guides == 4
-    for prop in s.bl_rna.properties:
-        if prop.identifier not in {"rna_type", "name"}:
-            assert len(prop.description) > 15, prop.identifier
+def test_sampler_on_odd_grooms(fc):
+    scene = bpy.context.scene
+    surf = make_surface(uv=False)
+
+    # 0 curves: refused, nothing created
+    empty = hair_from_sizes("Empty", [])
+    empty.data.surface = surf
+    activate(empty)
+    n_objects = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="'Empty' has no curves to sample"):
+        bpy.ops.furcollide.fur_sampler()
+    assert len(bpy.data.objects) == n_objects
+
+    # 1 curve: the guide is that curve
+    one = hair_from_sizes("One", [5])
+    one.data.surface = surf
+    activate(one)
+    assert bpy.ops.furcollide.fur_sampler() == {"FINISHED"}
+    g = bpy.context.view_layer.objects.active
+    assert g.name == "One Guides" and len(g.data.curves) == 1
+    np.testing.assert_array_equal(fc.positions(g), fc.positions(one))
+
+    # curves of 1 point: sampled (roots only count), but a setup on them is refused
+    dots = hair_from_sizes("Dots", [1, 1, 1, 1])
+    dots.data.surface = surf
+    activate(dots)
+    assert bpy.ops.furcollide.fur_sampler(fraction=0.5) == {"FINISHED"}
+    g = bpy.context.view_layer.objects.active
+    assert len(g.data.curves) == 2 and len(g.data.points) == 2
+    activate(g, make_box())
+    with pytest.raises(RuntimeError, match="has curves with fewer than 2 points"):
+        bpy.ops.furcollide.add()
+    assert not g.furcollide.is_setup
+
+    # a fraction that rounds to 0 guides still gives one guide (never an empty object)
+    grid = make_hair("Grid", nx=6, ny=6)
+    grid.data.surface = surf  # no UV map on this Surface: not needed
+    activate(grid)
+    assert bpy.ops.furcollide.fur_sampler(fraction=0.001) == {"FINISHED"}
+    g = bpy.context.view_layer.objects.active
+    assert len(g.data.curves) == 1
+    assert g.data.surface == surf and "surface_uv_coordinate" not in g.data.attributes
+    activate(grid)
+    assert bpy.ops.furcollide.fur_sampler(fraction=0.5, seed=3) == {"FINISHED"}
+    assert len(bpy.context.view_layer.objects.active.data.curves) == 18
+
+    # a Surface that is not a mesh (Blender accepts any object there): refused
+    for other in (bpy.data.objects.new("Ctrl", None),
+                  bpy.data.objects.new("Path", bpy.data.curves.new("Path", "CURVE"))):
+        scene.collection.objects.link(other)
+        grid.data.surface = other
+        activate(grid)
+        n_objects = len(bpy.data.objects)
+        assert not bpy.ops.furcollide.fur_sampler.poll()
+        with pytest.raises(RuntimeError, match="must be a hair Curves object with a Surface"):
+            bpy.ops.furcollide.fur_sampler()
+        assert len(bpy.data.objects) == n_objects
 
 
-class _Layout:
-    """Records what a panel draws (panels cannot be drawn headless)."""
+def test_children_from_guides_on_odd_setups(fc):
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 4
+    box = make_box(location=(0, 0, 0.6))
+    # a hair with 0 curves cannot even become a setup
+    empty = hair_from_sizes("Empty", [])
+    activate(empty, box)
+    with pytest.raises(RuntimeError, match="has no curves to collide"):
+        bpy.ops.furcollide.add()
 
-    def __init__(self, log):
-        self.log = log
-        self.use_property_split = self.use_property_decorate = self.enabled = None
+    # 1 curve, on a Surface without a UV map: a clear error, nothing added; with a
+    # UV map children grow, and the handler is fine
+    one = hair_from_sizes("One", [5])
+    surf = make_surface(uv=False)
+    one.data.surface = surf
+    out = fc.setup(one, [box])
+    activate(one)
+    with pytest.raises(RuntimeError, match="'Skin' has no UV map"):
+        bpy.ops.furcollide.children_from_guides(density=50.0)
+    assert "FurCollide Children" not in out.modifiers
+    surf.data.uv_layers.new(name="UVMap")
+    assert bpy.ops.furcollide.children_from_guides(density=50.0) == {"FINISHED"}
+    dg = bpy.context.evaluated_depsgraph_get()
+    assert len(out.evaluated_get(dg).data.curves) > 10
+    play(scene, range(1, 4))
+    assert fc.registry.status_for(one) == ("INFO", "")
 
-    def _child(self, *args, **kw):
-        return _Layout(self.log)
-
-    box = row = column = _child
-
-    def prop(self, data, name, **kw):
-        assert hasattr(data, name), name
-        self.log.append(("prop", name))
-
-    def operator(self, idname, **kw):
-        mod, name = idname.split(".")
-        assert hasattr(getattr(bpy.ops, mod), name), idname
-        self.log.append(("operator", idname))
-        return type("Props", (), {})()
-
-    def prop_search(self, data, name, search_data, search_name, **kw):
-        assert hasattr(data, name) and hasattr(search_data, search_name), name
-        self.log.append(("prop", name))
-
-    def label(self, **kw):
-        self.log.append(("label", kw.get("text")))
-
-    def separator(self, **kw):
-        pass
-
-
-def _draw(panel):
-    log = []
-    panel.draw(type("P", (), {"layout": _Layout(log)})(), bpy.context)
-    return log
+    # a Surface that is not a mesh: refused with the reason, nothing changed
+    ctrl = bpy.data.objects.new("Ctrl", None)
+    scene.collection.objects.link(ctrl)
+    grid = make_hair("Grid", nx=3, ny=3)
+    out2 = fc.setup(grid, [box])
+    grid.data.surface = ctrl
+    activate(grid)
+    with pytest.raises(RuntimeError, match="no Surface mesh"):
+        bpy.ops.furcollide.children_from_guides()
+    assert "FurCollide Children" not in out2.modifiers
 
 
-def test_pipeline_panel_draws(fc):
-    panel = bpy.types.FURCOLLIDE_PT_pipeline
-    hair, _ = groom(fc)
-    box = bpy.data.objects["Box"]
-    _activate(hair)
-    log = _draw(panel)
-    assert ("operator", "furcollide.fur_sampler") in log
-    assert ("operator", "furcollide.collider_distance") not in log
-    fc.setup(hair, [box])
-    _activate(hair)
-    log = _draw(panel)
-    for idname in ("furcollide.fur_sampler", "furcollide.collider_distance",
-                   "furcollide.children_from_guides"):
-        assert ("operator", idname) in log
-    for name in ("fraction", "seed", "use_selection", "area", "density", "guides"):
-        assert ("prop", name) in log
+def test_children_from_guides_refuses_a_surface_without_faces(fc):
+    hair, box = fc.make_scene(animate=False, nx=3, ny=3)
+    out = fc.setup(hair, [box])
+    hair.data.surface = no_faces()
+    activate(hair)
+    with pytest.raises(RuntimeError, match="no faces"):
+        bpy.ops.furcollide.children_from_guides()
+    assert "FurCollide Children" not in out.modifiers

@@ -1,0 +1,221 @@
+"""A frame's inputs: the evaluated source read into numpy, and the frame-inputs record.
+
+* :func:`read_inputs` reads the evaluated source (world positions, offsets, per-curve
+  enable mask; moved by Fur Attach when it is on) into a :class:`FrameInputs`;
+  :func:`prepare_input` records the roots for jiggle and applies the motion that runs
+  before collision. The colliders are added when the frame is solved
+  (:func:`colliders.read_for_solve`).
+* A cached frame (memory or bake) keeps a record of what it was solved from; it is
+  shown only while the current inputs give the same record (see README "Time"):
+  :func:`solved_inputs` makes it for a solved frame, :func:`current_inputs` afresh, and
+  :func:`cached_frame_change` / :func:`baked_frame_change` say what changed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core import framecache
+from . import bridge, motion
+from .colliders import collider_objects, read_collider_inputs
+from .fur_attach import attached_points
+from .setup import signature
+
+
+@dataclass
+class FrameInputs:
+    """One frame's input to :func:`frame_solve.solve_frame`.
+
+    Read from the evaluated scene by :func:`read_inputs`, or given by a script
+    (``points``, ``offsets``, ``colliders`` and ``frame`` are enough).
+    """
+
+    points: np.ndarray  # world (P, 3) float32, after the motion before collision
+    offsets: np.ndarray  # (C+1,) int32
+    enabled: np.ndarray | None = None  # (C,) bool per-curve enable mask (None: all)
+    frame: int = 0
+    colliders: list = field(default_factory=list)  # core Colliders (read when solved)
+    growth: object = None  # core Collider of the growth surface, when the solve reads it
+    #: The source's curve layout (``framecache.topology_key``; computed when not given).
+    key: tuple | None = None
+    #: The input before motion (the caches store the result relative to it, so a
+    #: cached frame never needs the motion again); ``points`` when there is none.
+    raw: np.ndarray | None = None
+    m_out_inv: np.ndarray | None = None  # world -> output's local space
+    warning: str = ""  # the enable attribute cannot be used (the status says why)
+    #: The source's own local positions when the output has the same world matrix
+    #: (the usual case): unchanged points are written back from here, untouched.
+    local: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.raw is None:
+            self.raw = self.points
+        if self.key is None:
+            self.key = framecache.topology_key(self.offsets)
+
+
+def read_inputs(setup) -> FrameInputs:
+    """Evaluated source positions (world), offsets, enable mask."""
+    ob, depsgraph = setup.ob, setup.depsgraph
+    s = ob.furcollide
+    src = ob.evaluated_get(depsgraph)
+    if not src.is_evaluated:
+        raise RuntimeError("the source is not evaluated in this depsgraph")
+    data = src.data
+    offs = bridge.curve_offsets(data)
+    key = framecache.topology_key(offs)
+    P = bridge.get_positions(data)
+    M = bridge.matrix(src)
+    out = s.output.evaluated_get(depsgraph)
+    M_out = bridge.matrix(out)
+    mask, warning = bridge.read_curve_mask(data, s.enable_attribute, len(offs) - 1)
+    M_out_inv = bridge.matrix(out, inverted=True)
+    common = dict(offsets=offs, enabled=mask, frame=setup.frame, key=key, m_out_inv=M_out_inv,
+                  warning=warning)
+    if s.use_fur_attach:  # the input stage: curves follow the evaluated growth surface
+        world = np.asarray(attached_points(ob, depsgraph, offs), np.float32)
+        return FrameInputs(world, **common)
+    # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
+    local = P if np.allclose(M, M_out, rtol=1e-6, atol=1e-7) else None
+    return FrameInputs(bridge.transform(P, M), local=local, **common)
+
+
+def prepare_input(setup, inp) -> None:
+    """Record the roots for jiggle and apply the motion that runs before collision."""
+    m, f, rt = setup.motion, inp.frame, setup.rt
+    if motion.needs_history(m) and f >= setup.s.frame_start:
+        # (before the start frame the hair counts as at rest: frames viewed there
+        # must not change a bake, which starts at the start frame)
+        rt.history.record(f, inp.points[inp.offsets[:-1]])
+    moved = motion.apply_motion(m, "INPUT", inp.points, inp.offsets, f, setup.fps, rt.history)
+    if moved is not None:
+        inp.points = np.asarray(moved, np.float32)
+        inp.local = None
+
+
+def shown(obj, depsgraph) -> bool:
+    """Is ``obj`` evaluated in ``depsgraph`` (not hidden from it)?"""
+    return obj is not None and obj.evaluated_get(depsgraph).is_evaluated
+
+
+# ------------------------------------------------------------ frame inputs
+# A cached frame (memory or bake) keeps a record of what it was solved from; it is
+# shown only while the current inputs give the same record (see README "Time").
+
+
+def uses_growth(settings) -> bool:
+    """Does the solve read the growth surface? (core Settings or the setup's properties)"""
+    return bool(settings.attract_to_growth_surface
+                or settings.pinch_resolution == "growth_surface")
+
+
+def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
+    """The frame-inputs record of one frame: part name -> 64-bit digest.
+
+    Parameters
+    ----------
+    inp : FrameInputs
+        The frame's input: world positions before motion (``raw``), offsets and
+        the per-curve enable mask.
+    sig : str
+        The settings: :func:`signature` without the objects' identities (their
+        geometry is digested; renaming an object or a new session never counts).
+    colliders : list of (int, int)
+        :func:`collider_inputs` of each collider, in :func:`collider_objects` order.
+    flags : list of (bool, float or None)
+        Each collider's Double Sided and Collision Offset, in the same order.
+    surface : (int, int) or None
+        The growth surface's, when the solve reads it.
+
+    Returns
+    -------
+    dict
+        Ordered as :func:`describe_change` reports the first difference: the
+        colliders' number and options, the settings, the source, the enable mask,
+        each collider's matrix and shape, the surface's.
+    """
+    rec = {"colliders": framecache.text_digest(repr(list(flags))),
+           "settings": framecache.text_digest(sig),
+           "source": framecache.digest(inp.raw, inp.offsets)}
+    if inp.enabled is not None:
+        rec["enabled"] = framecache.digest(inp.enabled)
+    for i, (matrix, shape) in enumerate(colliders):
+        rec[f"collider {i} matrix"] = matrix
+        rec[f"collider {i} shape"] = shape
+    if surface is not None:
+        rec["surface matrix"], rec["surface shape"] = surface
+    return rec
+
+
+def solved_inputs(setup, inp) -> dict:
+    """The record of the frame just solved, from the colliders as the solve read them."""
+    rt = setup.rt
+    growth = rt.growth if rt.growth is not None and uses_growth(rt.solver.settings) else None
+    entries = list(rt.colliders.values())
+    return frame_inputs(inp, setup.signature(identities=False),
+                        [e.inputs for e in entries], [(e.double_sided, e.offset) for e in entries],
+                        growth.inputs if growth is not None else None)
+
+
+def current_inputs(setup, inp) -> dict:
+    """The record of the frame the setup's depsgraph shows now, read afresh (no solver
+    needed): what a cached frame's record must equal to be shown."""
+    ob, depsgraph = setup.ob, setup.depsgraph
+    scene = depsgraph.scene
+    refs = collider_objects(ob, scene)
+    cols = [read_collider_inputs(r.object, depsgraph, r.matrix(depsgraph)) for r in refs]
+    surf = ob.data.surface
+    surface = None
+    if uses_growth(ob.furcollide) and surf is not None and surf.type == "MESH":
+        surface = read_collider_inputs(surf, depsgraph)
+    return frame_inputs(inp, signature(ob, scene=scene, identities=False), cols,
+                        [(r.double_sided, r.offset) for r in refs], surface)
+
+
+def describe_change(ob, part, scene, old=None, new=None) -> str:
+    """The change :func:`framecache.first_change` found between the records ``old`` and
+    ``new``, in words naming the object."""
+    if part == "colliders":
+        count = [sum(k.endswith(" matrix") and k.startswith("collider ") for k in r or {})
+                 for r in (old, new)]
+        if count[1] != count[0]:
+            return f"a collider was {'added' if count[1] > count[0] else 'removed'}"
+        return "a collider's Double Sided or Collision Offset changed"
+    if part == "settings":
+        return "the settings changed"
+    if part == "source":
+        return f"the source hair '{ob.name}' changed (groom, modifiers or placement)"
+    if part == "enabled":
+        return f"the enable attribute '{ob.furcollide.enable_attribute}' of '{ob.name}' changed"
+    what, _, kind = part.rpartition(" ")
+    change = "moved" if kind == "matrix" else "changed shape"
+    if what == "surface":
+        surf = ob.data.surface
+        return f"the growth surface '{surf.name if surf is not None else '?'}' {change}"
+    refs = collider_objects(ob, scene)
+    i = int(what.split()[-1]) if what.startswith("collider ") else len(refs)
+    return f"'{refs[i].name}' {change}" if i < len(refs) else "the colliders changed"
+
+
+def cached_frame_change(setup, inp, f) -> str:
+    """Why memory-cached frame ``f`` no longer matches the current inputs ('' when it
+    does, or when it was stored without a record)."""
+    old = setup.rt.memory.inputs(f)
+    if old is None:
+        return ""
+    new = current_inputs(setup, inp)
+    part = framecache.first_change(old, new)
+    return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""
+
+
+def baked_frame_change(setup, inp, directory, f) -> str:
+    """Why baked frame ``f`` no longer matches the current inputs ('' when it does,
+    or for files baked before FurCollide stored their inputs: not checked)."""
+    old = framecache.read_inputs(directory, f)
+    if old is None:
+        return ""
+    new = current_inputs(setup, inp)
+    part = framecache.first_change(old, new)
+    return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""

@@ -1,0 +1,137 @@
+"""What a frame writes: the output hair's positions, status codes, colours and attributes.
+
+FurCollide writes only into the output object it owns (never the source): the world
+points are brought into the output's local space (:func:`output_local`, bit for bit for
+the points the solver left alone when the output sits where the source sits), the
+per-curve ``furcollide_status`` and the point colours are rewritten only where a
+status changed, and per-point attributes (the collider distance) are set. Also here:
+the output's curve layout follows the source's (:func:`sync_output`), and which of
+source and output the viewport shows (:func:`apply_visibility`).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ..core import framecache
+from . import bridge
+from .registry import source_of
+
+
+def write(setup, inputs, points_world, status, changed=None, attributes=None) -> np.ndarray:
+    """Write world positions, status codes and per-point ``attributes`` (name ->
+    (P,) array) into the output's original data.
+
+    Parameters
+    ----------
+    setup : setup.Setup
+    inputs : frame_inputs.FrameInputs
+        The frame's inputs (offsets, the output's inverse matrix, the source's own
+        local positions).
+    points_world : (P, 3) float32 ndarray
+    status : (C,) int8 ndarray
+        Core ``Status`` codes.
+    changed : (P,) bool ndarray, optional
+        The points that differ from the input (computed when not given).
+    attributes : dict, optional
+
+    Returns
+    -------
+    (P, 3) float32 ndarray
+        ``points_world``: what the output shows now (the render groom follows it).
+    """
+    rt = setup.rt
+    data = setup.s.output.data
+    bridge.set_positions(data, output_local(inputs, points_world, changed))
+    if attributes:
+        write_attributes(data, attributes)
+    attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
+    last = rt.written_status  # (data, status, colours) written last
+    if last is not None and (
+        attr is None or last[0] != data.session_uid or len(attr.data) != len(status)
+    ):
+        last = None  # the output data was replaced or edited: write everything
+    if last is None or not np.array_equal(last[1], status):
+        previous, colors = (last[1], last[2]) if last is not None else (None, None)
+        colors = bridge.status_colors(status, inputs.offsets, previous, colors)
+        bridge.write_status(data, status, inputs.offsets, colors)
+        rt.written_status = (data.session_uid, status.copy(), colors)
+    return points_world
+
+
+def output_local(inputs, points_world, changed=None) -> np.ndarray:
+    """``points_world`` in the output's local space.
+
+    When the output sits where the source sits, the points the solver left
+    alone (``changed`` False; computed when not given) are the source's own
+    local positions, exactly; only the others are transformed.
+    """
+    if inputs.local is None:  # the output was moved away from the source
+        return bridge.transform(points_world, inputs.m_out_inv)
+    if bridge.is_identity(inputs.m_out_inv):  # both at the world origin
+        return points_world
+    if changed is None:
+        changed = framecache.rows_differ(points_world, inputs.points)
+    local = inputs.local.copy()
+    idx = np.flatnonzero(changed)
+    if len(idx):
+        local[idx] = bridge.transform(points_world[idx], inputs.m_out_inv)
+    return local
+
+
+def write_attributes(data, attributes: dict) -> None:
+    """Write per-point float attributes (name -> (P,) array) into hair ``data``."""
+    for name, values in attributes.items():
+        attr = data.attributes.get(name)
+        if attr is not None and (attr.data_type != "FLOAT" or attr.domain != "POINT"):
+            data.attributes.remove(attr)
+            attr = None
+        if attr is None:
+            attr = data.attributes.new(name, "FLOAT", "POINT")
+        if len(attr.data) != len(values):
+            raise bridge.BridgeError(
+                f"'{data.name}' has {len(attr.data)} points but {len(values)} values of "
+                f"'{name}' were computed"
+            )
+        attr.data.foreach_set("value", np.ascontiguousarray(values, np.float32))
+
+
+def sync_output(setup, inputs) -> None:
+    """Give the output the evaluated source's topology when it differs."""
+    ob = setup.ob
+    out = ob.furcollide.output
+    if framecache.topology_key(bridge.curve_offsets(out.data)) != inputs.key:
+        old = out.data
+        if len(old.curves) and not hasattr(old, "remove_curves"):  # older Blender
+            new = bpy.data.hair_curves.new(old.name)
+            for mat in old.materials:
+                new.materials.append(mat)
+            new.surface, new.surface_uv_map = old.surface, old.surface_uv_map
+            out.data = new
+            if old.users == 0:
+                bpy.data.hair_curves.remove(old)
+        bridge.copy_topology(ob.evaluated_get(setup.depsgraph).data, out.data)
+
+
+# ---------------------------------------------------------------- viewport
+def apply_visibility(ob) -> None:
+    """Show source or output in the viewport according to ``show_result``."""
+    ob = source_of(ob)
+    if ob is None:
+        return
+    s = ob.furcollide
+    out = s.output
+    for target, hide in ((ob, s.show_result), (out, not s.show_result)):
+        if target is not None:
+            hide_in_viewport(target, hide)
+
+
+def hide_in_viewport(ob, hide: bool, render: bool | None = None) -> None:
+    """Hide or show ``ob`` in the viewport (and in renders when ``render`` is given)."""
+    if render is not None:
+        ob.hide_render = render
+    try:
+        ob.hide_set(hide)
+    except RuntimeError:  # not in the active view layer
+        pass

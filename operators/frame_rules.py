@@ -1,0 +1,440 @@
+"""The frame rules: what the frame handler does with a setup at a frame.
+
+Frame rules (``frame_change_post``; see README "Using it in Blender"):
+
+* subframes (motion blur) never step: the output keeps the whole frame (a bake
+  blends its two neighbouring baked frames);
+* ``f == frame_start``: reset the solver and solve;
+* ``f`` cached (memory, or disk when baked) and its inputs still hold: show it, bit
+  for bit; its inputs changed: solve it again at the start frame, else mark the setup
+  outdated and drop the playback cache;
+* ``f - 1`` cached: restore its solver state if needed and step;
+* otherwise (jump ahead): hold the newest cached frame, mark outdated;
+* ``f < frame_start``: the output follows the source; ``f > frame_end``:
+  the end frame is held.
+
+:func:`evaluate` reads one frame top to bottom: the output checks, the inputs
+(:mod:`.frame_inputs`), the rule that applies, the solve (:func:`frame_solve.solve_frame`)
+or the cached frame, the write (:mod:`.frame_outputs`), then the render groom stage
+(:mod:`.groom_stage`). It returns an :class:`Outcome`. It raises on errors; the handler
+(:mod:`.handlers`) turns them into the setup's status message plus one console line,
+and the output keeps its last good result.
+"""
+
+from __future__ import annotations
+
+import enum
+import os
+
+import bpy
+import numpy as np
+
+from ..core import framecache
+from . import bridge, frame_outputs, frame_solve, groom_stage, registry
+from .colliders import read_for_solve, surface_as_collider
+from .frame_inputs import (
+    FrameInputs,
+    baked_frame_change,
+    cached_frame_change,
+    prepare_input,
+    read_inputs,
+    shown,
+    solved_inputs,
+)
+
+
+class Outcome(enum.Enum):
+    """What :func:`evaluate` did with a setup's frame."""
+
+    RESET = "reset"  #: the start frame, solved from the groomed shape
+    STEP = "step"  #: solved one step from the previous frame's state
+    CACHE = "cache"  #: a memory-cached frame shown
+    BAKE = "bake"  #: a baked frame shown (or the newest one before it, when missing)
+    HOLD = "hold"  #: after the end frame: the end frame held
+    OUTDATED = "outdated"  #: not solvable (jump ahead, changed inputs): a frame held
+    PASSTHROUGH = "passthrough"  #: disabled or before the start: the output follows
+    SUBFRAME = "subframe"  #: a motion-blur subframe (never steps; a bake blends)
+    TOPOLOGY = "topology"  #: the source's curves changed: nothing written
+    BAKING = "baking"  #: this setup's bake is running (it writes the frames)
+    HIDDEN = "hidden"  #: no output of the setup is in this depsgraph
+
+
+def evaluate(setup) -> Outcome:
+    """Run the frame rules (module docstring) for ``setup``, then the render groom stage.
+
+    Raises
+    ------
+    Exception
+        Any error; the frame handler turns it into the status message, the bake into
+        a report. A render groom error only warns (the guides are written).
+    """
+    outcome, written = _rules(setup)
+    if written is not None and setup.s.groom.output is not None:
+        try:
+            groom_stage.run(setup, written)
+        except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
+            setup.set_status("WARNING", f"Render groom: {registry.describe(exc)}")
+    return outcome
+
+
+def _rules(setup):
+    """(Outcome, the world points written into the output or None), rule by rule."""
+    skipped = _not_evaluated(setup)
+    if skipped is not None:
+        return skipped
+    inp = _read_frame(setup)
+    if inp is None:
+        return Outcome.TOPOLOGY, None
+    note = _input_warning(setup, inp)
+    s, rt, f = setup.s, setup.rt, setup.frame
+    if not s.enabled or f < s.frame_start:
+        return _pass_through(setup, inp, note)
+    if s.is_baked:
+        return _show_baked(setup, inp, note)
+    if f > s.frame_end:
+        return _after_the_end(setup, inp, note)
+    if f in rt.memory:
+        shown = _show_cached_if_current(setup, inp, note)
+        if shown is not None:
+            return shown
+    if f != s.frame_start and (f - 1) not in rt.memory:
+        return _hold(setup, inp)
+    held = _prepare_solver(setup, inp)
+    if held is not None:
+        return held
+    return _solve(setup, inp, note)
+
+
+def _not_evaluated(setup):
+    """The outcome when the frame is not evaluated at all (a bake runs, the outputs
+    are hidden from this depsgraph, a subframe), else None. Raises ValueError when the
+    output must not be written (:func:`check_output`)."""
+    s = setup.s
+    check_output(setup.ob)
+    if setup.rt.baking:
+        return Outcome.BAKING, None
+    if not shown(s.output, setup.depsgraph) and not shown(s.groom.output, setup.depsgraph):
+        # Nothing of this setup is in this depsgraph (its outputs are hidden from
+        # it, e.g. from the render): nothing to show, so nothing to compute or to
+        # report (its source is usually hidden too).
+        return Outcome.HIDDEN, None
+    if setup.subframe != 0.0:
+        # Never step on subframes (motion blur). A bake is blended between its
+        # whole frames; otherwise the output keeps the whole frame.
+        if s.is_baked and s.enabled:
+            return Outcome.SUBFRAME, _baked_subframe(setup)
+        return Outcome.SUBFRAME, None
+    return None
+
+
+def _read_frame(setup):
+    """The frame's inputs (motion before collision applied), or None when the source's
+    curves changed (the status says so). Drops the cached frames that changes made
+    without an update callback invalidate."""
+    s, rt = setup.s, setup.rt
+    _changes_without_callbacks(setup)  # before the input is read: see there
+    inp = read_inputs(setup)
+    if not _check_topology(setup, inp):
+        return None
+    prepare_input(setup, inp)
+    if not s.is_baked:  # a bake checks its own curve layout first
+        frame_outputs.sync_output(setup, inp)
+    sig = setup.signature()
+    if rt.signature is not None and sig != rt.signature and not s.is_baked:
+        # Changed without an update callback (deleted collider, undo, driver).
+        rt.drop_frames_after(setup.frame - 1, s.frame_start)
+        rt.colliders.clear()
+    rt.signature = sig
+    return inp
+
+
+def _input_warning(setup, inp) -> tuple[str, str]:
+    """(level, message) the status shows when the frame is fine: a warning about the
+    enable attribute or a Surface listed as a collider, else ("INFO", "")."""
+    if inp.warning:
+        return "WARNING", inp.warning
+    if warn := surface_as_collider(setup.ob):
+        return "WARNING", warn
+    return "INFO", ""
+
+
+def _pass_through(setup, inp, note):
+    """Disabled, or before the start frame: the output follows the source."""
+    frame_outputs.sync_output(setup, inp)
+    written = frame_outputs.write(setup, inp, inp.points, np.zeros(len(inp.offsets) - 1, np.int8))
+    setup.rt.outdated = False
+    level, msg = note
+    setup.set_status(level, msg or ("Disabled" if not setup.s.enabled
+                                    else "Before the start frame"))
+    return Outcome.PASSTHROUGH, written
+
+
+def _after_the_end(setup, inp, note):
+    """After the end frame: hold the end frame (or, not cached, the newest cached one)."""
+    rt, end = setup.rt, setup.s.frame_end
+    if rt.hold is not None and rt.hold[0] == end:
+        written = frame_outputs.write(setup, inp, rt.hold[1], rt.hold[2])
+        level, msg = note
+        setup.set_status(level, msg or f"After the end frame: holding frame {end}")
+        return Outcome.HOLD, written
+    return _hold(setup, inp, reason=f"after the end frame, and frame {end} is not")
+
+
+def _show_cached_if_current(setup, inp, note):
+    """A memory-cached frame: shown while its inputs still hold; else the setup is
+    outdated (or, at the start frame, None: it is solved again, which drops every
+    cached frame)."""
+    rt, f = setup.rt, setup.frame
+    why = cached_frame_change(setup, inp, f)
+    if not why:
+        written, status, stats = _show_cached(setup, inp, f)
+        if rt.hold is None and f == max(rt.memory.frames):
+            rt.hold = (f, written, status)
+        rt.stats = dict(stats, source="cache")
+        rt.outdated = False
+        setup.set_status(*_note(setup, stats, note))
+        return Outcome.CACHE, written
+    if f != setup.s.frame_start:
+        return _outdated(setup, why)
+    return None
+
+
+def _prepare_solver(setup, inp):
+    """Reset the solver at the start frame, else give it frame ``f - 1``'s state; the
+    hold outcome when that state is not known, else None."""
+    s, rt, f = setup.s, setup.rt, setup.frame
+    solver = setup.ensure_solver(inp)  # a mode change resets it: state unknown
+    if f == s.frame_start:
+        solver.reset()
+        rt.memory.clear()
+        rt.dropped = ""
+        rt.memory.start = f
+        rt.memory.limit = int(s.memory_limit * 1024 * 1024)
+    elif rt.solver_frame != f - 1:
+        state = rt.memory.state(f - 1)
+        if state is None:
+            return _hold(setup, inp)
+        try:
+            solver.state = state
+        except ValueError as exc:  # saved with another mode
+            rt.solver_frame = None
+            return _hold(setup, inp, reason=str(exc))
+    return None
+
+
+def check_output(ob) -> None:
+    """Raise ValueError when FurCollide must not write into the setup's output."""
+    s = ob.furcollide
+    if s.output is None:
+        raise ValueError("the output hair object is missing: remove the setup and add it again")
+    if s.output == ob or not s.output.furcollide.is_output:
+        raise ValueError(
+            f"'{s.output.name}' is not a FurCollide output: FurCollide only writes into "
+            "the output object it created (remove the setup and add it again)"
+        )
+    if s.output.furcollide.source != ob:
+        raise ValueError(
+            f"this object is a copy of the setup on '{_owner_name(s.output)}': "
+            "use Add FurCollide to give it its own output"
+        )
+    if problem := bridge.write_refusal(s.output, "output"):
+        raise ValueError(problem)
+
+
+def _changes_without_callbacks(setup) -> None:
+    """Drop every cached frame when Fur Attach or the fps changed without an update
+    callback (undo, a driver). Runs before the input is read: its root history for
+    this frame must survive."""
+    s, rt = setup.s, setup.rt
+    att = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
+    if rt.attach_state is not None and att != rt.attach_state and not s.is_baked:
+        # Fur Attach toggled or rebound: every frame's input changed, so no cached
+        # frame is valid.
+        rt.drop_frames_after(s.frame_start - 1, s.frame_start)
+    rt.attach_state = att
+    tk = setup.time_key()
+    if None not in (tk, rt.time_state) and tk != rt.time_state and not s.is_baked:
+        # The fps changed: wind and jiggle of every cached frame ran on the old
+        # seconds. (Turning them on or off goes through the signature.)
+        rt.drop_frames_after(s.frame_start - 1, s.frame_start)
+    rt.time_state = tk
+
+
+def _check_topology(setup, inp) -> bool:
+    """Adopt or verify the source topology; False (with an error) on change."""
+    rt, s = setup.rt, setup.s
+    if rt.topology is None or rt.topology == inp.key:
+        rt.adopt_topology(inp.key)
+        return True
+    if len(rt.memory) == 0 and not s.is_baked:
+        rt.adopt_topology(inp.key)
+        rt.hold = None
+        return True
+    old, new = rt.topology, inp.key
+    what = "bake" if s.is_baked else "cached frames"
+    setup.set_status(
+        "ERROR",
+        f"Source hair changed from {old[0]} curves / {old[1]} points to {new[0]} / {new[1]}: "
+        f"the output keeps its last result and the {what} are kept. "
+        f"Press {'Free Bake' if what == 'bake' else 'Reset'} to simulate the new curves.",
+    )
+    return False
+
+
+def _solve(setup, inp, note):
+    """Solve frame ``f`` (the solver holds ``f - 1``, or was reset), cache it, show it."""
+    rt, f = setup.rt, setup.frame
+    read_for_solve(setup, inp)
+    rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
+    result = frame_solve.solve_frame(setup, inp)
+    rt.solver_frame = f
+    rt.memory.put(
+        f, inp.raw, result.points, result.status, inp.offsets, rt.solver.state, result.stats,
+        result.changed, result.attributes, solved_inputs(setup, inp),
+    )
+    if rt.hold is None or f >= rt.hold[0]:
+        rt.hold = (f, result.points, result.status)
+    written = frame_outputs.write(setup, inp, result.points, result.status, result.changed,
+                                  result.attributes)
+    rt.stats = result.stats
+    rt.error = ""
+    rt.outdated = False
+    rt.invalid_note = invalid_note(result.problems)
+    setup.set_status(*_note(setup, result.stats, note))
+    return (Outcome.RESET if f == setup.s.frame_start else Outcome.STEP), written
+
+
+def invalid_note(problems):
+    """The status for curves the core left as they are (INVALID), or None."""
+    if not problems:
+        return None
+    return ("WARNING", f"Source hair: {problems[0]}. They are shown in yellow; the other "
+            "curves are solved. Fix the source curves (merge or delete the points)")
+
+
+def _note(setup, stats, note):
+    """``note``, unless the frame shown holds INVALID curves: then what the last solve
+    said about them (or how many there are, for a frame solved in another session)."""
+    n = stats.get("invalid", 0)
+    if not n:
+        return note
+    return setup.rt.invalid_note or (
+        "WARNING", f"Source hair: {n} curves have a zero-length segment or a non-finite "
+        "point. They are shown as they are, in yellow; the other curves are solved")
+
+
+def _show_cached(setup, inp, f):
+    """Write memory-cached frame ``f`` to the output; returns (points, status, stats)."""
+    rt = setup.rt
+    out, status, stats = rt.memory.get(f, inp.raw, inp.offsets)
+    frame_outputs.write(setup, inp, out, status, attributes=rt.memory.attributes(f))
+    return out, status, stats
+
+
+def _outdated(setup, why):
+    """The cached frame (not the start frame) was solved from inputs that no longer
+    hold: drop the playback cache (the frames stepped from it would not be what a
+    bake gives either), keep the output as it is and mark the setup outdated."""
+    rt, f, start = setup.rt, setup.frame, setup.s.frame_start
+    rt.drop_frames_after(start - 1, start)
+    rt.dropped = f"{why}: the playback cache was dropped"
+    rt.outdated = True
+    setup.set_status("WARNING", f"Frame {f} is outdated: {why} since it was cached. The "
+                     f"playback cache is dropped: go to frame {start} and play, or press Bake.")
+    return Outcome.OUTDATED, None
+
+
+def _hold(setup, inp, reason=""):
+    """Jump ahead past the cache: hold the newest cached frame, mark outdated."""
+    rt, f = setup.rt, setup.frame
+    rt.outdated = True
+    reason = reason or rt.dropped
+    k = rt.memory.newest_before(f)
+    written = None
+    if rt.hold is not None and rt.hold[0] == k:
+        written = frame_outputs.write(setup, inp, rt.hold[1], rt.hold[2])
+        held = f"holding frame {k}"
+    elif k is not None and k in rt.memory:  # (whatever frame was shown before the jump)
+        written, status, _stats = _show_cached(setup, inp, k)
+        rt.hold = (k, written, status)
+        held = f"holding frame {k}"
+    else:
+        held = "showing the last result"
+    start = setup.s.frame_start
+    if rt.error:
+        setup.set_status("ERROR", f"{rt.error} (frame {f} not solved: fix it, then go back "
+                         f"to frame {start})")
+        return Outcome.OUTDATED, written
+    why = f" ({reason})" if reason else ""
+    setup.set_status(
+        "WARNING",
+        f"Frame {f} is not cached{why}: {held}. Play from frame {start} or bake.",
+    )
+    return Outcome.OUTDATED, written
+
+
+def _show_baked(setup, inp, note):
+    """A baked setup: show the baked frame (the newest one before it when missing)."""
+    s, rt, f = setup.s, setup.rt, setup.frame
+    directory = bpy.path.abspath(s.bake_path)
+    fe = min(f, s.frame_end)
+    if not os.path.exists(framecache.frame_path(directory, fe)):
+        frames = [k for k in framecache.list_frames(directory) if k < fe]
+        rt.outdated = True
+        if frames:
+            fe = frames[-1]
+        else:
+            setup.set_status("ERROR", f"Bake files are missing in {directory}")
+            return Outcome.OUTDATED, None
+    points, status, offsets, _state = framecache.read_frame(directory, fe)
+    if not np.array_equal(offsets, inp.offsets):
+        setup.set_status(
+            "ERROR",
+            "The bake was made for other curves (the source changed): output keeps its "
+            "last result. Free Bake to simulate the new curves.",
+        )
+        return Outcome.TOPOLOGY, None
+    frame_outputs.sync_output(setup, inp)
+    written = frame_outputs.write(setup, inp, points, status,
+                                  attributes=framecache.read_attributes(directory, fe))
+    rt.stats = frame_solve.frame_stats(status, fe, source="bake")
+    why = baked_frame_change(setup, inp, directory, fe) if fe == f else ""
+    if why:  # still shown (it is what renders), never as if current
+        rt.outdated = True
+        setup.set_status("WARNING", f"Frame {f} of the bake is outdated: {why} since it was "
+                         "baked. The baked frame is still shown: press Free Bake, then Bake.")
+    elif fe == min(f, s.frame_end):
+        rt.outdated = False
+        setup.set_status(*_note(setup, rt.stats, note))
+    else:
+        setup.set_status("WARNING", f"Frame {f} is missing from the bake: holding frame {fe}")
+    return Outcome.BAKE, written
+
+
+def _owner_name(out) -> str:
+    src = out.furcollide.source
+    return src.name if src is not None else "?"
+
+
+def _baked_subframe(setup):
+    """Blend the two baked frames around a subframe into the output; the written
+    points, or None (nothing written) when they are not both baked."""
+    s, f = setup.s, setup.frame
+    directory = bpy.path.abspath(s.bake_path)
+    a, b = f, f + 1
+    if not (s.frame_start <= a and b <= s.frame_end):
+        return None
+    if not (os.path.exists(framecache.frame_path(directory, a)) and os.path.exists(
+        framecache.frame_path(directory, b)
+    )):
+        return None
+    pa, status, offs, _ = framecache.read_frame(directory, a)
+    pb = framecache.read_frame(directory, b)[0]
+    data = s.output.data
+    if pa.shape != pb.shape or len(data.points) != len(pa):
+        return None
+    w = np.float32(setup.subframe)
+    points = pa + (pb - pa) * w
+    m_out_inv = bridge.matrix(s.output.evaluated_get(setup.depsgraph), inverted=True)
+    inp = FrameInputs(points, offs, m_out_inv=m_out_inv)
+    return frame_outputs.write(setup, inp, points, status)

@@ -1,0 +1,169 @@
+"""Blender's handlers: thin loops over the setups that never raise into Blender.
+
+* ``frame_change_post``: every setup of the scene runs the frame rules
+  (:func:`frame_rules.evaluate`); an error becomes the setup's status message.
+  Both this and the depsgraph check first prune the registry (:func:`registry.prune`):
+  a deleted source's runtime and memory cache go.
+* ``depsgraph_update_post``: an edited source or collider drops the cached frames
+  after the current one (:func:`invalidation.invalidate`), and the dependency
+  modifiers follow the setups' inputs. It never writes hair data.
+* ``load_post``: a new file forgets every runtime and completes the setups'
+  dependency modifiers; ``save_pre`` / ``save_post`` keep relative bake paths
+  pointing at the same files when the file is saved elsewhere.
+"""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import frame_rules, invalidation, registry
+from .colliders import collider_objects
+from .dependencies import dependencies_stale, update_dependencies
+from .setup import Setup, signature
+
+
+@persistent
+def on_frame_change_post(scene, depsgraph=None):
+    """Evaluate every setup of ``scene``; never raises."""
+    if registry.busy() or depsgraph is None:
+        return
+    with registry.handlers_held():
+        try:
+            registry.prune()  # a deleted source's runtime and cache go
+            for ob in registry.setups(scene):
+                try:
+                    frame_rules.evaluate(Setup(ob, scene, depsgraph))
+                except Exception as exc:  # noqa: BLE001 - the handler must never raise
+                    registry.record_error(ob, exc)
+        except Exception as exc:  # noqa: BLE001 - not even while listing the setups
+            print(f"FurCollide: frame handler failed: {registry.describe(exc)}", flush=True)
+
+
+@persistent
+def on_depsgraph_update_post(scene, depsgraph=None):
+    """Invalidate (never write) when colliders or the source were edited."""
+    if registry.busy() or depsgraph is None or getattr(depsgraph, "mode", "VIEWPORT") == "RENDER":
+        return
+    try:
+        registry.prune()  # a source deleted in the UI: its runtime and cache go
+        edited = set()
+        for u in depsgraph.updates:
+            if (u.is_updated_geometry or u.is_updated_transform) and isinstance(
+                u.id, bpy.types.Object
+            ):
+                edited.add(u.id.original.name)
+        if not edited and not any(True for _ in registry.setups(scene)):
+            return
+        for ob in registry.setups(scene):
+            rt = registry.get_runtime(ob, create=False)
+            if (rt is None or not rt.baking) and dependencies_stale(ob):
+                update_dependencies(ob)  # (a no-op next time: no update loop)
+            if rt is None or rt.baking or ob.furcollide.is_baked:
+                continue
+            inputs = {ob.name} | {o.name for r in collider_objects(ob, scene) for o in r.objects}
+            if ob.data.surface is not None:
+                inputs.add(ob.data.surface.name)
+            if edited & inputs and len(rt.memory):
+                invalidation.invalidate(ob, scene, reason="source or collider edited")
+            elif rt.signature is not None and signature(ob, scene=scene) != rt.signature:
+                invalidation.invalidate(ob, scene, reason="colliders changed", colliders=True)
+    except Exception as exc:  # noqa: BLE001
+        print(f"FurCollide: depsgraph update check failed: {exc}")
+
+
+@persistent
+def on_load_post(*_args):
+    """A new file: forget every runtime (caches belong to the old file), and
+    complete the setups' dependency modifiers (render groom outputs of older
+    files, inputs changed without an update callback): without them a render
+    with those inputs hidden would not see them."""
+    registry.registry.clear()
+    try:
+        for ob in bpy.data.objects:
+            s = getattr(ob, "furcollide", None)
+            if s is None or not s.is_setup or s.output is None:
+                continue
+            if s.output.furcollide.source == ob and dependencies_stale(ob):
+                update_dependencies(ob)
+    except Exception as exc:  # noqa: BLE001 - a handler must never raise
+        print(f"FurCollide: could not update the setups' inputs: {exc}", flush=True)
+
+
+_save_remap: dict = {}  # object name -> bake_path before save_pre rewrote it
+
+
+def _relative_bake_paths():
+    for ob in bpy.data.objects:
+        s = getattr(ob, "furcollide", None)
+        if s is not None and s.is_setup and s.bake_path.startswith("//") and ob.library is None:
+            yield ob, s
+
+
+@persistent
+def on_save_pre(filepath="", *_args):
+    """Save As to another folder: keep each bake's relative path pointing at the
+    same files (Blender remaps its own relative paths, not an add-on's)."""
+    _save_remap.clear()
+    try:
+        old = bpy.data.filepath
+        if not old or not filepath or os.path.dirname(old) == os.path.dirname(filepath):
+            return
+        start = os.path.dirname(os.path.abspath(filepath))
+        for ob, s in _relative_bake_paths():
+            target = bpy.path.abspath(s.bake_path)
+            try:
+                new = "//" + os.path.relpath(target, start).replace(os.sep, "/")
+            except ValueError:  # another drive (Windows): keep it absolute
+                new = target
+            _save_remap[ob.name] = s.bake_path
+            s.bake_path = new
+    except Exception as exc:  # noqa: BLE001 - a handler must never raise
+        print(f"FurCollide: could not remap the bake paths: {exc}", flush=True)
+
+
+@persistent
+def on_save_post(filepath="", *_args):
+    """A *copy* was saved (File > Save Copy: the open file keeps its path): put
+    back the bake paths :func:`on_save_pre` rewrote for it."""
+    try:
+        if filepath and os.path.abspath(bpy.data.filepath) != os.path.abspath(filepath):
+            for name, path in _save_remap.items():
+                ob = bpy.data.objects.get(name)
+                if ob is not None:
+                    ob.furcollide.bake_path = path
+    except Exception as exc:  # noqa: BLE001
+        print(f"FurCollide: could not restore the bake paths: {exc}", flush=True)
+    finally:
+        _save_remap.clear()
+
+
+_HANDLERS = (
+    ("frame_change_post", on_frame_change_post),
+    ("depsgraph_update_post", on_depsgraph_update_post),
+    ("load_post", on_load_post),
+    ("save_pre", on_save_pre),
+    ("save_post", on_save_post),
+)
+
+
+def register():
+    for name, fn in _HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        for h in list(lst):  # survive "Reload Scripts"
+            if getattr(h, "__name__", "") == fn.__name__ and "furcollide" in getattr(
+                h, "__module__", ""
+            ):
+                lst.remove(h)
+        lst.append(fn)
+
+
+def unregister():
+    for name, fn in _HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        if fn in lst:
+            lst.remove(fn)
+    invalidation.cancel_refreshes()
+    registry.registry.clear()

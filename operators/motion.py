@@ -1,0 +1,153 @@
+"""Wind, jiggle and the Region of Influence around the solver (paper section 4).
+
+Thin glue, no Blender data: every computation is a :mod:`..core.pipeline` call, driven
+by a setup's motion settings ``m`` (its ``furcollide.motion`` property group, or any
+object with the same attributes).
+
+* **Motion before collision** (``Stage = Before Collision``): wind and/or jiggle
+  move the input curves; FurCollide resolves the moved curves
+  (:func:`frame_inputs.prepare_input`).
+* **Motion after collision** (``Stage = After Collision``): wind and/or jiggle
+  move the collided curves, restricted per point by the **Region of Influence**
+  (:func:`core.pipeline.region_of_influence`) to less than its **Fur Collider
+  Distance**, so the result stays collision free (:func:`output_stage`).
+* **Collider distance attribute**: ``furcollide_collider_distance`` on the
+  output, the distance of every point's segments to the colliders.
+
+Jiggle needs the roots of the last frames: the frame rules record them
+(:class:`RootHistory`) while they play; frames never seen take the roots of the
+nearest later frame seen (hair at rest before the start frame).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core import pipeline
+
+#: Per-point attribute with the Fur Collider Distance on the output.
+DISTANCE_ATTRIBUTE = "furcollide_collider_distance"
+#: Frames of root history kept per setup for jiggle (its window is at most 240).
+HISTORY_FRAMES = 480
+
+
+def fps(scene) -> float:
+    """Frames per second of ``scene``."""
+    return scene.render.fps / (scene.render.fps_base or 1.0)
+
+
+# ------------------------------------------------------------- root history
+class RootHistory:
+    """Curve roots (world) per whole frame, recorded by the frame rules for jiggle. It
+    belongs to one curve layout: the runtime clears it when the layout changes."""
+
+    def __init__(self):
+        self.frames: dict[int, np.ndarray] = {}
+
+    def record(self, f: int, roots: np.ndarray) -> None:
+        self.frames[int(f)] = np.asarray(roots, np.float32).copy()
+        if len(self.frames) > HISTORY_FRAMES:  # forget the frames farthest from f
+            far = sorted(self.frames, key=lambda k: (abs(k - f), k))[HISTORY_FRAMES:]
+            for k in far:
+                del self.frames[k]
+
+    def clear(self) -> None:
+        self.frames.clear()
+
+    def drop_after(self, f: int) -> None:
+        for k in [k for k in self.frames if k > f]:
+            del self.frames[k]
+
+    def lookup(self, f: int) -> np.ndarray:
+        """Roots at frame ``f``: recorded, else those of the nearest later recorded frame."""
+        got = self.frames.get(int(round(f)))
+        if got is not None:
+            return got
+        later = [k for k in self.frames if k > f]
+        k = min(later) if later else max(self.frames)
+        return self.frames[k]
+
+
+# -------------------------------------------------------------------- motion
+def _wind(m, points, offsets, f, fps):
+    return pipeline.wind(
+        points, offsets, f, direction=tuple(m.wind_direction), strength=m.wind_strength,
+        frequency=m.wind_frequency, turbulence=m.wind_turbulence, falloff=m.wind_falloff,
+        seed=m.wind_seed, scale=m.wind_scale, fps=fps,
+    )
+
+
+def _jiggle(m, points, offsets, f, fps, history):
+    return pipeline.jiggle(
+        points, offsets, history.lookup, frame=f, fps=fps,
+        stiffness=m.jiggle_stiffness, damping=m.jiggle_damping, amount=m.jiggle_amount,
+        falloff=m.jiggle_falloff,
+    )
+
+
+def apply_motion(m, stage, points, offsets, f, fps, history) -> np.ndarray | None:
+    """Wind then jiggle of the motion settings ``m`` that run at ``stage`` ('INPUT' or
+    'OUTPUT'); None when none does. ``points`` (P, 3) world; returns float64."""
+    out = None
+    if m.use_wind and m.wind_stage == stage and m.wind_strength > 0:
+        out = _wind(m, points if out is None else out, offsets, f, fps)
+    if m.use_jiggle and m.jiggle_stage == stage and m.jiggle_amount > 0 and history.frames:
+        out = _jiggle(m, points if out is None else out, offsets, f, fps, history)
+    return out
+
+
+def needs_history(m) -> bool:
+    """Does the motion settings ``m``'s result depend on the roots of earlier frames?"""
+    return bool(m.use_jiggle)
+
+
+def output_stage(m, points, offsets, f, fps, history, colliders):
+    """Motion after collision with its Region of Influence, and the collider distance.
+
+    Parameters
+    ----------
+    m : the setup's motion settings.
+    points : (P, 3) float32 ndarray
+        The solver's collided curves (world).
+    offsets : (C+1,) int ndarray
+    f : int
+        Frame.
+    fps : float
+        The scene's frames per second (wind and jiggle run on seconds).
+    history : RootHistory
+    colliders : list of core.Collider
+        This frame's colliders.
+
+    Returns
+    -------
+    points : (P, 3) float32 ndarray
+        Final curves (``points`` itself when nothing moved them).
+    attributes : dict
+        ``{DISTANCE_ATTRIBUTE: (P,) float32}`` when the attribute is on.
+    """
+    moved = apply_motion(m, "OUTPUT", points, offsets, f, fps, history)
+    attributes = {}
+    distance = None
+    if m.write_collider_distance:
+        cap = float(m.distance_max) if m.distance_max > 0 else None
+        distance = _distance(points, offsets, colliders, cap)
+        if cap is not None:  # nothing within the cap (no collider either): the cap
+            distance = np.minimum(distance, cap)
+        attributes[DISTANCE_ATTRIBUTE] = np.asarray(distance, np.float32)
+    if moved is None:
+        return points, attributes
+    if m.use_region_of_influence and colliders:
+        reach = float(np.sqrt(((moved - points) ** 2).sum(1).max())) if len(points) else 0.0
+        if distance is None or (m.distance_max > 0 and m.distance_max < reach):
+            # RoI only clamps displacements longer than the distance: capped at the
+            # longest displacement, the distance gives the same result, faster.
+            distance = _distance(points, offsets, colliders, reach)
+        moved = pipeline.region_of_influence(points, offsets, moved, distance,
+                                             margin=m.roi_margin)
+    return np.asarray(moved, np.float32), attributes
+
+
+def _distance(points, offsets, colliders, cap):
+    if not colliders:
+        return np.full(len(points), np.inf)
+    return pipeline.collider_distance(points, offsets, colliders, max_distance=cap)

@@ -1,0 +1,158 @@
+"""How the setup's properties are declared: their update callbacks and factories.
+
+Every property that changes the result drops the cached frames after the current one
+through its ``update=`` callback (:func:`invalidation.invalidate`). Like the frame
+handler, the callbacks never raise (a failure is one console line; the next frame
+re-checks everything). The factories give the solver settings their few shapes (a
+toggle, a 0..1 factor, an angle...), leaving the name, default and tooltip to the call.
+"""
+
+import functools
+
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+
+from . import bridge, frame_outputs, invalidation, registry
+from .colliders import instanced_collection
+
+# ------------------------------------------------------------------ updates
+# Update callbacks run inside Blender's UI: like the frame handler, they never
+# raise (a failure is one console line; the next frame re-checks everything).
+
+
+def never_raises(update):
+    @functools.wraps(update)
+    def wrapper(self, context):
+        try:
+            update(self, context)
+        except Exception as exc:  # noqa: BLE001
+            print(f"FurCollide: {update.__name__.strip('_')} failed: {registry.describe(exc)}")
+
+    return wrapper
+
+
+@never_raises
+def update_settings(self, context):
+    invalidation.invalidate(self.id_data, context.scene, reason="settings changed")
+
+
+@never_raises
+def update_colliders(self, context):
+    invalidation.invalidate(self.id_data, context.scene, reason="colliders changed",
+                            colliders=True)
+
+
+@never_raises
+def update_range(self, context):
+    ob = self.id_data
+    s = ob.furcollide
+    if s.frame_end < s.frame_start:
+        s.frame_end = s.frame_start
+        return
+    rt = registry.get_runtime(ob, create=False)
+    if rt is not None and rt.memory.start == s.frame_start:
+        # Only the end moved: frames inside the new range stay valid.
+        invalidation.invalidate(ob, context.scene, reason="frame range changed",
+                                from_frame=s.frame_end)
+    else:
+        invalidation.invalidate(ob, context.scene, reason="frame range changed",
+                                from_frame=s.frame_start - 1)
+
+
+def update_every_frame(reason):
+    """An update that drops every cached frame: for changes of every frame's input
+    (Fur Attach, motion before collision) or output (motion after collision). The
+    memory cache stores only the curves that differ from the input, so earlier frames
+    would mix old results with the new input."""
+
+    @never_raises
+    def update(self, context):
+        ob = self.id_data
+        invalidation.invalidate(ob, context.scene, reason=reason,
+                                from_frame=ob.furcollide.frame_start - 1)
+
+    return update
+
+
+update_attach = update_every_frame("Fur Attach changed")
+update_motion = update_every_frame("motion changed")
+
+
+@never_raises
+def update_memory_limit(self, context):
+    rt = registry.get_runtime(self.id_data, create=False)
+    if rt is not None:
+        rt.memory.limit = int(self.memory_limit * 1024 * 1024)
+
+
+@never_raises
+def update_show_result(self, context):
+    frame_outputs.apply_visibility(self.id_data)
+
+
+def poll_collider(self, ob):
+    return bridge.is_collider_type(ob) or instanced_collection(ob) is not None
+
+
+def poll_hair(self, ob):
+    return ob.type == "CURVES"
+
+
+@never_raises
+def update_groom(self, context):
+    invalidation.refresh_groom(self.id_data)
+
+
+# ------------------------------------------------------ property factories
+# The solver settings share a few shapes; each factory fixes the shape and
+# leaves the name, default and the artist-facing tooltip to the call.
+
+
+def toggle(name, default, description, update=update_settings):
+    return BoolProperty(name=name, default=default, update=update, description=description)
+
+
+def factor(name, default, description):
+    """A 0..1 slider."""
+    return FloatProperty(
+        name=name, default=default, min=0.0, max=1.0, subtype="FACTOR",
+        update=update_settings, description=description,
+    )
+
+
+def degrees(name, default, description, **limits):
+    """An angle in degrees (the unit of :class:`core.Settings`)."""
+    limits = {"min": 0.01, "max": 360.0, **limits}
+    return FloatProperty(
+        name=name, default=default, update=update_settings, description=description, **limits
+    )
+
+
+def offset_property(description, update):
+    """A collision offset (world distance)."""
+    return FloatProperty(
+        name="Collision Offset", default=0.0, min=0.0, soft_max=0.1, subtype="DISTANCE",
+        unit="LENGTH", update=update, description=description,
+    )
+
+
+def choice(name, items, default, description):
+    """One of a few named behaviours (``items``: identifier, label, tooltip)."""
+    return EnumProperty(
+        name=name, items=items, default=default, update=update_settings, description=description
+    )
+
+
+def hidden(prop, name, default):
+    """Internal bookkeeping, never drawn."""
+    return prop(name=name, default=default, options={"HIDDEN"},
+                description=f"{name} (set by FurCollide, not meant to be edited)")
+
+
+def stat(name, key, description, prop=IntProperty, **kw):
+    """A read-only statistic of the last frame, served by the runtime registry."""
+    default = 0.0 if prop is FloatProperty else 0
+
+    def get(self):
+        return registry.stats_for(self.id_data).get(key, default)
+
+    return prop(name=name, get=get, description=description, **kw)

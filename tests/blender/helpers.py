@@ -1,0 +1,688 @@
+"""Scene builders and readers shared by the Blender tests (``from helpers import ...``).
+
+Builders make small, deterministic scenes with real Blender data (hair grids, boxes,
+surfaces, sweeping colliders); readers return numpy arrays (positions, offsets, world
+points, status codes); the rest plays frames, saves and reopens files, and records
+what a panel draws. Test files import from here, never from each other.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+from core import Status
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
+import oracle  # noqa: E402, F401  (the core tests' brute-force segment/triangle oracle)
+
+#: The add-on's module name: the tests register this checkout from a "dev" repository.
+ADDON = "bl_ext.fcdev.furcollide"
+
+INPUTS = "FurCollide Inputs"
+FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED = (
+    Status.FREE, Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED)
+RESOLVED = (FREE, COLLIDING, RECOVERING)
+SHOT_FRAMES = (1, 6)
+HALF = 0.25
+
+# ----------------------------------------------------------------- builders
+def make_hair(name="Fur", nx=6, ny=6, npts=5, length=1.0, spacing=0.2):
+    """A grid of straight vertical hairs on z = 0 (nx * ny curves)."""
+    hc = bpy.data.hair_curves.new(name)
+    hc.add_curves([npts] * (nx * ny))
+    xs = (np.arange(nx) - (nx - 1) / 2) * spacing
+    ys = (np.arange(ny) - (ny - 1) / 2) * spacing
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    roots = np.stack([X.ravel(), Y.ravel(), np.zeros(nx * ny)], 1)
+    t = np.linspace(0, length, npts)
+    P = (roots[:, None, :] + t[None, :, None] * np.array([0, 0, 1.0])).reshape(-1, 3)
+    hc.position_data.foreach_set("vector", P.astype(np.float32).ravel())
+    ob = bpy.data.objects.new(name, hc)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def make_surface(name="Skin", half=1.0, n=8, z=0.0, uv=True):
+    """A subdivided square (n x n quads) on z, as a growth surface; ``uv``: with a
+    UV map named UVMap (Fur Attach needs none)."""
+    xs = np.linspace(-half, half, n + 1)
+    verts = [(x, y, z) for y in xs for x in xs]
+    faces = [
+        (j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+        for j in range(n) for i in range(n)
+    ]
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    if uv:
+        me.uv_layers.new(name="UVMap")
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def make_box(name="Box", size=0.5, location=(0, 0, 0.6)):
+    """A closed cube mesh object (12 triangles) of edge ``size``."""
+    h = size / 2
+    verts = [(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-h, h)]
+    faces = [
+        (0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1),
+        (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3),
+    ]
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.location = location
+    return ob
+
+
+def make_scene(frames=(1, 12), nx=6, ny=6, animate=True):
+    """Hair grid + a box sweeping through it along x over ``frames``."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = frames
+    hair = make_hair(nx=nx, ny=ny)
+    box = make_box()
+    if animate:
+        box.location = (-1.2, 0, 0.6)
+        box.keyframe_insert("location", frame=frames[0])
+        box.location = (1.2, 0, 0.6)
+        box.keyframe_insert("location", frame=frames[1])
+        for fc_ in box.animation_data.action.fcurves if hasattr(
+            box.animation_data.action, "fcurves"
+        ) else []:
+            for k in fc_.keyframe_points:
+                k.interpolation = "LINEAR"
+    scene.frame_set(frames[0])
+    return hair, box
+
+
+def activate(ob, *selected):
+    """Make ``ob`` the active object, with ``selected`` (and ``ob``) selected."""
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    for o in selected:
+        o.select_set(True)
+    ob.select_set(True)
+    bpy.context.view_layer.objects.active = ob
+
+
+def setup(hair, colliders):
+    """Run furcollide.add with ``hair`` active and ``colliders`` selected."""
+    activate(hair, *colliders)
+    assert bpy.ops.furcollide.add() == {"FINISHED"}
+    return hair.furcollide.output
+
+
+def render_camera(scene, engine="BLENDER_WORKBENCH", px=32):
+    """A small, fast render set-up: an orthographic camera looking at the
+    origin from -Y, ``px`` x ``px`` pixels, Lock Interface on."""
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 3.0
+    cam.location = (0, -5, 0.5)
+    cam.rotation_euler = (np.pi / 2, 0, 0)
+    scene.render.engine = engine
+    if engine == "CYCLES":
+        scene.cycles.samples = 1
+        scene.cycles.device = "CPU"
+    scene.render.resolution_x = scene.render.resolution_y = px
+    scene.render.use_lock_interface = True
+    return cam
+
+
+def positions(ob):
+    """Original point positions of a hair object, (P, 3) float32."""
+    d = ob.data
+    P = np.empty(len(d.points) * 3, np.float32)
+    d.position_data.foreach_get("vector", P)
+    return P.reshape(-1, 3)
+
+
+def bake_crashing_at(fc, monkeypatch, frame, match="simulated crash"):
+    """Run furcollide.bake with a simulated crash in ``frame`` (the frames before
+    it are kept on disk); the error message must match ``match``."""
+    real = fc.bake.bake_frame
+
+    def crashing(setup, directory, trust_solver):
+        if setup.frame == frame:
+            raise RuntimeError("simulated crash")
+        return real(setup, directory, trust_solver)
+
+    with monkeypatch.context() as m:
+        m.setattr(fc.bake, "bake_frame", crashing)
+        with pytest.raises(RuntimeError, match=match):
+            bpy.ops.furcollide.bake()
+
+
+# ------------------------------------------------------------------ readers
+def offsets_of(ob):
+    """``(C+1,)`` int32 curve offsets of a hair object's original data."""
+    n = len(ob.data.curves)
+    offs = np.zeros(n + 1, np.int32)
+    if n:
+        ob.data.curve_offset_data.foreach_get("value", offs)
+    return offs
+
+
+def world(ob):
+    """World-space (P, 3) float64 points of a hair object's original data."""
+    P = positions(ob).astype(np.float64)
+    M = np.array(ob.matrix_world)
+    return P @ M[:3, :3].T + M[:3, 3]
+
+
+def status_of(out):
+    """The per-curve ``furcollide_status`` codes (core ``Status``) of an output."""
+    st = np.zeros(len(out.data.curves), np.int8)
+    out.data.attributes["furcollide_status"].data.foreach_get("value", st)
+    return st
+
+
+def seg_lengths(P, offs):
+    """Per-curve segment lengths (no segment between two curves)."""
+    d = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    keep = np.ones(len(d), bool)
+    keep[offs[1:-1] - 1] = False
+    return d[keep]
+
+
+# ---------------------------------------------------------------- animation
+def fcurves(id_):
+    """Every F-curve of ``id_``'s action (layered actions of Blender 4.4+ too)."""
+    ad = getattr(id_, "animation_data", None)
+    act = ad.action if ad else None
+    if act is None:
+        return []
+    if hasattr(act, "fcurves"):
+        return list(act.fcurves)
+    out = []
+    for layer in act.layers:
+        for strip in layer.strips:
+            for bag in strip.channelbags:
+                out.extend(bag.fcurves)
+    return out
+
+
+def linear(*ids):
+    """Make every keyframe of ``ids`` linear."""
+    for id_ in ids:
+        for fcu in fcurves(id_):
+            for k in fcu.keyframe_points:
+                k.interpolation = "LINEAR"
+
+
+def sweep_box(name="Box", x0=-1.2, x1=1.2, frames=(1, 8), size=0.5, y=0.0, z=0.6,
+              linear_keys=True):
+    """A box sweeping from ``x0`` to ``x1`` at height ``z``, keyed at both ends of
+    ``frames`` (linearly unless ``linear_keys`` is off)."""
+    box = make_box(name, size=size, location=(x0, y, z))
+    box.keyframe_insert("location", frame=frames[0])
+    box.location = (x1, y, z)
+    box.keyframe_insert("location", frame=frames[1])
+    if linear_keys:
+        linear(box)
+    return box
+
+
+# ---------------------------------------------------------------- playing
+def play(scene, frames):
+    """``scene.frame_set`` every frame of ``frames``."""
+    for f in frames:
+        scene.frame_set(f)
+
+
+def positions_per_frame(out, frames):
+    """Play ``frames`` in the context scene: ``{frame: out's positions}``."""
+    scene = bpy.context.scene
+    rec = {}
+    for f in frames:
+        scene.frame_set(f)
+        rec[f] = positions(out).copy()
+    return rec
+
+
+# ------------------------------------------------------------------- files
+def save_as(path):
+    """Save the open file as ``path``; returns it as a string."""
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return str(path)
+
+
+def save_in(tmp_path, name="shot.blend"):
+    """Save the open file as ``name`` in ``tmp_path``; returns the path."""
+    return save_as(tmp_path / name)
+
+
+def reopen(path):
+    """Open ``path`` from an empty session."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy.ops.wm.open_mainfile(filepath=path)
+
+
+def bake_files(d):
+    """The ``frame_*`` files in bake directory ``d`` (sorted; none when it is missing)."""
+    return sorted(f for f in os.listdir(d) if f.startswith("frame_")) if os.path.isdir(d) else []
+
+
+# ------------------------------------------------ shared by several test files
+def render_watching(tmp_path, tag, watch, setup):
+    """Render the animation; record every RENDER-depsgraph frame change (after
+    FurCollide's handler): ``{(frame, subframe): [{name: world points}, ...]}`` and
+    the setup's status message at each of them."""
+    scene = bpy.context.scene
+    scene.render.filepath = str(tmp_path / f"{tag}_####")
+    seen, statuses = {}, []
+
+    def spy(sc, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            key = (sc.frame_current, round(sc.frame_subframe, 3))
+            seen.setdefault(key, []).append({o.name: world(o).copy() for o in watch})
+            statuses.append((key, setup.furcollide.status_message))
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render(animation=True)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    return seen, statuses
+
+
+def check_render(seen, statuses, watch, frames):
+    """Every rendered whole frame equals the viewport at that frame; nothing failed."""
+    assert [s for s in statuses if s[1]] == [], "status set during the render"
+    whole = sorted(k[0] for k in seen if k[1] == 0.0)
+    assert sorted(set(whole)) == list(frames)
+    scene = bpy.context.scene
+    viewport = {}
+    for f in frames:
+        scene.frame_set(f)
+        viewport[f] = {o.name: world(o).copy() for o in watch}
+        for snap in seen[(f, 0.0)]:
+            for o in watch:
+                np.testing.assert_array_equal(snap[o.name], viewport[f][o.name],
+                                              err_msg=f"{o.name} frame {f}")
+    return viewport
+
+
+def dependency_objects(ob):
+    mod = ob.modifiers[0]
+    assert mod.name == INPUTS, [m.name for m in ob.modifiers]
+    return {n.inputs["Object"].default_value for n in mod.node_group.nodes
+            if n.bl_idname == "GeometryNodeObjectInfo"}
+
+
+def duplicate(ob, dx=0.0):
+    dup = ob.copy()
+    dup.data = ob.data.copy()
+    dup.name = ob.name + " Copy"
+    dup.location.x += dx
+    bpy.context.scene.collection.objects.link(dup)
+    return dup
+
+
+class RecordingLayout:
+    """Records what a panel draws (panels cannot be drawn headless)."""
+
+    def __init__(self, log):
+        self.log = log
+        self.use_property_split = self.use_property_decorate = self.enabled = None
+
+    def _child(self, *args, **kw):
+        return RecordingLayout(self.log)
+
+    box = row = column = _child
+
+    def prop(self, data, name, **kw):
+        assert hasattr(data, name), name
+        self.log.append(("prop", name))
+
+    def operator(self, idname, **kw):
+        mod, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, mod), name), idname
+        self.log.append(("operator", idname))
+        return type("Props", (), {})()
+
+    def prop_search(self, data, name, search_data, search_name, **kw):
+        assert hasattr(data, name) and hasattr(search_data, search_name), name
+        self.log.append(("prop", name))
+
+    def label(self, **kw):
+        self.log.append(("label", kw.get("text")))
+
+    def separator(self, **kw):
+        pass
+
+
+def draw_panel(panel):
+    log = []
+    panel.draw(type("P", (), {"layout": RecordingLayout(log)})(), bpy.context)
+    return log
+
+
+class EnabledLayout:
+    """Records what a panel draws, with the effective ``enabled`` state of every
+    property (panels cannot be drawn headless)."""
+
+    def __init__(self, log, parent=None):
+        self.log = log
+        self.parent = parent
+        self.enabled = True
+        self.active = True
+        self.alert = False
+        self.use_property_split = self.use_property_decorate = None
+
+    def _on(self):
+        return self.enabled and (self.parent is None or self.parent._on())
+
+    def _child(self, *args, **kw):
+        return EnabledLayout(self.log, self)
+
+    box = row = column = _child
+
+    def prop(self, data, name, **kw):
+        assert hasattr(data, name), name
+        self.log.append(("prop", name, self._on()))
+
+    def operator(self, idname, **kw):
+        self.log.append(("operator", idname, self._on()))
+        return type("Props", (), {})()
+
+    def label(self, **kw):
+        self.log.append(("label", kw.get("text"), self._on()))
+
+    def separator(self, **kw):
+        pass
+
+
+def draw_enabled(panel):
+    log = []
+    fake = type("P", (), {"layout": EnabledLayout(log), "prepare": getattr(panel, "prepare", None),
+                          "settings": getattr(panel, "settings", None)})()
+    panel.draw(fake, bpy.context)
+    return log
+
+
+def small_setup(fc, frames=(1, 8), nx=4, ny=4):
+    hair, box = fc.make_scene(frames=frames, nx=nx, ny=ny)
+    out = fc.setup(hair, [box])
+    return hair, box, out
+
+
+def render_spy(fc, tmp_path, hair, out, tag):
+    """Render the animation; {frame: (world points, status, outdated)} as the
+    RENDER depsgraph's frame changes left them (after FurCollide's handler)."""
+    scene = bpy.context.scene
+    scene.render.filepath = str(tmp_path / f"{tag}_####")
+    seen = {}
+
+    def spy(sc, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen[sc.frame_current] = (world(out).copy(), fc.registry.status_for(hair),
+                                      hair.furcollide.is_outdated)
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render(animation=True)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    return seen
+
+
+def mesh_object(name, verts, edges=(), faces=()):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(list(verts), list(edges), list(faces))
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def no_faces(name="Wire"):
+    """A mesh with vertices and an edge but no face."""
+    return mesh_object(name, [(0, 0, 0.5), (1, 0, 0.5)], [(0, 1)])
+
+
+def ragged_groom(name, surf=None, n=60, seed=1, one_point=None):
+    """A groom whose curves have 2 to 8 points each (ragged), roots on z = 0."""
+    rng = np.random.default_rng(seed)
+    sizes = rng.integers(2, 9, n)
+    if one_point is not None:
+        sizes[one_point] = 1
+    hc = bpy.data.hair_curves.new(name)
+    hc.add_curves(sizes.tolist())
+    roots = np.c_[rng.uniform(-0.6, 0.6, (n, 2)), np.zeros(n)]
+    lengths = rng.uniform(0.6, 1.2, n)
+    P = [r + np.linspace(0, L, k)[:, None] * [0, 0, 1.0]
+         for r, k, L in zip(roots, sizes, lengths, strict=True)]
+    hc.position_data.foreach_set("vector", np.concatenate(P).astype(np.float32).ravel())
+    hc.surface = surf
+    ob = bpy.data.objects.new(name, hc)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def build_setup(fc, prefix, frames=(1, 6), nx=4, ny=4):
+    """Hair + a sweeping box in the context scene, with a setup; returns (hair, box, out)."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = frames
+    hair = make_hair(prefix + "Fur", nx=nx, ny=ny)
+    box = sweep_box(prefix + "Box", -1.2, 1.2, frames)
+    scene.frame_set(frames[0])
+    out = fc.setup(hair, [box])
+    return hair, box, out
+
+
+def tris_world(ob, depsgraph=None):
+    """World vertices (float64) and triangles of ``ob``'s evaluated mesh."""
+    dg = depsgraph or bpy.context.evaluated_depsgraph_get()
+    e = ob.evaluated_get(dg)
+    me = e.data
+    V = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", V)
+    me.calc_loop_triangles()
+    F = np.empty(len(me.loop_triangles) * 3, np.int32)
+    me.loop_triangles.foreach_get("vertices", F)
+    return oracle.transform(V.reshape(-1, 3), np.array(e.matrix_world)), F.reshape(-1, 3)
+
+
+def resolved_crossing(out, colliders, status=None):
+    """Curves whose status says resolved but that surely cross a collider."""
+    P, offs = world(out), offsets_of(out)
+    st = status_of(out) if status is None else status
+    bad = np.zeros(len(offs) - 1, bool)
+    for ob in colliders:
+        V, F = tris_world(ob)
+        margin = oracle.float32_margin(P, V)
+        bad |= oracle.segments_hit_mesh(P, offs, V, F, abs_eps=margin)
+    return np.flatnonzero(bad & np.isin(st, RESOLVED))
+
+
+def check_frame(hair, out, colliders, exact_roots=True, lengths=True):
+    """The per-frame invariants; returns the status codes."""
+    s = hair.furcollide
+    assert s.status_message == "", s.status_message
+    offs = offsets_of(out)
+    st = status_of(out)
+    assert len(resolved_crossing(out, colliders, st)) == 0, resolved_crossing(out, colliders, st)
+    src, res = oracle.transform(positions(hair), None), positions(out)
+    if exact_roots:
+        np.testing.assert_array_equal(res[offs[:-1]], positions(hair)[offs[:-1]])
+    else:
+        np.testing.assert_allclose(world(out)[offs[:-1]], world(hair)[offs[:-1]], atol=2e-5)
+    if lengths:
+        np.testing.assert_allclose(seg_lengths(res, offs), seg_lengths(src, offs),
+                                   rtol=2e-4, atol=1e-6)
+    return st
+
+
+def bake_setup(hair):
+    bpy.context.view_layer.objects.active = hair
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert hair.furcollide.is_baked
+
+
+def bake_files_of(hair):
+    d = bpy.path.abspath(hair.furcollide.bake_path)
+    return sorted(f for f in os.listdir(d) if f.startswith("frame_")) if os.path.isdir(d) else []
+
+
+def record(scene, out, frames):
+    rec = {}
+    for f in frames:
+        scene.frame_set(f)
+        rec[f] = (positions(out).copy(), status_of(out).copy())
+    return rec
+
+
+def assert_same_frames(rec, scene, out, frames=None, what=""):
+    for f in frames or sorted(rec):
+        scene.frame_set(f)
+        np.testing.assert_array_equal(positions(out), rec[f][0], err_msg=f"{what} frame {f}")
+        np.testing.assert_array_equal(status_of(out), rec[f][1], err_msg=f"{what} frame {f}")
+
+
+def preroll_scene(fc):
+    """A shot of frames 0..3 whose setup starts at frame -4 (a pre-roll so the fur
+    has settled when the shot starts; Blender's scene range cannot go below 0, the
+    setup's Frame Start can). The box sweeps from frame -4 to 3."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 0, 3
+    hair = make_hair(nx=5, ny=5)
+    box = sweep_box(frames=(-4, 3))
+    scene.frame_set(0)
+    out = fc.setup(hair, [box])
+    s = hair.furcollide
+    s.frame_start = -4
+    assert (s.frame_start, s.frame_end) == (-4, 3)
+    return scene, hair, box, out
+
+
+def snapshot(ob):
+    """What an artist groomed: positions and curve layout of ``ob``'s data."""
+    return positions(ob).copy(), offsets_of(ob).copy()
+
+
+def assert_unchanged(ob, snap, what=""):
+    P, offs = snap
+    np.testing.assert_array_equal(offsets_of(ob), offs, err_msg=f"{ob.name} layout {what}")
+    np.testing.assert_array_equal(positions(ob), P, err_msg=f"{ob.name} positions {what}")
+
+
+def sweep_setup(fc, frames=SHOT_FRAMES, nx=3, ny=3, collection=None):
+    """Hair + sweeping box (optionally moved into a new collection) and a setup.
+    Returns (hair, box, out)."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = frames
+    hair = make_hair("Fur", nx=nx, ny=ny)
+    box = sweep_box(frames=frames, linear_keys=False)
+    if collection is not None:
+        coll = bpy.data.collections.new(collection)
+        scene.collection.children.link(coll)
+        for o in (hair, box):
+            coll.objects.link(o)
+            scene.collection.objects.unlink(o)
+    scene.frame_set(frames[0])
+    out = fc.setup(hair, [box])
+    return hair, box, out
+
+
+def play_checked(scene, ob, frames=range(SHOT_FRAMES[0], SHOT_FRAMES[1] + 1), check_status=True):
+    """Play ``frames``; the output's positions per frame. The status stays empty."""
+    got = {}
+    for f in frames:
+        scene.frame_set(f)
+        if check_status:
+            assert ob.furcollide.status_message == "", (f, ob.furcollide.status_message)
+        got[f] = positions(ob.furcollide.output).copy()
+    return got
+
+
+def reference_frames(fc, scene, hair):
+    """Positions of every frame, played from the start; checks something collided."""
+    ref = play_checked(scene, hair)
+    assert any(not np.array_equal(p, positions(hair)) for p in ref.values()), "nothing collided"
+    scene.frame_set(SHOT_FRAMES[0])
+    return ref
+
+
+def same_frames(got, ref):
+    for f, p in got.items():
+        np.testing.assert_array_equal(p, ref[f], err_msg=f"frame {f}")
+
+
+def no_traceback(capsys):
+    cap = capsys.readouterr()
+    assert "Traceback" not in cap.out + cap.err, cap.out + cap.err
+    return cap
+
+
+def frames_on_disk(d):
+    return sorted(f for f in os.listdir(d) if f.startswith("frame_")) if os.path.isdir(d) else []
+
+
+def dense_groom(fc, nx=10, ny=10, uv=True):
+    """Hair grid (roots on z = 0) attached to a surface, with surface UVs."""
+    hair = fc.make_scene(nx=nx, ny=ny, animate=False)[0]
+    surf = make_surface()
+    hair.data.surface = surf
+    hair.data.surface_uv_map = "UVMap"
+    if uv:
+        C = len(hair.data.curves)
+        uvs = np.random.default_rng(3).random((C, 2)).astype(np.float32)
+        hair.data.attributes.new("surface_uv_coordinate", "FLOAT2", "CURVE").data.foreach_set(
+            "vector", uvs.ravel()
+        )
+    return hair, surf
+
+
+def segments_in_box(P, offsets, center, half=HALF, shrink=1e-4):
+    """Indices of curves with a segment meeting the axis-aligned box (slab test)."""
+    lo = np.asarray(center, np.float64) - half + shrink
+    hi = np.asarray(center, np.float64) + half - shrink
+    P = np.asarray(P, np.float64)
+    sizes = np.diff(offsets)
+    curve = np.repeat(np.arange(len(sizes)), sizes - 1)
+    s0 = np.arange(len(curve)) + curve  # first point of every segment
+    a, d = P[s0], P[s0 + 1] - P[s0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (lo - a) / d
+        t2 = (hi - a) / d
+    inside_slab = (a >= lo) & (a <= hi)  # d == 0 on an axis: inside that slab or never
+    tmin = np.where(d == 0, np.where(inside_slab, -np.inf, np.inf), np.minimum(t1, t2))
+    tmax = np.where(d == 0, np.where(inside_slab, np.inf, -np.inf), np.maximum(t1, t2))
+    t0 = np.maximum(tmin.max(1), 0.0)
+    t_1 = np.minimum(tmax.min(1), 1.0)
+    hit = t0 <= t_1
+    return np.unique(curve[hit])
+
+
+def groom_scene(fc):
+    """Guides (5 x 5) and a dense groom (12 x 12) on one Surface, a box collider."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 8
+    scene.frame_set(1)
+    surf = make_surface(half=1.2, n=6, uv=False)
+    guides = make_hair("Guides", nx=5, ny=5, spacing=0.3)
+    groom = make_hair("Groom", nx=12, ny=12, spacing=0.1)
+    guides.data.surface = surf
+    groom.data.surface = surf
+    box = make_box(location=(-2.0, 0, 0.6))
+    box.keyframe_insert("location", frame=1)
+    box.location = (0.05, 0.05, 0.6)
+    box.keyframe_insert("location", frame=6)
+    scene.frame_set(1)
+    out = fc.setup(guides, [box])
+    guides.furcollide.frame_end = 8
+    guides.furcollide.groom.groom = groom
+    bpy.context.view_layer.objects.active = guides
+    return guides, groom, box, out

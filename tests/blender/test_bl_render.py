@@ -1,0 +1,267 @@
+"""Renders: animation renders see the solved or baked frame, motion-blur subframes,
+frame steps, time remapping and one-frame ranges agree with the viewport."""
+
+import os
+
+import bpy
+import numpy as np
+import pytest
+from helpers import (
+    COLLIDING,
+    assert_same_frames,
+    bake_files_of,
+    bake_setup,
+    check_frame,
+    check_render,
+    make_box,
+    make_hair,
+    positions,
+    render_camera,
+    render_spy,
+    render_watching,
+    save_in,
+    status_of,
+    sweep_box,
+    world,
+)
+
+pytestmark = pytest.mark.blender
+
+
+
+
+def _render_setup(fc, tmp_path):
+    hair, box = fc.make_scene(frames=(1, 4), nx=8, ny=8)
+    out = fc.setup(hair, [box])
+    sc = bpy.context.scene
+    render_camera(sc, px=48)
+    sc.render.film_transparent = True
+    box.hide_render = True  # the collider is hidden from render, yet it must count
+    return hair, out
+
+
+def render_alpha(tmp_path, tag):
+    sc = bpy.context.scene
+    sc.render.filepath = str(tmp_path / f"{tag}_####")
+    bpy.ops.render.render(animation=True)
+    imgs = []
+    for f in range(sc.frame_start, sc.frame_end + 1):
+        im = bpy.data.images.load(str(tmp_path / f"{tag}_{f:04d}.png"))
+        imgs.append(np.array(im.pixels[:]).reshape(-1, 4)[:, 3].copy())
+        bpy.data.images.remove(im)
+    return imgs
+
+
+def _step_scene(fc):
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 7), nx=4, ny=4)
+    out = fc.setup(hair, [box])
+    render_camera(scene)
+    box.hide_render = True
+    scene.frame_step = 2
+    scene.frame_set(1)
+    return scene, hair, out
+
+
+def test_render_animation_sees_result(fc, tmp_path):
+    hair, out = _render_setup(fc, tmp_path)
+    seen = {}
+
+    def spy(scene, depsgraph):  # runs after FurCollide's handler
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen[scene.frame_current] = fc.positions(out).copy()
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        collided = render_alpha(tmp_path, "on")
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    assert sorted(seen) == [1, 2, 3, 4]
+    # every rendered frame got exactly the solved (cached) result
+    rt = fc.registry.get_runtime(hair)
+    assert sorted(rt.memory.frames) == [1, 2, 3, 4]
+    for f in range(1, 5):
+        bpy.context.scene.frame_set(f)
+        assert np.array_equal(fc.positions(out), seen[f]), f
+    moved = [f for f in seen if not np.array_equal(seen[f], fc.positions(hair))]
+    assert moved, "the box never touched the hair"
+    hair.furcollide.enabled = False
+    plain = render_alpha(tmp_path, "off")
+    assert any(not np.array_equal(a, b) for a, b in zip(collided, plain, strict=True))
+
+
+def test_render_after_reload_reads_the_bake(fc, tmp_path):
+    hair, out = _render_setup(fc, tmp_path)
+    path = str(tmp_path / "render.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    bpy.ops.wm.save_mainfile()
+    d = bpy.path.abspath(hair.furcollide.bake_path)
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy.ops.wm.open_mainfile(filepath=path)  # a farm node: nothing in memory
+    out = bpy.data.objects["Fur FurCollide"]
+    seen = {}
+
+    def spy(scene, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen[scene.frame_current] = fc.positions(out).copy()
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.context.scene.frame_start = 2  # render a sub-range
+        render_alpha(tmp_path, "farm")
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    assert sorted(seen) == [2, 3, 4]
+    for f in seen:
+        assert np.array_equal(seen[f], fc.cache.read_frame(d, f)[0]), f
+
+
+@pytest.mark.parametrize("engine", ["BLENDER_WORKBENCH", "CYCLES"])
+def test_motion_blur_render_plain_setup(fc, tmp_path, engine):
+    """Workbench ignores motion blur; Cycles sets subframes (frame - 0.25, frame +
+    0.25) through the frame handler, which must never step there."""
+    hair, box = fc.make_scene(frames=(1, 4), nx=5, ny=5)
+    out = fc.setup(hair, [box])
+    scene = bpy.context.scene
+    render_camera(scene, engine)
+    scene.render.use_motion_blur = True
+    box.hide_render = True
+    seen, statuses = render_watching(tmp_path, "mb", [out], hair)
+    assert hair.furcollide.status_message == ""
+    viewport = check_render(seen, statuses, [out], range(1, 5))
+    # subframes keep the whole frame being rendered (README: "Never steps")
+    for (f, sub), snaps in seen.items():
+        if sub:
+            whole = f + 1 if sub > 0.5 else f
+            for snap in snaps:
+                np.testing.assert_array_equal(snap[out.name], viewport[whole][out.name])
+    if engine == "CYCLES":
+        assert any(sub for _f, sub in seen), "Cycles did not render motion steps"
+    assert any(not np.array_equal(viewport[f][out.name], viewport[1][out.name])
+               for f in range(2, 5))
+    # the same as a fresh play in the viewport
+    bpy.context.view_layer.objects.active = hair
+    bpy.ops.furcollide.reset()
+    for f in range(1, 5):
+        scene.frame_set(f)
+        np.testing.assert_array_equal(world(out), viewport[f][out.name], err_msg=f"{f}")
+
+
+def test_render_with_frame_step_holds_and_warns(fc, tmp_path, capsys):
+    """Unbaked and not played: every rendered frame after the first is a jump ahead
+    (README: hold the newest cached frame, mark outdated, one console line)."""
+    scene, hair, out = _step_scene(fc)
+    first = world(out).copy()
+    capsys.readouterr()
+    seen = render_spy(fc, tmp_path, hair, out, "step")
+    console = capsys.readouterr()
+    assert sorted(seen) == [1, 3, 5, 7]
+    for f in (1, 3, 5, 7):
+        assert os.path.exists(tmp_path / f"step_{f:04d}.png")
+    P, (level, msg), outdated = seen[1]
+    np.testing.assert_array_equal(P, first)
+    assert level == "INFO" and msg == "" and not outdated
+    for f in (3, 5, 7):  # a jump ahead: hold the newest cached frame, mark outdated
+        P, (level, msg), outdated = seen[f]
+        np.testing.assert_array_equal(P, first, err_msg=f"frame {f}")
+        assert level == "WARNING" and outdated, (f, level, msg)
+        assert f"Frame {f} is not cached" in msg and "holding frame 1" in msg, msg
+    assert "Traceback" not in console.err + console.out
+    assert "Error" not in console.err
+    lines = [ln for ln in console.out.splitlines() if ln.startswith("FurCollide 'Fur'")]
+    assert len(lines) == 1 and "not cached" in lines[0], lines  # one console line
+
+
+@pytest.mark.parametrize("how", ["played", "baked"])
+def test_render_with_frame_step_after_play_or_bake(fc, tmp_path, capsys, how):
+    """Played every frame first (memory cache) or baked: the rendered frames are the
+    solved ones, with no warning."""
+    scene, hair, out = _step_scene(fc)
+    want = {}
+    for f in range(1, 8):
+        scene.frame_set(f)
+        want[f] = world(out).copy()
+    if how == "baked":
+        save_in(tmp_path)
+        assert bpy.ops.furcollide.bake() == {"FINISHED"}
+        bpy.context.view_layer.objects.active = hair
+    scene.frame_set(1)
+    capsys.readouterr()
+    seen = render_spy(fc, tmp_path, hair, out, how)
+    console = capsys.readouterr()
+    assert sorted(seen) == [1, 3, 5, 7]
+    for f, (P, (level, msg), outdated) in seen.items():
+        np.testing.assert_array_equal(P, want[f], err_msg=f"frame {f}")
+        assert (level, msg, outdated) == ("INFO", "", False), (f, level, msg)
+    assert any(not np.array_equal(want[f], want[1]) for f in (3, 5, 7))
+    assert "Traceback" not in console.err + console.out
+
+
+def test_time_remapping_play_bake_and_render_agree(fc, tmp_path):
+    """Time remapping (Old 100 -> New 50: the animation runs twice as fast): the
+    collider is read at the remapped time, and play, bake and render agree."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 6
+    scene.frame_set(1)
+    hair = make_hair(nx=5, ny=5)
+    box = sweep_box(frames=(1, 11))
+    scene.render.frame_map_old, scene.render.frame_map_new = 100, 50
+    scene.frame_set(1)
+    out = fc.setup(hair, [box])
+    played = {}
+    for f in range(1, 7):
+        scene.frame_set(f)
+        assert scene.frame_subframe == 0.0
+        # the box is where the un-remapped animation has it at frame 2f - 1 ... 2f
+        want = min(1.2, -1.2 + 0.24 * (2 * f - 1))  # (keyed at frames 1 and 11)
+        assert box.matrix_world.translation.x == pytest.approx(want, abs=1e-5)
+        check_frame(hair, out, [box])
+        played[f] = (positions(out).copy(), status_of(out).copy())
+    assert any(played[f][1].any() for f in played)
+    save_in(tmp_path)
+    bake_setup(hair)
+    assert_same_frames(played, scene, out, what="baked")
+    render_camera(scene, px=16)
+    box.hide_render = True
+    scene.frame_set(1)
+    seen = render_spy(fc, tmp_path, hair, out, "remap")
+    assert sorted(seen) == list(range(1, 7))
+    for f, (P, (level, msg), outdated) in seen.items():
+        scene.frame_set(f)
+        np.testing.assert_array_equal(P, world(out), err_msg=f"render frame {f}")
+        assert (level, msg, outdated) == ("INFO", "", False), (f, level, msg)
+
+
+def test_one_frame_range_plays_bakes_and_renders(fc, tmp_path):
+    """Frame Start = Frame End = 5: before it the source, at it the solve, after it
+    the held frame 5; the bake is one file; a render shows it."""
+    scene = bpy.context.scene
+    scene.frame_start = scene.frame_end = 5
+    scene.frame_set(5)
+    hair = make_hair(nx=5, ny=5)
+    box = make_box(location=(0.1, 0.0, 0.6))
+    out = fc.setup(hair, [box])
+    s = hair.furcollide
+    assert (s.frame_start, s.frame_end) == (5, 5)
+    st = check_frame(hair, out, [box])
+    solved = positions(out).copy()
+    assert (st == COLLIDING).sum() > 0
+    scene.frame_set(4)
+    np.testing.assert_array_equal(positions(out), positions(hair))
+    scene.frame_set(9)
+    np.testing.assert_array_equal(positions(out), solved)
+    assert s.status_message == "After the end frame: holding frame 5" and not s.is_outdated
+    save_in(tmp_path)
+    bake_setup(hair)
+    assert bake_files_of(hair) == ["frame_000005.npz"]
+    for f, want in ((5, solved), (8, solved), (4, positions(hair))):
+        scene.frame_set(f)
+        np.testing.assert_array_equal(positions(out), want, err_msg=f"frame {f}")
+    render_camera(scene, px=16)
+    box.hide_render = True
+    scene.frame_set(5)
+    seen = render_spy(fc, tmp_path, hair, out, "one")
+    assert sorted(seen) == [5]
+    scene.frame_set(5)
+    np.testing.assert_array_equal(seen[5][0], world(out))

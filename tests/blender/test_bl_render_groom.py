@@ -1,0 +1,445 @@
+"""The render groom: a dense groom follows the collided guides with its clearance pass,
+its output's inputs follow the setup's colliders, renders with the guides hidden,
+baked guides, ragged or foreign grooms, Guides per Curve and binding again."""
+
+import bpy
+import numpy as np
+import pytest
+from helpers import (
+    HALF,
+    INPUTS,
+    activate,
+    check_render,
+    dependency_objects,
+    draw_panel,
+    duplicate,
+    groom_scene,
+    make_box,
+    make_surface,
+    offsets_of,
+    play,
+    ragged_groom,
+    render_camera,
+    render_watching,
+    seg_lengths,
+    segments_in_box,
+    world,
+)
+
+pytestmark = pytest.mark.blender
+
+
+
+
+def _groom_bound(fc):
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    play(bpy.context.scene, range(1, 4))
+    new = make_box("Wall", location=(0.0, 1.0, 0.6))
+    return guides, out, guides.furcollide.groom.output, box, new
+
+
+def _same_inputs(out, gout, must_have):
+    assert gout.modifiers[0].name == INPUTS
+    assert gout.modifiers[0].node_group == out.modifiers[0].node_group
+    have = dependency_objects(gout)
+    assert must_have <= have, (must_have, have)
+    assert dependency_objects(out) == have
+
+
+def test_render_groom_follows_guides_with_clearance(fc):
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    groom_before = world(groom)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    g = guides.furcollide.groom
+    gout = g.output
+    assert gout is not None and gout != groom
+    assert groom.hide_render
+    roff = offsets_of(gout)
+    # at the reference pose the guides do not collide: identity
+    np.testing.assert_allclose(world(gout), groom_before, atol=1e-5)
+    play(scene, range(1, 8))
+    P = world(gout)
+    assert np.abs(P - groom_before).max() > 0.05  # the groom follows the guides
+    assert len(segments_in_box(P, roff, box.matrix_world.translation)) == 0
+    np.testing.assert_allclose(P[roff[:-1]], groom_before[roff[:-1]], atol=1e-5)  # roots
+    np.testing.assert_array_equal(world(groom), groom_before)  # the groom is untouched
+    fixed_on = guides.furcollide.stat_groom_fixed
+    # without the clearance pass, the blend between guides leaves render curves inside
+    g.use_clearance = False
+    scene.frame_set(6)
+    scene.frame_set(7)
+    crossing = segments_in_box(world(gout), roff, box.matrix_world.translation)
+    assert len(crossing) > 0
+    assert fixed_on >= len(crossing) > 0  # the pass reported the curves it fixed
+
+
+def test_render_groom_remove_restores_the_groom(fc):
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    name = guides.furcollide.groom.output.name
+    assert bpy.ops.furcollide.groom_remove() == {"FINISHED"}
+    assert bpy.data.objects.get(name) is None
+    assert not groom.hide_render
+    assert guides.furcollide.groom.output is None
+    assert not bpy.ops.furcollide.groom_remove.poll()
+
+
+def test_render_groom_bind_refuses_the_guides_themselves(fc):
+    guides, groom, box, out = groom_scene(fc)
+    guides.furcollide.groom.groom = guides
+    assert not bpy.ops.furcollide.groom_bind.poll()
+
+
+def test_clearance_pass_keeps_the_setup_collision_offset(fc):
+    """Render curves freed by the clearance pass keep the setup's Collision Offset from
+    the collider, like the guides."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    guides.furcollide.collision_offset = 0.05
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    play(scene, range(1, 8))
+    gout = guides.furcollide.groom.output
+    roff = offsets_of(gout)
+    center = box.matrix_world.translation
+    # inside the box grown by most of the offset: no segment
+    assert len(segments_in_box(world(gout), roff, center, half=HALF + 0.04)) == 0
+    assert guides.furcollide.stat_groom_fixed > 0
+
+
+def test_render_groom_renders_every_frame_with_the_guides_hidden(fc, tmp_path):
+    """The usual render set-up: only the render groom is rendered (the guides,
+    their FurCollide output, the groom source and the collider are hidden from
+    render). Every rendered frame still shows that frame's render groom."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    for o in (guides, out, groom, box):
+        o.hide_render = True
+    assert not gout.hide_render
+    scene.frame_start, scene.frame_end = 1, 7
+    render_camera(scene)
+    scene.render.filepath = str(tmp_path / "groom_####")
+    seen = {}
+
+    def spy(sc, depsgraph):  # runs after FurCollide's handler
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen[sc.frame_current] = world(gout).copy()
+
+    scene.frame_set(1)
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render(animation=True)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    assert sorted(seen) == list(range(1, 8))
+    assert guides.furcollide.status_message == ""
+    moved = 0
+    for f in range(1, 8):
+        scene.frame_set(f)
+        np.testing.assert_array_equal(world(gout), seen[f], err_msg=f"frame {f}")
+        moved += int(not np.array_equal(seen[f], seen[1]))
+    assert moved > 0  # the render groom moved with the guides
+
+
+def test_render_groom_output_of_an_older_file_gets_its_inputs_on_load(fc, tmp_path):
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    name = fc.dependencies.DEPENDENCY_MODIFIER
+    assert gout.modifiers[0].name == name  # the bind gives it the modifier
+    gout.modifiers.remove(gout.modifiers[name])  # as saved by an earlier version
+    path = str(tmp_path / "old.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    gout = bpy.data.objects["Guides"].furcollide.groom.output
+    assert gout.modifiers[0].name == name
+    guides_out = bpy.data.objects["Guides FurCollide"]
+    assert gout.modifiers[0].node_group == guides_out.modifiers[0].node_group
+
+
+def test_render_groom_panel_hints_bind_again_after_guides_per_curve_changes(fc):
+
+    guides, groom, box, out = groom_scene(fc)
+    g = guides.furcollide.groom
+    g.guides = 3
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    panel = bpy.types.FURCOLLIDE_PT_pipeline
+    hint = ("label", "Bound with 3: press Bind Groom again")
+    assert hint not in draw_panel(panel)
+    g.guides = 5
+    assert hint in draw_panel(panel)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    assert ("label", "Bound with 5: press Bind Groom again") not in draw_panel(panel)
+
+
+@pytest.mark.parametrize("engine", ["BLENDER_WORKBENCH", "CYCLES"])
+def test_motion_blur_render_groom(fc, tmp_path, engine):
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    for o in (guides, out, groom, box):
+        o.hide_render = True
+    scene.frame_start, scene.frame_end = 1, 6
+    render_camera(scene, engine)
+    scene.render.use_motion_blur = True
+    scene.frame_set(1)
+    seen, statuses = render_watching(tmp_path, "mbg", [out, gout], guides)
+    assert guides.furcollide.status_message == ""
+    viewport = check_render(seen, statuses, [out, gout], range(1, 7))
+    for (f, sub), snaps in seen.items():
+        if sub:
+            whole = f + 1 if sub > 0.5 else f
+            for snap in snaps:
+                np.testing.assert_array_equal(snap[gout.name], viewport[whole][gout.name])
+    assert any(not np.array_equal(viewport[f][gout.name], viewport[1][gout.name])
+               for f in range(2, 7))
+
+
+@pytest.mark.parametrize("order", ["bind_then_bake", "bake_then_bind"])
+def test_render_groom_of_a_baked_setup_with_guides_hidden(fc, tmp_path, order):
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    guides.furcollide.frame_end = 6
+    scene.frame_start, scene.frame_end = 1, 6
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "groom.blend"))
+    activate(guides)
+    if order == "bind_then_bake":
+        assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+        assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    else:
+        assert bpy.ops.furcollide.bake() == {"FINISHED"}
+        scene.frame_set(1)
+        assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    assert guides.furcollide.is_baked
+    gout = guides.furcollide.groom.output
+    for o in (guides, out, groom, box):
+        o.hide_render = True
+    render_camera(scene)
+    scene.frame_set(1)
+    seen, statuses = render_watching(tmp_path, "baked", [gout], guides)
+    assert guides.furcollide.status_message == ""
+    viewport = check_render(seen, statuses, [gout], range(1, 7))
+    assert any(not np.array_equal(viewport[f][gout.name], viewport[1][gout.name])
+               for f in range(2, 7))
+
+
+def test_collider_added_after_groom_bind_reaches_the_groom_inputs(fc):
+    guides, out, gout, box, new = _groom_bound(fc)
+    activate(guides, new)
+    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    _same_inputs(out, gout, {guides, box, new})
+
+
+def test_collider_replaced_after_groom_bind_reaches_the_groom_inputs(fc):
+    guides, out, gout, box, new = _groom_bound(fc)
+    guides.furcollide.colliders[0].object = new
+    _same_inputs(out, gout, {guides, new})
+    assert box not in dependency_objects(gout)
+
+
+def test_collider_collection_after_groom_bind_reaches_the_groom_inputs(fc):
+    guides, out, gout, box, new = _groom_bound(fc)
+    coll = bpy.data.collections.new("Colliders")
+    bpy.context.scene.collection.children.link(coll)
+    coll.objects.link(new)
+    guides.furcollide.collider_collection = coll
+    _same_inputs(out, gout, {guides, box, new})
+
+
+def test_collider_added_after_reopening_the_file_reaches_the_groom_inputs(fc, tmp_path):
+    """The next day: open the file (nothing in memory yet) and add a collider."""
+    guides, out, gout, box, new = _groom_bound(fc)
+    path = str(tmp_path / "groom.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    guides, new = bpy.data.objects["Guides"], bpy.data.objects["Wall"]
+    out, gout = guides.furcollide.output, guides.furcollide.groom.output
+    activate(guides, new)
+    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    play(bpy.context.scene, range(1, 3))
+    assert [c.object for c in guides.furcollide.colliders][-1] == new
+    _same_inputs(out, gout, {guides, bpy.data.objects["Box"], new})
+
+
+def test_mesh_linked_into_the_collider_collection_reaches_the_groom_inputs(fc):
+    """The collection is set first; a mesh linked into it later collides (it is read
+    every frame) and must be evaluated for both outputs in renders too."""
+    guides, out, gout, box, new = _groom_bound(fc)
+    coll = bpy.data.collections.new("Colliders")
+    bpy.context.scene.collection.children.link(coll)
+    guides.furcollide.collider_collection = coll
+    play(bpy.context.scene, range(1, 3))
+    coll.objects.link(new)
+    bpy.context.view_layer.update()
+    play(bpy.context.scene, range(1, 4))
+    assert new in {r.object for r in fc.colliders.collider_objects(guides)}
+    _same_inputs(out, gout, {guides, box, new})
+
+
+def test_render_groom_renders_a_collider_added_after_the_bind(fc, tmp_path):
+    """The added collider moves through the groom and is hidden from render with
+    everything else but the groom output: the render matches the viewport."""
+    scene = bpy.context.scene
+    guides, out, gout, box, new = _groom_bound(fc)
+    box.location = (5, 5, 5)  # only the new wall matters
+    new.location = (0.0, -2.0, 0.6)
+    new.keyframe_insert("location", frame=1)
+    new.location = (0.05, 0.05, 0.6)
+    new.keyframe_insert("location", frame=6)
+    activate(guides, new)
+    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    for o in (guides, out, guides.furcollide.groom.groom, box, new):
+        o.hide_render = True
+    scene.frame_start, scene.frame_end = 1, 6
+    render_camera(scene)
+    scene.frame_set(1)
+    seen, statuses = render_watching(tmp_path, "wall", [gout], guides)
+    viewport = check_render(seen, statuses, [gout], range(1, 7))
+    assert any(not np.array_equal(viewport[f][gout.name], viewport[1][gout.name])
+               for f in range(2, 7))
+
+
+def test_remove_setup_with_render_groom(fc):
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    play(bpy.context.scene, range(1, 4))
+    gout = guides.furcollide.groom.output
+    gname, gdata, oname = gout.name, gout.data.name, out.name
+    assert groom.hide_render
+    activate(guides)
+    assert bpy.ops.furcollide.remove() == {"FINISHED"}
+    assert bpy.data.objects.get(gname) is None and bpy.data.objects.get(oname) is None
+    assert bpy.data.hair_curves.get(gdata) is None
+    assert not groom.hide_render and not guides.hide_render
+    assert guides.furcollide.groom.output is None
+    orphans = [ng.name for ng in bpy.data.node_groups
+               if ng.name.startswith(".FurCollide Inputs") and ng.users == 0]
+    assert orphans == []
+    play(bpy.context.scene, range(4, 6))  # nothing left to run, nothing fails
+
+
+def test_add_on_a_duplicated_groom_setup_leaves_the_original_groom_alone(fc):
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    ng = gout.modifiers[0].node_group
+    play(scene, range(1, 5))
+    ref = world(gout).copy()
+    scene.frame_set(1)
+    dup = duplicate(guides, dx=0.4)
+    dup.data.surface = None
+    scene.frame_set(2)
+    assert "copy of the setup on 'Guides'" in dup.furcollide.status_message
+    activate(dup, box)
+    assert bpy.ops.furcollide.add() == {"FINISHED"}  # README: gives it its own output
+    assert dup.furcollide.output not in (None, out)
+    assert gout.modifiers[0].node_group == ng
+    assert dup not in dependency_objects(gout)
+    play(scene, range(1, 5))
+    np.testing.assert_array_equal(world(gout), ref)
+
+
+def test_render_groom_ragged_groom(fc, capsys):
+    scene = bpy.context.scene
+    guides, _groom, box, out = groom_scene(fc)
+    rg = ragged_groom("Ragged", surf=guides.data.surface)
+    ref = world(rg)
+    roff = offsets_of(rg)
+    assert len(set(np.diff(roff).tolist())) > 3  # really ragged
+    guides.furcollide.groom.groom = rg
+    activate(guides)
+    capsys.readouterr()
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    assert "60 curves of 'Ragged' follow 25 guides" in capsys.readouterr().out
+    gout = guides.furcollide.groom.output
+    np.testing.assert_array_equal(offsets_of(gout), roff)
+    np.testing.assert_allclose(world(gout), ref, atol=1e-5)  # identity at the reference
+    moved = 0.0
+    for f in range(1, 8):
+        scene.frame_set(f)
+        assert fc.registry.status_for(guides) == ("INFO", ""), f
+        P = world(gout)
+        np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]], atol=1e-5)  # roots stay
+        np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
+        assert len(segments_in_box(P, roff, box.matrix_world.translation)) == 0, f
+        moved = max(moved, float(np.abs(P - ref).max()))
+    assert moved > 0.05 and guides.furcollide.stat_groom_fixed >= 0
+    np.testing.assert_array_equal(world(rg), ref)  # the groom itself is untouched
+
+
+def test_render_groom_with_a_one_point_curve_is_refused(fc):
+    guides, _groom, box, out = groom_scene(fc)
+    bad = ragged_groom("Stubby", surf=guides.data.surface, one_point=3)
+    guides.furcollide.groom.groom = bad
+    activate(guides)
+    n = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="'Stubby': curve 3 has fewer than 2 points"):
+        bpy.ops.furcollide.groom_bind()
+    assert len(bpy.data.objects) == n and guides.furcollide.groom.output is None
+    assert not bad.hide_render
+
+
+def test_render_groom_on_another_surface_follows_the_guides(fc, capsys):
+    scene = bpy.context.scene
+    guides, _groom, box, out = groom_scene(fc)
+    other = make_surface("Other", half=1.0, n=3, uv=False)
+    rg = ragged_groom("Foreign", surf=other, seed=4)
+    ref = world(rg)
+    roff = offsets_of(rg)
+    guides.furcollide.groom.groom = rg
+    activate(guides)
+    capsys.readouterr()
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    assert "(roots following the guides)" in capsys.readouterr().out
+    gout = guides.furcollide.groom.output
+    np.testing.assert_allclose(world(gout), ref, atol=1e-5)
+    for f in range(1, 8):
+        scene.frame_set(f)
+        assert fc.registry.status_for(guides) == ("INFO", ""), f
+        assert len(segments_in_box(world(gout), roff, box.matrix_world.translation)) == 0
+    assert np.abs(world(gout) - ref).max() > 0.05
+    # the other Surface moving does not move the roots (they follow the guides' roots)
+    other.location = (0, 0, 1.0)
+    scene.frame_set(1)
+    np.testing.assert_allclose(world(gout)[roff[:-1]], ref[roff[:-1]], atol=1e-5)
+
+
+def test_guides_per_curve_changed_after_binding_keeps_the_old_binding(fc):
+    """README: "Bind again after changing Guides per Curve": until then the groom
+    keeps its binding (no error, no silent re-bind)."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    g = guides.furcollide.groom
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    play(scene, range(1, 5))
+    before = world(g.output).copy()
+    rt = fc.registry.get_runtime(guides)
+    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 4
+    g.guides = 1
+    scene.frame_set(3)
+    scene.frame_set(4)
+    assert fc.registry.status_for(guides) == ("INFO", "")
+    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 4
+    np.testing.assert_array_equal(world(g.output), before)
+
+
+def test_bind_groom_again_after_changing_guides_per_curve(fc):
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    g = guides.furcollide.groom
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    play(scene, range(1, 4))
+    g.guides = 1
+    scene.frame_set(1)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    play(scene, range(1, 6))
+    assert fc.registry.status_for(guides) == ("INFO", ""), fc.registry.status_for(guides)
+    rt = fc.registry.get_runtime(guides)
+    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 1

@@ -1,0 +1,242 @@
+"""The frame cache without Blender (``core.framecache``): the memory cache's footprint,
+budget and exactness, the bake files, and the frame-inputs digests and records."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from core import Settings, Solver, Status
+from core import framecache as fcache
+
+C, N = 50_000, 8
+
+
+# ------------------------------------------------------------------ memory
+def _frames(touched=0.1, n_frames=12, seed=0):
+    """Paper-scale frames (50,000 curves x 8 CVs) with ``touched`` of the curves moved."""
+    rng = np.random.default_rng(seed)
+    offsets = np.arange(0, (C + 1) * N, N, dtype=np.int32)
+    solver = Solver(offsets, Settings(mode="bend"))
+    base = solver.state
+    inp = rng.random((C * N, 3), dtype=np.float32)
+    for f in range(1, n_frames + 1):
+        hit = np.sort(rng.choice(C, int(C * touched), replace=False))
+        out = inp.copy()
+        pts = fcache.curve_point_mask(offsets, hit)
+        out[pts] += 0.01
+        st = {k: v.copy() for k, v in base.items()}
+        st["angle"][hit] = 0.3
+        st["angle_max"][hit] = 0.4
+        st["axis"][hit] = (0, 0, 1)
+        st["frame"][hit] = np.eye(3)
+        st["active"][hit] = True
+        status = np.zeros(C, np.int8)
+        status[hit] = Status.COLLIDING
+        yield f, inp, out, status, offsets, st, base
+
+
+def test_paper_scale_footprint_and_exactness():
+    mem = fcache.MemoryCache(limit_mb=512)
+    per_frame = []
+    kept = {}
+    for f, inp, out, status, offsets, st, base in _frames():
+        if mem.sparse is None:
+            mem.sparse = fcache.SparseState(base)
+        before = mem.nbytes
+        mem.put(f, inp, out, status, offsets, st, {})
+        per_frame.append(mem.nbytes - before)
+        if f in (1, 7):
+            kept[f] = (out.copy(), status.copy(), st)
+        the_input = inp
+    mb = np.median(per_frame) / 2**20
+    # 10 % of the curves touched: ~1 MB per frame -> 250 frames well under 512 MB
+    print(f"memory cache: {mb:.2f} MB per frame")
+    assert mb < 1.3, mb
+    assert 250 * mb < 400
+    for f, (out, status, st) in kept.items():
+        got, got_status, _ = mem.get(f, the_input, offsets)
+        assert np.array_equal(got, out) and np.array_equal(got_status, status)
+        state = mem.state(f)
+        for k in st:
+            assert np.array_equal(state[k], st[k]), k
+
+
+def test_budget_evicts_states_then_frames():
+    mem = fcache.MemoryCache(limit_mb=8)
+    for f, inp, out, status, offsets, st, base in _frames(n_frames=14):
+        if mem.sparse is None:
+            mem.sparse = fcache.SparseState(base)
+            mem.start = 1
+        mem.put(f, inp, out, status, offsets, st, {})
+        assert mem.nbytes <= mem.limit or len(mem) <= 2
+    assert 14 in mem and mem.state(14) is not None  # the newest frame can be stepped from
+    assert mem.nbytes <= mem.limit
+
+
+def _small(n_curves=6, npts=4, seed=1):
+    rng = np.random.default_rng(seed)
+    offsets = np.arange(0, (n_curves + 1) * npts, npts, dtype=np.int32)
+    inp = rng.random((n_curves * npts, 3), dtype=np.float32)
+    return offsets, inp
+
+
+def test_memory_frames_keep_attributes_records_and_drop_after():
+    offsets, inp = _small()
+    mem = fcache.MemoryCache()
+    for f in range(1, 6):
+        out = inp.copy()
+        out[4 * f: 4 * f + 4] += f
+        status = np.zeros(6, np.int8)
+        status[f] = Status.RECOVERING
+        dist = np.full(len(inp), float(f), np.float32)
+        mem.put(f, inp, out, status, offsets, None, {"frame": f},
+                attributes={"d": dist}, inputs={"source": f})
+    assert len(mem) == 5 and mem.newest_before(4) == 3 and mem.newest_before(1) is None
+    out, status, stats = mem.get(3, inp, offsets)
+    assert stats == {"frame": 3} and status.tolist() == [0, 0, 0, 2, 0, 0]
+    assert np.array_equal(out[12:16], inp[12:16] + 3) and np.array_equal(out[:12], inp[:12])
+    assert mem.attributes(3)["d"][0] == 3.0 and mem.inputs(3) == {"source": 3}
+    assert mem.state(3) is None  # stored without a solver state: cannot be stepped from
+    assert mem.drop_after(3) == 2 and sorted(mem.frames) == [1, 2, 3]
+    assert mem.inputs(5) is None and mem.attributes(5) == {}
+
+
+def test_rows_differ_compares_bits():
+    a = np.zeros((5, 3), np.float32)
+    b = a.copy()
+    b[1, 2] = -0.0  # equal as a number, not as stored bits
+    b[3, 0] = 1.0
+    assert fcache.rows_differ(a, b).tolist() == [False, True, False, True, False]
+    q = np.zeros((4, 4))
+    r = q.copy()
+    r[2, 3] = 5.0
+    assert fcache.rows_differ(q, r).tolist() == [False, False, True, False]
+    f = np.zeros((3, 3, 3))
+    g = f.copy()
+    g[0, 2, 2] = 1.0
+    assert fcache.rows_differ(f, g).tolist() == [True, False, False]
+
+
+def test_topology_key_and_point_masks():
+    offsets = np.array([0, 3, 5, 9], np.int32)
+    assert fcache.topology_key(offsets)[:2] == (3, 9)
+    assert fcache.topology_key(offsets) != fcache.topology_key(np.array([0, 4, 5, 9]))
+    assert fcache.curve_point_mask(offsets, np.array([0, 2])).tolist() == [0, 1, 2, 5, 6, 7, 8]
+    flags = np.zeros(9, bool)
+    flags[6] = True
+    assert fcache.curves_with_any(flags, offsets).tolist() == [False, False, True]
+
+
+# -------------------------------------------------------------------- disk
+def test_bake_file_round_trip_with_a_sparse_state(tmp_path):
+    offsets = np.arange(0, 65 * 4, 4, dtype=np.int32)
+    solver = Solver(offsets, Settings(mode="bend"))
+    sparse = fcache.SparseState(solver.state)
+    state = solver.state
+    state["angle"][[3, 40]] = 0.25
+    points = np.random.default_rng(2).random((64 * 4, 3), dtype=np.float32)
+    status = np.zeros(64, np.int8)
+    status[3] = Status.PINCHED
+    d = str(tmp_path / "bake")
+    path = fcache.write_frame(d, -4, points, status, offsets, state, sparse,
+                              {"d": np.arange(len(points), dtype=np.float32)},
+                              inputs={"source": (1 << 64) - 1})
+    assert os.path.basename(path) == "frame_-00004.npz"  # a pre-roll frame keeps its sign
+    assert fcache.list_frames(d) == [-4] and not os.path.exists(path + ".tmp")
+    p, st, offs, stored = fcache.read_frame(d, -4)
+    assert np.array_equal(p, points) and np.array_equal(st, status)
+    assert np.array_equal(offs, offsets)
+    full = fcache.decode_state(stored, sparse)
+    for k in state:
+        assert np.array_equal(full[k], state[k]), k
+    assert fcache.read_attributes(d, -4)["d"][5] == 5.0
+    assert fcache.read_inputs(d, -4) == {"source": (1 << 64) - 1}
+
+
+def test_free_removes_only_the_bake_files(tmp_path):
+    d = tmp_path / "bake"
+    offsets = np.array([0, 2], np.int32)
+    for f in (1, 2):
+        fcache.write_frame(str(d), f, np.zeros((2, 3), np.float32), np.zeros(1, np.int8),
+                           offsets, None)
+    (d / "frame_000003.npz.tmp").write_bytes(b"half")  # a crashed write
+    (d / "notes.txt").write_text("mine")
+    (d / "frame_3.npz").write_bytes(b"not ours")  # not a name FurCollide writes
+    assert fcache.list_frames(str(d)) == [1, 2]
+    assert fcache.read_inputs(str(d), 1) is None  # written without a record: not checked
+    assert fcache.remove_frames(str(d)) == 3
+    assert sorted(os.listdir(d)) == ["frame_3.npz", "notes.txt"]
+    for name in os.listdir(d):
+        os.remove(d / name)
+    assert fcache.remove_frames(str(d)) == 0 and not d.exists()  # empty: removed
+
+
+# ------------------------------------------------------------ frame inputs
+def test_digest_sees_any_change_and_any_reordering():
+    """One flipped bit, a swap of two points, another dtype, a change in the tail bytes
+    (not a whole 8-byte word) and another length all count."""
+    digest = fcache.digest
+    rng = np.random.default_rng(3)
+    P = rng.random((40_001, 3), dtype=np.float32)  # 480,012 bytes: a 4-byte tail
+    d = digest(P)
+    assert digest(P.copy()) == d
+    for i in rng.integers(0, P.size, 50):
+        a = P.copy().reshape(-1)
+        a.view(np.uint32)[i] ^= np.uint32(1)  # one ulp
+        assert digest(a.reshape(-1, 3)) != d, i
+    for i, j in rng.integers(0, len(P), (50, 2)):
+        if i != j:
+            a = P.copy()
+            a[[i, j]] = a[[j, i]]
+            assert digest(a) != d, (i, j)
+    a = P.copy()
+    a[-1, 2] = -a[-1, 2]
+    assert digest(a) != d
+    assert digest(P[:-1]) != d and digest(P.view(np.int32)) != d
+    assert digest(np.zeros(3, np.float32)) != digest(np.zeros(3, np.int32))
+    assert digest(np.eye(4)) != digest(np.eye(4) * (1 + 1e-16 * 4))
+
+
+def test_records_compare_in_order_and_survive_a_bake_file():
+    c = fcache
+    old = {"colliders": 1, "settings": 2, "source": 3, "collider 0 matrix": 4}
+    assert c.first_change(old, dict(old)) is None
+    assert c.first_change(old, {**old, "source": 9, "collider 0 matrix": 9}) == "source"
+    assert c.first_change(old, {k: v for k, v in old.items() if k != "source"}) == "source"
+    assert c.first_change(old, {**old, "surface matrix": 5}) == "surface matrix"
+    big = {**old, "source": (1 << 64) - 1}
+    assert c.decode_inputs(c.encode_inputs(big)) == big
+    assert c.decode_inputs(np.frombuffer(b"\xff\x00", np.uint8)) is None
+
+
+@pytest.mark.parametrize("text", ["settings", ""])
+def test_text_digest_is_stable(text):
+    assert fcache.text_digest(text) == fcache.text_digest(str(text))
+    assert fcache.text_digest(text) != fcache.text_digest(text + " ")
+
+
+def test_framecache_imports_without_blender():
+    import subprocess
+    import sys
+    import textwrap
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    code = textwrap.dedent(f"""
+        import importlib.abc, sys
+        class Block(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] in ("bpy", "mathutils", "bmesh"):
+                    raise ImportError(name)
+        sys.meta_path.insert(0, Block())
+        sys.path.insert(0, {str(root)!r})
+        from core import framecache
+        assert not [m for m in sys.modules if m.split(".")[0] in ("bpy", "operators", "ui")]
+        print("OK")
+    """)
+    proc = subprocess.run([sys.executable, "-I", "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0 and proc.stdout.strip() == "OK", proc.stderr[-2000:]
