@@ -55,3 +55,11 @@ OCCUPANCY_CELLS = 64
 #: moves by the full offset (a vertex where faces meet at a sharp angle moves
 #: farther than the offset), at most this many times the offset.
 OFFSET_MAX_STRETCH = 4.0
+
+#: The fur pipeline's per-frame stages (``core.pipeline``) are computed with
+#: bind-time caches and blocked component arrays: the same formulas in
+#: another order of floating-point operations. Their results agree with the
+#: straightforward implementations (kept in tests/pipeline/slow_reference.py)
+#: to within ``PIPELINE_REORDER_REL`` times the scene's size (the largest
+#: absolute coordinate plus the longest curve), i.e. a few float64 ulps.
+PIPELINE_REORDER_REL = 1e-12

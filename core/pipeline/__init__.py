@@ -24,7 +24,7 @@ from .distance import (
     segment_mesh_distance,
     segment_triangle_distance,
 )
-from .groom import GroomWeights, bind_groom, clearance_pass, deform_groom, knn
+from .groom import GroomDeformer, GroomWeights, bind_groom, clearance_pass, deform_groom, knn
 from .influence import region_of_influence
 from .motion import jiggle, spring_impulse_response, wind, wind_noise
 from .sampler import dart_throwing, neighbor_pairs, sample_guides
@@ -32,6 +32,7 @@ from .sampler import dart_throwing, neighbor_pairs, sample_guides
 __all__ = [
     "surface_values",
     "Binding",
+    "GroomDeformer",
     "GroomWeights",
     "bind",
     "bind_groom",
