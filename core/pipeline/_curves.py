@@ -24,9 +24,8 @@ def check_curves(points, offsets, name="points"):
     pts = as_points(points, name)
     if len(pts) != off[-1]:
         raise InputError(f"{name} has {len(pts)} rows but offsets describe {int(off[-1])} points")
-    bad = ~np.isfinite(pts).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
+    if not np.isfinite(pts).all():  # (one pass; rows only to name the culprit)
+        i = int(np.argmax(~np.isfinite(pts).all(axis=1)))
         c = int(np.searchsorted(off, i, "right") - 1)
         raise InputError(f"{name}: point {i} (curve {c}) is not finite: {pts[i].tolist()}")
     return pts, off
@@ -47,6 +46,8 @@ def as_points(points, name="points"):
 
 def check_finite(a, name, off=None):
     a = np.asarray(a, np.float64)
+    if np.isfinite(a).all():
+        return a
     bad = ~np.isfinite(a.reshape(len(a), -1)).all(axis=1) if a.ndim > 1 else ~np.isfinite(a)
     if bad.any():
         i = int(np.argmax(bad))
@@ -126,6 +127,19 @@ def layout(off):
     return curve, index, np.flatnonzero(~is_tip)
 
 
+def row_norm(v):
+    """Lengths of the rows of ``v`` (k, 3): ``np.linalg.norm(v, axis=1)`` in long passes."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
+
+
+def uniform_size(off):
+    """The common point count of the curves, or 0 when they differ (or there is none)."""
+    if len(off) < 2:
+        return 0
+    n = int(off[1] - off[0])
+    return n if int(off[-1]) == n * (len(off) - 1) and (np.diff(off) == n).all() else 0
+
+
 def segmented_cumsum(x, off):
     """Cumulative sum of rows of ``x`` restarting at every curve (inclusive).
 
@@ -137,6 +151,10 @@ def segmented_cumsum(x, off):
     C = len(sizes)
     if C == 0:
         return np.zeros_like(x, dtype=np.float64)
+    n = uniform_size(off)
+    if n:  # every curve n points: the padded array is x itself
+        return np.cumsum(np.asarray(x, np.float64).reshape((C, n) + x.shape[1:]),
+                         axis=1).reshape(x.shape)
     curve = np.repeat(np.arange(C), sizes)
     index = np.arange(len(x)) - off[curve]
     pad = np.zeros((C, int(sizes.max())) + x.shape[1:])
@@ -155,7 +173,7 @@ def arc_length(points, off):
     """
     P = len(points)
     seg_len = np.zeros(P)
-    d = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    d = row_norm(np.diff(points, axis=0))
     seg_len[1:] = d
     seg_len[off[:-1]] = 0.0
     cum = segmented_cumsum(seg_len, off)
@@ -190,8 +208,8 @@ def rechain(points, off, moved):
     v1 = np.zeros((P, 3))
     v0[1:] = np.diff(points, axis=0)
     v1[1:] = np.diff(moved, axis=0)
-    L0 = np.linalg.norm(v0, axis=1)
-    L1 = np.linalg.norm(v1, axis=1)
+    L0 = row_norm(v0)
+    L1 = row_norm(v1)
     ok = L1 > 1e-300
     v = np.where(ok[:, None], v1 * (L0 / np.where(ok, L1, 1.0))[:, None], v0)
     v[off[:-1]] = points[off[:-1]]  # the root itself starts the chain
