@@ -16,14 +16,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import rotations as rot
+from .. import tolerances as tol
 from ..collider import Collider
 from ..errors import InputError
 from ..settings import Settings
 from ..solver import Solver
-from ._curves import as_points, check_curves, layout, segmented_cumsum
+from ._curves import as_points, check_curves, layout, segmented_cumsum, uniform_size
 
 #: Pairs (query, reference) per chunk of the brute-force nearest neighbours.
 _KNN_CHUNK = 4_000_000
+#: Above this share of reaching curves the clearance pass solves them all (no gather).
+_CLEARANCE_ALL = 0.7
 #: Neighbouring guide roots used to find each guide's root rotation.
 _FRAME_NEIGHBORS = 4
 
@@ -501,7 +504,11 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     Render curves that still pass through a collider after
     :func:`deform_groom` (between the guides) are resolved by the core's
     solver with a fresh state (Stiff mode by default: minimal rotation at
-    the root, shape kept).
+    the root, shape kept). Only the curves whose bounding box meets a
+    collider's bounds go to the solver: the others can neither cross a
+    collider nor have their root inside one, so the solver would return them
+    unchanged and FREE (a curve's result never depends on the other curves
+    solved with it: the same output as solving them all).
 
     Parameters
     ----------
@@ -524,10 +531,77 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     pts, off = check_curves(render_points, render_offsets, "render_points")
     if isinstance(colliders, Collider):
         colliders = [colliders]
-    solver = Solver(off, Settings(mode="stiff") if settings is None else settings)
-    res = solver.step(pts, list(colliders), growth=growth)
-    out = np.asarray(res.points, np.float64)
-    changed = np.any(out != pts, axis=1)
-    curve = np.repeat(np.arange(len(off) - 1), np.diff(off))
-    n_fixed = int(np.count_nonzero(np.bincount(curve, changed, minlength=len(off) - 1)))
-    return out, res.status, n_fixed
+    colliders = list(colliders)
+    settings = Settings(mode="stiff") if settings is None else settings
+    R = len(off) - 1
+    reach = _reaching(pts, off, colliders, settings)
+    if R and not reach.any():
+        reach[0] = True  # (one curve, unchanged: the solver still checks its other inputs)
+    if R == 0 or reach.mean() > _CLEARANCE_ALL:  # (gathering would cost more than it saves)
+        res = Solver(off, settings).step(pts, colliders, growth=growth)
+        out = np.asarray(res.points, np.float64)
+        changed = np.any(out != pts, axis=1)
+        curve = np.repeat(np.arange(R), np.diff(off))
+        return out, res.status, int(np.count_nonzero(np.bincount(curve, changed, minlength=R)))
+    _check_segments(pts, off, ~reach)  # the solver's own check, for the curves it skips
+    out = pts.copy()
+    status = np.zeros(R, np.int8)
+    idx = np.flatnonzero(reach)
+    sizes = np.diff(off)[idx]
+    rows = np.repeat(off[idx] - (np.cumsum(sizes) - sizes), sizes) + np.arange(int(sizes.sum()))
+    sub_off = np.concatenate([[0], np.cumsum(sizes)])
+    res = Solver(sub_off, settings).step(pts[rows], colliders, growth=growth)
+    sub = np.asarray(res.points, np.float64)
+    out[rows] = sub
+    status[idx] = res.status
+    changed = np.any(sub != pts[rows], axis=1)
+    curve = np.repeat(np.arange(len(idx)), sizes)
+    n_fixed = int(np.count_nonzero(np.bincount(curve, changed, minlength=len(idx))))
+    return out, status, n_fixed
+
+
+def _check_segments(pts, off, which):
+    """The solver's zero-length segment check (``tolerances.ZERO_SEGMENT_REL``) of the
+    curves ``which`` (bool (R,)): culled curves must fail as they would in the solver."""
+    d = np.diff(pts, axis=0)
+    L = np.sqrt(np.einsum("ij,ij->i", d, d))
+    _, _, s0 = layout(off)
+    L = L[s0]
+    nseg = np.diff(off) - 1
+    first = np.cumsum(nseg) - nseg
+    total = np.add.reduceat(L, first) if len(L) else np.zeros(0)
+    short = np.minimum.reduceat(L, first) if len(L) else np.zeros(0)
+    bad = which & (short <= tol.ZERO_SEGMENT_REL * total)
+    if bad.any():
+        c = int(np.argmax(bad))
+        j = int(np.argmin(L[first[c]:first[c] + nseg[c]]))
+        k = int(off[c]) + j
+        raise InputError(f"curve {c} has a zero-length segment between points {k} and {k + 1}")
+
+
+def _reaching(pts, off, colliders, settings):
+    """(R,) bool: curves whose bounding box meets the (offset) bounds of a collider.
+
+    The box is grown by a relative margin far above the solver's ray
+    extension (``tolerances.RAY_EXTEND_ULPS`` float32 ulps), so every curve
+    the solver could touch is kept.
+    """
+    R = len(off) - 1
+    n = uniform_size(off)
+    if n:  # column by column: reductions over 8 CVs are slow
+        P3 = pts.reshape(R, n, 3)
+        lo, hi = P3[:, 0].copy(), P3[:, 0].copy()
+        for j in range(1, n):
+            np.minimum(lo, P3[:, j], out=lo)
+            np.maximum(hi, P3[:, j], out=hi)
+    else:
+        lo = np.minimum.reduceat(pts, off[:-1], axis=0)
+        hi = np.maximum.reduceat(pts, off[:-1], axis=0)
+    reach = np.zeros(R, bool)
+    for c in colliders:
+        if not isinstance(c, Collider) or c.empty:
+            continue  # (the solver reports a wrong type)
+        blo, bhi = c.bounds_world(c.effective_offset(settings.collision_offset))
+        pad = 1e-4 * (float(np.linalg.norm(bhi - blo)) + float(np.abs(np.r_[blo, bhi]).max()))
+        reach |= ((lo <= bhi + pad) & (hi >= blo - pad)).all(1)
+    return reach

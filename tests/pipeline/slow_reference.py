@@ -256,3 +256,20 @@ def deform_groom_v0(render_ref_points, render_offsets, guides_ref_points, guides
     return segmented_cumsum(step, roff)
 
 
+
+
+# ---------------------------------------------------------------- clearance_pass
+def clearance_pass_v0(render_points, render_offsets, colliders, settings=None, growth=None):
+    """The clearance pass before issue 11: the solver on every render curve."""
+    from core import Collider, Settings, Solver
+
+    pts, off = check_curves(render_points, render_offsets, "render_points")
+    if isinstance(colliders, Collider):
+        colliders = [colliders]
+    solver = Solver(off, Settings(mode="stiff") if settings is None else settings)
+    res = solver.step(pts, list(colliders), growth=growth)
+    out = np.asarray(res.points, np.float64)
+    changed = np.any(out != pts, axis=1)
+    curve = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    n_fixed = int(np.count_nonzero(np.bincount(curve, changed, minlength=len(off) - 1)))
+    return out, res.status, n_fixed

@@ -100,3 +100,45 @@ def test_a_failed_rebuild_leaves_no_stale_cache():
         deform_groom(bad, ro, gp, gp, go, w)
     assert w._deformer is None
     np.testing.assert_allclose(deform_groom(rp, ro, gp, gp, go, w), rp, atol=1e-9, rtol=0)
+
+
+@PROP
+@given(seed=st.integers(0, 10_000), radius=st.floats(0.1, 0.9), offset=st.floats(0.0, 0.05),
+       mode=st.sampled_from(["stiff", "bend"]), two=st.booleans())
+def test_clearance_pass_matches_solving_every_curve(seed, radius, offset, mode, two):
+    """Culled curves (their box misses every collider's bounds) come back unchanged and
+    FREE, exactly as the solver run on all curves returns them."""
+    from core import Collider, Settings
+    from core.pipeline import clearance_pass
+
+    rng = np.random.default_rng(seed)
+    V, F = po.grid(4.0, 8)
+    pts, off = po.fur_on_mesh(rng, V, F, 150, int(rng.integers(2, 8)), 0.6, noise=0.2)
+    cols = [Collider(*po.icosphere(rng.uniform(-1.5, 1.5, 3) * [1, 1, 0] + [0, 0, 0.3],
+                                   radius, 2))]
+    if two:
+        cols.append(Collider(*po.icosphere((1.2, -1.2, 0.5), 0.3, 1), double_sided=True))
+    s = Settings(mode=mode, collision_offset=offset)
+    want = ref.clearance_pass_v0(pts, off, cols, settings=s)
+    got = clearance_pass(pts, off, cols, settings=s)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+    assert got[2] == want[2]
+
+
+def test_clearance_pass_errors_like_the_solver():
+    from core import Collider
+    from core.pipeline import clearance_pass
+
+    rng = np.random.default_rng(2)
+    V, F = po.grid(4.0, 4)
+    pts, off = po.fur_on_mesh(rng, V, F, 30, 4, 0.5)
+    far = Collider(*po.icosphere((1.8, 1.8, 0.2), 0.1, 1))  # touches almost nothing
+    pts[off[20] + 2] = pts[off[20] + 1]  # a zero-length segment in a culled curve
+    with pytest.raises(InputError, match="curve 20 has a zero-length segment"):
+        clearance_pass(pts, off, [far])
+    with pytest.raises(InputError, match="curve 20 has a zero-length segment"):
+        ref.clearance_pass_v0(pts, off, [far])
+    pts[off[20] + 2] += 0.01
+    with pytest.raises(InputError, match="not a core.Collider"):
+        clearance_pass(pts, off, [far, "mesh"])
