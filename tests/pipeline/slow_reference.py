@@ -273,3 +273,17 @@ def clearance_pass_v0(render_points, render_offsets, colliders, settings=None, g
     curve = np.repeat(np.arange(len(off) - 1), np.diff(off))
     n_fixed = int(np.count_nonzero(np.bincount(curve, changed, minlength=len(off) - 1)))
     return out, res.status, n_fixed
+
+
+# ---------------------------------------------------------------- Binding.apply
+def binding_apply_v0(binding, V_now):
+    """``Binding.apply`` before issue 11: per-CV gathers of the frames."""
+    from core.pipeline.attach import _frames
+
+    O = binding.roots(V_now)
+    V = np.asarray(V_now, np.float64)
+    R, ok = _frames(V, binding.faces, binding.face)
+    R = np.where(ok[:, None, None], R, binding.frame_ref)
+    sizes = np.diff(binding.offsets)
+    curve = np.repeat(np.arange(len(sizes)), sizes)
+    return O[curve] + np.einsum("pij,pj->pi", R[curve], binding.local)

@@ -142,3 +142,25 @@ def test_clearance_pass_errors_like_the_solver():
     pts[off[20] + 2] += 0.01
     with pytest.raises(InputError, match="not a core.Collider"):
         clearance_pass(pts, off, [far, "mesh"])
+
+
+@PROP
+@given(seed=st.integers(0, 10_000), uniform=st.booleans(), amp=st.floats(0.0, 0.4),
+       collapse=st.booleans())
+def test_binding_apply_matches_the_reference(seed, uniform, amp, collapse):
+    from core.pipeline import bind
+
+    rng = np.random.default_rng(seed)
+    V, F = po.icosphere((0.3, -0.2, 0.1), 1.0, 2)
+    if uniform:
+        pts, off = po.fur_on_mesh(rng, V, F, 60, int(rng.integers(2, 9)), 0.4)
+    else:
+        pts, off = po.pack([po.fur_on_mesh(rng, V, F, 1, int(rng.integers(2, 9)), 0.4)[0]
+                            for _ in range(60)])
+    b = bind(pts, off, V, F)
+    V2 = V + amp * rng.normal(size=V.shape) + 2.0
+    if collapse:  # a triangle collapses: its curves keep their reference orientation
+        f = F[b.face[0]]
+        V2[f[1]] = V2[f[0]]
+        V2[f[2]] = V2[f[0]]
+    _close(b.apply(V2), ref.binding_apply_v0(b, V2), V2, pts)
