@@ -74,3 +74,12 @@ PIPELINE_REORDER_REL = 1e-12
 #: segment (at most 2 cells long) from the nearest node, plus sqrt(3) cells
 #: beyond the exact band. Measured: 1.3 cells below on average, 2.4 at most.
 DISTANCE_FIELD_CELLS = 5.5
+
+#: Fur Attach orients each curve by its triangle's frame (edge, normal). The
+#: frame is undefined when the normal is shorter than ``ATTACH_FRAME_MIN_SIN``
+#: times the triangle's longest edge squared (the sine of its smallest angle,
+#: roughly, below 1e-12: float64 cannot tell the normal's direction): such a
+#: face cannot be bound (with ``DEGENERATE_AREA_REL``'s faces, the only
+#: degenerate-face rule), and a bound triangle that collapses below it later
+#: keeps its reference frame.
+ATTACH_FRAME_MIN_SIN = 1e-12

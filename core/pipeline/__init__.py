@@ -17,9 +17,9 @@ curve ``i`` is ``points[offsets[i]:offsets[i + 1]]``. Meshes are ``V``
 :class:`~core.errors.InputError` or :class:`~core.errors.ColliderError`.
 """
 
+from ..closest import closest_faces
 from .attach import Binding, bind, surface_values
 from .distance import (
-    closest_faces,
     collider_distance,
     segment_mesh_distance,
     segment_triangle_distance,

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import tolerances as tol
 from ..errors import ColliderError, InputError
 from ..layout import check_offsets
 
@@ -99,11 +100,15 @@ def triangle_areas(V, F):
     return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - a, V[F[:, 2]] - a), axis=1)
 
 
-def degenerate_faces(V, F, rel=1e-12):
-    """(m,) bool: zero-area (relative to the mesh's size) or repeated-vertex faces."""
+def degenerate_faces(V, F):
+    """(m,) bool: degenerate faces, by the colliders' rule (``Collider`` drops the same).
+
+    Repeated vertices, or an area at most ``tolerances.DEGENERATE_AREA_REL``
+    times the squared diagonal of the mesh's bounding box.
+    """
     diag = float(np.linalg.norm(V.max(0) - V.min(0))) or 1.0
     rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    return rep | (triangle_areas(V, F) <= rel * diag**2)
+    return rep | (triangle_areas(V, F) <= tol.DEGENERATE_AREA_REL * diag**2)
 
 
 def layout(off):

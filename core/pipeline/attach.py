@@ -15,9 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import rotations as rot
+from .. import tolerances as tol
+from ..closest import closest_faces
 from ..errors import ColliderError, InputError
 from ._curves import check_curves, check_surface, degenerate_faces, uniform_size
-from .distance import closest_faces
 
 
 def _frames(V, F, face):
@@ -47,7 +48,7 @@ def _frames_of(T, rows=False):
     le = np.sqrt(rot._dot3(e, e))
     ln = np.sqrt(rot._dot3(n, n))
     scale = np.maximum(np.sqrt(rot._dot3(ca, ca)), le)
-    ok = (le > 0) & (ln > 1e-12 * scale**2)
+    ok = (le > 0) & (ln > tol.ATTACH_FRAME_MIN_SIN * scale**2)
     e /= np.where(ok, le, 1.0)
     n /= np.where(ok, ln, 1.0)
     t = rot._cross3(n, e)
@@ -261,7 +262,8 @@ def bind(points, offsets, V_ref, F, snap_roots=True, drop_degenerate=False) -> B
     """
     pts, off = check_curves(points, offsets)
     V, F = check_surface(V_ref, F, "growth surface")
-    bad = degenerate_faces(V, F)
+    # degenerate by the colliders' rule, or too thin to give its curves an orientation
+    bad = degenerate_faces(V, F) | ~_frames(V, F, np.arange(len(F)))[1]
     if bad.any() and not drop_degenerate:
         i = int(np.argmax(bad))
         raise ColliderError(

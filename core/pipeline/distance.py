@@ -42,6 +42,10 @@ from .. import rotations as rot
 from ..closest import closest_on_triangles
 from ..collider import Collider
 from ..errors import InputError
+from ..proximity import TriangleGrid as _TriGrid
+from ..proximity import box_cells as _box_cells
+from ..proximity import plane_crosses_cells as _plane_crosses_cells
+from ..proximity import planes as _planes
 from ._curves import check_curves, check_surface, layout, row_norm
 
 #: Segments whose search box spans more grid cells than this take the
@@ -55,12 +59,6 @@ _FIELD_DIMS = 64
 _FIELD_PADS = (0.5, 2.0)
 #: Cell entries (segment, cell) per chunk of the exact search.
 _CHUNK_CELLS = 1_000_000
-#: Grid cells along the longest side, at most.
-_MAX_DIMS = 256
-#: Triangles spanning more grid cells than this are tested by every search.
-_BIG_CELLS = 4096
-#: Triangle grids with at most this many cells get a dense cell -> triangles lookup.
-_DENSE_CELLS = 1 << 23
 #: Cells along the longest side of the near lower-bound field (over the mesh's box).
 _NEAR_DIMS = 128
 #: The near field holds distances up to this many cells (beyond: "at least that").
@@ -177,135 +175,6 @@ def _world_mesh(col, i):
     return check_surface(V, F, f"colliders[{i}]")
 
 
-class _TriGrid:
-    """Uniform grid of triangle bounding boxes (cell size ``h``).
-
-    Triangles whose box spans more than ``_BIG_CELLS`` cells (a ground
-    plane next to a detailed character) are not registered in cells: they
-    are in :attr:`big` and every search tests them.
-    """
-
-    def __init__(self, T, h):
-        lo, hi = T.min(1), T.max(1)
-        self.n_tris = len(T)
-        self.glo = lo.min(0)
-        ext = float((hi.max(0) - self.glo).max()) or 1.0
-        self.h = h = max(h, ext / _MAX_DIMS)
-        self.dims = np.floor((hi.max(0) - self.glo) / h).astype(np.int64) + 1
-        ilo = np.floor((lo - self.glo) / h).astype(np.int64)
-        ihi = np.floor((hi - self.glo) / h).astype(np.int64)
-        big = (ihi - ilo + 1).prod(1) > _BIG_CELLS
-        self.big = np.flatnonzero(big)
-        small = np.flatnonzero(~big)
-        cell, owner = _box_cells(ilo[small], ihi[small])
-        # only the cells of the box that the triangle's plane crosses
-        planes = _planes(T)
-        hit = _plane_crosses_cells(planes, cell, small[owner], self.glo, h)
-        cell, owner = cell[hit], owner[hit]
-        keys = self.key(cell)
-        order = np.argsort(keys, kind="stable")
-        self.keys = keys[order]
-        self.tris = small[owner[order]]
-        self._slabs(T, planes[0])
-        # dense lookup: triangles of cell key k are tris[start[k]:start[k + 1]]
-        n_keys = int((self.dims + 2).prod())
-        self.start = None
-        if n_keys <= _DENSE_CELLS:
-            self.start = np.zeros(n_keys + 1, np.int64)
-            np.cumsum(np.bincount(self.keys, minlength=n_keys), out=self.start[1:])
-
-    def _slabs(self, T, normal):
-        """Per occupied cell, a slab holding its triangles: ``a <= n . p <= b``.
-
-        ``n`` is the cell's mean triangle normal (unit, or 0); ``a``/``b`` the
-        range of ``n . v`` over the vertices of every triangle in the cell,
-        so the whole triangles (not only their parts in the cell) are in
-        the slab. Stored at the cell's first slot in :attr:`tris`.
-        """
-        R = len(self.tris)
-        self.slab_n = np.zeros((R, 3))
-        self.slab_a = np.zeros(R)
-        self.slab_b = np.zeros(R)
-        if R == 0:
-            return
-        head = np.flatnonzero(np.r_[True, self.keys[1:] != self.keys[:-1]])
-        Tr = T[self.tris]
-        n = normal[self.tris]
-        nl = np.linalg.norm(n, axis=1, keepdims=True)
-        n = np.where(nl > 0, n / np.where(nl > 0, nl, 1.0), 0.0)
-        nc = np.add.reduceat(n, head, axis=0)
-        nl = np.linalg.norm(nc, axis=1, keepdims=True)
-        nc = np.where(nl > 1e-6, nc / np.where(nl > 1e-6, nl, 1.0), 0.0)
-        cell_of = np.repeat(np.arange(len(head)), np.diff(np.r_[head, R]))
-        pv = np.einsum("rij,rj->ri", Tr, nc[cell_of])
-        self.slab_n[head] = nc
-        self.slab_a[head] = np.minimum.reduceat(pv.min(1), head)
-        self.slab_b[head] = np.maximum.reduceat(pv.max(1), head)
-
-    def candidates(self, ilo, ihi):
-        """(box, triangle) pairs of the boxes ``[ilo, ihi]`` (cells), deduplicated.
-
-        Returns
-        -------
-        box, tri : (e,) int64
-        """
-        cell, owner = _box_cells(ilo, ihi)
-        keys = self.key(cell)
-        lo = np.searchsorted(self.keys, keys, "left")
-        n = np.searchsorted(self.keys, keys, "right") - lo
-        b_of = np.repeat(owner, n)
-        t_of = self.tris[np.repeat(lo - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))]
-        if len(self.big):
-            nb = len(ilo)
-            b_of = np.concatenate([b_of, np.repeat(np.arange(nb), len(self.big))])
-            t_of = np.concatenate([t_of, np.tile(self.big, nb)])
-        m = int(self.n_tris)
-        pair = np.unique(b_of * m + t_of)
-        return pair // m, pair % m
-
-    def key(self, cell):
-        d = self.dims + 2
-        c = cell + 1
-        return (c[:, 0] * d[1] + c[:, 1]) * d[2] + c[:, 2]
-
-
-def _box_cells(ilo, ihi):
-    """Enumerate the integer cells of boxes ``[ilo, ihi]``: ``(cells (n, 3), owner (n,))``."""
-    span = ihi - ilo + 1
-    count = span.prod(1)
-    owner = np.repeat(np.arange(len(ilo)), count)
-    start = np.repeat(np.cumsum(count) - count, count)
-    local = np.arange(len(owner)) - start
-    sx, sy = span[owner, 0], span[owner, 1]
-    cell = np.stack([
-        ilo[owner, 0] + local % sx,
-        ilo[owner, 1] + (local // sx) % sy,
-        ilo[owner, 2] + local // (sx * sy),
-    ], axis=1)
-    return cell, owner
-
-
-def _planes(T):
-    """Triangle planes ``n . x = c`` (``n`` the unnormalized normal) and ``|n|_1``."""
-    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    return n, _dot(n, T[:, 0]), np.abs(n).sum(1)
-
-
-def _plane_crosses_cells(planes, cell, tri, glo, h):
-    """(k,) bool: the plane of triangle ``tri`` meets cell ``cell`` (box overlap test).
-
-    A triangle meets only cells that its plane meets, so dropping the
-    others keeps every cell that holds a point of the triangle (with a
-    little slack against rounding; degenerate triangles keep every cell).
-    """
-    n, c, l1 = planes
-    centre = glo + (cell + 0.5) * h
-    reach = 0.5 * h * l1[tri]
-    off = np.abs(_dot(n[tri], centre) - c[tri])
-    return off <= reach * (1 + 1e-6) + 1e-9 * h * l1.max(initial=0.0) * (
-        1 + float(np.abs(glo).max()) / h)
-
-
 class _LowerBoundField:
     """Conservative distance field of a mesh: a lower bound of the distance anywhere.
 
@@ -356,7 +225,6 @@ class _LowerBoundField:
         inside = self.D[c[:, 0], c[:, 1], c[:, 2]] * self.h
         # p in the box and q' the projection of q: the angle at q' is >= 90 degrees
         return np.sqrt(out**2 + inside.astype(np.float64) ** 2)
-
 
 
 class _NodeField:
@@ -1131,73 +999,3 @@ def collider_distance(points, offsets, colliders, return_exact=False, max_distan
     if return_exact:
         return dist, exact
     return dist
-
-
-def closest_faces(V, F, Q):
-    """Exact closest point of a triangle mesh to each query, and its triangle.
-
-    An expanding search over a grid of the triangles (cell ~ the median
-    triangle size), with a brute-force fallback for queries whose search
-    box grows past ``_MAX_CELLS`` cells. Ties go to the lowest face index.
-
-    Parameters
-    ----------
-    V : (n, 3) ndarray of float64
-    F : (m, 3) ndarray of int, m >= 1
-    Q : (k, 3) ndarray of float64
-
-    Returns
-    -------
-    P : (k, 3) ndarray of float64
-        Closest points.
-    face : (k,) int64
-    """
-    Q = np.asarray(Q, np.float64)
-    k = len(Q)
-    T = V[F]
-    m = len(T)
-    if k == 0:
-        return np.zeros((0, 3)), np.zeros(0, np.int64)
-    ext = (T.max(1) - T.min(1)).max(1)
-    g = _TriGrid(T, max(float(np.median(ext)), 1e-12))
-    best = np.full(k, np.inf)
-    face = np.full(k, -1, np.int64)
-    rho = np.full(k, 0.25 * g.h)  # roots usually lie on the surface: start small
-    todo = np.arange(k)
-    while len(todo):
-        r = rho[todo][:, None]
-        ilo = np.clip(np.floor((Q[todo] - r - g.glo) / g.h), -1, g.dims).astype(np.int64)
-        ihi = np.clip(np.floor((Q[todo] + r - g.glo) / g.h), -1, g.dims).astype(np.int64)
-        ok = (ihi - ilo + 1).prod(1) <= _MAX_CELLS
-        brute = todo[~ok]
-        todo, ilo, ihi = todo[ok], ilo[ok], ihi[ok]
-        if len(brute):
-            step = max(1, _CHUNK_CELLS // m)
-            for a in range(0, len(brute), step):
-                qi = np.repeat(brute[a:a + step], m)
-                ti = np.tile(np.arange(m), len(brute[a:a + step]))
-                _point_pairs(Q, T, qi, ti, best, face)
-        if len(todo):
-            box, ti = g.candidates(ilo, ihi)
-            _point_pairs(Q, T, todo[box], ti, best, face)
-        done = best[todo] <= rho[todo]
-        todo = todo[~done]
-        rho[todo] = np.where(np.isfinite(best[todo]), best[todo], 2 * rho[todo])
-    P = closest_on_triangles(Q, T[face, 0], T[face, 1], T[face, 2])
-    return P, face
-
-
-def _point_pairs(Q, T, qi, ti, best, face):
-    """Update ``best`` / ``face`` with the (query, triangle) pairs (ties: lowest face)."""
-    if len(qi) == 0:
-        return
-    p = closest_on_triangles(Q[qi], T[ti, 0], T[ti, 1], T[ti, 2])
-    d = np.linalg.norm(p - Q[qi], axis=1)
-    o = np.lexsort((ti, d, qi))
-    qi, ti, d = qi[o], ti[o], d[o]
-    first = np.ones(len(qi), bool)
-    first[1:] = qi[1:] != qi[:-1]
-    qi, ti, d = qi[first], ti[first], d[first]
-    better = (d < best[qi]) | ((d == best[qi]) & (ti < face[qi]))
-    best[qi[better]] = d[better]
-    face[qi[better]] = ti[better]

@@ -19,104 +19,15 @@ from .. import rotations as rot
 from .. import tolerances as tol
 from ..collider import Collider
 from ..errors import InputError
+from ..proximity import knn
 from ..settings import Settings
 from ..solver import Solver
 from ._curves import as_points, check_curves, layout, segmented_cumsum, uniform_size
 
-#: Pairs (query, reference) per chunk of the brute-force nearest neighbours.
-_KNN_CHUNK = 4_000_000
 #: Above this share of reaching curves the clearance pass solves them all (no gather).
 _CLEARANCE_ALL = 0.7
 #: Neighbouring guide roots used to find each guide's root rotation.
 _FRAME_NEIGHBORS = 4
-
-
-def _knn_brute(Q, X, k):
-    """Chunked brute force of :func:`knn`."""
-    index = np.empty((len(Q), k), np.int64)
-    dist = np.empty((len(Q), k))
-    step = max(1, _KNN_CHUNK // max(len(X), 1))
-    xx = np.einsum("ij,ij->i", X, X)
-    for a in range(0, len(Q), step):
-        q = Q[a:a + step]
-        d2 = np.maximum(xx[None] - 2 * q @ X.T + np.einsum("ij,ij->i", q, q)[:, None], 0)
-        if k < len(X):
-            part = np.argpartition(d2, k - 1, axis=1)[:, :k]
-        else:
-            part = np.broadcast_to(np.arange(len(X)), d2.shape)
-        d = np.linalg.norm(X[part] - q[:, None], axis=-1)
-        order = np.lexsort((part, d), axis=1)
-        index[a:a + step] = np.take_along_axis(part, order, 1)
-        dist[a:a + step] = np.take_along_axis(d, order, 1)
-    return index, dist
-
-
-def knn(Q, X, k):
-    """``k`` nearest rows of ``X`` to each row of ``Q``.
-
-    A uniform grid answers the queries whose ``k``-th neighbour lies within
-    one cell (all candidates in the 27 cells around the query); the others
-    fall back to a chunked brute force. Exact either way.
-
-    Returns
-    -------
-    index : (q, k) int64
-        Sorted by distance (ties: lower index first).
-    dist : (q, k) float64
-    """
-    Q = np.asarray(Q, np.float64)
-    X = np.asarray(X, np.float64)
-    k = min(k, len(X))
-    nq = len(Q)
-    if nq * len(X) <= _KNN_CHUNK or len(X) < 8 * k:
-        return _knn_brute(Q, X, k)
-    lo = X.min(0)
-    ext = float((X.max(0) - lo).max()) or 1.0
-    h = ext * np.sqrt(2.0 * k / len(X))  # ~2k points per cell on a surface
-    dims = np.floor((X.max(0) - lo) / h).astype(np.int64) + 1
-
-    def key(c):
-        c = np.clip(c, -1, dims) + 1
-        return (c[:, 0] * (dims[1] + 2) + c[:, 1]) * (dims[2] + 2) + c[:, 2]
-
-    kx = key(np.floor((X - lo) / h).astype(np.int64))
-    order = np.argsort(kx, kind="stable")
-    ks = kx[order]
-    qc = np.floor((Q - lo) / h).astype(np.int64)
-    index = np.empty((nq, k), np.int64)
-    dist = np.empty((nq, k))
-    good = np.zeros(nq, bool)
-    step = max(1, _KNN_CHUNK // (27 * 4 * k))
-    for a in range(0, nq, step):
-        qi = np.arange(a, min(nq, a + step))
-        I, J = [], []
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                for dz in (-1, 0, 1):
-                    kk = key(qc[qi] + [dx, dy, dz])
-                    s0 = np.searchsorted(ks, kk, "left")
-                    m = np.searchsorted(ks, kk, "right") - s0
-                    I.append(np.repeat(qi, m))
-                    J.append(order[np.repeat(s0 - (np.cumsum(m) - m), m)
-                                   + np.arange(int(m.sum()))])
-        i, j = np.concatenate(I), np.concatenate(J)
-        d = np.linalg.norm(X[j] - Q[i], axis=1)
-        o = np.lexsort((j, d, i))
-        i, j, d = i[o], j[o], d[o]
-        first = np.searchsorted(i, qi)
-        count = np.searchsorted(i, qi, "right") - first
-        ok = count >= k
-        sel = first[ok][:, None] + np.arange(k)
-        ok_idx = qi[ok]
-        kth = d[sel[:, -1]]
-        exact = kth <= h  # every point within h of the query is in its 27 cells
-        index[ok_idx[exact]] = j[sel[exact]]
-        dist[ok_idx[exact]] = d[sel[exact]]
-        good[ok_idx[exact]] = True
-    rest = np.flatnonzero(~good)
-    if len(rest):
-        index[rest], dist[rest] = _knn_brute(Q[rest], X, k)
-    return index, dist
 
 
 @dataclass
