@@ -72,7 +72,7 @@ PIPELINE_REORDER_REL = 1e-12
 #: collider's median triangle size, halved until at most half the curves'
 #: median segment length): 2 (sqrt(3) / 2 + 1) = 3.73 cells for a piece of a
 #: segment (at most 2 cells long) from the nearest node, plus sqrt(3) cells
-#: beyond the exact band. Measured: 1.3 cells below on average, 2.4 at most.
+#: beyond the exact band. Measured: 1.3 cells below on average, 2.6 at most.
 DISTANCE_FIELD_CELLS = 5.5
 
 #: Fur Attach orients each curve by its triangle's frame (edge, normal). The

@@ -73,8 +73,10 @@ _NODE_MAX = 1 << 23
 #: Node field windows (cells beyond its band) are multiples of this, at most _NODE_WINDOW_MAX.
 _NODE_WINDOW_STEP = 8
 _NODE_WINDOW_MAX = 32
-#: Segments are bounded by the node field in pieces at most this many cells long.
+#: Segments are bounded by the node field in pieces at most this many cells long...
 _NODE_PIECE = 2.0
+#: ...in at most this many pieces.
+_NODE_MAX_PIECES = 64
 
 
 def _dot(a, b):
@@ -311,24 +313,25 @@ class _NodeField:
         a = [(A[:, i] - self.glo[i]) / h for i in range(3)]
         d = [(B[:, i] - A[:, i]) / h for i in range(3)]
         L = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        m = np.maximum(1, np.ceil(L / _NODE_PIECE).astype(np.int64))  # pieces per segment
+        # pieces per segment: a function of the segment alone (never of the others); a
+        # very long segment (over _NODE_MAX_PIECES pieces) gets longer pieces: a looser
+        # bound, still a bound
+        m = np.clip(np.ceil(L / _NODE_PIECE), 1, _NODE_MAX_PIECES).astype(np.int64)
         out = np.empty(S)
-        n = int(m.max())
-        if n * S <= 1.5 * m.sum() + S:  # the usual case: every segment in n pieces
+        for n in np.unique(m):  # segments cut in n pieces, together
+            sel = None if (m == n).all() else np.flatnonzero(m == n)
+            an = a if sel is None else [x[sel] for x in a]
+            dn = d if sel is None else [x[sel] for x in d]
             best = None
-            for k in range(n):
-                lo = [a[i] + d[i] * (k / n) for i in range(3)]
-                hi = [a[i] + d[i] * ((k + 1) / n) for i in range(3)]
-                b = self._pieces(lo, hi)
-                best = b if best is None else np.minimum(best, b, out=best)
-            return np.maximum(best, 0.0)
-        first = np.cumsum(m) - m
-        seg = np.repeat(np.arange(S), m)
-        f = (np.arange(len(seg)) - np.repeat(first, m)) / m[seg]
-        step = 1.0 / m[seg]
-        lo = [a[i][seg] + d[i][seg] * f for i in range(3)]
-        hi = [lo[i] + d[i][seg] * step for i in range(3)]
-        out = np.minimum.reduceat(self._pieces(lo, hi), first)
+            for k in range(int(n)):
+                lo = [an[i] + dn[i] * (k / n) for i in range(3)]
+                hi = [an[i] + dn[i] * ((k + 1) / n) for i in range(3)]
+                p = self._pieces(lo, hi)
+                best = p if best is None else np.minimum(best, p, out=best)
+            if sel is None:
+                out[:] = best
+            else:
+                out[sel] = best
         return np.maximum(out, 0.0)
 
     def _pieces(self, a, b):
@@ -633,7 +636,15 @@ def _segment_distance(ix, A, B, cap, exact=False):
     if plan is None:
         return _exact_distance(ix, A, B, cap)
     nf = ix.node_field(*plan)
-    lb = nf.lower_bound(A, B)
+    # segments whose box is at least their cap from the mesh's box are done (a small
+    # collider next to a big groom: most segments)
+    gap = np.maximum(np.maximum(ix.lo - np.maximum(A, B), np.minimum(A, B) - ix.hi), 0.0)
+    lb = np.sqrt(np.einsum("ij,ij->i", gap, gap))
+    near = np.flatnonzero(lb < capv)
+    if len(near) == len(A):
+        lb = nf.lower_bound(A, B)
+    elif len(near):
+        lb[near] = nf.lower_bound(A[near], B[near])
     # segments the field cannot bound up to their cap: the coarse fields too
     far = np.flatnonzero((lb < capv) & (lb >= nf.reach - 3 * nf.h))
     if len(far):

@@ -268,6 +268,9 @@ class GroomDeformer:
     def _segment_rotations(self, gn, q_root):
         """Per-segment rotations (S, 4) of every guide, parallel-transported from the root."""
         gs0 = self.gs0
+        n = uniform_size(self.goff)
+        if n:
+            return self._segment_rotations_uniform(gn, q_root, n)
         t_n = rot.normalize(gn[gs0 + 1] - gn[gs0])
         q = np.empty((len(gs0), 4))
         prev = q_root.copy()
@@ -278,6 +281,36 @@ class GroomDeformer:
             q[s] = qj
             prev[c] = qj
         return q
+
+    def _segment_rotations_uniform(self, gn, q_root, n):
+        """:meth:`_segment_rotations` for guides of ``n`` CVs each, on component arrays
+        (4, G): the formulas of rotations.quat_rotate, normalize, quat_swing, quat_mul."""
+        G = len(q_root)
+        g3 = gn.reshape(G, n, 3)
+        tr3 = self.t_r.reshape(G, n - 1, 3)
+        p = np.ascontiguousarray(q_root.T)  # (4, G)
+        out = np.empty((G, n - 1, 4))
+        for j in range(n - 1):
+            tn = (g3[:, j + 1] - g3[:, j]).T  # (3, G)
+            tn = rot._unit3(tn)
+            v = rot.quat_rotate_soa(p, np.ascontiguousarray(tr3[:, j].T))
+            v = rot._unit3(v)
+            # quat_swing(v, tn): minimal rotation taking v to tn
+            c = rot._dot3(v, tn)
+            sw = np.empty((4, G))
+            sw[0] = 1.0 + c
+            sw[1:] = rot._cross3(v, tn)
+            anti = c < -1 + 1e-12
+            if anti.any():
+                sw[:, anti] = rot.quat_swing(v[:, anti].T, tn[:, anti].T).T
+            sw /= np.sqrt(sw[0] * sw[0] + rot._dot3(sw[1:], sw[1:]))
+            # quat_mul(sw, p)
+            q = np.empty((4, G))
+            q[0] = sw[0] * p[0] - rot._dot3(sw[1:], p[1:])
+            q[1:] = sw[0] * p[1:] + p[0] * sw[1:] + rot._cross3(sw[1:], p[1:])
+            out[:, j] = q.T
+            p = q
+        return out.reshape(-1, 4)
 
     def _blend_block(self, Qt, flip, a, b, out):
         """Rotated render segments ``a:b`` into ``out`` (3, S): per guide, the rotation
@@ -352,7 +385,9 @@ class GroomDeformer:
             out[:, 0] = new_roots
             for i in range(3):
                 out[:, 1:, i] = seg[i].reshape(Rn, n - 1)
-            return np.cumsum(out, axis=1).reshape(-1, 3)
+            for j in range(1, n):  # the sums of np.cumsum(axis=1), one CV column a pass
+                out[:, j] += out[:, j - 1]
+            return out.reshape(-1, 3)
         step = np.empty_like(self.rp)
         step[self.rs0 + 1] = seg.T
         step[roff[:-1]] = new_roots

@@ -80,6 +80,12 @@ def test_same_input_same_output_whatever_came_before():
     collider_distance(pts, off, [col], max_distance=0.5)  # another window
     collider_distance(pts * 0.5, off, [col])  # other curves, no cap
     np.testing.assert_array_equal(collider_distance(pts, off, [col], max_distance=0.2), first)
+    # a curve's distances do not depend on the other curves of the call
+    sub = np.arange(3, 11)
+    rows = np.concatenate([np.arange(off[i], off[i + 1]) for i in sub])
+    sub_off = np.concatenate([[0], np.cumsum(np.diff(off)[sub])])
+    np.testing.assert_array_equal(collider_distance(pts[rows], sub_off, [col], max_distance=0.2),
+                                  first[rows])
     fresh = Collider(V, F)
     np.testing.assert_array_equal(collider_distance(pts, off, [fresh], max_distance=0.2), first)
     np.testing.assert_array_equal(collider_distance(pts, off, [(V.astype(np.float32), F)],

@@ -33,7 +33,11 @@ def _close(a, b, *scenes):
 def _groom(seed, n_guides, n_render, uniform):
     rng = np.random.default_rng(seed)
     V, F = po.icosphere((0.2, -0.1, 0.3), 1.0, 2)
-    gp, go = po.fur_on_mesh(rng, V, F, n_guides, int(rng.integers(2, 9)), 0.4)
+    if uniform:
+        gp, go = po.fur_on_mesh(rng, V, F, n_guides, int(rng.integers(2, 9)), 0.4)
+    else:
+        gp, go = po.pack([po.fur_on_mesh(rng, V, F, 1, int(rng.integers(2, 9)), 0.4)[0]
+                          for _ in range(n_guides)])
     if uniform:
         rp, ro = po.fur_on_mesh(rng, V, F, n_render, int(rng.integers(2, 9)), 0.4)
     else:  # every curve its own CV count
