@@ -123,7 +123,7 @@ class GroomDeformer:
 
     #: Render segments per block of the blend (component arrays of
     #: (4, block, k) floats stay in the CPU caches).
-    BLOCK = 16384
+    BLOCK = 8192
 
     def __init__(self, render_ref_points, render_offsets, guides_ref_points, guide_offsets,
                  weights):
@@ -204,6 +204,11 @@ class GroomDeformer:
             # t = 0 it does not count, so it is never stored
             self.i0[a:a + (1 << 18)] = gf[g] + j0
         self.sc = sc
+        # (guide, segment) layout for the blend: contiguous rows per guide slot
+        self.i0k = np.ascontiguousarray(self.i0.T)
+        self.tk = np.ascontiguousarray(self.t.T)
+        del self.i0, self.t
+        self.weight_t = np.ascontiguousarray(self.weight.T)
         self.vT = np.ascontiguousarray(v.T)  # (3, S) render segments at rest
         sizes = np.diff(roff)
         self.uniform = int(sizes[0]) if len(sizes) and (sizes == sizes[0]).all() else 0
@@ -319,29 +324,35 @@ class GroomDeformer:
 
         ``flip`` (GS,) is true where a guide segment's rotation and the next one's
         have a negative dot product: the nlerp then takes the next one negated.
+        Arrays are (component, guide, segment): every pass runs over contiguous
+        rows of the block's segments.
         """
-        i0, t = self.i0[a:b], self.t[a:b]  # (n, k)
-        q0 = np.stack([Qc.take(i0) for Qc in Qt])  # (4, n, k)
-        t1 = np.negative(t, where=flip.take(i0), out=t.copy())  # (-q1) t = q1 (-t)
+        i0, t = self.i0k[:, a:b], self.tk[:, a:b]  # (k, n)
+        q0 = np.empty((4,) + i0.shape)
+        q1 = np.empty_like(q0)
         i1 = i0 + (t > 0)
-        q1 = np.stack([Qc.take(i1) for Qc in Qt])
+        for c in range(4):
+            np.take(Qt[c], i0, out=q0[c])
+            np.take(Qt[c], i1, out=q1[c])
+        t1 = np.where(flip.take(i0), -t, t)  # (-q1) t = q1 (-t)
         qs = q0 * (1 - t)
-        qs += q1 * t1
+        q1 *= t1
+        qs += q1
         n = qs[0] * qs[0]
         for c in (1, 2, 3):
             n += qs[c] * qs[c]
         np.sqrt(n, out=n)
         # sign-aligned with the first guide's, weighted; the nlerp's normalization
         # folded into the weights
-        d = qs[0] * qs[0, :, :1]
+        d = qs[0] * qs[0, :1]
         for c in (1, 2, 3):
-            d += qs[c] * qs[c, :, :1]
-        sw = self.weight[self.sc[a:b]]
+            d += qs[c] * qs[c, :1]
+        sw = self.weight_t[:, self.sc[a:b]]
         sw /= n
         np.negative(sw, out=sw, where=d < 0)
-        m = qs[:, :, 0] * sw[:, 0]
-        for k in range(1, sw.shape[1]):
-            m += qs[:, :, k] * sw[:, k]
+        m = qs[:, 0] * sw[0]
+        for k in range(1, len(sw)):
+            m += qs[:, k] * sw[k]
         n = m[0] * m[0]
         for c in (1, 2, 3):
             n += m[c] * m[c]
