@@ -9,9 +9,9 @@ ellipsoid) that rests on the head and swings +-25 degrees.
 
 Per frame, in the order of the add-on's frame handler:
 
-* ``attach``: ``Binding.apply`` of the render groom's Fur Attach (and the guides');
-* ``collide``: ``Solver.step`` of the guides (FurCollide itself; not a
-  pipeline stage, printed for scale);
+* ``attach``: ``Binding.apply`` of the render groom's Fur Attach;
+* ``collide``: the guides' Fur Attach and ``Solver.step`` (FurCollide itself;
+  not a pipeline stage, printed for scale);
 * ``motion``: ``wind`` after collision + ``collider_distance`` (capped at the
   longest displacement, as the add-on does) + ``region_of_influence``;
 * ``groom``: ``deform_groom`` of the render groom (roots from its Fur Attach);
@@ -23,10 +23,12 @@ segment of the 50,000-curve groom on 2 pinned threads plus the numpy set-up,
 the collider moved by its matrix). Both wall time and CPU time (all threads
 of the process) are given; the CPU ratio is the one to trust on a busy
 machine. Then the linear-scaling check (each stage from 10k to 500k render
-curves) and each stage's peak memory (tracemalloc, numpy's allocations).
+curves) and each stage's peak memory (tracemalloc, numpy's allocations), and
+the Blender end-to-end figure (``bench_pipeline_blender.py``: the demo's
+pipeline at the same render-curve count, played through the operators).
 Targets are printed with PASS/MISS, never asserted.
 
-    .venv/bin/python bench/bench_pipeline.py            # everything (~5 min)
+    .venv/bin/python bench/bench_pipeline.py            # everything (~10 min)
     .venv/bin/python bench/bench_pipeline.py --quick    # smoke run (~20 s)
     .venv/bin/python bench/bench_pipeline.py --no-scaling --frames 8
 """
@@ -248,9 +250,8 @@ class Scene:
 
 # ------------------------------------------------------------------ stages
 def stage_attach(sc, Vn):
-    r = sc.rbind.apply(Vn)
-    sc.gbind.apply(Vn)
-    return r
+    """Fur Attach of the render groom (the guides' is timed with collide)."""
+    return sc.rbind.apply(Vn)
 
 
 def stage_motion(sc, guides_out, frame):
@@ -445,6 +446,9 @@ def parse_args(argv=None):
     ap.add_argument("--repeat", type=int, default=3, help="repeats per size (scaling)")
     ap.add_argument("--no-scaling", action="store_true")
     ap.add_argument("--no-frames", action="store_true")
+    ap.add_argument("--no-blender", action="store_true",
+                    help="skip the Blender end-to-end figure (bench_pipeline_blender.py)")
+    ap.add_argument("--blender-frames", type=int, default=24)
     ap.add_argument("--quick", action="store_true",
                     help="smoke run: 10,000 curves, 4 frames, scaling 5k..20k")
     a = ap.parse_args(argv)
@@ -470,6 +474,17 @@ def main(argv=None):
     if not args.no_scaling:
         scaling(args)
     pool.shutdown()
+    if not args.no_blender:
+        import subprocess
+
+        print("\n  Blender end-to-end (the demo's pipeline through the operators, bpy wheel):",
+              flush=True)
+        cmd = [sys.executable, str(HERE / "bench_pipeline_blender.py"), "--curves",
+               str(args.curves), "--frames", str(args.blender_frames)]
+        try:
+            subprocess.run(cmd, check=False, timeout=1800)
+        except subprocess.TimeoutExpired:
+            print("  (timed out)")
     return 0
 
 

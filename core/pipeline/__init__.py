@@ -8,6 +8,7 @@ Public API (paper names, see README "The fur pipeline")::
         wind, jiggle,                                    # wind / secondary motion
         collider_distance, region_of_influence,          # Collider Distance, RoI
         bind_groom, GroomWeights, deform_groom,          # render groom follows guides
+        GroomDeformer,                                   #   (its bind-time work, explicit)
         clearance_pass,                                  # final clearance (FurCollide)
     )
 
