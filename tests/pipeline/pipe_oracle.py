@@ -162,3 +162,35 @@ def sphere_and_ground(seed=12):
         curves.append(root + np.cumsum(rng.normal(0, 0.08, (4, 3)), 0))
     pts, off = pack(curves)
     return pts, off, np.vstack([Vs, Vp]), np.vstack([Fs, Fp])
+
+
+def brute_segments(A, B, V, F):
+    """(S,) exact segment-mesh distance: every segment against every triangle.
+
+    (The one oracle here that uses core: ``segment_triangle_distance``, itself
+    checked against sampling in test_distance_cap.py.)
+    """
+    S, m = len(A), len(F)
+    si = np.repeat(np.arange(S), m)
+    ti = np.tile(np.arange(m), S)
+    T = V[F]
+    from core.pipeline import segment_triangle_distance
+
+    d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
+    return d.reshape(S, m).min(1)
+
+
+def brute_cv(points, offsets, meshes):
+    """(P,) exact per-CV distance (min over the CV's segments and the meshes)."""
+    A, B, _ = segments(points, offsets)
+    seg = np.full(len(A), np.inf)
+    for V, F in meshes:
+        seg = np.minimum(seg, brute_segments(A, B, V, F))
+    out = np.full(len(points), np.inf)
+    k = 0
+    for i in range(len(offsets) - 1):
+        for j in range(offsets[i], offsets[i + 1] - 1):
+            out[j] = min(out[j], seg[k])
+            out[j + 1] = min(out[j + 1], seg[k])
+            k += 1
+    return out
