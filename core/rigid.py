@@ -457,6 +457,23 @@ def release(ctx, idx):
     ctx.angle_max[done] = 0.0
 
 
+def _stages(ns):
+    """Segment ranges (first, stop) a probe's rays are traced in, in turn.
+
+    A probe that collides usually collides at its tip (the outer segments turn
+    the most), so the tip segment goes first, then the next one, then the rest
+    of the outer half, then the inner half; each range only for the probes the
+    ones before left clear. The answer does not depend on the order; a probe
+    that collides costs about 1.5 rays instead of the 4 of an outer-half-first
+    order (sustained contact at paper scale: 345,000 rays per frame instead of
+    414,000).
+    """
+    t = ns // 2
+    if ns - t >= 3:
+        return ((ns - 1, ns), (ns - 2, ns - 1), (t, ns - 2), (0, t))
+    return ((t, ns), (0, t)) if t else ((0, ns),)
+
+
 class RigidBatch:
     """Stiff/Bend curves under search, with all angle-independent work done once.
 
@@ -604,18 +621,24 @@ class RigidBatch:
                     blk = slice(lo, min(lo + _BLOCK, b))
                     w = slice(lo - a, min(lo + _BLOCK, b) - a)
                     self._rays(it[blk], th[blk], *terms, o32[:, w], d32[:, w])
-                # The outer segments first (they turn the most, and a probe
-                # that collides usually collides there); the inner ones only
-                # for the probes they left clear. The answer is the same.
-                t = ns // 2
-                h = c.segment_hits_local(o32[t:].reshape(-1, 3), d32[t:].reshape(-1, 3), off,
-                                         threads).reshape(ns - t, b - a).any(axis=0)
-                rest = np.flatnonzero(~h)
-                if t and len(rest):
-                    hi = c.segment_hits_local(o32[:t, rest].reshape(-1, 3),
-                                              d32[:t, rest].reshape(-1, 3), off, threads)
-                    h[rest] = hi.reshape(t, len(rest)).any(axis=0)
-                return h, (ns - t) * (b - a) + t * len(rest)
+                # Segment ranges in turn (:func:`_stages`), each only for the
+                # probes the ones before left clear: the answer is the same.
+                h = np.zeros(b - a, bool)
+                rest = np.arange(b - a)
+                n_rays = 0
+                for s0, s1 in _stages(ns):
+                    if len(rest) == 0:
+                        break
+                    if len(rest) == b - a:
+                        oo, dd = o32[s0:s1], d32[s0:s1]
+                    else:
+                        oo, dd = o32[s0:s1, rest], d32[s0:s1, rest]
+                    hi = c.segment_hits_local(oo.reshape(-1, 3), dd.reshape(-1, 3), off,
+                                              threads).reshape(s1 - s0, len(rest)).any(axis=0)
+                    n_rays += (s1 - s0) * len(rest)
+                    h[rest[hi]] = True
+                    rest = rest[~hi]
+                return h, n_rays
 
             if ctx.threads > 1 and k >= 2 * _BLOCK:
                 # Two halves, each built and traced by one thread: numpy and
