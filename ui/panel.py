@@ -5,7 +5,7 @@ from bpy.types import Panel, UIList
 
 from ..core import framecache
 from ..operators import ops_bake, registry
-from ..operators.colliders import in_scene
+from ..operators.colliders import collider_lines, in_scene
 from ..operators.ops_common import active_setup, backend_message
 
 #: List icon per collider object type (a mesh, or what Blender turns into one).
@@ -130,6 +130,9 @@ class FURCOLLIDE_PT_colliders(_Sub, Panel):
             sub = col.column()
             sub.active = item.use_offset
             sub.prop(item, "collision_offset")
+            rt = registry.get_runtime(active_setup(context), create=False)
+            for line in collider_lines(rt, item.object):  # repairs, no pinch detection
+                col.label(text=line, icon="INFO")
         col = layout.column()
         col.use_property_split = True
         col.prop(s, "collider_collection")
