@@ -134,6 +134,11 @@ class Runtime:
 
 registry: dict[str, Runtime] = {}
 
+#: Why the playback cache is empty after a file saved with one was opened (the reason
+#: the frames that are not cached give, as ``Runtime.dropped``, until the start frame
+#: is solved again).
+NOT_SAVED = "the playback cache is not saved with the file: bake to keep the frames"
+
 
 def ensure_uid(ob) -> str:
     """The setup id of ``ob`` (created on first use)."""

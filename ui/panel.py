@@ -231,6 +231,10 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         total = max(0, s.frame_end - s.frame_start + 1)
         n, where = cached_count(src)
         layout.label(text=f"{n} of {total} frames {where}", icon="FILE_CACHE")
+        rt = registry.get_runtime(src, create=False)
+        if not s.is_baked and rt is not None and rt.dropped == registry.NOT_SAVED:
+            layout.label(text="The playback cache is not saved with the file: bake",
+                         icon="ERROR")
         if s.is_outdated:  # (the status above says why)
             layout.label(text="Outdated bake: Free Bake, then Bake" if s.is_baked
                          else "Outdated: play from the start frame or bake", icon="ERROR")
