@@ -17,6 +17,16 @@ import numpy as np
 STATE_VERSION = 1
 
 
+def identity_rows(n: int) -> np.ndarray:
+    """(n, 4) float64 identity quaternions (1, 0, 0, 0), read-only: one row
+    broadcast, no memory per row (copy it to write)."""
+    return np.broadcast_to(np.array([1.0, 0.0, 0.0, 0.0]), (n, 4))
+
+
+def _copy(a: np.ndarray) -> np.ndarray:
+    return a if not a.flags.writeable else a.copy()
+
+
 @dataclass
 class SolverState:
     """Per-curve state of a :class:`core.Solver` (C curves, S segments).
@@ -46,7 +56,10 @@ class SolverState:
         the recovery step a blocked curve took.
     quat, quat_max : (S, 4) float64
         Soft: each segment's rotation (w, x, y, z), local frame, and the
-        largest of this contact.
+        largest of this contact. Until a Soft step stores its own, both are one
+        read-only identity row broadcast to (S, 4) (:func:`identity_rows`): Stiff
+        and Bend never use them, and at 200,000 curves x 8 CVs two real arrays
+        would take 90 MB.
     """
 
     angle: np.ndarray
@@ -79,16 +92,17 @@ class SolverState:
     def fresh(cls, n_curves: int, n_segments: int) -> SolverState:
         """The state of curves with no history."""
         C, S = n_curves, n_segments
-        ident = np.tile([1.0, 0.0, 0.0, 0.0], (S, 1))
+        ident = identity_rows(S)
         return cls(
             angle=np.zeros(C), angle_max=np.zeros(C), axis=np.zeros((C, 3)),
             frame=np.zeros((C, 3, 3)), active=np.zeros(C, bool), hold=np.zeros(C, bool),
             pinched=np.zeros(C, bool), stiff=np.zeros(C, bool), contact=np.zeros(C, bool),
-            delta=np.zeros(C), quat=ident, quat_max=ident.copy(),
+            delta=np.zeros(C), quat=ident, quat_max=ident,
         )
 
     def copy(self) -> SolverState:
-        return SolverState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+        """A copy (the read-only identity rows of a fresh state are shared, not copied)."""
+        return SolverState(**{f.name: _copy(getattr(self, f.name)) for f in fields(self)})
 
     def rows(self, curves, seg) -> dict:
         """Copies of the rows of ``curves`` (C,) bool and their segments ``seg``
@@ -102,7 +116,13 @@ class SolverState:
     def put_rows(self, curves, seg, rows: dict) -> None:
         """Write back :meth:`rows` (an invalid curve keeps its state)."""
         for f in fields(self):
-            getattr(self, f.name)[seg if f.name in self.SOFT else curves] = rows[f.name]
+            a, sel = getattr(self, f.name), seg if f.name in self.SOFT else curves
+            if not a.flags.writeable:  # identity rows (no Soft step yet)
+                if np.array_equal(a[sel], rows[f.name]):
+                    continue
+                a = a.copy()
+                setattr(self, f.name, a)
+            a[sel] = rows[f.name]
 
     @classmethod
     def from_arrays(cls, arrays: dict, n_curves: int, n_segments: int) -> SolverState:

@@ -226,10 +226,77 @@ def collider_list(setup) -> list:
     rt, depsgraph = setup.rt, setup.depsgraph
     cols = {}
     for r in collider_objects(setup.ob, depsgraph.scene):
-        cols[r.uid] = sync_collider(rt.colliders.get(r.uid), r.object, depsgraph,
-                                    r.double_sided, r.offset, r.matrix(depsgraph), r.name)
+        old = rt.colliders.get(r.uid)
+        cols[r.uid] = sync_collider(old, r.object, depsgraph, r.double_sided, r.offset,
+                                    r.matrix(depsgraph), r.name)
+        if cols[r.uid] is not old:
+            _tell(setup, r.uid, cols[r.uid].collider, r.object.type == "MESH")
     rt.colliders = cols  # forgets deleted colliders
     return [e.collider for e in cols.values()]
+
+
+# ------------------------------------------------------------- what was made of them
+def open_mesh(col) -> str:
+    """'no pinch detection for <name>: open mesh (...)' for a single-sided collider that
+    is open even after the core's repairs (welded seams, duplicated faces ignored), so
+    it has no inside; '' otherwise (closed, Double Sided, or no faces at all)."""
+    rep = col.repairs
+    if col.double_sided or col.closed or not len(rep.faces):
+        return ""
+    edges = f"{rep.open_edges} open edge{'s' if rep.open_edges != 1 else ''}" if (
+        rep.open_edges) else "not closed"
+    return f"no pinch detection for '{col.name}': open mesh ({edges})"
+
+
+def repaired(col) -> str:
+    """What the core repaired in ``col`` ("'Ball': 12 duplicated faces ignored, 430 faces
+    turned outward"), '' when nothing."""
+    text = col.repairs.describe()
+    return f"'{col.name}': {text}" if text else ""
+
+
+def _tell(setup, uid, col, mesh) -> None:
+    """A collider was built: say once (one console line, and the next status) what was
+    repaired in it when it is a ``mesh`` object (a curve, text or surface is always
+    tessellated with seams: nothing the artist could fix), and once that it detects no
+    pinch when it is an open mesh."""
+    rt = setup.rt
+    said = rt.told.setdefault(uid, set())
+    for kind, text in (("repaired", repaired(col) if mesh else ""), ("open", open_mesh(col))):
+        if text and kind not in said:
+            said.add(kind)
+            rt.fresh_notes.append(text)
+            what = "collider " if kind == "repaired" else ""
+            print(f"FurCollide '{setup.ob.name}': {what}{text}", flush=True)
+
+
+def collider_note(rt) -> str:
+    """The status note about a setup's colliders ('' when none): the open meshes that
+    detect no pinch (while they are colliders), and what was repaired in colliders
+    just built (said once)."""
+    notes, rt.fresh_notes = list(rt.fresh_notes), []
+    for e in rt.colliders.values():
+        text = open_mesh(e.collider)
+        if text and text not in notes:
+            notes.append(text)
+    return "Colliders: " + "; ".join(notes) if notes else ""
+
+
+def collider_lines(rt, obj) -> list[str]:
+    """For the panel: what the core made of the collider entry ``obj`` (an object, or a
+    collection instance: each collider in it) at the last solved frame."""
+    if rt is None or obj is None:
+        return []
+    lines = []
+    for e in rt.colliders.values():
+        name = e.collider.name
+        if name != obj.name and not name.startswith(obj.name + " › "):
+            continue
+        if obj.type == "MESH" and (text := repaired(e.collider)):
+            lines.append("Repaired " + text)
+        if text := open_mesh(e.collider):
+            lines.append(text[:1].upper() + text[1:])
+    return lines
 
 
 def growth_collider(setup, settings):

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..core import framecache
 from . import bridge, frame_outputs, frame_solve, groom_stage, registry
-from .colliders import read_for_solve, surface_as_collider
+from .colliders import collider_note, read_for_solve, surface_as_collider
 from .frame_inputs import (
     FrameInputs,
     baked_frame_change,
@@ -370,10 +370,15 @@ def invalid_note(problems):
 
 def _note(setup, stats, note):
     """``note``, unless the frame shown holds INVALID curves: then what the last solve
-    said about them (or how many there are, for a frame solved in another session)."""
+    said about them (or how many there are, for a frame solved in another session).
+    Without either, what there is to say about the colliders (an open mesh detects no
+    pinch; what was repaired in one just built, once): :func:`colliders.collider_note`."""
     n = stats.get("invalid", 0)
     if not n:
-        return note
+        if note[1]:
+            return note
+        about = collider_note(setup.rt)
+        return ("INFO", about) if about else note
     return setup.rt.invalid_note or (
         "WARNING", f"Source hair: {n} curves have a zero-length segment or a non-finite "
         "point. They are shown as they are, in yellow; the other curves are solved")

@@ -12,6 +12,10 @@
 * ``load_post``: a new file forgets every runtime and completes the setups'
   dependency modifiers; ``save_pre`` / ``save_post`` keep relative bake paths
   pointing at the same files when the file is saved elsewhere.
+* The playback cache is not saved with the file: ``save_pre`` records how many frames
+  each setup had cached, and ``load_post`` has such a setup say that they are gone
+  (:data:`registry.NOT_SAVED`): at once, and on every frame that is not cached until
+  the start frame is solved again.
 """
 
 from __future__ import annotations
@@ -119,6 +123,51 @@ def on_load_post(*_args):
                 update_dependencies(ob)
     except Exception as exc:  # noqa: BLE001 - a handler must never raise
         print(f"FurCollide: could not update the setups' inputs: {exc}", flush=True)
+    try:
+        for ob in bpy.data.objects:
+            s = getattr(ob, "furcollide", None)
+            if s is not None and s.is_setup and s.cached_at_save > 0 and s.enabled and (
+                    not s.is_baked):
+                _cache_not_saved(ob)
+    except Exception as exc:  # noqa: BLE001
+        print(f"FurCollide: could not check the setups' playback caches: {exc}", flush=True)
+
+
+def _cache_not_saved(ob) -> None:
+    """``ob``'s file was saved while its setup had a playback cache, and that cache is
+    not in the file: say so now (the status, one console line), and have the frames
+    that are not cached say it until the start frame is solved again (the reason
+    ``frame_rules`` gives when it holds a frame is ``Runtime.dropped``)."""
+    s = ob.furcollide
+    rt = registry.get_runtime(ob)
+    if rt is None:
+        return
+    rt.dropped = registry.NOT_SAVED
+    n = s.cached_at_save
+    registry.set_status(ob, "WARNING", (
+        f"The playback cache ({n} frame{'s' if n != 1 else ''}) is not saved with the "
+        f"file: bake to keep the frames, or play from frame {s.frame_start}"))
+
+
+def _record_playback_caches() -> None:
+    """Before a save: record in each setup how many frames its playback cache holds
+    (0 when baked, or when only the start frame is cached: that one is solved again
+    when shown). A setup with nothing cached that has not solved its start frame since
+    the file was opened keeps what the file said: its output still shows a frame of
+    the cache lost then."""
+    for ob in bpy.data.objects:
+        s = getattr(ob, "furcollide", None)
+        if s is None or not s.is_setup or ob.library is not None:
+            continue
+        rt = registry.get_runtime(ob, create=False)
+        if s.is_baked:
+            n = 0
+        elif rt is None or (not len(rt.memory) and rt.dropped == registry.NOT_SAVED):
+            continue
+        else:
+            n = len(rt.memory) if any(f > s.frame_start for f in rt.memory.frames) else 0
+        if s.cached_at_save != n:
+            s.cached_at_save = n
 
 
 _save_remap: dict = {}  # object name -> bake_path before save_pre rewrote it
@@ -133,9 +182,14 @@ def _relative_bake_paths():
 
 @persistent
 def on_save_pre(filepath="", *_args):
-    """Save As to another folder: keep each bake's relative path pointing at the
-    same files (Blender remaps its own relative paths, not an add-on's)."""
+    """Record each setup's playback cache (:func:`_record_playback_caches`). Save As
+    to another folder: keep each bake's relative path pointing at the same files
+    (Blender remaps its own relative paths, not an add-on's)."""
     _save_remap.clear()
+    try:
+        _record_playback_caches()
+    except Exception as exc:  # noqa: BLE001 - a handler must never raise
+        print(f"FurCollide: could not record the playback caches: {exc}", flush=True)
     try:
         old = bpy.data.filepath
         if not old or not filepath or os.path.dirname(old) == os.path.dirname(filepath):

@@ -314,6 +314,9 @@ class FurCollideSettings(PropertyGroup):
         description="A dense render groom that follows the collided guides",
     )
     bake_path: hidden(StringProperty, "Bake Path", "")
+    #: Frames the playback cache held when the file was last saved (the cache itself is
+    #: not saved): after reopening, the frames that are not cached say so (handlers).
+    cached_at_save: hidden(IntProperty, "Frames Cached At Save", 0)
 
     # --------------------------------------------------- read-only statistics
     stat_frame: stat("Frame", "frame", "Frame the statistics below belong to")

@@ -78,6 +78,10 @@ class Runtime:
     #: ahead of it); any other change drops the playback cache (see frame_rules).
     trusted: set = field(default_factory=set)
     verified: set = field(default_factory=set)
+    #: Collider uid -> what was said about it once (``colliders._tell``), and what the
+    #: next status says of colliders just built (``colliders.collider_note``).
+    told: dict = field(default_factory=dict)
+    fresh_notes: list = field(default_factory=list)
 
     def forget_solver(self):
         self.solver = None
@@ -129,6 +133,11 @@ class Runtime:
 
 
 registry: dict[str, Runtime] = {}
+
+#: Why the playback cache is empty after a file saved with one was opened (the reason
+#: the frames that are not cached give, as ``Runtime.dropped``, until the start frame
+#: is solved again).
+NOT_SAVED = "the playback cache is not saved with the file: bake to keep the frames"
 
 
 def ensure_uid(ob) -> str:

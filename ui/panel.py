@@ -5,7 +5,7 @@ from bpy.types import Panel, UIList
 
 from ..core import framecache
 from ..operators import ops_bake, registry
-from ..operators.colliders import in_scene
+from ..operators.colliders import collider_lines, in_scene
 from ..operators.ops_common import active_setup, backend_message
 
 #: List icon per collider object type (a mesh, or what Blender turns into one).
@@ -130,6 +130,9 @@ class FURCOLLIDE_PT_colliders(_Sub, Panel):
             sub = col.column()
             sub.active = item.use_offset
             sub.prop(item, "collision_offset")
+            rt = registry.get_runtime(active_setup(context), create=False)
+            for line in collider_lines(rt, item.object):  # repairs, no pinch detection
+                col.label(text=line, icon="INFO")
         col = layout.column()
         col.use_property_split = True
         col.prop(s, "collider_collection")
@@ -228,6 +231,10 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         total = max(0, s.frame_end - s.frame_start + 1)
         n, where = cached_count(src)
         layout.label(text=f"{n} of {total} frames {where}", icon="FILE_CACHE")
+        rt = registry.get_runtime(src, create=False)
+        if not s.is_baked and rt is not None and rt.dropped == registry.NOT_SAVED:
+            layout.label(text="The playback cache is not saved with the file: bake",
+                         icon="ERROR")
         if s.is_outdated:  # (the status above says why)
             layout.label(text="Outdated bake: Free Bake, then Bake" if s.is_baked
                          else "Outdated: play from the start frame or bake", icon="ERROR")

@@ -418,7 +418,8 @@ def test_collider_parented_to_an_animated_non_uniformly_scaled_empty(fc, offset)
 def test_collider_with_a_build_modifier_changes_topology_every_frame(fc, tmp_path):
     """A Build modifier adds the faces of a wall frame by frame (0 faces at the
     start): the collider's topology changes on every frame. Nothing raises, the
-    invariants hold and the bake equals the play."""
+    invariants hold and the bake equals the play. While it is built the wall is an
+    open mesh: the status says it detects no pinch."""
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, 8
     scene.frame_set(1)
@@ -431,12 +432,17 @@ def test_collider_with_a_build_modifier_changes_topology_every_frame(fc, tmp_pat
     out = fc.setup(hair, [wall])
     faces = {}
     played = {}
+    notes = {}
     for f in range(1, 9):
         scene.frame_set(f)
-        st = check_frame(hair, out, [wall])
+        st = check_frame(hair, out, [wall], status=None)
+        notes[f] = hair.furcollide.status_message
         faces[f] = len(tris_world(wall)[1])
         played[f] = (positions(out).copy(), st.copy())
     assert faces[1] == 0 and faces[1] < faces[4] < faces[8], faces
+    assert notes[1] == "" and notes[8] == "", notes  # no faces; then closed
+    for f in range(2, 8):
+        assert notes[f].startswith("Colliders: no pinch detection for 'Wall': open mesh ("), f
     assert (played[8][1] != FREE).any()
     save_in(tmp_path)
     bake_setup(hair)
