@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import frame_rules, registry
+from . import baked, frame_rules, registry
 from .dependencies import update_dependencies
 from .setup import Setup
 
@@ -20,7 +20,8 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
     """Drop the memory-cached frames after ``from_frame`` (default: the current frame of
     ``scene``, the scene the change was seen in).
 
-    A baked setup is not affected (its bake is read-only until freed).
+    A baked setup's bake is not affected (it is read-only until freed); a change of
+    its settings marks it outdated at once (:func:`baked.check`).
     ``colliders`` also forgets the core Colliders and updates the output's
     dependency modifier. ``refresh`` re-evaluates the current frame soon
     (interactive sessions only; never from inside the frame handler).
@@ -28,6 +29,8 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
     ob = registry.source_of(ob)
     if ob is None:
         return
+    if ob.furcollide.is_baked:
+        baked.check(ob, scene)
     rt = registry.get_runtime(ob, create=False)
     if rt is None:  # nothing cached (a file just opened), but the inputs may have changed
         if colliders:
@@ -47,6 +50,8 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
 def refresh_groom(ob) -> None:
     """The groom options changed: recompute the groom on the next evaluation."""
     ob = registry.source_of(ob)
+    if ob is not None and ob.furcollide.is_baked:
+        baked.check(ob)
     rt = registry.get_runtime(ob, create=False) if ob is not None else None
     if rt is not None:
         rt.groom_shown = None
