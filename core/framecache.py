@@ -494,12 +494,14 @@ def read_inputs(directory, f) -> dict | None:
         return None
 
 
-def read_extra(directory, f, part) -> dict | None:
+def read_extra(directory, f, part, names=None) -> dict | None:
     """The arrays of ``part`` stored with frame ``f`` (:func:`write_frame`'s
-    ``extra``), or None when the frame has none."""
+    ``extra``), or None when the frame has none. ``names`` (optional) reads only
+    those arrays (the others are not loaded)."""
     prefix = f"{_EXTRA_PREFIX}{part}__"
     with np.load(frame_path(directory, f), allow_pickle=False) as z:
-        got = {k[len(prefix):]: z[k] for k in z.files if k.startswith(prefix)}
+        got = {k[len(prefix):]: z[k] for k in z.files if k.startswith(prefix)
+               and (names is None or k[len(prefix):] in names)}
     return got or None
 
 

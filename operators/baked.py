@@ -51,7 +51,7 @@ def _baked_with(directory, f):
     if got is None:
         try:
             record = framecache.read_inputs(directory, f)
-            groom = framecache.read_extra(directory, f, groom_stage.BAKE_PART)
+            groom = framecache.read_extra(directory, f, groom_stage.BAKE_PART, ("key",))
         except (OSError, ValueError, KeyError):
             record, groom = None, None
         got = (None if record is None else record.get("settings"),
@@ -87,7 +87,8 @@ def check(ob, scene=None) -> bool:
     Does nothing for a setup that is not baked."""
     if not ob.furcollide.is_baked:
         return False
-    differs = settings_differ(ob, scene)
+    # A disabled setup shows its source (nothing baked is shown): nothing to disagree with.
+    differs = ob.furcollide.enabled and settings_differ(ob, scene)
     rt = registry.get_runtime(ob)
     if rt is None:
         return differs

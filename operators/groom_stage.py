@@ -343,9 +343,9 @@ def _show_note(setup, note, guides_ok) -> None:
 
 # ----------------------------------------------------------------- bake
 def _baked(setup, state):
-    """The render groom baked with the frame the output shows, while its binding and
-    settings are the bake's: (points, status, stats), else None (computed live; a bake
-    made with other groom settings marks the setup outdated)."""
+    """The render groom baked with the frame the output shows: (points, status,
+    stats), else None (the bake holds no groom, or another one: computed live). A
+    groom baked with other settings is shown all the same, the setup outdated."""
     rt = setup.rt
     if rt.stats.get("source") != "bake":
         return None
@@ -356,13 +356,15 @@ def _baked(setup, state):
         return None
     if part is None:
         return None
-    if part["key"].tobytes().decode() != settings_key(setup.ob):
-        rt.outdated = True  # (the frame rules say it: baked.settings_differ)
-        return None
     points = np.asarray(part["points"], np.float64)
     status = np.asarray(part["status"], np.int8)
     if points.shape != state.binding.render_ref.shape:
-        return None
+        return None  # (another groom bound since: computed live)
+    if part["key"].tobytes().decode() != settings_key(setup.ob):
+        # Baked with other groom settings: still shown, as the guides' baked frame is
+        # (it is what renders), never as if current (the frame rules say it:
+        # baked.settings_differ).
+        rt.outdated = True
     return points, status, groom_stats(status, int(part["fixed"][0]))
 
 
