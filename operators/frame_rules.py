@@ -33,7 +33,7 @@ import bpy
 import numpy as np
 
 from ..core import framecache
-from . import baked, bridge, frame_outputs, frame_solve, groom_stage, registry
+from . import baked, bridge, frame_outputs, frame_solve, groom_stage
 from .clock import clock
 from .colliders import read_for_solve, surface_as_collider
 from .frame_inputs import (
@@ -89,7 +89,7 @@ def evaluate(setup) -> Outcome:
         try:
             groom_stage.run(setup, written)
         except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
-            setup.set_status("WARNING", f"Render groom: {registry.describe(exc)}")
+            setup.set_status("WARNING", groom_stage.error_message(exc))
     setup.rt.stats = dict(setup.rt.stats, **clock.stats())
     return outcome
 

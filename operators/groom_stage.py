@@ -37,7 +37,7 @@ import numpy as np
 from .. import core
 from ..core import Status, framecache, pipeline
 from ..core.pipeline._curves import as_given, bad_curves
-from . import bridge
+from . import bridge, registry
 from .clock import clock
 from .colliders import collider_list, in_scene
 from .frame_outputs import hide_in_viewport
@@ -93,6 +93,12 @@ def run(setup, guides_world) -> None:
     _write(setup, state, points, status)
     setup.rt.stats = dict(setup.rt.stats, **stats)
     _show_note(setup, note or state.note or binding.note, guides_ok=True)
+
+
+def error_message(exc) -> str:
+    """The status of an error of this stage: "Render groom: ...", said once."""
+    text = registry.describe(exc)
+    return text if text.startswith("Render groom:") else f"Render groom: {text}"
 
 
 def follow_last_guides(setup) -> None:

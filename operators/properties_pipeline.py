@@ -119,7 +119,9 @@ class FurCollideMotion(PropertyGroup):
     )
     distance_max: _motion_float(
         "Max Distance", 0.0, "Distances beyond this are stored as this value, which is "
-        "much faster (0 = exact everywhere)", min=0.0, soft_max=1.0, subtype="DISTANCE",
+        "much faster (0 = no cap). Every stored distance is a lower bound of the true one, "
+        "a few cells of the collider's distance field at most", min=0.0, soft_max=1.0,
+        subtype="DISTANCE",
         unit="LENGTH",
     )
 

@@ -125,21 +125,6 @@ CHILDREN_NOT_CLEARED = (
 )
 
 
-def draw_stage_times(layout, src):
-    """The last frame's milliseconds per pipeline stage (the setup's stats)."""
-    from ..operators import registry
-    from ..operators.clock import STAGES
-
-    stats = registry.stats_for(src)
-    if not any(stats.get(f"{k}_ms") for k in STAGES):
-        return
-    box = layout.box()
-    box.label(text="Last Frame (ms per stage)", icon="TIME")
-    col = box.column(align=True)
-    for k in STAGES:
-        col.label(text=f"{k.capitalize()}: {stats.get(f'{k}_ms', 0.0):.1f}")
-
-
 class FURCOLLIDE_PT_pipeline(Panel):
     """Fur pipeline around FurCollide: guides from a groom, collider distance, children."""
 
@@ -205,7 +190,6 @@ class FURCOLLIDE_PT_pipeline(Panel):
         for i, line in enumerate(CHILDREN_NOT_CLEARED):
             col.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
         draw_groom(layout, src)
-        draw_stage_times(layout, src)
 
 
 classes = (FURCOLLIDE_PT_pipeline,)

@@ -9,6 +9,7 @@ import pytest
 from helpers import (
     UNRESOLVED,
     activate,
+    draw_enabled,
     groom_scene,
     mesh_object,
     offsets_of,
@@ -273,6 +274,13 @@ def test_stage_times_and_skipped_stages(fc, monkeypatch):
     for k in ("attach", "collide", "motion", "groom", "clearance", "write"):
         assert f"{k}_ms" in stats
     assert stats["collide_ms"] > 0 and stats["groom_ms"] > 0 and stats["write_ms"] > 0
+    # the Last Frame panel shows them, and the render groom's counts
+    activate(guides)
+    labels = [e[1] for e in draw_enabled(bpy.types.FURCOLLIDE_PT_stats) if e[0] == "label"]
+    assert f"Groom: {stats['groom_ms']:.1f}" in labels and "Milliseconds per stage:" in labels
+    g = guides.furcollide.groom
+    assert f"Render groom: {g.stat_fixed} fixed" in labels
+    assert f"Unresolved (red): {g.stat_unresolved}" in labels
     calls = []
     deform = fc.groom_stage.GroomBinding.deform
 
@@ -318,3 +326,23 @@ def test_collider_distance_computed_once_per_frame(fc, monkeypatch):
     v = np.empty(len(a.data), np.float32)
     a.data.foreach_get("value", v)
     assert (v <= np.float32(0.05)).all()
+
+
+def test_a_groom_stage_error_is_prefixed_once(fc):
+    """Issue 17 point 7: an error of the groom stage (here its output's curves were
+    edited) says "Render groom:" once, and an error raised with the prefix is not
+    prefixed again."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = _bound(fc)
+    play(scene, range(1, 3))
+    hc = bpy.data.hair_curves.new("Edited output")
+    hc.add_curves([5] * 3)
+    gout.data = hc
+    scene.frame_set(3)
+    level, msg = fc.registry.status_for(guides)
+    assert level == "WARNING" and msg.startswith(
+        "Render groom: The groom output 'Groom FurCollide' has other curves than the bound "
+        "groom (edited?): press Bind Groom again"), msg
+    assert msg.count("Render groom:") == 1
+    said = fc.groom_stage.error_message(ValueError("Render groom: the guides now have 3"))
+    assert said == "Render groom: the guides now have 3"
