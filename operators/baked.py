@@ -64,7 +64,10 @@ def _baked_with(directory, f):
 
 def settings_differ(ob, scene=None, directory=None, f=None) -> bool:
     """Are the setup's settings other than those its bake (frame ``f``, default the
-    first) was made with? False when the bake does not say (files of older versions)."""
+    first) was made with? False when the bake does not say (files of older versions).
+
+    Every frame of a bake has the same settings (a bake resumes only with them), so the
+    first frame's record, read once per file version, answers for every frame shown."""
     if directory is None:
         where = _bake_file(ob)
         if where is None:

@@ -473,7 +473,7 @@ def _show_baked(setup, inp, note):
                                   attributes=framecache.read_attributes(directory, fe))
     rt.stats = frame_solve.frame_stats(status, fe, source="bake")
     why = baked_frame_change(setup, inp, directory, fe) if fe == f else ""
-    if baked.settings_differ(setup.ob, setup.scene, directory, fe):
+    if baked.settings_differ(setup.ob, setup.scene):
         rt.outdated = True
         setup.set_status("WARNING", f"Frame {f} was {baked.MESSAGE} (the baked frame is "
                          "still shown)")
