@@ -570,13 +570,16 @@ class GroomBinding:
                 self._g_off, self.weights)
         gn = np.asarray(guides_now, np.float64)[self._g_rows]
         moved = self._deformer.deform(gn, roots)
-        points = self.render_ref.copy()
-        points[self._rows_v] = moved
         status = np.where(self.invalid, Status.INVALID, Status.FREE).astype(np.int8)
-        if self.fixed is not None and surface_V is not None:
-            points[self._rows_i] = self.fixed.apply(surface_V)
-        finite = np.isfinite(points).all(axis=1)
-        if not finite.all():  # (a guide degenerated this frame: never write NaN)
+        if len(self._rows_i):
+            points = self.render_ref.copy()
+            points[self._rows_v] = moved
+            if self.fixed is not None and surface_V is not None:
+                points[self._rows_i] = self.fixed.apply(surface_V)
+        else:  # (every curve is valid: the deformer's result as it is)
+            points = np.asarray(moved, np.float64)
+        if not np.isfinite(points.sum()):  # (a guide degenerated this frame: never NaN)
+            finite = np.isfinite(points).all(axis=1)
             R = len(self.render_offsets) - 1
             curve = np.repeat(np.arange(R), np.diff(self.render_offsets))
             bad = np.zeros(R, bool)
