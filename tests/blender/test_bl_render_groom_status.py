@@ -326,6 +326,8 @@ def test_collider_distance_computed_once_per_frame(fc, monkeypatch):
     v = np.empty(len(a.data), np.float32)
     a.data.foreach_get("value", v)
     assert (v <= np.float32(0.05)).all()
+    tip = type(m).bl_rna.properties["distance_max"].description
+    assert "(0 = no cap)" in tip and "exact" not in tip
 
 
 def test_a_groom_stage_error_is_prefixed_once(fc):
