@@ -74,6 +74,7 @@ def _frame_of(name: str) -> int | None:
 _STATE_PREFIX = "state__"
 _ATTRIBUTE_PREFIX = "attr__"
 _INPUTS_KEY = "inputs"
+_EXTRA_PREFIX = "extra__"
 _FORMAT_VERSION = 1
 
 
@@ -431,7 +432,7 @@ def list_frames(directory: str) -> list[int]:
 
 
 def write_frame(directory, f, points, status, offsets, state, sparse=None,
-                attributes=None, inputs=None) -> str:
+                attributes=None, inputs=None, extra=None) -> str:
     """Atomically write frame ``f`` (temp file + :func:`os.replace`).
 
     With ``sparse`` (a :class:`SparseState`), the solver state is stored as
@@ -439,7 +440,9 @@ def write_frame(directory, f, points, status, offsets, state, sparse=None,
     instead of ~25 MB per frame at paper scale). ``attributes`` (name -> (P,)
     array) are per-point attributes of the output (:func:`read_attributes`).
     ``inputs`` is the frame-inputs record the frame was solved from
-    (:func:`read_inputs`).
+    (:func:`read_inputs`). ``extra`` (part name -> dict of arrays, or None) stores
+    what later stages derived from the frame, e.g. the render groom
+    (:func:`read_extra`).
     """
     if sparse is not None and state is not None:
         state = {k.replace(":", "__"): v for k, v in sparse.encode(state).items()}
@@ -458,6 +461,9 @@ def write_frame(directory, f, points, status, offsets, state, sparse=None,
         arrays[_ATTRIBUTE_PREFIX + k] = np.asarray(v)
     if inputs is not None:
         arrays[_INPUTS_KEY] = encode_inputs(inputs)
+    for part, items in (extra or {}).items():
+        for k, v in (items or {}).items():
+            arrays[f"{_EXTRA_PREFIX}{part}__{k}"] = np.asarray(v)
     with open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
         fh.flush()
@@ -499,6 +505,17 @@ def read_inputs(directory, f) -> dict | None:
             return decode_inputs(z[_INPUTS_KEY])
     except (OSError, ValueError, KeyError):
         return None
+
+
+def read_extra(directory, f, part, names=None) -> dict | None:
+    """The arrays of ``part`` stored with frame ``f`` (:func:`write_frame`'s
+    ``extra``), or None when the frame has none. ``names`` (optional) reads only
+    those arrays (the others are not loaded)."""
+    prefix = f"{_EXTRA_PREFIX}{part}__"
+    with np.load(frame_path(directory, f), allow_pickle=False) as z:
+        got = {k[len(prefix):]: z[k] for k in z.files if k.startswith(prefix)
+               and (names is None or k[len(prefix):] in names)}
+    return got or None
 
 
 def read_attributes(directory, f) -> dict:

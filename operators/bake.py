@@ -19,7 +19,8 @@ import bpy
 import numpy as np
 
 from ..core import framecache
-from . import frame_outputs, frame_rules, frame_solve, motion, registry
+from . import frame_outputs, frame_rules, frame_solve, groom_stage, motion, registry
+from .clock import clock
 from .colliders import read_for_solve
 from .frame_inputs import current_inputs, prepare_input, read_inputs, solved_inputs
 from .setup import Setup, core_settings, signature
@@ -65,6 +66,7 @@ def bake_frame(setup, directory, trust_solver) -> dict:
         The frame's stats (curve counts per status, ``solve_ms``).
     """
     s, rt, f = setup.s, setup.rt, setup.frame
+    clock.start()
     inp = read_inputs(setup)
     rt.adopt_topology(inp.key)
     prepare_input(setup, inp)
@@ -84,16 +86,30 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     fp = settings_fingerprint(setup.ob)
     state = solver.state
     state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
+    rt.stats = dict(result.stats, source="bake")
+    groom = _bake_groom(setup, result.points)  # the render groom is baked with its guides
     framecache.write_frame(directory, f, result.points, result.status, inp.offsets, state,
                            rt.memory.sparse, result.attributes,
-                           inputs=solved_inputs(setup, inp))
+                           inputs=solved_inputs(setup, inp),
+                           extra=None if groom is None else {groom_stage.BAKE_PART: groom})
     frame_outputs.write(setup, inp, result.points, result.status, result.changed,
                         result.attributes)
-    rt.stats = dict(result.stats, source="bake")
+    rt.stats = dict(rt.stats, **clock.stats())
     rt.invalid_note = frame_rules.invalid_note(result.problems)
     if rt.invalid_note:
         setup.set_status(*rt.invalid_note)
     return rt.stats
+
+
+def _bake_groom(setup, guides_world):
+    """The render groom's arrays for the frame's bake file (None: no render groom, or
+    it failed: then it is computed on every frame shown, and the console says why)."""
+    try:
+        return groom_stage.bake_frame(setup, guides_world)
+    except Exception as exc:  # noqa: BLE001 - the guides are baked all the same
+        print(f"FurCollide bake '{setup.ob.name}': frame {setup.frame}: render groom not "
+              f"baked: {registry.describe(exc)}", flush=True)
+        return None
 
 
 def scene_depsgraph(scene):

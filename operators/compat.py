@@ -12,6 +12,10 @@ versions it was seen on (the test matrix runs every test on each of them).
   Map``); 5.0 adds a ``Surface Input Type`` menu. 5.2 has no Surface input at all: the
   group reads the hair data-block's own ``surface`` and ``surface_uv_map``. Sockets are
   matched by name and type (:func:`interpolate_sockets`), never by position.
+* **Rest position of the Surface**: the group's switch to place children on the
+  Surface's ``rest_position`` (not its deformed shape) is "Surface Rest Position" in
+  4.2-5.0 and "Resting Surface" (on by default) in 5.2; every version reads the
+  attribute Blender adds with ``Object.add_rest_position_attribute``.
 * **Geometry-nodes modifier inputs**: up to 5.0 they are ID properties
   (``mod["Input_15"] = 10``, ``mod["Input_18_use_attribute"]``); 5.2 replaced them with
   ``mod.properties.inputs.Input_15.value`` / ``.type`` / ``.attribute_name``
@@ -90,6 +94,8 @@ class InterpolateSockets:
     surface_uv_map: str | None
     density: str | None
     guides: str | None
+    #: The switch placing the children on the Surface's rest position (all versions).
+    rest_position: str | None = None
 
     @property
     def surface_from_hair_data(self) -> bool:
@@ -123,6 +129,8 @@ def interpolate_sockets(ng) -> InterpolateSockets:
         surface_uv_map=ids.get(("Surface UV Map", "NodeSocketVector")),
         density=ids.get(("Density", "NodeSocketFloat")),
         guides=ids.get(("Interpolation Guides", "NodeSocketInt")),
+        rest_position=ids.get(("Surface Rest Position", "NodeSocketBool"))
+        or ids.get(("Resting Surface", "NodeSocketBool")),
     )
     known_52 = "Surface" not in names and "Resting Surface" in names
     if sockets.surface_object is None and not known_52:
@@ -181,6 +189,14 @@ def modifier_input_attribute(mod, identifier: str) -> str:
     if inp is None or getattr(inp, "type", "VALUE") != "ATTRIBUTE":
         return ""
     return inp.attribute_name
+
+
+def move_modifier(ob, mod, index: int) -> None:
+    """Put modifier ``mod`` of ``ob`` at position ``index`` of its stack
+    (``ObjectModifiers.move``, present on every supported version)."""
+    have = list(ob.modifiers).index(mod)
+    if have != index:
+        ob.modifiers.move(have, index)
 
 
 def uv_map_names(mesh) -> list[str]:

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core import framecache
 from . import bridge
+from .clock import clock
 from .registry import source_of
 
 
@@ -41,6 +42,11 @@ def write(setup, inputs, points_world, status, changed=None, attributes=None) ->
     (P, 3) float32 ndarray
         ``points_world``: what the output shows now (the render groom follows it).
     """
+    with clock.timing("write"):
+        return _write(setup, inputs, points_world, status, changed, attributes)
+
+
+def _write(setup, inputs, points_world, status, changed, attributes) -> np.ndarray:
     rt = setup.rt
     data = setup.s.output.data
     bridge.set_positions(data, output_local(inputs, points_world, changed))

@@ -33,7 +33,8 @@ import bpy
 import numpy as np
 
 from ..core import framecache
-from . import bridge, frame_outputs, frame_solve, groom_stage, registry
+from . import baked, bridge, frame_outputs, frame_solve, groom_stage
+from .clock import clock
 from .colliders import collider_note, read_for_solve, surface_as_collider
 from .frame_inputs import (
     FrameInputs,
@@ -76,12 +77,20 @@ def evaluate(setup) -> Outcome:
         Any error; the frame handler turns it into the status message, the bake into
         a report. A render groom error only warns (the guides are written).
     """
-    outcome, written = _rules(setup)
-    if written is not None and setup.s.groom.output is not None:
+    clock.start()
+    try:
+        outcome, written = _rules(setup)
+    except Exception:
+        groom_stage.follow_last_guides(setup)  # (never raises)
+        raise
+    if setup.s.groom.output is not None and (
+        written is not None or outcome in (Outcome.TOPOLOGY, Outcome.OUTDATED)
+    ):  # (None: the groom follows the last good guides)
         try:
             groom_stage.run(setup, written)
         except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
-            setup.set_status("WARNING", f"Render groom: {registry.describe(exc)}")
+            setup.set_status("WARNING", groom_stage.error_message(exc))
+    setup.rt.stats = dict(setup.rt.stats, **clock.stats())
     return outcome
 
 
@@ -469,7 +478,11 @@ def _show_baked(setup, inp, note):
                                   attributes=framecache.read_attributes(directory, fe))
     rt.stats = frame_solve.frame_stats(status, fe, source="bake")
     why = baked_frame_change(setup, inp, directory, fe) if fe == f else ""
-    if why:  # still shown (it is what renders), never as if current
+    if baked.settings_differ(setup.ob, setup.scene):
+        rt.outdated = True
+        setup.set_status("WARNING", f"Frame {f} was {baked.MESSAGE} (the baked frame is "
+                         "still shown)")
+    elif why:  # still shown (it is what renders), never as if current
         rt.outdated = True
         setup.set_status("WARNING", f"Frame {f} of the bake is outdated: {why} since it was "
                          "baked. The baked frame is still shown: press Free Bake, then Bake.")

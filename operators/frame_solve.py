@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core import Status, framecache
 from . import motion
+from .clock import clock
 
 
 @dataclass
@@ -65,6 +66,7 @@ def solve_frame(setup, inputs) -> FrameResult:
     """
     res = setup.solver.step(inputs.points, inputs.colliders, growth=inputs.growth,
                             enabled=inputs.enabled)
+    clock.add("collide", res.timings.get("total", 0.0))
     m = setup.motion
     if m is None or not m.active:
         points, attributes = res.points, {}

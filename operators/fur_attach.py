@@ -15,6 +15,7 @@ import numpy as np
 
 from ..core.pipeline import Binding
 from . import bridge
+from .clock import clock
 from .registry import get_runtime
 
 #: Custom property (bytes of an ``np.savez`` file) on the source object holding the
@@ -81,6 +82,11 @@ def load_binding(ob):
 def attached_points(ob, depsgraph, offsets) -> np.ndarray:
     """Fur Attach input stage: the bound curves moved rigidly with the evaluated
     Surface of the source ``ob`` (world space, (P, 3) float64)."""
+    with clock.timing("attach"):
+        return _attached_points(ob, depsgraph, offsets)
+
+
+def _attached_points(ob, depsgraph, offsets) -> np.ndarray:
     binding, key = load_binding(ob)
     surf = ob.data.surface
     if surf is None or surf.type != "MESH":

@@ -5,59 +5,154 @@ guides (:class:`GroomBinding`, saved on the groom output object). Every frame th
 rules show, :func:`run` deforms the render curves with the guides just written
 (:func:`core.pipeline.deform_groom`), then the **clearance pass**
 (:func:`core.pipeline.clearance_pass`) frees the render curves that still cross a
-collider; their count is a panel statistic. The groom output is recomputed from the
-shown guides; it is not cached or baked itself.
+collider, and writes the result with its ``furcollide_status`` and ``furcollide_color``
+(as the guides' output). What the stage does, frame by frame:
+
+* it checks the groom against its binding (:func:`groom_changes`): another Render
+  Groom, its curves edited, Guides per Curve changed. The groom output keeps following
+  the guides with the bound curves and the status says what to press;
+* it computes only when its inputs changed (the guides, the Surface, the colliders and
+  the groom's settings): a held frame, a still scene or a repeated frame writes what it
+  computed last;
+* a baked frame shows the groom baked with it (:func:`bake_frame` writes it) while its
+  binding and settings are the bake's;
+* when the guides' frame fails (an error, a topology change, an outdated frame), the
+  groom follows the last good guides, carried with their Surface to the current frame
+  (:func:`follow_last_guides`), so its roots stay on the skin and the clearance pass
+  still runs against the colliders of this frame.
+
+Render curves the solver cannot work with (a zero-length segment, a NaN point) are set
+aside at Bind Groom and shown as they are, in yellow (``Status.INVALID``); curves the
+clearance pass cannot free are ``UNRESOLVED`` (red). Both are counted in the stats.
 """
 
 from __future__ import annotations
 
 import io
+import re
 
 import bpy
 import numpy as np
 
 from .. import core
-from ..core import pipeline
-from . import bridge
+from ..core import Status, framecache, pipeline
+from ..core.pipeline._curves import as_given, bad_curves
+from . import bridge, registry
+from .clock import clock
 from .colliders import collider_list, in_scene
 from .frame_outputs import hide_in_viewport
-from .registry import get_runtime
+from .registry import get_runtime, set_status, status_for
 
 #: Custom property (bytes of an ``np.savez`` file) on the groom output object with
 #: the render groom binding (reference poses, guide weights, optional root binding).
 GROOM_PROPERTY = "_furcollide_groom"
+#: Name of the render groom's arrays in a bake file (:func:`framecache.write_frame`).
+BAKE_PART = "groom"
 
 
+# ------------------------------------------------------------------ frame
 def run(setup, guides_world) -> None:
-    """The render groom follows the guides just written (deform + clearance pass).
+    """The render groom follows the guides the output shows (deform + clearance pass).
 
-    ``guides_world`` (P, 3): the guides' world points the output shows now.
+    Parameters
+    ----------
+    setup : setup.Setup
+    guides_world : (P, 3) float32 ndarray or None
+        The guides' world points the output shows now; None when the guides' frame
+        failed: the groom then follows the last good guides (:func:`follow_last_guides`).
+
+    Raises
+    ------
+    ValueError
+        The groom output cannot be written (its messages name what to press).
     """
-    rt, depsgraph = setup.rt, setup.depsgraph
-    g = setup.s.groom
-    out = g.output
-    f = setup.frame + setup.subframe
+    depsgraph = setup.depsgraph
+    out = setup.s.groom.output
     if depsgraph is None or not in_scene(out, depsgraph.scene):
         return
-    if rt.groom_shown is not None and rt.groom_shown[0] == f and np.array_equal(
-        rt.groom_shown[1], guides_world
-    ):
-        return  # the same frame again (handlers fire for repeated frames)
-    binding = groom_binding(setup.ob, rt)
-    cols = collider_list(setup) if g.use_clearance else []
-    points, n_fixed = groom_frame(setup, binding, guides_world, cols)
-    write_groom(out, points, binding.render_offsets, depsgraph)
-    rt.groom_shown = (f, np.array(guides_world, copy=True))
-    rt.stats = dict(rt.stats, groom_fixed=n_fixed)
+    state = groom_state(setup.ob, setup.rt)
+    state.note = ""
+    binding = state.binding
+    note = groom_changes(setup, binding)
+    if guides_world is not None and guides_world.shape != binding.guides_ref.shape:
+        note = note or (
+            f"Render groom: the guides now have {len(guides_world)} points but were bound "
+            f"with {len(binding.guides_ref)}: press Bind Groom again (the groom follows "
+            "the last guides it could use)")
+        guides_world = None
+    if guides_world is None:
+        _follow(setup, state)
+        _show_note(setup, note or state.note or binding.note, guides_ok=False)
+        return
+    baked = _baked(setup, state) if setup.s.is_baked and setup.subframe == 0.0 else None
+    if baked is not None:
+        points, status, stats = baked
+        state.remember_guides(guides_world, _surface_now(setup, binding)[0])
+    else:
+        points, status, stats = _compute(setup, state, guides_world)
+    _write(setup, state, points, status)
+    setup.rt.stats = dict(setup.rt.stats, **stats)
+    _show_note(setup, note or state.note or binding.note, guides_ok=True)
+
+
+def error_message(exc) -> str:
+    """The status of an error of this stage: "Render groom: ...", said once."""
+    text = registry.describe(exc)
+    return text if text.startswith("Render groom:") else f"Render groom: {text}"
+
+
+def follow_last_guides(setup) -> None:
+    """The guides' frame failed: the groom follows the last good guides (attached to
+    the current Surface), so it neither freezes nor crosses the colliders. Never
+    raises (an error here must not hide the guides' own)."""
+    try:
+        if setup.s.groom.output is not None:
+            run(setup, None)
+    except Exception as exc:  # noqa: BLE001 - the guides' error is the one reported
+        print(f"FurCollide '{setup.ob.name}': render groom: {exc}", flush=True)
+
+
+def bake_frame(setup, guides_world) -> dict | None:
+    """The render groom of a frame being baked: computed (and written, so the bake
+    shows it) from the guides just baked; returns its arrays for the bake file, or
+    None when the setup has no render groom."""
+    g = setup.s.groom
+    out = g.output
+    if out is None or not has_groom(out) or not in_scene(out, setup.depsgraph.scene):
+        return None
+    state = groom_state(setup.ob, setup.rt)
+    if guides_world.shape != state.binding.guides_ref.shape:
+        return None  # (the guides changed since Bind Groom: not baked, computed live)
+    points, status, stats = _compute(setup, state, guides_world)
+    _write(setup, state, points, status)
+    setup.rt.stats = dict(setup.rt.stats, **stats)
+    g.baked_id = g.bind_id
+    return {"points": np.asarray(points, np.float32), "status": status,
+            "key": np.frombuffer(settings_key(setup.ob).encode(), np.uint8),
+            "fixed": np.array([stats["groom_fixed"]], np.int64)}
+
+
+def settings_key(ob) -> str:
+    """What the baked render groom depends on besides the guides: the binding and the
+    clearance pass's settings."""
+    s = ob.furcollide
+    g = s.groom
+    return f"{g.bind_id}|{bool(g.use_clearance)}|{float(s.collision_offset)!r}"
 
 
 def groom_binding(ob, rt):
     """The render groom binding of the setup on ``ob`` (cached in its runtime ``rt``)."""
+    return groom_state(ob, rt).binding
+
+
+def groom_state(ob, rt) -> GroomState:
+    """The render groom's session state of the setup on ``ob`` (loaded on first use,
+    again after Bind Groom)."""
     g = ob.furcollide.groom
-    if rt.groom is None or rt.groom[0] != g.bind_id:
-        rt.groom = (g.bind_id, load_groom(g.output))
+    if not isinstance(rt.groom, GroomState) or rt.groom.bind_id != g.bind_id:
+        rt.groom = GroomState(g.bind_id, load_groom(g.output))
         rt.groom_shown = None
-    return rt.groom[1]
+    return rt.groom
 
 
 def remove_groom(src) -> None:
@@ -73,55 +168,435 @@ def remove_groom(src) -> None:
         rt.groom = rt.groom_shown = None
 
 
+class GroomState:
+    """What the render groom stage keeps between frames (in the setup's runtime)."""
+
+    def __init__(self, bind_id, binding):
+        self.bind_id = bind_id
+        self.binding = binding
+        self.key = None  # digests of the inputs of ``result``
+        self.result = None  # (points (P, 3) float64 world, status (R,), stats)
+        self.written = None  # (data session uid, status, colours) written last
+        self.last_guides = None  # (guides world (Q, 3), Surface world (n, 3) or None)
+        self.carried = None  # (last_guides, core Binding of them to the Surface)
+        self.note = ""  # what the last computation found (shown after the checks)
+        self.noted = ""  # the status the stage set last
+
+    def remember_guides(self, guides, surface_V) -> None:
+        self.last_guides = (np.array(guides, np.float64), surface_V)
+
+
+# --------------------------------------------------------------- compute
+def _surface_now(setup, binding):
+    """(world vertices (n, 3) of the Surface the render roots are bound to, now, or
+    None; a note when its topology changed since Bind Groom)."""
+    surf = setup.ob.data.surface
+    if binding.roots is None or surf is None or surf.type != "MESH":
+        return None, ""
+    se = surf.evaluated_get(setup.depsgraph)
+    with bridge.evaluated_mesh(se) as me:
+        if me is None:
+            return None, ""
+        if not bridge.same_topology(bridge.mesh_topology_key(me), binding.surface_key):
+            return None, (
+                f"Render groom: the Surface '{surf.name}' changed topology since Bind Groom "
+                "(the render roots follow the guides): press Bind Groom again")
+        V = bridge.mesh_vertices(me).astype(np.float64)
+    return bridge.transform(V, bridge.matrix(se)), ""
+
+
+def _compute(setup, state, guides_world, remember=True):
+    """(points (P, 3) float64 world, status (R,) int8, stats) of the render groom on
+    ``guides_world``; reuses the last result while its inputs are unchanged.
+    ``remember``: these are the last good guides (not carried ones)."""
+    s = setup.s
+    g = s.groom
+    binding = state.binding
+    with clock.timing("attach"):  # (the render roots' Surface)
+        V, surface_note = _surface_now(setup, binding)
+    state.note = state.note or surface_note
+    with clock.timing("clearance"):  # (its colliders, read at this frame)
+        cols = collider_list(setup) if g.use_clearance else []
+        entries = list(setup.rt.colliders.values()) if g.use_clearance else []
+    guides = np.asarray(guides_world, np.float64)
+    key = (
+        state.bind_id, settings_key(setup.ob), framecache.digest(guides),
+        None if V is None else framecache.digest(V),
+        tuple((e.inputs, e.double_sided, e.offset) for e in entries),
+    )
+    if remember:
+        state.remember_guides(guides, V)
+    if key == state.key and state.result is not None:
+        return state.result  # (nothing it depends on changed: a held or repeated frame)
+    with clock.timing("groom"):
+        points, status = binding.deform(guides, V)
+    n_fixed = 0
+    if cols:
+        with clock.timing("clearance"):
+            points, status, n_fixed = clearance(s, binding, points, status, cols)
+    stats = groom_stats(status, n_fixed)
+    state.key, state.result = key, (points, status, stats)
+    return points, status, stats
+
+
+def clearance(s, binding, points, status, colliders):
+    """The clearance pass on the deformed render curves (the invalid ones set aside).
+
+    Stiff (the minimal rotation at the root, shape kept) with the setup's own
+    Collision Offset, so render strands keep the same gap as the guides; the curves
+    Stiff cannot free within Max Angle get a second try in Bend, and those still
+    crossing are UNRESOLVED. Returns (points, status, n_fixed).
+    """
+    settings = core.Settings(mode="stiff", collision_offset=s.collision_offset)
+    fallback = core.Settings(mode="bend", collision_offset=s.collision_offset)
+    valid = status != Status.INVALID
+    if valid.all():
+        pts, st, n_fixed = pipeline.clearance_pass(points, binding.render_offsets, colliders,
+                                                   settings=settings, fallback=fallback)
+        return pts, st, n_fixed
+    rows, off = binding.subset(valid)
+    pts, st, n_fixed = pipeline.clearance_pass(points[rows], off, colliders,
+                                               settings=settings, fallback=fallback)
+    out = points.copy()
+    out[rows] = pts
+    status = status.copy()
+    status[valid] = st
+    return out, status, n_fixed
+
+
+def groom_stats(status, n_fixed) -> dict:
+    """The render groom's panel statistics (keys ``groom_*``)."""
+    counts = np.bincount(status.astype(np.intp), minlength=len(Status))
+    return {"groom_fixed": int(n_fixed), "groom_unresolved": int(counts[Status.UNRESOLVED]),
+            "groom_invalid": int(counts[Status.INVALID]),
+            "groom_pinched": int(counts[Status.PINCHED]), "groom_curves": int(len(status))}
+
+
+def _follow(setup, state) -> None:
+    """Write the groom following the last good guides, carried rigidly with their
+    Surface triangles to the Surface of this frame; nothing when there are none."""
+    if state.last_guides is None:
+        return
+    guides, V_then = state.last_guides
+    binding = state.binding
+    V, _ = _surface_now(setup, binding)
+    if V is not None and V_then is not None and V.shape == V_then.shape and not np.array_equal(
+        V, V_then
+    ):
+        guides = _carry(setup, state, guides, V_then, V)
+    points, status, stats = _compute(setup, state, guides, remember=False)
+    _write(setup, state, points, status)
+    setup.rt.stats = dict(setup.rt.stats, **stats)
+
+
+def _carry(setup, state, guides, V_then, V_now):
+    """The last good guides moved rigidly with their root triangles from the Surface
+    ``V_then`` (when they were shown) to ``V_now`` (Fur Attach of the guides)."""
+    carried = state.carried
+    if carried is None or carried[0] is not state.last_guides:
+        surf = setup.ob.data.surface
+        with bridge.evaluated_mesh(surf.evaluated_get(setup.depsgraph)) as me:
+            F = bridge.mesh_triangles(me).astype(np.int64)
+        b = pipeline.bind(guides, state.binding.guide_offsets, V_then, F, snap_roots=False,
+                          drop_degenerate=True)
+        carried = state.carried = (state.last_guides, b)
+    return carried[1].apply(V_now)
+
+
+def _write(setup, state, points_world, status) -> None:
+    """Write the render groom's world points, status codes and colours into the groom
+    output's data (status and colours only where a code changed)."""
+    out = setup.s.groom.output
+    with clock.timing("write"):
+        _write_data(setup, state, out, points_world, status)
+
+
+def _write_data(setup, state, out, points_world, status) -> None:
+    write_groom(out, points_world, state.binding.render_offsets, setup.depsgraph)
+    data = out.data
+    attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
+    last = state.written
+    if last is not None and (attr is None or last[0] != data.session_uid
+                             or len(attr.data) != len(status)):
+        last = None
+    if last is None or not np.array_equal(last[1], status):
+        offsets = state.binding.render_offsets
+        prev, colors = (last[1], last[2]) if last is not None else (None, None)
+        colors = bridge.status_colors(status, offsets, prev, colors)
+        bridge.write_status(data, status, offsets, colors)
+        state.written = (data.session_uid, status.copy(), colors)
+
+
+def _show_note(setup, note, guides_ok) -> None:
+    """Show what the groom check found: alone when the guides are fine, after their
+    own warning otherwise; never over an error of the guides."""
+    state = setup.rt.groom
+    if not note:
+        state.noted = ""
+        return
+    level, msg = status_for(setup.ob)
+    if level == "ERROR" or not guides_ok and msg:
+        return
+    if msg and note not in msg:
+        note = f"{msg} {note}"
+    if note == state.noted:  # (one console line per problem, not one per frame)
+        setup.rt.status = ("WARNING", note)
+        setup.rt.printed = re.sub(r"\d+", "#", note)
+    else:
+        set_status(setup.ob, "WARNING", note)
+    state.noted = note
+
+
+# ----------------------------------------------------------------- bake
+def _baked(setup, state):
+    """The render groom baked with the frame the output shows: (points, status,
+    stats), else None (the bake holds no groom, or another one: computed live). A
+    groom baked with other settings is shown all the same, the setup outdated."""
+    rt = setup.rt
+    if rt.stats.get("source") != "bake":
+        return None
+    directory = bpy.path.abspath(setup.s.bake_path)
+    try:
+        part = framecache.read_extra(directory, int(rt.stats["frame"]), BAKE_PART)
+    except (OSError, ValueError, KeyError):
+        return None
+    if part is None:
+        return None
+    points = np.asarray(part["points"], np.float64)
+    status = np.asarray(part["status"], np.int8)
+    if points.shape != state.binding.render_ref.shape:
+        return None  # (another groom bound since: computed live)
+    if part["key"].tobytes().decode() != settings_key(setup.ob):
+        # Baked with other groom settings: still shown, as the guides' baked frame is
+        # (it is what renders), never as if current (the frame rules say it:
+        # baked.settings_differ).
+        rt.outdated = True
+    return points, status, groom_stats(status, int(part["fixed"][0]))
+
+
+# ----------------------------------------------------------------- checks
+def groom_changes(setup, binding) -> str:
+    """What changed in the render groom since Bind Groom, as a status naming it and
+    what to press ('' when nothing did)."""
+    g = setup.s.groom
+    groom = g.groom
+    bound = binding.groom_name
+    if groom is None:
+        return (f"Render groom: no Render Groom is chosen (bound: '{bound}'); the groom "
+                "output keeps following the guides. Choose it again, or remove the groom "
+                "output (X)")
+    if bound and groom.name != bound:
+        return (f"Render groom: the Render Groom is now '{groom.name}' but '{bound}' is "
+                "bound: press Bind Groom")
+    if binding.groom_digest is not None and groom.type == "CURVES":
+        offs = bridge.curve_offsets(groom.data)
+        C, P = len(offs) - 1, int(offs[-1])
+        if (C, P) != binding.groom_counts:
+            return (f"Render groom: '{groom.name}' now has {C} curves / {P} points but was "
+                    f"bound with {binding.groom_counts[0]} / {binding.groom_counts[1]}: "
+                    "press Bind Groom again (the groom output shows the bound curves)")
+        if groom_digest(groom) != binding.groom_digest:
+            return (f"Render groom: '{groom.name}' was edited since Bind Groom (its curves "
+                    "were moved or reshaped): press Bind Groom again (the groom output "
+                    "shows the bound shape)")
+    oe = groom.evaluated_get(setup.depsgraph)
+    if oe.is_evaluated and groom.type == "CURVES":
+        offs = bridge.curve_offsets(oe.data)
+        ref = binding.render_offsets
+        if len(offs) != len(ref) or not np.array_equal(offs, ref):
+            return (f"Render groom: '{groom.name}' now gives {len(offs) - 1} curves / "
+                    f"{int(offs[-1])} points but was bound with {len(ref) - 1} / "
+                    f"{int(ref[-1])} (its modifiers?): press Bind Groom again")
+    bound_k = binding.guides_k or g.bound_guides
+    if bound_k and g.guides != bound_k:
+        return (f"Render groom: Guides per Curve is {g.guides} but the groom was bound with "
+                f"{bound_k}: press Bind Groom again")
+    return ""
+
+
+def groom_digest(groom) -> int:
+    """Digest of the render groom's own curves (original data: its layout and points),
+    what Bind Groom records and every frame compares."""
+    data = groom.data
+    return framecache.digest(bridge.curve_offsets(data), bridge.get_positions(data))
+
+
 # -------------------------------------------------------------- binding
 class GroomBinding:
-    """A render groom bound to a setup's guides (see ``furcollide.groom_bind``)."""
+    """A render groom bound to a setup's guides (see ``furcollide.groom_bind``).
+
+    Render curves the solver cannot work with are set aside (``invalid``): they
+    are shown as they are (moved rigidly with their Surface triangle when the roots
+    are bound to it), ``Status.INVALID``. So are guides: the render curves follow
+    the others.
+    """
 
     def __init__(self, arrays: dict):
         self.render_ref = np.asarray(arrays["render_ref"], np.float64)
         self.render_offsets = np.asarray(arrays["render_offsets"], np.int64)
         self.guides_ref = np.asarray(arrays["guides_ref"], np.float64)
         self.guide_offsets = np.asarray(arrays["guide_offsets"], np.int64)
+        R, G = len(self.render_offsets) - 1, len(self.guide_offsets) - 1
+        self.invalid = np.asarray(arrays.get("invalid", np.zeros(R, bool)), bool)
+        self.guides_used = np.asarray(arrays.get("guides_used", np.ones(G, bool)), bool)
         self.weights = pipeline.GroomWeights.from_arrays(
             {"index": arrays["weights_index"], "weight": arrays["weights_weight"]}
         )
-        self.roots = None  # Binding of the render roots to the Surface (optional)
+        self.roots = None  # Binding of the valid render roots to the Surface (optional)
+        self.fixed = None  # Binding of the invalid render curves to the Surface (optional)
         self.surface_key = None
         if "root_face" in arrays:
             self.roots = pipeline.Binding.from_arrays(
                 {k[5:]: arrays[k] for k in arrays if k.startswith("root_")}
             )
             self.surface_key = tuple(int(k) for k in arrays["surface_key"])
+        if "fixed_face" in arrays:
+            self.fixed = pipeline.Binding.from_arrays(
+                {k[6:]: arrays[k] for k in arrays if k.startswith("fixed_")}
+            )
+        self.groom_name = str(arrays["groom_name"]) if "groom_name" in arrays else ""
+        self.groom_digest = (int(np.asarray(arrays["groom_digest"]).view(np.uint64)[0])
+                             if "groom_digest" in arrays else None)
+        self.groom_counts = tuple(int(k) for k in arrays.get("groom_counts", (0, 0)))
+        self.guides_k = int(arrays["guides_k"]) if "guides_k" in arrays else 0
+        #: What Bind Groom set aside (shown every frame while it is so), or ''.
+        self.note = str(arrays["note"]) if "note" in arrays else ""
+        self._rows_v, self._off_v = self.subset(~self.invalid)
+        self._rows_i, _ = self.subset(self.invalid)
+        self._g_rows, self._g_off = _subset(self.guide_offsets, self.guides_used)
+        self._deformer = None
+
+    def subset(self, which):
+        """(rows (k,), offsets) of the render curves ``which`` (bool (R,))."""
+        return _subset(self.render_offsets, which)
 
     @staticmethod
-    def build(render_ref, render_offsets, guides_ref, guide_offsets, k, surface=None):
-        """Bind (all world space, reference pose). ``surface``: (V, F, key) or None."""
-        render_ref = np.asarray(render_ref, np.float64)
-        guides_ref = np.asarray(guides_ref, np.float64)
-        weights = pipeline.bind_groom(render_ref[render_offsets[:-1]],
-                                      guides_ref[guide_offsets[:-1]],
-                                      k=min(int(k), len(guide_offsets) - 1))
+    def build(render_ref, render_offsets, guides_ref, guide_offsets, k, surface=None,
+              groom=None):
+        """Bind (all world space, reference pose).
+
+        Parameters
+        ----------
+        render_ref : (P, 3) float array
+        render_offsets : (R+1,) int array
+        guides_ref : (Q, 3) float array
+        guide_offsets : (G+1,) int array
+        k : int
+            Guides per Curve.
+        surface : (V, F, key) or None
+            The Surface (world) the render roots stay on, and its topology key.
+        groom : bpy.types.Object, optional
+            The render groom (its name and curves are recorded: :func:`groom_changes`).
+
+        Returns
+        -------
+        arrays : dict
+            What :func:`store_groom` saves.
+        notes : list of str
+            The curves set aside (invalid render curves, guides), naming the first.
+
+        Raises
+        ------
+        ValueError
+            No render curve (or no guide) can be used.
+        """
+        render_offsets = np.asarray(render_offsets, np.int64)
+        guide_offsets = np.asarray(guide_offsets, np.int64)
+        bad_r, why_r = bad_curves(render_ref, render_offsets)
+        bad_g, why_g = bad_curves(guides_ref, guide_offsets)
+        name = f"'{groom.name}'" if groom is not None else "the render groom"
+        if bad_r.all():
+            raise ValueError(f"No curve of {name} can be used: {why_r}")
+        if bad_g.all():
+            raise ValueError(f"No guide can be followed: {why_g}")
+        render_ref = as_given(render_ref, render_offsets, bad_r)
+        guides_ref = as_given(guides_ref, guide_offsets, bad_g)
+        rows_v, off_v = _subset(render_offsets, ~bad_r)
+        g_rows, g_off = _subset(guide_offsets, ~bad_g)
+        weights = pipeline.bind_groom(render_ref[rows_v][off_v[:-1]],
+                                      guides_ref[g_rows][g_off[:-1]],
+                                      k=min(int(k), len(g_off) - 1))
         arrays = {
-            "render_ref": render_ref, "render_offsets": np.asarray(render_offsets, np.int64),
-            "guides_ref": guides_ref, "guide_offsets": np.asarray(guide_offsets, np.int64),
+            "render_ref": render_ref, "render_offsets": render_offsets,
+            "guides_ref": guides_ref, "guide_offsets": guide_offsets,
             "weights_index": weights.index, "weights_weight": weights.weight,
+            "invalid": bad_r, "guides_used": ~bad_g, "guides_k": np.int64(k),
         }
         if surface is not None:
             V, F, key = surface
-            b = pipeline.bind(render_ref, render_offsets, V, F, drop_degenerate=True)
-            arrays.update({"root_" + k: v for k, v in b.arrays().items()})
+            b = pipeline.bind(render_ref[rows_v], off_v, V, F, drop_degenerate=True)
+            arrays.update({"root_" + n: v for n, v in b.arrays().items()})
+            if bad_r.any():
+                rows_i, off_i = _subset(render_offsets, bad_r)
+                b = pipeline.bind(render_ref[rows_i], off_i, V, F, drop_degenerate=True)
+                arrays.update({"fixed_" + n: v for n, v in b.arrays().items()})
             arrays["surface_key"] = np.asarray(key, np.int64)
-        return arrays
+        if groom is not None:
+            offs = bridge.curve_offsets(groom.data)
+            arrays["groom_name"] = np.array(groom.name)
+            arrays["groom_digest"] = np.array([groom_digest(groom)], np.uint64).view(np.int64)
+            arrays["groom_counts"] = np.array([len(offs) - 1, int(offs[-1])], np.int64)
+        notes = []
+        if bad_r.any():
+            n = int(bad_r.sum())
+            notes.append(
+                f"{n} curve{'s' if n > 1 else ''} of {name} cannot be solved ({why_r}): "
+                f"{'they are' if n > 1 else 'it is'} shown as {'they are' if n > 1 else 'it is'},"
+                " in yellow (Invalid). Fix the groom's curves and press Bind Groom again")
+        if bad_g.any():
+            n = int(bad_g.sum())
+            notes.append(f"{n} guide{'s' if n > 1 else ''} cannot be followed ({why_g}): "
+                         "the render curves follow the others")
+        if notes:
+            arrays["note"] = np.array("Render groom: " + "; ".join(notes))
+        return arrays, notes
 
-    def deform(self, guides_now, surface_V=None) -> np.ndarray:
-        """(P, 3) float64 render curves following ``guides_now`` (world)."""
+    def deform(self, guides_now, surface_V=None):
+        """The render curves following ``guides_now`` (world).
+
+        Returns
+        -------
+        points : (P, 3) float64 ndarray
+        status : (R,) int8 ndarray
+            ``Status.INVALID`` for the curves set aside (and any the guides made
+            non-finite this frame: they are shown at their reference shape), else FREE.
+        """
         roots = None
         if self.roots is not None and surface_V is not None:
             roots = self.roots.roots(surface_V)
-        return pipeline.deform_groom(
-            self.render_ref, self.render_offsets, self.guides_ref, guides_now,
-            self.guide_offsets, self.weights, render_roots_now=roots,
-        )
+        if self._deformer is None:
+            self._deformer = pipeline.GroomDeformer(
+                self.render_ref[self._rows_v], self._off_v, self.guides_ref[self._g_rows],
+                self._g_off, self.weights)
+        gn = np.asarray(guides_now, np.float64)[self._g_rows]
+        moved = self._deformer.deform(gn, roots)
+        status = np.where(self.invalid, Status.INVALID, Status.FREE).astype(np.int8)
+        if len(self._rows_i):
+            points = self.render_ref.copy()
+            points[self._rows_v] = moved
+            if self.fixed is not None and surface_V is not None:
+                points[self._rows_i] = self.fixed.apply(surface_V)
+        else:  # (every curve is valid: the deformer's result as it is)
+            points = np.asarray(moved, np.float64)
+        if not np.isfinite(points.sum()):  # (a guide degenerated this frame: never NaN)
+            finite = np.isfinite(points).all(axis=1)
+            R = len(self.render_offsets) - 1
+            curve = np.repeat(np.arange(R), np.diff(self.render_offsets))
+            bad = np.zeros(R, bool)
+            bad[curve[~finite]] = True
+            rows, _ = self.subset(bad)
+            points[rows] = self.render_ref[rows]
+            status[bad] = Status.INVALID
+        return points, status
+
+
+def _subset(offsets, which):
+    """(rows, offsets) of the curves ``which`` (bool (C,)) of the layout ``offsets``."""
+    idx = np.flatnonzero(which)
+    sizes = np.diff(offsets)[idx]
+    rows = np.repeat(offsets[idx] - (np.cumsum(sizes) - sizes), sizes) + np.arange(
+        int(sizes.sum()))
+    return rows, np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
 
 
 def store_groom(out, arrays: dict) -> None:
@@ -155,41 +630,6 @@ def load_groom(out) -> GroomBinding:
         return GroomBinding({k: d[k] for k in d.files})
 
 
-def groom_frame(setup, binding, guides_world, colliders):
-    """Deform the render groom of ``setup`` and run its clearance pass.
-
-    Returns
-    -------
-    points : (P, 3) float32 ndarray (world)
-    n_fixed : int
-        Render curves the clearance pass moved (0 when it is off).
-    """
-    ob, depsgraph = setup.ob, setup.depsgraph
-    g = ob.furcollide.groom
-    if guides_world.shape != binding.guides_ref.shape:
-        raise ValueError(
-            f"Render groom: the guides now have {len(guides_world)} points but were bound "
-            f"with {len(binding.guides_ref)}: press Bind Groom again"
-        )
-    V = None
-    surf = ob.data.surface
-    if binding.roots is not None and surf is not None and surf.type == "MESH":
-        se = surf.evaluated_get(depsgraph)
-        if bridge.same_topology(bridge.mesh_topology_key(se.data), binding.surface_key):
-            V = bridge.transform(bridge.mesh_vertices(se.data).astype(np.float64),
-                                 bridge.matrix(se))
-    pts = binding.deform(np.asarray(guides_world, np.float64), V)
-    n_fixed = 0
-    if g.use_clearance and colliders:
-        # Stiff (the minimal rotation at the root, shape kept) with the setup's own
-        # Collision Offset: render strands keep the same gap as the guides.
-        settings = core.Settings(mode="stiff", collision_offset=ob.furcollide.collision_offset)
-        pts, _status, n_fixed = pipeline.clearance_pass(
-            pts, binding.render_offsets, colliders, settings=settings
-        )
-    return np.asarray(pts, np.float32), int(n_fixed)
-
-
 def write_groom(out, points_world, offsets, depsgraph) -> None:
     """Write the render groom's world points into the groom output's data."""
     if problem := bridge.write_refusal(out, "render groom output"):
@@ -202,7 +642,7 @@ def write_groom(out, points_world, offsets, depsgraph) -> None:
             "(edited?): press Bind Groom again"
         )
     M_inv = bridge.matrix(out.evaluated_get(depsgraph), inverted=True)
-    bridge.set_positions(data, bridge.transform(points_world, M_inv))
+    bridge.set_positions(data, bridge.transform(np.asarray(points_world, np.float32), M_inv))
 
 
 def remove_groom_output(out) -> None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import bpy
 
 from ..core import framecache
-from . import frame_rules, registry
+from . import baked, frame_rules, registry
 from .dependencies import update_dependencies
 from .frame_inputs import current_inputs, describe_change, read_inputs
 from .setup import Setup
@@ -28,8 +28,9 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
     not cached says ``reason`` (e.g. "the settings changed"). Only ``from_frame`` at or
     after the start frame keeps the frames up to it (a shorter frame range).
 
-    A baked setup is not affected (its bake is read-only until freed; a baked frame
-    whose inputs changed is marked outdated when shown). ``colliders`` also forgets the
+    A baked setup's bake is not affected (it is read-only until freed; a baked frame
+    whose inputs changed is marked outdated when shown); a change of its settings marks
+    it outdated at once (:func:`baked.check`). ``colliders`` also forgets the
     core Colliders and updates the output's dependency modifier. ``refresh``
     re-evaluates the current frame soon (interactive sessions only; never from inside
     the frame handler).
@@ -37,6 +38,8 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
     ob = registry.source_of(ob)
     if ob is None:
         return
+    if ob.furcollide.is_baked:
+        baked.check(ob, scene)
     rt = registry.get_runtime(ob, create=False)
     if rt is None:  # nothing cached (a file just opened), but the inputs may have changed
         if colliders:
@@ -85,6 +88,8 @@ def edit_seen(setup) -> str | None:
 def refresh_groom(ob) -> None:
     """The groom options changed: recompute the groom on the next evaluation."""
     ob = registry.source_of(ob)
+    if ob is not None and ob.furcollide.is_baked:
+        baked.check(ob)
     rt = registry.get_runtime(ob, create=False) if ob is not None else None
     if rt is not None:
         rt.groom_shown = None

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core import pipeline
+from .clock import clock
 
 #: Per-point attribute with the Fur Collider Distance on the output.
 DISTANCE_ATTRIBUTE = "furcollide_collider_distance"
@@ -88,6 +89,11 @@ def _jiggle(m, points, offsets, f, fps, history):
 def apply_motion(m, stage, points, offsets, f, fps, history) -> np.ndarray | None:
     """Wind then jiggle of the motion settings ``m`` that run at ``stage`` ('INPUT' or
     'OUTPUT'); None when none does. ``points`` (P, 3) world; returns float64."""
+    with clock.timing("motion"):
+        return _apply_motion(m, stage, points, offsets, f, fps, history)
+
+
+def _apply_motion(m, stage, points, offsets, f, fps, history):
     out = None
     if m.use_wind and m.wind_stage == stage and m.wind_strength > 0:
         out = _wind(m, points if out is None else out, offsets, f, fps)
@@ -126,22 +132,32 @@ def output_stage(m, points, offsets, f, fps, history, colliders):
         ``{DISTANCE_ATTRIBUTE: (P,) float32}`` when the attribute is on.
     """
     moved = apply_motion(m, "OUTPUT", points, offsets, f, fps, history)
+    with clock.timing("motion"):
+        return _limit(m, points, offsets, moved, colliders)
+
+
+def _limit(m, points, offsets, moved, colliders):
+    """The collider distance (the attribute and the Region of Influence's limit), once
+    per frame with the larger of the two caps, then the Region of Influence."""
     attributes = {}
-    distance = None
-    if m.write_collider_distance:
-        cap = float(m.distance_max) if m.distance_max > 0 else None
-        distance = _distance(points, offsets, colliders, cap)
-        if cap is not None:  # nothing within the cap (no collider either): the cap
-            distance = np.minimum(distance, cap)
-        attributes[DISTANCE_ATTRIBUTE] = np.asarray(distance, np.float32)
-    if moved is None:
-        return points, attributes
-    if m.use_region_of_influence and colliders:
-        reach = float(np.sqrt(((moved - points) ** 2).sum(1).max())) if len(points) else 0.0
-        if distance is None or (m.distance_max > 0 and m.distance_max < reach):
+    want_attr = bool(m.write_collider_distance)
+    want_roi = moved is not None and bool(m.use_region_of_influence) and bool(colliders)
+    if want_attr or want_roi:
+        attr_cap = float(m.distance_max) if m.distance_max > 0 else None
+        caps = [attr_cap] if want_attr else []
+        if want_roi:
             # RoI only clamps displacements longer than the distance: capped at the
             # longest displacement, the distance gives the same result, faster.
-            distance = _distance(points, offsets, colliders, reach)
+            caps.append(float(np.sqrt(((moved - points) ** 2).sum(1).max()))
+                        if len(points) else 0.0)
+        cap = None if None in caps else max(caps)
+        distance = _distance(points, offsets, colliders, cap)
+        if want_attr:  # nothing within the cap (no collider either): the cap
+            shown = distance if attr_cap is None else np.minimum(distance, attr_cap)
+            attributes[DISTANCE_ATTRIBUTE] = np.asarray(shown, np.float32)
+    if moved is None:
+        return points, attributes
+    if want_roi:
         moved = pipeline.region_of_influence(points, offsets, moved, distance,
                                              margin=m.roi_margin)
     return np.asarray(moved, np.float32), attributes

@@ -56,6 +56,8 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
             return f"'{g.name}' is not a hair Curves object"
         if g == src or g == src.furcollide.output or g == src.furcollide.groom.output:
             return "The Render Groom must be another hair object than the guides"
+        if src.furcollide.groom.is_baked_with:
+            return "The setup's bake holds this render groom: free the bake before binding"
         return ""
 
     @reports_errors
@@ -81,8 +83,8 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
             # render roots stay exactly on the shared Surface (Fur Attach of the roots)
             V, F = bridge.surface_mesh_world(surf, dg)
             surface = (V, F, bridge.mesh_topology_key(surf.evaluated_get(dg).data))
-        arrays = GroomBinding.build(
-            render_ref, roff, inp.points, inp.offsets, g.guides, surface
+        arrays, notes = GroomBinding.build(
+            render_ref, roff, inp.points, inp.offsets, g.guides, surface, groom=groom
         )
         out = g.output
         if out is None or out.type != "CURVES" or not in_scene(out, scene):
@@ -105,6 +107,8 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
             f"Render groom: {len(roff) - 1} curves of '{groom.name}' follow "
             f"{len(inp.offsets) - 1} guides into '{out.name}' (roots {roots})",
         )
+        for note in notes:
+            self.report({"WARNING"}, f"Render groom: {note}")
         if err:
             self.report({"WARNING"}, f"FurCollide: {err}")
         redraw(context)

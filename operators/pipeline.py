@@ -46,6 +46,12 @@ HAIR_ASSETS = tuple(compat.hair_asset_candidates())
 INTERPOLATE_GROUP = compat.INTERPOLATE_GROUP
 #: Name of the modifier ``furcollide.children_from_guides`` adds.
 CHILDREN_MODIFIER = "FurCollide Children"
+#: The modifier before it: the collided guides moved to the Surface's rest position.
+REST_MODIFIER = "FurCollide Rest Pose"
+#: The modifier after it: every child moved from the rest Surface onto the deformed one.
+SURFACE_MODIFIER = "FurCollide Follow Surface"
+#: Named attributes the roots groups store on the Surface (inside the group only).
+_DEFORMED, _REST = "furcollide_deformed_position", "furcollide_rest_position"
 
 
 def _core_pipeline():
@@ -84,6 +90,106 @@ def interpolate_group():
 
 
 group_inputs = compat.group_inputs
+
+
+def roots_group(to_rest: bool):
+    """The node group moving every curve of a hair geometry rigidly so that its root
+    goes from the deformed Surface to the same point of its rest shape (``to_rest``)
+    or back.
+
+    Inputs: Geometry (curves) and Surface (object). The Surface's evaluated mesh is read
+    twice: as it is (deformed) and moved to its ``rest_position`` attribute (the
+    shape before shape keys and modifiers; without the attribute both are the same and
+    nothing moves). Each curve's root is found on one of them (Sample Nearest Surface,
+    once per curve) and the matching point of the other gives the curve's offset.
+    Children from Guides uses it around Blender's Interpolate Hair Curves, which
+    places children on the rest shape (so their number and places never change while
+    the skin deforms) and interpolates the guides there.
+    """
+    tag = f"{'to_rest' if to_rest else 'to_surface'}:1"
+    for ng in bpy.data.node_groups:
+        if ng.get("furcollide_roots") == tag and ng.bl_idname == "GeometryNodeTree":
+            return ng
+    name = ".FurCollide Roots " + ("to Rest" if to_rest else "to Surface")
+    ng = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    ng["furcollide_roots"] = tag
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Surface", in_out="INPUT", socket_type="NodeSocketObject")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, link = ng.nodes, ng.links.new
+
+    def node(kind, **props):
+        n = nodes.new(kind)
+        for k, v in props.items():
+            setattr(n, k, v)
+        return n
+
+    def named(attribute):
+        n = node("GeometryNodeInputNamedAttribute", data_type="FLOAT_VECTOR")
+        n.inputs["Name"].default_value = attribute
+        return n
+
+    def store(geometry, attribute, value):
+        n = node("GeometryNodeStoreNamedAttribute", data_type="FLOAT_VECTOR", domain="POINT")
+        n.inputs["Name"].default_value = attribute
+        link(geometry, n.inputs["Geometry"])
+        link(value, n.inputs["Value"])
+        return n.outputs["Geometry"]
+
+    def set_position(geometry, position, selection=None):
+        n = node("GeometryNodeSetPosition")
+        link(geometry, n.inputs["Geometry"])
+        link(position, n.inputs["Position"])
+        if selection is not None:
+            link(selection, n.inputs["Selection"])
+        return n.outputs["Geometry"]
+
+    gin, gout = node("NodeGroupInput"), node("NodeGroupOutput")
+    info = node("GeometryNodeObjectInfo", transform_space="RELATIVE")
+    link(gin.outputs["Surface"], info.inputs["Object"])
+    position = node("GeometryNodeInputPosition").outputs["Position"]
+    deformed = store(info.outputs["Geometry"], _DEFORMED, position)
+    rest = named("rest_position")
+    rest_mesh = store(set_position(deformed, rest.outputs["Attribute"], rest.outputs["Exists"]),
+                      _REST, position)
+    if to_rest:
+        mesh = set_position(rest_mesh, named(_DEFORMED).outputs["Attribute"])
+        value = named(_REST).outputs["Attribute"]
+    else:
+        mesh, value = rest_mesh, named(_DEFORMED).outputs["Attribute"]
+    # per curve (evaluated on the curve domain): its root, and where the root goes
+    first = node("GeometryNodePointsOfCurve")
+    first.inputs["Sort Index"].default_value = 0
+    root = node("GeometryNodeFieldAtIndex", domain="POINT", data_type="FLOAT_VECTOR")
+    link(first.outputs["Point Index"], root.inputs["Index"])
+    link(position, root.inputs["Value"])
+    sample = node("GeometryNodeSampleNearestSurface", data_type="FLOAT_VECTOR")
+    link(mesh, sample.inputs["Mesh"])
+    link(value, sample.inputs["Value"])
+    link(root.outputs["Value"], sample.inputs["Sample Position"])
+    offset = node("ShaderNodeVectorMath", operation="SUBTRACT")
+    link(sample.outputs["Value"], offset.inputs[0])
+    link(root.outputs["Value"], offset.inputs[1])
+    per_point = node("GeometryNodeFieldAtIndex", domain="CURVE", data_type="FLOAT_VECTOR")
+    link(node("GeometryNodeCurveOfPoint").outputs["Curve Index"], per_point.inputs["Index"])
+    link(offset.outputs["Vector"], per_point.inputs["Value"])
+    move = node("GeometryNodeSetPosition")
+    link(gin.outputs["Geometry"], move.inputs["Geometry"])
+    link(per_point.outputs["Value"], move.inputs["Offset"])
+    link(move.outputs["Geometry"], gout.inputs["Geometry"])
+    return ng
+
+
+def _roots_modifier(out, name, to_rest, surf):
+    """The roots modifier ``name`` of ``out`` (added when missing), reading ``surf``."""
+    mod = out.modifiers.get(name)
+    if mod is None or mod.type != "NODES":
+        mod = out.modifiers.new(name, "NODES")
+        mod.show_expanded = False
+    ng = roots_group(to_rest)
+    mod.node_group = ng
+    compat.set_modifier_input(mod, group_inputs(ng)[("Surface", "NodeSocketObject")], surf)
+    return mod
 
 
 # ---------------------------------------------------------------- settings
@@ -167,6 +273,14 @@ class FURCOLLIDE_OT_collider_distance(_OutputOperator, Operator):
         return {"FINISHED"}
 
 
+#: Children are Blender's: nothing clears them (the panel says it too).
+_CHILDREN_NOTE = (
+    "Children from Guides are not collided: between guides they can cross a collider.",
+    "For renders with no crossing, use a Render Groom (Fur Pipeline > Render Groom > "
+    "Bind Groom): it gets a clearance pass.",
+)
+
+
 class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
     """Children from Guides: add Blender's Interpolate Hair Curves to the output, so
     dense render children grow on the source's Surface and follow the collided guides"""
@@ -238,14 +352,31 @@ class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
             compat.set_modifier_input(mod, sockets.guides, int(self.guides))
         if sockets.surface_uv_map is not None:
             compat.set_modifier_input_attribute(mod, sockets.surface_uv_map, uv_name)
+        # Children are placed (and their guides found) on the Surface's rest shape, so
+        # their number and places never change while the skin deforms; the guides go
+        # there before (REST_MODIFIER) and every child comes back onto the deformed
+        # Surface after (SURFACE_MODIFIER). Blender needs the Surface's rest position.
+        if sockets.rest_position is not None:
+            compat.set_modifier_input(mod, sockets.rest_position, True)
+        added_rest = not surf.add_rest_position_attribute
+        if added_rest:  # (an edit of the Surface: the playback cache is dropped once)
+            surf.add_rest_position_attribute = True
+        pre = _roots_modifier(out, REST_MODIFIER, True, surf)
+        post = _roots_modifier(out, SURFACE_MODIFIER, False, surf)
+        at = list(out.modifiers).index(mod)
+        compat.move_modifier(out, pre, at if list(out.modifiers).index(pre) > at else at - 1)
+        at = list(out.modifiers).index(mod)
+        compat.move_modifier(out, post, at + 1)
         out.data.surface = surf
         out.data.surface_uv_map = uv_name
         out.update_tag()
         self.report(
             {"INFO"},
             f"Children from guides on '{out.name}' (surface '{surf.name}', UV map "
-            f"'{uv_name}', density {self.density:g})",
+            f"'{uv_name}', density {self.density:g}), placed on the Surface's rest shape"
+            + (f" ('Add Rest Position' turned on for '{surf.name}')" if added_rest else ""),
         )
+        self.report({"WARNING"}, " ".join(_CHILDREN_NOTE))
         redraw(context)
         return {"FINISHED"}
 

@@ -15,7 +15,7 @@ from bpy.props import (
 )
 from bpy.types import PropertyGroup
 
-from .property_helpers import hidden, poll_hair, update_groom, update_motion
+from .property_helpers import hidden, poll_hair, stat, update_groom, update_motion
 
 _STAGES = [
     ("INPUT", "Before Collision", "Move the input curves; FurCollide then resolves the "
@@ -119,7 +119,9 @@ class FurCollideMotion(PropertyGroup):
     )
     distance_max: _motion_float(
         "Max Distance", 0.0, "Distances beyond this are stored as this value, which is "
-        "much faster (0 = exact everywhere)", min=0.0, soft_max=1.0, subtype="DISTANCE",
+        "much faster (0 = no cap). Every stored distance is a lower bound of the true one, "
+        "a few cells of the collider's distance field at most", min=0.0, soft_max=1.0,
+        subtype="DISTANCE",
         unit="LENGTH",
     )
 
@@ -147,6 +149,7 @@ class FurCollideGroom(PropertyGroup):
         name="Render Groom",
         type=bpy.types.Object,
         poll=poll_hair,
+        update=update_groom,
         description="Dense hair that follows the collided guides (the FurCollide output): "
         "press Bind Groom at the reference pose. It is never modified",
     )
@@ -158,15 +161,38 @@ class FurCollideGroom(PropertyGroup):
         "frame (created by Bind Groom)",
     )
     guides: IntProperty(
-        name="Guides per Curve", default=4, min=1, max=32,
+        name="Guides per Curve", default=4, min=1, max=32, update=update_groom,
         description="How many nearest guides (by root, at the reference pose) each render "
         "curve blends. Press Bind Groom again after changing it",
     )
     use_clearance: BoolProperty(
         name="Clearance Pass", default=True, update=update_groom,
         description="Resolve render curves that still pass through a collider after the "
-        "guide deform (FurCollide's minimal Stiff rotation, a fresh solve per frame); the "
-        "count is shown below",
+        "guide deform (FurCollide's minimal Stiff rotation, Bend where turning cannot "
+        "free a curve; a fresh solve per frame); the counts are shown below",
     )
     bind_id: hidden(StringProperty, "Groom Bind ID", "")
     bound_guides: hidden(IntProperty, "Bound Guides per Curve", 0)
+    #: The Bind ID of the render groom the setup's bake holds ('' when none).
+    baked_id: hidden(StringProperty, "Baked Groom Bind ID", "")
+
+    stat_fixed: stat(
+        "Render Curves Fixed", "groom_fixed",
+        "Render curves the clearance pass moved out of a collider on the last frame",
+    )
+    stat_unresolved: stat(
+        "Render Curves Unresolved", "groom_unresolved",
+        "Render curves the clearance pass could not free on the last frame (red in the "
+        "groom output)",
+    )
+    stat_invalid: stat(
+        "Render Curves Invalid", "groom_invalid",
+        "Render curves FurCollide cannot solve (a zero-length segment, a NaN point): shown "
+        "as they are, in yellow",
+    )
+
+    @property
+    def is_baked_with(self) -> bool:
+        """Does the setup's bake hold this render groom (its settings are the bake's)?"""
+        src = self.id_data
+        return bool(src.furcollide.is_baked and self.bind_id and self.baked_id == self.bind_id)

@@ -5,6 +5,7 @@ from bpy.types import Panel, UIList
 
 from ..core import framecache
 from ..operators import ops_bake, registry
+from ..operators.clock import STAGES
 from ..operators.colliders import collider_lines, in_scene
 from ..operators.ops_common import active_setup, backend_message
 
@@ -267,6 +268,26 @@ class FURCOLLIDE_PT_stats(_Sub, Panel):
         if s.stat_invalid:
             col.label(text=f"Invalid: {s.stat_invalid}", icon="ERROR")
         col.label(text=f"Solve: {s.stat_solve_ms:.1f} ms")
+        g = s.groom
+        if g.output is not None:
+            col = layout.column(align=True)
+            col.label(text=f"Render groom: {g.stat_fixed} fixed", icon="OUTLINER_OB_CURVES")
+            col.label(text=f"Unresolved (red): {g.stat_unresolved}",
+                      icon="ERROR" if g.stat_unresolved else "BLANK1")
+            if g.stat_invalid:
+                col.label(text=f"Invalid (yellow): {g.stat_invalid}", icon="ERROR")
+        draw_stage_times(layout, registry.stats_for(s.id_data))
+
+
+def draw_stage_times(layout, stats):
+    """The last frame's milliseconds per pipeline stage (``operators/clock.py``; a
+    stage that had nothing to do shows 0)."""
+    if not any(stats.get(f"{k}_ms") for k in STAGES):
+        return
+    col = layout.column(align=True)
+    col.label(text="Milliseconds per stage:", icon="TIME")
+    for k in STAGES:
+        col.label(text=f"{k.capitalize()}: {stats.get(f'{k}_ms', 0.0):.1f}", icon="BLANK1")
 
 
 def cached_count(src) -> tuple[int, str]:

@@ -15,6 +15,7 @@ def draw_attach(layout, src):
     box = layout.box()
     box.label(text="Fur Attach (Input)", icon="SNAP_FACE")
     col = box.column()
+    col.enabled = not s.is_baked  # a baked setup only reads its bake
     has_surface = src.data.surface is not None and src.data.surface.type == "MESH"
     bound = has_binding(src)
     row = col.row()
@@ -39,6 +40,7 @@ def draw_motion(layout, src):
     box = layout.box()
     box.label(text="Wind & Jiggle", icon="FORCE_WIND")
     col = box.column()
+    col.enabled = not src.furcollide.is_baked
     col.prop(m, "use_wind")
     sub = col.column()
     sub.enabled = m.use_wind
@@ -60,6 +62,7 @@ def draw_influence(layout, src):
     box = layout.box()
     box.label(text="Region of Influence", icon="DRIVER_DISTANCE")
     col = box.column()
+    col.enabled = not src.furcollide.is_baked
     after = (m.use_wind and m.wind_stage == "OUTPUT") or (
         m.use_jiggle and m.jiggle_stage == "OUTPUT")
     col.prop(m, "use_region_of_influence")
@@ -86,20 +89,40 @@ def draw_groom(layout, src):
     box = layout.box()
     box.label(text="Render Groom", icon="OUTLINER_OB_CURVES")
     col = box.column()
-    col.prop(g, "groom")
-    col.prop(g, "guides")
+    settings = col.column()
+    settings.enabled = not g.is_baked_with  # the bake holds this render groom
+    settings.prop(g, "groom")
+    settings.prop(g, "guides")
     if g.output is not None and g.bound_guides and g.guides != g.bound_guides:
         col.label(text=f"Bound with {g.bound_guides}: press Bind Groom again", icon="INFO")
-    col.prop(g, "use_clearance")
+    settings.prop(g, "use_clearance")
     row = col.row(align=True)
-    row.operator("furcollide.groom_bind", icon="LINKED")
+    sub = row.row(align=True)
+    sub.enabled = not g.is_baked_with
+    sub.operator("furcollide.groom_bind", icon="LINKED")
     sub = row.row(align=True)
     sub.enabled = g.output is not None
     sub.operator("furcollide.groom_remove", text="", icon="X")
-    if g.output is not None:
-        col.label(text=f"Output: {g.output.name}", icon="OUTLINER_DATA_CURVES")
-        if g.use_clearance:
-            col.label(text=f"Render curves fixed: {s.stat_groom_fixed}", icon="CHECKMARK")
+    if g.output is None:
+        return
+    col.label(text=f"Output: {g.output.name}", icon="OUTLINER_DATA_CURVES")
+    if g.is_baked_with:
+        col.label(text="Baked with the setup (Free Bake to change it)", icon="FILE_CACHE")
+    if g.use_clearance:
+        col.label(text=f"Render curves fixed: {g.stat_fixed}", icon="CHECKMARK")
+        if g.stat_unresolved:
+            col.label(text=f"Unresolved (red): {g.stat_unresolved}", icon="ERROR")
+    if g.stat_invalid:
+        col.label(text=f"Invalid (yellow): {g.stat_invalid}", icon="ERROR")
+
+
+#: What the Children from Guides box says about collisions: the children are made by
+#: Blender's node group from the collided guides, so nothing clears them.
+CHILDREN_NOT_CLEARED = (
+    "Children are not collided: between guides they can cross a collider.",
+    "For renders with no crossing, use a Render Groom (Bind Groom below):",
+    "it gets a clearance pass.",
+)
 
 
 class FURCOLLIDE_PT_pipeline(Panel):
@@ -164,6 +187,8 @@ class FURCOLLIDE_PT_pipeline(Panel):
         op.density, op.guides = s.density, s.guides
         if src.data.surface is None:
             col.label(text="Children need the source's Surface", icon="INFO")
+        for i, line in enumerate(CHILDREN_NOT_CLEARED):
+            col.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
         draw_groom(layout, src)
 
 

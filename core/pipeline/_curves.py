@@ -13,8 +13,11 @@ from ..errors import ColliderError, InputError
 from ..layout import check_offsets
 
 
-def check_curves(points, offsets, name="points"):
+def check_curves(points, offsets, name="points", finite=True):
     """Validate and return ``(points float64 (P, 3), offsets int64 (C+1,))``.
+
+    ``finite=False`` accepts non-finite points (a caller that sets such curves
+    aside, as the solver does: :func:`bad_curves`).
 
     Raises
     ------
@@ -25,7 +28,7 @@ def check_curves(points, offsets, name="points"):
     pts = as_points(points, name)
     if len(pts) != off[-1]:
         raise InputError(f"{name} has {len(pts)} rows but offsets describe {int(off[-1])} points")
-    if not np.isfinite(pts).all():  # (one pass; rows only to name the culprit)
+    if finite and not np.isfinite(pts).all():  # (one pass; rows only to name the culprit)
         i = int(np.argmax(~np.isfinite(pts).all(axis=1)))
         c = int(np.searchsorted(off, i, "right") - 1)
         raise InputError(f"{name}: point {i} (curve {c}) is not finite: {pts[i].tolist()}")
@@ -219,3 +222,91 @@ def rechain(points, off, moved):
     v = np.where(ok[:, None], v1 * (L0 / np.where(ok, L1, 1.0))[:, None], v0)
     v[off[:-1]] = points[off[:-1]]  # the root itself starts the chain
     return segmented_cumsum(v, off)
+
+
+def bad_curves(points, offsets):
+    """Curves no FurCollide step can work with, by the solver's rules.
+
+    A curve is bad when it has fewer than 2 points, a non-finite point, a
+    zero-length segment (shorter than ``tolerances.ZERO_SEGMENT_REL`` times its
+    curve's length) or a length that overflows. The solver leaves such curves as
+    they are and marks them ``Status.INVALID``; the render groom does the same.
+
+    Parameters
+    ----------
+    points : (P, 3) float ndarray
+        May hold non-finite values.
+    offsets : (C+1,) int ndarray
+
+    Returns
+    -------
+    bad : (C,) bool ndarray
+    reason : str
+        What is wrong with the first bad curve, naming it ('' when none is bad).
+    """
+    pts = np.asarray(points, np.float64)
+    off = np.asarray(offsets, np.int64)
+    C = len(off) - 1
+    sizes = np.diff(off)
+    bad = sizes < 2
+    curve = np.repeat(np.arange(C), sizes)
+    finite = np.isfinite(pts).all(axis=1)
+    nonfinite = np.zeros(C, bool)
+    nonfinite[curve[~finite]] = True
+    d = np.diff(pts, axis=0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        L = np.sqrt(np.einsum("ij,ij->i", d, d)) if len(d) else np.zeros(0)
+    _, _, s0 = layout(off)
+    L = L[s0] if len(s0) else np.zeros(0)
+    scurve = curve[s0]
+    with np.errstate(invalid="ignore", over="ignore"):
+        total = np.bincount(scurve, L, minlength=C)
+    short = np.full(C, np.inf)
+    with np.errstate(invalid="ignore"):
+        if len(L):
+            np.minimum.at(short, scurve, L)
+        zero = ~(short > tol.ZERO_SEGMENT_REL * total) & (sizes >= 2)
+    overflow = ~np.isfinite(total) & ~nonfinite & (sizes >= 2)
+    bad = bad | nonfinite | zero | overflow
+    if not bad.any():
+        return bad, ""
+    c = int(np.argmax(bad))
+    if sizes[c] < 2:
+        why = f"curve {c} has fewer than 2 points"
+    elif nonfinite[c]:
+        i = int(off[c] + np.argmax(~finite[off[c]:off[c + 1]]))
+        why = f"curve {c}: point {i} is not finite ({pts[i].tolist()})"
+    elif overflow[c]:
+        why = f"curve {c} is too large: its length overflows (coordinates ~1e19+)"
+    else:
+        seg = np.flatnonzero(scurve == c)
+        k = int(s0[seg[int(np.argmin(L[seg]))]])
+        why = f"curve {c} has a zero-length segment between points {k} and {k + 1}"
+    return bad, why
+
+
+def as_given(points, offsets, which):
+    """``points`` with every non-finite point of the curves ``which`` (bool (C,))
+    replaced by the nearest finite one before it on its curve (after it for leading
+    ones; the origin when the curve has none), as the solver outputs its INVALID
+    curves: an output never holds NaN. Returns a float64 copy."""
+    out = np.array(points, np.float64)
+    off = np.asarray(offsets, np.int64)
+    ok = np.isfinite(out).all(axis=1)
+    sizes = np.diff(off)
+    rows = np.flatnonzero(np.repeat(np.asarray(which, bool), sizes) & ~ok)
+    if not len(rows):
+        return out
+    curve = np.repeat(np.arange(len(sizes)), sizes)
+    for i in rows:  # (rare: only the invalid curves' non-finite points)
+        c = curve[i]
+        a, b = int(off[c]), int(off[c + 1])
+        before = np.flatnonzero(ok[a:i])
+        after = np.flatnonzero(ok[i:b])
+        if len(before):
+            out[i] = out[a + before[-1]]
+        elif len(after):
+            out[i] = out[i + after[0]]
+        else:
+            out[i] = 0.0
+    return out

@@ -456,7 +456,8 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
     return deformer.deform(guides_now_points, render_roots_now)
 
 
-def clearance_pass(render_points, render_offsets, colliders, settings=None, growth=None):
+def clearance_pass(render_points, render_offsets, colliders, settings=None, growth=None,
+                   fallback=None):
     """Final clearance: FurCollide once on the render curves, counting those it moved.
 
     Render curves that still pass through a collider after
@@ -468,6 +469,10 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     unchanged and FREE (a curve's result never depends on the other curves
     solved with it: the same output as solving them all).
 
+    Curves the solver cannot work with (a zero-length segment, a non-finite
+    point) are left as they are and marked ``Status.INVALID``, as the solver
+    marks them; the output never holds NaN.
+
     Parameters
     ----------
     render_points : (P, 3) array_like of float
@@ -477,6 +482,12 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
         Default ``Settings(mode="stiff")``.
     growth : Collider, optional
         Growth surface (for the settings that need it).
+    fallback : Settings, optional
+        Curves ``settings`` leave ``UNRESOLVED`` (no rotation within Max Angle
+        clears them) are solved again, from their input, with these settings
+        (e.g. Bend: a bent curve clears where a rigidly turned one cannot); the
+        second result is kept where it resolves the curve. Curves still
+        unresolved keep the status ``UNRESOLVED``.
 
     Returns
     -------
@@ -486,36 +497,55 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     n_fixed : int
         Number of render curves the pass had to move.
     """
-    pts, off = check_curves(render_points, render_offsets, "render_points")
+    pts, off = check_curves(render_points, render_offsets, "render_points", finite=False)
     if isinstance(colliders, Collider):
         colliders = [colliders]
     colliders = list(colliders)
     settings = Settings(mode="stiff") if settings is None else settings
     R = len(off) - 1
-    reach = _reaching(pts, off, colliders, settings)
+    finite = np.isfinite(pts).all(axis=1)
+    nonfinite = np.zeros(R, bool)
+    if not finite.all():
+        nonfinite[np.repeat(np.arange(R), np.diff(off))[~finite]] = True
+    reach = _reaching(np.where(finite[:, None], pts, 0.0), off, colliders, settings)
+    reach |= nonfinite  # the solver sets them aside (INVALID, never NaN)
     if R and not reach.any():
         reach[0] = True  # (one curve, unchanged: the solver still checks its other inputs)
     if R == 0 or reach.mean() > _CLEARANCE_ALL:  # (gathering would cost more than it saves)
         res = Solver(off, settings).step(pts, colliders, growth=growth)
         out = np.asarray(res.points, np.float64)
-        changed = np.any(out != pts, axis=1)
-        curve = np.repeat(np.arange(R), np.diff(off))
-        return out, res.status, int(np.count_nonzero(np.bincount(curve, changed, minlength=R)))
-    out = pts.copy()
-    status = np.zeros(R, np.int8)
-    status[_degenerate(pts, off, ~reach)] = Status.INVALID  # as the solver marks them
-    idx = np.flatnonzero(reach)
+        status = res.status
+    else:
+        out = pts.copy()
+        status = np.zeros(R, np.int8)
+        status[_degenerate(pts, off, ~reach)] = Status.INVALID  # as the solver marks them
+        idx = np.flatnonzero(reach)
+        rows, sub_off = _gather(off, idx)
+        res = Solver(sub_off, settings).step(pts[rows], colliders, growth=growth)
+        out[rows] = res.points
+        status[idx] = res.status
+    if fallback is not None and R:
+        again = np.flatnonzero(status == Status.UNRESOLVED)
+        if len(again):
+            rows, sub_off = _gather(off, again)
+            res = Solver(sub_off, fallback).step(pts[rows], colliders, growth=growth)
+            took = res.status != Status.UNRESOLVED
+            if took.any():
+                keep = np.repeat(took, np.diff(sub_off))
+                out[rows[keep]] = res.points[keep]
+                status[again[took]] = res.status[took]
+    with np.errstate(invalid="ignore"):
+        changed = np.any(out != pts, axis=1) & finite
+    curve = np.repeat(np.arange(R), np.diff(off))
+    moved = np.bincount(curve, changed, minlength=R) > 0
+    return out, status, int(np.count_nonzero(moved & (status != Status.INVALID)))
+
+
+def _gather(off, idx):
+    """Rows of the curves ``idx`` and their offsets as a curve set of their own."""
     sizes = np.diff(off)[idx]
     rows = np.repeat(off[idx] - (np.cumsum(sizes) - sizes), sizes) + np.arange(int(sizes.sum()))
-    sub_off = np.concatenate([[0], np.cumsum(sizes)])
-    res = Solver(sub_off, settings).step(pts[rows], colliders, growth=growth)
-    sub = np.asarray(res.points, np.float64)
-    out[rows] = sub
-    status[idx] = res.status
-    changed = np.any(sub != pts[rows], axis=1)
-    curve = np.repeat(np.arange(len(idx)), sizes)
-    n_fixed = int(np.count_nonzero(np.bincount(curve, changed, minlength=len(idx))))
-    return out, status, n_fixed
+    return rows, np.concatenate([[0], np.cumsum(sizes)])
 
 
 def _degenerate(pts, off, which):

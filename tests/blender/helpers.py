@@ -393,6 +393,9 @@ class EnabledLayout:
         assert hasattr(data, name), name
         self.log.append(("prop", name, self._on()))
 
+    def prop_search(self, data, name, *args, **kw):
+        self.prop(data, name)
+
     def operator(self, idname, **kw):
         self.log.append(("operator", idname, self._on()))
         return type("Props", (), {})()

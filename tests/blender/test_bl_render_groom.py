@@ -411,7 +411,7 @@ def test_render_groom_on_another_surface_follows_the_guides(fc, capsys):
 
 def test_guides_per_curve_changed_after_binding_keeps_the_old_binding(fc):
     """README: "Bind again after changing Guides per Curve": until then the groom
-    keeps its binding (no error, no silent re-bind)."""
+    keeps its binding (no silent re-bind) and the status says what to press."""
     scene = bpy.context.scene
     guides, groom, box, out = groom_scene(fc)
     g = guides.furcollide.groom
@@ -424,9 +424,14 @@ def test_guides_per_curve_changed_after_binding_keeps_the_old_binding(fc):
     g.guides = 1
     scene.frame_set(3)
     scene.frame_set(4)
-    assert fc.registry.status_for(guides) == ("INFO", "")
+    assert fc.registry.status_for(guides) == (
+        "WARNING", "Render groom: Guides per Curve is 1 but the groom was bound with 4: "
+        "press Bind Groom again")
     assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 4
     np.testing.assert_array_equal(world(g.output), before)
+    g.guides = 4
+    scene.frame_set(3)
+    assert fc.registry.status_for(guides) == ("INFO", "")
 
 
 def test_bind_groom_again_after_changing_guides_per_curve(fc):

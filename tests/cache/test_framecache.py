@@ -180,6 +180,27 @@ def test_bake_file_round_trip_with_a_sparse_state(tmp_path):
         assert np.array_equal(full[k], state[k]), k
     assert fcache.read_attributes(d, -4)["d"][5] == 5.0
     assert fcache.read_inputs(d, -4) == {"source": (1 << 64) - 1}
+    assert fcache.read_extra(d, -4, "groom") is None
+
+
+def test_extra_parts_are_stored_with_the_frame_and_read_alone(tmp_path):
+    """A later stage's arrays (the render groom) live in the frame's file, apart from
+    the guides' own arrays and attributes; ``names`` reads only some of them."""
+    offsets = np.arange(0, 9 * 4, 4, dtype=np.int32)
+    points = np.random.default_rng(3).random((32, 3), dtype=np.float32)
+    groom = {"points": np.arange(30, dtype=np.float32).reshape(10, 3),
+             "status": np.array([0, 6], np.int8), "key": np.frombuffer(b"k|1", np.uint8)}
+    d = str(tmp_path / "bake")
+    fcache.write_frame(d, 3, points, np.zeros(8, np.int8), offsets, None,
+                       attributes={"a": np.ones(32, np.float32)}, extra={"groom": groom})
+    got = fcache.read_extra(d, 3, "groom")
+    assert sorted(got) == ["key", "points", "status"]
+    for k, v in groom.items():
+        assert np.array_equal(got[k], v) and got[k].dtype == v.dtype
+    assert list(fcache.read_extra(d, 3, "groom", ("key",))) == ["key"]
+    assert fcache.read_extra(d, 3, "other") is None
+    assert list(fcache.read_attributes(d, 3)) == ["a"]
+    assert np.array_equal(fcache.read_frame(d, 3)[0], points)
 
 
 def test_free_removes_only_the_bake_files(tmp_path):

@@ -1,0 +1,202 @@
+"""A baked pipeline setup (Fur Attach, wind, jiggle, Region of Influence, the collider
+distance, a render groom) against its bake (issue 17 point 1, issue 11 point 4):
+every setting greyed in every panel, a change from Python marks it outdated at once
+with a status naming what to press, the frames shown never silently disagree with
+the settings, and the render groom is read from the bake (never computed again)."""
+
+import bpy
+import numpy as np
+import pytest
+from helpers import (
+    EnabledLayout,
+    activate,
+    draw_enabled,
+    groom_scene,
+    play,
+    reopen,
+    save_in,
+    status_of,
+    world,
+)
+
+pytestmark = pytest.mark.blender
+
+FRAMES = range(1, 7)
+
+
+def _baked_pipeline(fc, tmp_path):
+    """The groom scene with Fur Attach on an animated Surface, wind and jiggle after
+    collision held by the Region of Influence, the collider distance attribute and a
+    render groom, baked over frames 1-6; returns (guides, out, gout, baked frames)."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    surf = guides.data.surface
+    surf.location = (0, 0, 0)
+    surf.keyframe_insert("location", frame=1)
+    surf.location = (0.1, 0.0, 0.05)
+    surf.keyframe_insert("location", frame=6)
+    scene.frame_set(1)
+    s = guides.furcollide
+    s.frame_end = 6
+    scene.frame_end = 6
+    m = s.motion
+    m.use_wind, m.wind_strength = True, 0.2
+    m.use_jiggle = True
+    m.write_collider_distance, m.distance_max = True, 0.3
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = s.groom.output
+    save_in(tmp_path)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert s.is_baked and s.groom.is_baked_with
+    baked = {}
+    for f in FRAMES:
+        scene.frame_set(f)
+        assert s.status_message == "" and not s.is_outdated, (f, s.status_message)
+        baked[f] = (world(out).copy(), world(gout).copy(), status_of(gout).copy())
+    return guides, out, gout, baked
+
+
+def _shows_the_bake(fc, guides, out, gout, baked, frames, outdated):
+    s = guides.furcollide
+    for f in frames:
+        bpy.context.scene.frame_set(f)
+        np.testing.assert_array_equal(world(out), baked[f][0], err_msg=f"frame {f}")
+        np.testing.assert_array_equal(world(gout), baked[f][1], err_msg=f"frame {f}")
+        np.testing.assert_array_equal(status_of(gout), baked[f][2])
+        assert s.is_outdated == outdated, (f, s.status_message)
+        if outdated:
+            assert "baked with other settings: Free Bake and bake again" in \
+                s.status_message, s.status_message
+        else:
+            assert s.status_message == "", s.status_message
+
+
+CHANGES = [
+    ("motion", "wind_strength", 0.5),
+    ("motion", "use_wind", False),
+    ("motion", "use_jiggle", False),
+    ("motion", "jiggle_amount", 2.0),
+    ("motion", "use_region_of_influence", False),
+    ("motion", "roi_margin", 0.5),
+    ("motion", "distance_max", 0.0),
+    ("", "use_fur_attach", False),
+    ("", "collision_offset", 0.02),
+    ("groom", "use_clearance", False),
+]
+
+
+@pytest.mark.parametrize("part,name,value", CHANGES, ids=[c[1] for c in CHANGES])
+def test_a_setting_changed_on_a_baked_setup_marks_it_outdated(fc, tmp_path, part, name,
+                                                               value):
+    """Changed from Python (greyed in the panel): at once outdated, with the status;
+    every frame still shows the bake (guides and render groom), marked outdated; set
+    back, the setup is current again."""
+    guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
+    s = guides.furcollide
+    data = getattr(s, part) if part else s
+    before = getattr(data, name)
+    setattr(data, name, value)
+    assert s.is_outdated  # at once, before any frame change
+    assert s.status_message == ("This setup was baked with other settings: Free Bake and "
+                                "bake again (the frames shown are the bake's)")
+    _shows_the_bake(fc, guides, out, gout, baked, (3, 6, 1), outdated=True)
+    setattr(data, name, before)
+    assert not s.is_outdated and s.status_message == ""
+    _shows_the_bake(fc, guides, out, gout, baked, (2, 5), outdated=False)
+
+
+def test_an_outdated_bake_says_so_after_reopening_the_file(fc, tmp_path):
+    guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
+    guides.furcollide.motion.wind_strength = 0.7
+    path = tmp_path / "changed.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    reopen(str(path))
+    guides = bpy.data.objects["Guides"]
+    out, gout = guides.furcollide.output, guides.furcollide.groom.output
+    _shows_the_bake(fc, guides, out, gout, baked, (4, 2), outdated=True)
+
+
+def test_disabling_a_baked_setup_is_not_a_settings_change(fc, tmp_path):
+    guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
+    s = guides.furcollide
+    s.enabled = False
+    assert not s.is_outdated and "other settings" not in s.status_message
+    bpy.context.scene.frame_set(3)
+    assert s.status_message == "Disabled"
+    s.enabled = True
+    _shows_the_bake(fc, guides, out, gout, baked, (3,), outdated=False)
+
+
+class _DataLayout(EnabledLayout):
+    """Records (owner type, property, enabled) for every property drawn."""
+
+    def _child(self, *args, **kw):
+        return _DataLayout(self.log, self)
+
+    box = row = column = _child
+
+    def prop(self, data, name, **kw):
+        assert hasattr(data, name), name
+        self.log.append((type(data).__name__, name, self._on()))
+
+    def prop_search(self, data, name, *args, **kw):
+        self.prop(data, name)
+
+
+def _pipeline_panel():
+    log = []
+    bpy.types.FURCOLLIDE_PT_pipeline.draw(
+        type("P", (), {"layout": _DataLayout(log)})(), bpy.context)
+    return log
+
+
+def test_every_pipeline_setting_of_a_baked_setup_is_greyed(fc, tmp_path):
+    """Fur Attach, Wind & Jiggle, Region of Influence, the collider distance and the
+    render groom baked with the setup: greyed. The scene's operator options (Fur
+    Sampler, Children from Guides) are not the setup's: they stay editable."""
+    guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
+    activate(guides)
+    log = _pipeline_panel()
+    setup_props = [e for e in log if e[0] in ("FurCollideSettings", "FurCollideMotion",
+                                              "FurCollideGroom")]
+    names = {e[1] for e in setup_props}
+    assert {"use_fur_attach", "use_wind", "wind_strength", "use_jiggle",
+            "use_region_of_influence", "roi_margin", "write_collider_distance",
+            "distance_max", "groom", "guides", "use_clearance"} <= names, names
+    assert not [e for e in setup_props if e[2]], [e for e in setup_props if e[2]]
+    assert [e for e in log if e[0] == "FURCOLLIDE_PG_pipeline" and e[2]]
+    assert ("operator", "furcollide.groom_bind", False) in [
+        e for e in draw_enabled(bpy.types.FURCOLLIDE_PT_pipeline) if e[0] == "operator"]
+    with pytest.raises(RuntimeError, match="free the bake"):
+        bpy.ops.furcollide.groom_bind()
+    activate(guides)
+    assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
+    log = _pipeline_panel()
+    assert all(e[2] for e in log if e[0] in ("FurCollideMotion", "FurCollideGroom"))
+
+
+def test_the_baked_render_groom_is_read_not_computed(fc, tmp_path, monkeypatch):
+    """Issue 11: the bake holds the render groom's positions and statuses; a baked
+    frame shows them (bit for bit the frame baked) without deforming or clearing the
+    groom; freed, the groom is computed again, the same."""
+    guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
+    calls = []
+    deform = fc.groom_stage.GroomBinding.deform
+
+    def counted(self, *a, **kw):
+        calls.append(1)
+        return deform(self, *a, **kw)
+
+    monkeypatch.setattr(fc.groom_stage.GroomBinding, "deform", counted)
+    _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 3, 6), outdated=False)
+    assert calls == []
+    assert any((baked[f][2] == 1).any() for f in FRAMES)  # the clearance pass was baked
+    stats = fc.registry.stats_for(guides)
+    assert stats["groom_ms"] == 0.0 and stats["clearance_ms"] == 0.0
+    activate(guides)
+    assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
+    play(bpy.context.scene, FRAMES)
+    assert len(calls) == len(FRAMES)
+    np.testing.assert_array_equal(world(gout), baked[6][1])

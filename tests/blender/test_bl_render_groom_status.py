@@ -1,0 +1,350 @@
+"""The render groom as the guides' output: ``furcollide_status`` and colours, stats that
+count its unresolved and invalid curves, no crossing left unmarked (oracle), curves
+it cannot solve set aside at Bind Groom, edits of the groom reported, and a groom that
+keeps following the skin while the guides' frame fails (issue 17)."""
+
+import bpy
+import numpy as np
+import pytest
+from helpers import (
+    UNRESOLVED,
+    activate,
+    draw_enabled,
+    groom_scene,
+    mesh_object,
+    offsets_of,
+    oracle,
+    play,
+    positions,
+    seg_lengths,
+    status_of,
+    tris_world,
+    world,
+)
+
+pytestmark = pytest.mark.blender
+
+INVALID = 6  # core Status.INVALID
+
+
+def _bound(fc, **kw):
+    guides, groom, box, out = groom_scene(fc)
+    for k, v in kw.items():
+        setattr(guides.furcollide.groom, k, v)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    return guides, groom, box, out, guides.furcollide.groom.output
+
+
+def _colours(ob):
+    a = ob.data.attributes["furcollide_color"]
+    assert (a.domain, a.data_type) == ("POINT", "FLOAT_COLOR")
+    c = np.empty(len(a.data) * 4, np.float32)
+    a.data.foreach_get("color", c)
+    return c.reshape(-1, 4)
+
+
+def _crossing_unmarked(gout, colliders):
+    """Render curves crossing a collider (oracle) whose root is outside every closed
+    collider and whose status does not say so (unresolved, invalid)."""
+    P, offs = world(gout), offsets_of(gout)
+    st = status_of(gout)
+    roots = P[offs[:-1]]
+    crossing = np.zeros(len(offs) - 1, bool)
+    inside = np.zeros(len(offs) - 1, bool)
+    for ob, closed in colliders:
+        V, F = tris_world(ob)
+        crossing |= oracle.segments_hit_mesh(P, offs, V, F, abs_eps=oracle.float32_margin(P, V))
+        if closed:
+            inside |= oracle.points_inside_closed_mesh(roots, V, F)
+    return np.flatnonzero(crossing & ~inside & ~np.isin(st, (UNRESOLVED, INVALID)))
+
+
+def test_groom_output_has_status_colours_and_counts(fc):
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = _bound(fc)
+    g = guides.furcollide.groom
+    seen_colliding = 0
+    for f in range(1, 8):
+        scene.frame_set(f)
+        st = status_of(gout)
+        assert len(st) == len(offsets_of(gout)) - 1
+        np.testing.assert_array_equal(
+            _colours(gout), np.repeat(fc.bridge.STATUS_COLORS[st], np.diff(offsets_of(gout)), 0))
+        assert g.stat_unresolved == int((st == UNRESOLVED).sum())
+        assert g.stat_invalid == int((st == INVALID).sum()) == 0
+        assert g.stat_fixed == guides.furcollide.stat_groom_fixed
+        seen_colliding = max(seen_colliding, int((st == 1).sum()))
+        assert len(_crossing_unmarked(gout, [(box, True)])) == 0, f
+    assert seen_colliding > 0
+    # the status and colours follow the frame shown (cached frames too)
+    scene.frame_set(1)
+    assert (status_of(gout) == 0).all() and g.stat_fixed == 0
+
+
+def test_a_curve_the_clearance_pass_cannot_free_is_unresolved_and_red(fc):
+    """A double-sided cage around a few roots: no rotation frees the curves grown in it.
+    They are UNRESOLVED (red, counted), never shown as resolved while crossing."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    h = 0.12
+    verts = [(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-0.05, 2 * h - 0.05)]
+    faces = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
+             (1, 5, 7, 3)]
+    cage = mesh_object("Cage", verts, faces=faces)
+    cage.location = (0.45, 0.45, 0.0)
+    activate(guides, cage)
+    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    guides.furcollide.colliders[-1].double_sided = True
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    play(scene, range(1, 5))
+    st = status_of(gout)
+    caged = np.flatnonzero(st == UNRESOLVED)
+    assert len(caged) >= 2
+    assert guides.furcollide.groom.stat_unresolved == len(caged)
+    red = fc.bridge.STATUS_COLORS[UNRESOLVED]
+    offs = offsets_of(gout)
+    assert (_colours(gout)[offs[caged[0]]] == red).all()
+    assert len(_crossing_unmarked(gout, [(box, True), (cage, False)])) == 0
+
+
+def _groom_with(fc, edit):
+    """The groom scene whose Render Groom's curves were edited by ``edit(P, offs)``."""
+    guides, groom, box, out = groom_scene(fc)
+    P = positions(groom).copy()
+    edit(P, offsets_of(groom))
+    groom.data.position_data.foreach_set("vector", P.ravel())
+    groom.data.update_tag()
+    return guides, groom, box, out
+
+
+def test_bind_groom_sets_bad_curves_aside_and_keeps_updating(fc, capsys):
+    """A zero-length segment and a NaN point: Bind Groom names the first, binds the
+    others, and every frame shows those two as they are, in yellow (Invalid); the
+    rest follows the guides, no NaN is ever written."""
+    scene = bpy.context.scene
+
+    def edit(P, offs):
+        P[offs[5] + 2] = P[offs[5] + 1]
+        P[offs[9] + 3] = np.nan
+
+    guides, groom, box, out = _groom_with(fc, edit)
+    capsys.readouterr()
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    said = capsys.readouterr().out
+    assert "2 curves of 'Groom' cannot be solved (curve 5 has a zero-length segment" in said
+    gout = guides.furcollide.groom.output
+    g = guides.furcollide.groom
+    first = world(gout).copy()
+    moved = set()
+    for f in range(1, 8):
+        scene.frame_set(f)
+        P, st = world(gout), status_of(gout)
+        assert np.isfinite(P).all()
+        assert np.flatnonzero(st == INVALID).tolist() == [5, 9]
+        assert g.stat_invalid == 2
+        assert "Render groom: 2 curves of 'Groom' cannot be solved" in \
+            guides.furcollide.status_message
+        moved |= set(np.flatnonzero(np.abs(P - first).max(1) > 0.01).tolist())
+        assert len(_crossing_unmarked(gout, [(box, True)])) == 0
+    offs = offsets_of(gout)
+    yellow = fc.bridge.STATUS_COLORS[INVALID]
+    assert (_colours(gout)[offs[5]:offs[6]] == yellow).all()
+    assert len(moved) > 10  # the others follow the guides
+
+
+def test_a_groom_with_only_bad_curves_is_refused(fc):
+    guides, groom, box, out = _groom_with(fc, lambda P, offs: P.__setitem__(
+        slice(None), np.nan))
+    with pytest.raises(RuntimeError, match="No curve of 'Groom' can be used"):
+        bpy.ops.furcollide.groom_bind()
+    assert guides.furcollide.groom.output is None
+
+
+@pytest.mark.parametrize("edit", ["comb", "remove", "add", "other_groom"])
+def test_editing_the_render_groom_after_bind_is_reported(fc, edit):
+    """Issue 17: combing, removing or adding curves, or choosing another groom after Bind
+    Groom: the groom output keeps the bound curves and the status says what changed and
+    to press Bind Groom again; binding again clears it."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = _bound(fc)
+    play(scene, range(1, 4))
+    before = world(gout).copy()
+    if edit == "comb":
+        P = positions(groom).copy()
+        P[:, 0] += 0.05 * (P[:, 2] ** 2)
+        groom.data.position_data.foreach_set("vector", P.ravel())
+        groom.data.update_tag()
+        want = "'Groom' was edited since Bind Groom"
+    elif edit in ("remove", "add"):
+        n = len(groom.data.curves)
+        sizes = np.diff(offsets_of(groom))
+        keep = n - 40 if edit == "remove" else n + 3
+        hc = bpy.data.hair_curves.new("Edited")
+        sizes = np.resize(sizes, keep)
+        hc.add_curves(sizes.tolist())
+        P = np.resize(positions(groom), (int(sizes.sum()), 3))
+        hc.position_data.foreach_set("vector", P.ravel())
+        hc.surface = groom.data.surface
+        groom.data = hc
+        want = f"'Groom' now has {keep} curves / {int(sizes.sum())} points but was bound " \
+               f"with {n} / {n * 5}"
+    else:
+        other = fc.make_scene.__globals__["make_hair"]("Other", nx=3, ny=3)
+        guides.furcollide.groom.groom = other
+        want = "the Render Groom is now 'Other' but 'Groom' is bound: press Bind Groom"
+    scene.frame_set(3)
+    level, msg = fc.registry.status_for(guides)
+    assert level == "WARNING" and want in msg, msg
+    assert "press Bind Groom" in msg and "Render groom: Render groom" not in msg
+    np.testing.assert_array_equal(world(gout), before)  # the bound groom, still following
+    scene.frame_set(1)
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    scene.frame_set(2)
+    assert fc.registry.status_for(guides) == ("INFO", "")
+
+
+def test_guides_changed_since_bind_are_named_once(fc):
+    """The guides' curves changed (and were solved again after Reset): the groom says it
+    with one prefix and keeps following the last guides it could use."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = _bound(fc)
+    play(scene, range(1, 4))
+    hc = bpy.data.hair_curves.new("Fewer")
+    hc.add_curves([5] * 24)
+    hc.position_data.foreach_set("vector", positions(guides)[:120].ravel())
+    hc.surface = guides.data.surface
+    guides.data = hc
+    scene.frame_set(1)
+    activate(guides)
+    assert bpy.ops.furcollide.reset() == {"FINISHED"}
+    scene.frame_set(1)
+    scene.frame_set(2)
+    msg = guides.furcollide.status_message
+    assert msg.count("Render groom:") == 1, msg
+    assert "the guides now have 120 points but were bound with 125: press Bind Groom again" \
+        in msg
+    assert np.isfinite(world(gout)).all()
+
+
+def test_error_state_groom_follows_the_last_guides_on_the_current_skin(fc):
+    """Issue 17: the guides' frame fails (their Fur Attach binding no longer matches the
+    source) while the skin moves and the box sweeps on: the render groom keeps its roots
+    on the skin and the clearance pass keeps it out of the box."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    surf = guides.data.surface
+    surf.location = (0, 0, 0)
+    surf.keyframe_insert("location", frame=1)
+    surf.location = (0.3, 0.0, 0.25)
+    surf.keyframe_insert("location", frame=8)
+    scene.frame_set(1)  # (bind at the animated pose of frame 1)
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    ref = world(groom)
+    roff = offsets_of(gout)
+    play(scene, range(1, 4))
+    hc = bpy.data.hair_curves.new("Fewer")  # the bound source loses a curve
+    hc.add_curves([5] * 24)
+    hc.position_data.foreach_set("vector", positions(guides)[:120].ravel())
+    hc.surface = surf
+    guides.data = hc
+    for f in range(4, 9):
+        scene.frame_set(f)
+        level, msg = fc.registry.status_for(guides)
+        assert level == "ERROR" and "press Bind again" in msg, msg
+        P = world(gout)
+        lift = np.array(surf.matrix_world.translation)
+        np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]] + lift, atol=1e-5)
+        np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
+        assert len(_crossing_unmarked(gout, [(box, True)])) == 0, f
+
+
+def test_stage_times_and_skipped_stages(fc, monkeypatch):
+    """Per-stage milliseconds are in the setup's stats; the groom is not computed again
+    while its inputs (guides, Surface, colliders, settings) are unchanged."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = _bound(fc)
+    play(scene, range(1, 5))
+    stats = fc.registry.stats_for(guides)
+    for k in ("attach", "collide", "motion", "groom", "clearance", "write"):
+        assert f"{k}_ms" in stats
+    assert stats["collide_ms"] > 0 and stats["groom_ms"] > 0 and stats["write_ms"] > 0
+    # the Last Frame panel shows them, and the render groom's counts
+    activate(guides)
+    labels = [e[1] for e in draw_enabled(bpy.types.FURCOLLIDE_PT_stats) if e[0] == "label"]
+    assert f"Groom: {stats['groom_ms']:.1f}" in labels and "Milliseconds per stage:" in labels
+    g = guides.furcollide.groom
+    assert f"Render groom: {g.stat_fixed} fixed" in labels
+    assert f"Unresolved (red): {g.stat_unresolved}" in labels
+    calls = []
+    deform = fc.groom_stage.GroomBinding.deform
+
+    def counted(self, *a, **kw):
+        calls.append(1)
+        return deform(self, *a, **kw)
+
+    monkeypatch.setattr(fc.groom_stage.GroomBinding, "deform", counted)
+    shown = world(gout).copy()
+    scene.frame_set(4)  # the same frame again
+    scene.frame_set(3)  # a cached frame: its guides differ
+    scene.frame_set(3)
+    assert len(calls) == 1
+    assert fc.registry.stats_for(guides)["groom_ms"] == 0.0  # (skipped this time)
+    scene.frame_set(4)
+    np.testing.assert_array_equal(world(gout), shown)
+    box.scale = (1.1, 1.1, 1.1)  # a collider changed: computed again
+    scene.frame_set(4)
+    assert len(calls) == 3
+
+
+def test_collider_distance_computed_once_per_frame(fc, monkeypatch):
+    scene = bpy.context.scene
+    hair, box = fc.make_scene(frames=(1, 5))
+    fc.setup(hair, [box])
+    m = hair.furcollide.motion
+    m.use_wind, m.wind_strength = True, 0.3
+    m.write_collider_distance = True
+    m.distance_max = 0.05
+    calls = []
+    core = fc.motion.pipeline
+    real = core.collider_distance
+
+    def counted(*a, **kw):
+        calls.append(kw.get("max_distance"))
+        return real(*a, **kw)
+
+    monkeypatch.setattr(core, "collider_distance", counted)
+    play(scene, range(1, 4))
+    assert len(calls) == 3
+    assert all(c is None or c >= 0.05 for c in calls)
+    a = hair.furcollide.output.data.attributes["furcollide_collider_distance"]
+    v = np.empty(len(a.data), np.float32)
+    a.data.foreach_get("value", v)
+    assert (v <= np.float32(0.05)).all()
+    tip = type(m).bl_rna.properties["distance_max"].description
+    assert "(0 = no cap)" in tip and "exact" not in tip
+
+
+def test_a_groom_stage_error_is_prefixed_once(fc):
+    """Issue 17 point 7: an error of the groom stage (here its output's curves were
+    edited) says "Render groom:" once, and an error raised with the prefix is not
+    prefixed again."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = _bound(fc)
+    play(scene, range(1, 3))
+    hc = bpy.data.hair_curves.new("Edited output")
+    hc.add_curves([5] * 3)
+    gout.data = hc
+    scene.frame_set(3)
+    level, msg = fc.registry.status_for(guides)
+    assert level == "WARNING" and msg.startswith(
+        "Render groom: The groom output 'Groom FurCollide' has other curves than the bound "
+        "groom (edited?): press Bind Groom again"), msg
+    assert msg.count("Render groom:") == 1
+    said = fc.groom_stage.error_message(ValueError("Render groom: the guides now have 3"))
+    assert said == "Render groom: the guides now have 3"
