@@ -581,8 +581,9 @@ class RigidBatch:
             d = Y[sel] + V0[sel] * cos + X[sel] * sin
             if scale is not None:
                 d *= scale[:, None]
-            cs = np.cumsum(d, axis=0)
-            o = cs - d + (root_lo[items] - (cs[first] - d[first]))[rep]
+            o = rot.cumsum_owned(d, rep, first)
+            o -= d
+            o += root_lo[items][rep]
             rays = mi[rep]
             if rays.all():
                 h = c.segment_hits_local(o - back * d, d * grow, off, ctx.threads)

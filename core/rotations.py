@@ -133,6 +133,37 @@ def cumsum_soa(d):
     return out
 
 
+def cumsum_owned(x, rep, starts):
+    """``np.cumsum(x, axis=0)`` restarted at every owner's first row.
+
+    Parameters
+    ----------
+    x : (k, ...) ndarray
+        Rows grouped by owner (a curve's segments are consecutive).
+    rep : (k,) int
+        Owner of each row (0..n-1, non-decreasing).
+    starts : (n,) int
+        First row of each owner.
+
+    Returns
+    -------
+    (k, ...) float64
+        Each owner's own sequential sums, computed on a padded
+        (n, longest, ...) array: a curve's result never depends on the
+        curves batched before it (one global cumsum minus each curve's
+        offset would carry their rounding), and equals :func:`cumsum_soa`'s
+        for the same rows.
+    """
+    n = len(starts)
+    if n == 0 or len(x) == 0:
+        return np.zeros(x.shape, np.float64)
+    pos = np.arange(len(x)) - starts[rep]
+    pad = np.zeros((n, int(pos.max()) + 1) + x.shape[1:])
+    pad[rep, pos] = x
+    np.cumsum(pad, axis=1, out=pad)
+    return pad[rep, pos]
+
+
 def apply_soa(A, x):
     """:func:`apply` on component arrays: ``x`` (3, ...) mapped by the 3x3
     ``A``, returned as (3, ...) (the same sums in the same order)."""

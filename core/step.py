@@ -358,11 +358,10 @@ class StepContext:
             scale = self.shrink_scale(a_seg)
             if scale is not None:
                 v = v * scale[:, None]
-        cs = np.cumsum(v, axis=0)
-        base = self.roots[idx] - (cs[starts] - v[starts])
+        cs = rot.cumsum_owned(v, rep, starts)
         # Round to the output dtype so the segments tested are exactly the
         # segments written out (float32 rounding must not re-open a contact).
-        end = (cs + base[rep]).astype(self.out_dtype).astype(np.float64)
+        end = (cs + self.roots[idx][rep]).astype(self.out_dtype).astype(np.float64)
         o = np.empty_like(end)
         o[1:] = end[:-1]
         o[starts] = self.roots[idx]

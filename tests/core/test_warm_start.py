@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import oracle
 import pytest
 import scenes
 from hypothesis import given, settings
@@ -28,22 +29,55 @@ if str(BENCH) not in sys.path:
 import scene  # noqa: E402  (numpy-only scene builders of make bench)
 
 
-def _same_steps(offsets, frames, mode, **kw):
+def _same_steps(offsets, frames, mode, soft_monotone_only=False, **kw):
     """Step a warm and a full solver from the same state each frame; return how
-    many curves were COLLIDING (the searches had work to do)."""
+    many curves were COLLIDING (the searches had work to do).
+
+    ``soft_monotone_only``: Soft's blocked recoveries bisect a fraction of the
+    recovery step, and the README promises the full search's level only where
+    clearance is monotone along that arc. An arc that enters a collider and
+    leaves it again (a thin or double-sided one, after a jump) has several
+    clear levels right below a blocked one; the warm search may stop at
+    another of them. Such curves may differ, and only such: both results
+    blocked recoveries (COLLIDING, in contact in both states) at different
+    levels, both clear of every collider (independent oracle).
+    """
     full = Solver(offsets, Settings(mode=mode, **kw))
     full.warm_start = False
     warm = Solver(offsets, Settings(mode=mode, **kw))
+    offsets = np.asarray(offsets)
+    nseg = np.diff(offsets) - 1
     contacts = 0
     for pts, cols in frames:
         warm.state = full.state
         a = full.step(pts, cols)
         b = warm.step(pts, cols)
         np.testing.assert_array_equal(a.status, b.status)
-        np.testing.assert_array_equal(a.points, b.points)
         sa, sb = full.state, warm.state
+        differ = np.flatnonzero(
+            np.logical_or.reduceat((a.points != b.points).any(axis=1), offsets[:-1]))
+        keep_c = np.ones(len(nseg), bool)
+        if len(differ) and soft_monotone_only:
+            assert mode == "soft"
+            assert (a.status[differ] == Status.COLLIDING).all(), differ
+            assert (sa["contact"][differ] & sb["contact"][differ]).all(), differ
+            assert (sa["delta"][differ] != sb["delta"][differ]).all(), differ
+            for res in (a, b):
+                for c in cols:
+                    Vw = oracle.transform(np.asarray(c.vertices, np.float64), c.matrix)
+                    hit = oracle.segments_hit_mesh(res.points, offsets, Vw, c.faces)
+                    assert not hit[differ].any(), differ
+            keep_c[differ] = False
+        else:
+            np.testing.assert_array_equal(a.points, b.points)
+        keep_s = np.repeat(keep_c, nseg)
         for key in sa:
-            np.testing.assert_array_equal(sa[key], sb[key], err_msg=key)
+            x, y = np.asarray(sa[key]), np.asarray(sb[key])
+            if x.ndim and len(x) == len(keep_c) and not keep_c.all():
+                x, y = x[keep_c], y[keep_c]
+            elif x.ndim and len(x) == len(keep_s) and not keep_s.all():
+                x, y = x[keep_s], y[keep_s]
+            np.testing.assert_array_equal(x, y, err_msg=key)
         contacts += int(np.count_nonzero(a.status == Status.COLLIDING))
     return contacts
 
@@ -95,5 +129,6 @@ def test_moving_and_jumping_colliders_give_the_full_search_answer(
             col.matrix = scenes.affine(scenes.rotation_matrix([1, 0.2, 0], 0.1 * f), t=t)
             yield pts, [col]
 
-    contacts = _same_steps(offs, frames(), mode, recovery_rate=rate, plasticity=plasticity)
+    contacts = _same_steps(offs, frames(), mode, soft_monotone_only=mode == "soft",
+                           recovery_rate=rate, plasticity=plasticity)
     assert contacts > 0  # the collider starts in the fur: the searches had work
