@@ -215,8 +215,9 @@ def write_status(curves, status: np.ndarray, offsets: np.ndarray, colors=None) -
 def copy_topology(src, dst) -> None:
     """Give ``dst`` (original Curves) the curve sizes and attributes of ``src``.
 
-    ``src`` is usually the *evaluated* source data. Existing curves of ``dst``
-    are removed; every non-internal attribute of ``src`` (radius,
+    ``src`` is usually the *evaluated* source data. ``dst`` has no curves
+    (:func:`compat.emptied_curves`) or, from Blender 4.3 on, its curves are
+    removed; every non-internal attribute of ``src`` (radius,
     ``surface_uv_coordinate``, custom attributes...) is copied.
     """
     offs = curve_offsets(src)

@@ -202,3 +202,27 @@ def move_modifier(ob, mod, index: int) -> None:
 def uv_map_names(mesh) -> list[str]:
     """Names of a mesh's UV maps (the same API on every supported version)."""
     return [uv.name for uv in mesh.uv_layers]
+
+
+def emptied_curves(ob):
+    """``ob``'s hair curves data with no curves, ready for ``add_curves``.
+
+    ``Curves.remove_curves`` is missing from Blender 4.2 (it came in 4.3):
+    there ``ob`` gets a new, empty hair curves datablock carrying the old
+    one's materials and surface, and the old one is removed when nothing
+    else uses it.
+    """
+    old = ob.data
+    if not len(old.curves):
+        return old
+    if hasattr(old, "remove_curves"):
+        old.remove_curves()
+        return old
+    new = bpy.data.hair_curves.new(old.name)
+    for mat in old.materials:
+        new.materials.append(mat)
+    new.surface, new.surface_uv_map = old.surface, old.surface_uv_map
+    ob.data = new
+    if old.users == 0:
+        bpy.data.hair_curves.remove(old)
+    return new

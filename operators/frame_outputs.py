@@ -11,11 +11,10 @@ source and output the viewport shows (:func:`apply_visibility`).
 
 from __future__ import annotations
 
-import bpy
 import numpy as np
 
 from ..core import framecache
-from . import bridge
+from . import bridge, compat
 from .clock import clock
 from .registry import source_of
 
@@ -108,16 +107,7 @@ def sync_output(setup, inputs) -> None:
     ob = setup.ob
     out = ob.furcollide.output
     if framecache.topology_key(bridge.curve_offsets(out.data)) != inputs.key:
-        old = out.data
-        if len(old.curves) and not hasattr(old, "remove_curves"):  # older Blender
-            new = bpy.data.hair_curves.new(old.name)
-            for mat in old.materials:
-                new.materials.append(mat)
-            new.surface, new.surface_uv_map = old.surface, old.surface_uv_map
-            out.data = new
-            if old.users == 0:
-                bpy.data.hair_curves.remove(old)
-        bridge.copy_topology(ob.evaluated_get(setup.depsgraph).data, out.data)
+        bridge.copy_topology(ob.evaluated_get(setup.depsgraph).data, compat.emptied_curves(out))
 
 
 # ---------------------------------------------------------------- viewport

@@ -12,7 +12,7 @@ import uuid
 import numpy as np
 from bpy.types import Operator
 
-from . import bridge
+from . import bridge, compat
 from .colliders import in_scene
 from .dependencies import update_dependencies
 from .frame_inputs import read_inputs
@@ -93,7 +93,7 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
                 lambda hc: bridge.copy_topology(groom.evaluated_get(dg).data, hc),
             )
         elif not np.array_equal(bridge.curve_offsets(out.data), roff):
-            bridge.copy_topology(groom.evaluated_get(dg).data, out.data)
+            bridge.copy_topology(groom.evaluated_get(dg).data, compat.emptied_curves(out))
         store_groom(out, arrays)
         g.output = out
         g.bind_id = uuid.uuid4().hex
