@@ -8,13 +8,21 @@ used to switch pinch detection off silently, or (inward winding with a Collision
 Offset) build the offset shell inside the mesh. :func:`tidy` fixes the
 *topology* the collider works with; the positions are never moved:
 
-1. **Weld**: vertices closer than ``tol.WELD_REL`` of the mesh's size become one
-   (the faces point at the first of them; the duplicates stay, unused).
-2. **Duplicated faces** (the same three welded corners, either winding) count
-   once.
+1. **Weld**: vertices within ``tol.WELD_REL`` of the mesh's size of each other
+   (transitively) become one (the faces point at the first of them; the
+   duplicates stay, unused).
+2. **Duplicated faces** (the same three welded corners): copies with the same
+   winding count once. Two copies wound opposite ways whose edges every other
+   face leaves shared by two more faces are the wall between two closed parts
+   touching face to face (two crates joined): both go, leaving the union closed.
 3. **Winding**: made consistent across every edge two faces share, per connected
-   part; a closed part is then wound outward (positive signed volume), an open
-   one keeps the winding most of its faces had.
+   part, keeping the winding most of its faces had. A closed part (each of its
+   edges shared by two of its faces, wound opposite ways) is then turned so that
+   the mesh means what its artist meant: a closed part inside no other one faces
+   outward (positive signed volume); a closed part lying wholly inside another
+   keeps its winding *relative to* that one (wound against it, it is the wall of
+   a cavity: the inner shell of a Solidify helmet faces the cavity; wound with
+   it, a solid within the solid). An open part keeps its majority winding.
 
 The result says what it changed, for the artist's status line.
 """
@@ -43,6 +51,9 @@ class Tidy:
         Faces dropped as duplicates of another face.
     collapsed : int
         Faces dropped because welding merged two of their corners.
+    shared : int
+        Faces dropped in pairs as the wall between two closed parts that touch
+        face to face.
     flipped : int
         Faces whose winding was reversed.
     open_edges : int
@@ -55,6 +66,7 @@ class Tidy:
     welded: int = 0
     duplicates: int = 0
     collapsed: int = 0
+    shared: int = 0
     flipped: int = 0
     open_edges: int = 0
     closed: bool = False
@@ -68,23 +80,66 @@ class Tidy:
             parts.append(f"{self.duplicates} duplicated faces ignored")
         if self.collapsed:
             parts.append(f"{self.collapsed} faces collapsed by welding ignored")
+        if self.shared:
+            parts.append(f"{self.shared} faces between touching parts ignored")
         if self.flipped:
             parts.append(f"{self.flipped} faces turned outward")
         return ", ".join(parts)
 
 
 def weld_map(V, tol_rel=tol.WELD_REL) -> np.ndarray:
-    """(n,) index of the vertex each vertex is welded to (itself if none):
-    vertices in the same cell of a grid of ``tol_rel`` times the mesh's size."""
+    """(n,) index of the vertex each vertex is welded to (itself if none).
+
+    Vertices within ``h = tol_rel`` times the mesh's size of each other are
+    one vertex, transitively; each maps to the lowest index of its group.
+    Found on a grid of cell ``h``: a pair that close lies in the same or a
+    neighbouring cell, so copies straddling a cell boundary (a seam whose
+    copies differ by an ulp) are welded too.
+    """
     V = np.asarray(V, np.float64)
     n = len(V)
     if n == 0:
         return np.zeros(0, np.int64)
     lo, hi = V.min(axis=0), V.max(axis=0)
     h = max(float(np.linalg.norm(hi - lo)) * tol_rel, 1e-300)
-    key = np.floor((V - lo) / h).astype(np.int64)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return first[inverse.reshape(-1)]
+    key = np.floor((V - lo) / h).astype(np.int64) + 1  # (>= 1: neighbours stay >= 0)
+    dims = key.max(axis=0) + 2
+    lin = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
+    order = np.argsort(lin, kind="stable")
+    sl = lin[order]
+    at = np.empty(n, np.int64)
+    at[order] = np.arange(n)  # each vertex's place in the sorted order
+    ia, ib = [], []
+    # the cell itself (the vertices after each one in its cell's run) and the
+    # 13 neighbours "after" it: each pair of vertices once
+    for dx, dy, dz in [(0, 0, 0)] + [(x, y, z) for x in (0, 1) for y in (-1, 0, 1)
+                                     for z in (-1, 0, 1) if (x, y, z) > (0, 0, 0)]:
+        t = lin + (dx * dims[1] + dy) * dims[2] + dz
+        if (dx, dy, dz) == (0, 0, 0):
+            a = at + 1
+            cnt = np.searchsorted(sl, t, "right") - a
+        else:
+            a = np.searchsorted(sl, t, "left")
+            cnt = np.searchsorted(sl, t, "right") - a
+        has = np.flatnonzero(cnt > 0)
+        if len(has) == 0:
+            continue
+        c = cnt[has]
+        k = np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c)
+        ia.append(np.repeat(has, c))
+        ib.append(order[np.repeat(a[has], c) + k])
+    rep = np.arange(n)
+    if ia:
+        i, j = np.concatenate(ia), np.concatenate(ib)
+        d = V[i] - V[j]
+        near = np.einsum("ij,ij->i", d, d) <= h * h
+        i, j = i[near], j[near]
+        if len(i):
+            labels = _components(i, j, n)
+            low = np.full(labels.max() + 1, n)
+            np.minimum.at(low, labels, np.arange(n))
+            rep = low[labels]
+    return rep
 
 
 def tidy(V, F) -> Tidy:
@@ -97,6 +152,7 @@ def tidy(V, F) -> Tidy:
         Non-degenerate triangles (indices into ``V``).
     """
     F = np.asarray(F, np.int64).reshape(-1, 3)
+    V = np.asarray(V, np.float64)
     n = len(V)
     rep = weld_map(V)
     welded = int(np.count_nonzero(rep != np.arange(n)))
@@ -104,15 +160,51 @@ def tidy(V, F) -> Tidy:
     ok = (Fw[:, 0] != Fw[:, 1]) & (Fw[:, 1] != Fw[:, 2]) & (Fw[:, 0] != Fw[:, 2])
     collapsed = int(np.count_nonzero(~ok))
     Fw = Fw[ok]
-    # duplicated faces: the same corners in any order
-    _, keep = np.unique(np.sort(Fw, axis=1), axis=0, return_index=True)
-    keep = np.sort(keep)
-    duplicates = len(Fw) - len(keep)
+    keep, shared = _unique_faces(Fw, n)
+    duplicates = len(Fw) - len(keep) - shared
     Fw = Fw[keep]
-    flip, open_edges, closed = _orient(np.asarray(V, np.float64), Fw, n)
+    flip, open_edges, closed = _orient(V, Fw, n)
     Fw[flip] = Fw[flip][:, ::-1]
-    return Tidy(Fw.astype(np.int32), welded, duplicates, collapsed,
+    return Tidy(Fw.astype(np.int32), welded, duplicates, collapsed, shared,
                 int(np.count_nonzero(flip)), open_edges, closed)
+
+
+def _unique_faces(F, n):
+    """Faces to keep (sorted indices) and how many went as walls between
+    touching parts (see the module docstring, 2.)."""
+    m = len(F)
+    if m == 0:
+        return np.zeros(0, np.int64), 0
+    srt = np.sort(F, axis=1)
+    # winding class: the corners in cyclic order from the lowest one ascend or not
+    lo_at = np.argmin(F, axis=1)
+    nxt = F[np.arange(m), (lo_at + 1) % 3]
+    cls = (nxt == srt[:, 1]).astype(np.int64)
+    keyed = np.column_stack([srt, cls])
+    _, first, inv = np.unique(keyed, axis=0, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    keep = np.sort(first)  # one face per (corners, winding)
+    # the same corners wound both ways: a wall between touching parts if every
+    # one of its edges is also shared by exactly two other kept faces
+    corners = srt[keep]
+    _, grp, gcount = np.unique(corners, axis=0, return_inverse=True, return_counts=True)
+    grp = grp.reshape(-1)
+    pair = gcount[grp] == 2
+    if not pair.any():
+        return keep, 0
+    key, _, face = _edges(F[keep], n)
+    uk, ucount = np.unique(key, return_counts=True)
+    per_face = np.zeros(len(keep), np.int64)  # its edges' smallest face count
+    per_face[:] = np.iinfo(np.int64).max
+    np.minimum.at(per_face, face, ucount[np.searchsorted(uk, key)])
+    ek = np.zeros(len(keep), np.int64)
+    np.maximum.at(ek, face, ucount[np.searchsorted(uk, key)])
+    wall = pair & (per_face == 4) & (ek == 4)  # (both faces of a pair decide alike)
+    # any other pair: one duplicated face, the first kept
+    low = np.full(len(gcount), len(keep))
+    np.minimum.at(low, grp, np.arange(len(keep)))
+    second = pair & ~wall & (np.arange(len(keep)) != low[grp])
+    return keep[~wall & ~second], int(np.count_nonzero(wall))
 
 
 def _edges(F, n):
@@ -126,9 +218,9 @@ def _edges(F, n):
 
 
 def _orient(V, F, n):
-    """Faces to flip so that windings agree across shared edges, closed parts
-    outward, open parts as most of their faces were. Returns (flip (m,) bool,
-    number of open edges, closed)."""
+    """Faces to flip: windings agree across shared edges, each part keeps its
+    majority winding, closed parts are turned as the module docstring says.
+    Returns (flip (m,) bool, number of open edges, every part closed)."""
     m = len(F)
     flip = np.zeros(m, bool)
     if m == 0:
@@ -144,29 +236,105 @@ def _orient(V, F, n):
     f1, f2 = face[two], face[two + 1]
     agree = sign[two] != sign[two + 1]  # consistent: the edge runs both ways
     labels = _components(f1, f2, m)
+    n_parts = int(labels.max()) + 1
     if not agree.all():
         flip = _propagate(f1, f2, agree, m)
-        # re-count consistency with the flips
-        s = np.where(flip[face], -sign, sign)
-        agree = s[two] != s[two + 1]
-    closed_part = np.ones(labels.max() + 1, bool)
-    bad = np.zeros(m, bool)
-    bad[face[np.repeat(count != 2, count)]] = True  # a face on an open or non-manifold edge
-    bad[f1[~agree]] = True
-    bad[f2[~agree]] = True
-    closed_part[labels[bad]] = False
-    # signed volume of each closed part (with the flips), outward = positive
+    size = np.bincount(labels, minlength=n_parts)
+    turned = np.bincount(labels, weights=flip.astype(float), minlength=n_parts)
+    flip ^= (turned * 2 > size)[labels]  # each part keeps its majority winding
+    # closed part: each of its edges has two of its faces, running opposite ways
+    s = np.where(flip[face], -sign, sign)
+    lab = labels[face]
+    po = np.lexsort((key, lab))
+    pk, pl, ps = key[po], lab[po], s[po]
+    pstart = np.flatnonzero(np.r_[True, (pk[1:] != pk[:-1]) | (pl[1:] != pl[:-1])])
+    pcount = np.diff(np.r_[pstart, len(pk)])
+    good = pcount == 2
+    good[good] = ps[pstart[good]] != ps[pstart[good] + 1]
+    closed_part = np.ones(n_parts, bool)
+    closed_part[labels[face[po][pstart[~good]]]] = False
+    # signed volume of each part (with the flips so far): the artist's sense
     G = np.where(flip[:, None], F[:, ::-1], F)
     p0, p1, p2 = V[G[:, 0]], V[G[:, 1]], V[G[:, 2]]
     c = V.mean(axis=0)  # about the mesh's centre: better conditioned
     vol = np.einsum("ij,ij->i", p0 - c, np.cross(p1 - c, p2 - c))
-    part_vol = np.bincount(labels, weights=vol, minlength=len(closed_part))
-    turned = np.bincount(labels, weights=flip.astype(float), minlength=len(closed_part))
-    size = np.bincount(labels, minlength=len(closed_part))
-    inward = np.where(closed_part, part_vol < 0, turned * 2 > size)
-    flip ^= inward[labels]
-    closed = bool(closed_part.all() and open_edges == 0 and (count == 2).all())
-    return flip, open_edges, closed
+    part_vol = np.bincount(labels, weights=vol, minlength=n_parts)
+    want = _wanted_senses(V, G, labels, closed_part, np.sign(part_vol))
+    turn = closed_part & (np.sign(part_vol) != want) & (want != 0)
+    flip ^= turn[labels]
+    return flip, open_edges, bool(closed_part.all())
+
+
+def _wanted_senses(V, G, labels, closed_part, sense):
+    """(parts,) +1 / -1: the signed-volume sense each closed part should have
+    (0 for open parts): outward unless it lies wholly inside another closed
+    part, then its parent's sense times its own relative to the parent's."""
+    parts = np.flatnonzero(closed_part)
+    want = np.zeros(len(closed_part))
+    if len(parts) == 0:
+        return want
+    want[parts] = 1.0
+    if len(parts) == 1 or len(parts) > _NEST_MAX_PARTS:
+        return want
+    lo = np.full((len(closed_part), 3), np.inf)
+    hi = np.full((len(closed_part), 3), -np.inf)
+    T = V[G]  # (m, 3, 3)
+    np.minimum.at(lo, labels, T.min(axis=1))
+    np.maximum.at(hi, labels, T.max(axis=1))
+    by = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[by], np.arange(len(closed_part) + 1))
+    faces_of = {int(p): by[bounds[p]:bounds[p + 1]] for p in parts}
+    parent = {}
+    depth = {int(p): 0 for p in parts}
+    for j in parts:
+        fj = faces_of[int(j)]
+        probe = T[fj[np.linspace(0, len(fj) - 1, min(len(fj), _NEST_PROBES)).astype(int)]]
+        probe = probe.mean(axis=1)  # face centres: on no other part's surface
+        holders = [i for i in parts if i != j and (lo[i] <= lo[j]).all()
+                   and (hi[j] <= hi[i]).all()
+                   and _inside(probe, T[faces_of[int(i)]]).all()]
+        depth[int(j)] = len(holders)
+        if holders:  # the innermost one holding it
+            parent[int(j)] = holders[int(np.argmin([(hi[i] - lo[i]).prod() for i in holders]))]
+    for j in sorted(depth, key=depth.get):
+        if j in parent:
+            p = parent[j]
+            want[j] = want[p] * sense[j] * sense[p] if sense[j] and sense[p] else want[p]
+    return want
+
+
+#: Face centres of a closed part tested against another to call it nested.
+_NEST_PROBES = 16
+#: Above this many closed parts (a scatter of pebbles) nesting is not looked
+#: for: every closed part faces outward.
+_NEST_MAX_PARTS = 64
+#: A fixed, generic direction for the parity rays of :func:`_inside`.
+_RAY = np.array([0.5773502691896258, 0.5773502691896257, 0.5773502691896259]) + np.array(
+    [0.0123, -0.0071, 0.0049])
+
+
+def _inside(points, T):
+    """(k,) bool: is each point inside the closed triangle set ``T`` (m, 3, 3)?
+    Ray parity along one generic direction (Moeller-Trumbore, in chunks)."""
+    d = _RAY / np.linalg.norm(_RAY)
+    odd = np.zeros(len(points), np.int64)
+    e1 = T[:, 1] - T[:, 0]
+    e2 = T[:, 2] - T[:, 0]
+    pv = np.cross(d, e2)  # (m, 3)
+    det = np.einsum("ij,ij->i", e1, pv)
+    ok = np.abs(det) > 1e-300
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    step = max(1, 2_000_000 // max(len(T), 1))
+    for a in range(0, len(points), step):
+        P = points[a:a + step]
+        tv = P[:, None, :] - T[None, :, 0]  # (k, m, 3)
+        u = np.einsum("kmj,mj->km", tv, pv) * inv
+        qv = np.cross(tv, e1[None])
+        v = np.einsum("j,kmj->km", d, qv) * inv
+        t = np.einsum("kmj,mj->km", qv, e2) * inv
+        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+        odd[a:a + step] = hit.sum(axis=1)
+    return odd % 2 == 1
 
 
 def _components(f1, f2, m):

@@ -39,9 +39,6 @@ def _cavity_fur(rng, n=20, half=0.3, length=0.2, npts=3):
 
 
 # ------------------------------------------------------------ colliders
-@pytest.mark.xfail(strict=True, reason="meshfix.tidy winds every closed part outward on "
-                   "its own: a hollow ball's inner shell is flipped and every root in the "
-                   "cavity is reported PINCHED")
 def test_roots_in_the_cavity_of_a_hollow_ball_are_not_pinched():
     """Fur growing inside a correctly modelled hollow ball (a head under a helmet made
     with Solidify) is outside the collider's solid: its roots are not pinched, and
@@ -56,9 +53,6 @@ def test_roots_in_the_cavity_of_a_hollow_ball_are_not_pinched():
     assert col.repairs.flipped == 0, col.repairs.describe()
 
 
-@pytest.mark.xfail(strict=True, reason="meshfix.tidy flips a hollow ball's inner shell: "
-                   "a Collision Offset shell of the cavity wall is built inside the wall, "
-                   "fur in the cavity is pinched instead of kept at the offset")
 def test_fur_in_a_hollow_ball_keeps_the_collision_offset_from_the_inner_wall():
     """Fur inside the cavity whose tips pierce the inner wall: resolved, clear of the
     wall, and at least (about) the Collision Offset away from it."""
@@ -113,12 +107,8 @@ def two_boxes(touch):
 
 @pytest.mark.parametrize("touch", [
     "apart",
-    pytest.param("face", marks=pytest.mark.xfail(
-        strict=True, reason="meshfix welds two closed boxes touching along a face into "
-        "a non-manifold mesh: 'not closed', no pinch detection for either box")),
-    pytest.param("edge", marks=pytest.mark.xfail(
-        strict=True, reason="meshfix welds two closed boxes touching along an edge into "
-        "a non-manifold mesh: 'not closed', no pinch detection for either box")),
+    "face",
+    "edge",
 ])
 def test_two_closed_boxes_in_one_mesh_still_detect_pinches(touch):
     """Each box is closed and wound outward: a root inside either is pinched (the
@@ -132,9 +122,6 @@ def test_two_closed_boxes_in_one_mesh_still_detect_pinches(touch):
     np.testing.assert_array_equal(col.contains(P), inside)
 
 
-@pytest.mark.xfail(strict=True, reason="meshfix.weld_map welds by grid cell, not by "
-                   "distance: seam copies 1 float32 ulp apart (far below WELD_REL) that "
-                   "straddle a cell boundary stay unwelded: 'open mesh', no pinch detection")
 @pytest.mark.parametrize("scale", [1.0, 2.0924042])
 def test_a_seam_whose_copies_differ_by_one_ulp_is_welded(scale):
     """An unwelded seam whose vertex copies are not bit-identical (an exporter's float32

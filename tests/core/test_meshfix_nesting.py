@@ -1,0 +1,103 @@
+"""How meshfix turns closed parts that lie inside one another, and duplicated faces.
+
+The rule (core/meshfix.py, README "Colliders as artists make them"): a closed part
+inside no other faces outward; a closed part wholly inside another keeps its
+winding relative to that one (against it: a cavity wall; with it: a solid within
+the solid). Faces doubled with opposite windings are the wall between two parts
+touching face to face only when every edge they have is shared by two more faces.
+Checked against the parity oracle on the mesh as the artist meant it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import oracle
+import pytest
+import scenes
+
+from core import Collider
+from core.meshfix import tidy
+
+
+def _ball(r, center=(0.0, 0.0, 0.0)):
+    return scenes.icosphere(center, r, subdivisions=2)
+
+
+def _join(*parts):
+    Vs, Fs, n = [], [], 0
+    for V, F in parts:
+        Vs.append(V)
+        Fs.append(F + n)
+        n += len(V)
+    return np.concatenate(Vs), np.concatenate(Fs)
+
+
+def _inside_per_core(V, F, P):
+    """Roots inside the collider as the core sees it (its pinch test)."""
+    col = Collider(V.astype(np.float32), F)
+    return col.contains(P)
+
+
+PROBES = np.array([[0, 0, 0], [0, 0, 0.7], [0.9, 0, 0], [0, 0, 1.2], [0.3, 0.1, -0.2]], float)
+
+
+@pytest.mark.parametrize("whole_mesh_flipped", [False, True])
+def test_a_hollow_ball_is_a_cavity_even_when_the_whole_mesh_is_flipped(whole_mesh_flipped):
+    Vo, Fo = _ball(1.0)
+    Vi, Fi = _ball(0.6)
+    V, F = _join((Vo, Fo), (Vi, Fi[:, ::-1]))  # Solidify: the inner shell faces the cavity
+    if whole_mesh_flipped:  # an import with the other handedness
+        F = F[:, ::-1]
+    t = tidy(V, F)
+    assert t.closed
+    assert t.flipped == (len(F) if whole_mesh_flipped else 0)
+    # inside = in the wall only (between 0.6 and 1.0)
+    want = np.array([False, True, True, False, False])
+    np.testing.assert_array_equal(_inside_per_core(V, F, PROBES), want)
+
+
+def test_a_solid_within_a_solid_wound_alike_stays_solid():
+    """An eye inside a head, joined, both wound outward: inside either is inside."""
+    Vo, Fo = _ball(1.0)
+    Vi, Fi = _ball(0.4)
+    V, F = _join((Vo, Fo), (Vi, Fi))
+    t = tidy(V, F)
+    assert t.closed and t.flipped == 0
+    np.testing.assert_array_equal(_inside_per_core(V, F, PROBES),
+                                  [True, True, True, False, True])
+
+
+def test_overlapping_balls_both_face_outward_whatever_their_winding():
+    """Two balls that intersect (an asset built from primitives): neither holds the
+    other wholly, so each faces outward; inside is the union."""
+    Va, Fa = _ball(0.6, (-0.3, 0, 0))
+    Vb, Fb = _ball(0.6, (0.3, 0, 0))
+    V, F = _join((Va, Fa), (Vb, Fb[:, ::-1]))  # one wound inward
+    t = tidy(V, F)
+    assert t.closed and t.flipped == len(Fb)
+    P = np.array([[-0.7, 0, 0], [0.7, 0, 0], [0, 0, 0], [0, 0.7, 0]])
+    union = oracle.points_inside_closed_mesh(P, Va, Fa) | oracle.points_inside_closed_mesh(
+        P, Vb, Fb)
+    np.testing.assert_array_equal(_inside_per_core(V, F, P), union)
+
+
+@pytest.mark.parametrize("flip_copy", [False, True])
+def test_a_doubled_face_in_one_ball_counts_once(flip_copy):
+    """A duplicated face (either winding) in a single closed ball is not a wall
+    between parts: one copy goes, the ball stays closed."""
+    V, F = _ball(1.0)
+    copy = F[:3, ::-1] if flip_copy else F[:3]
+    t = tidy(V, np.concatenate([F, copy]))
+    assert t.closed and t.shared == 0 and t.duplicates == 3
+    assert len(t.faces) == len(F)
+
+
+def test_the_wall_between_two_crates_goes_and_is_said():
+    V1, F1 = scenes.box([0, 0, 0], [1, 1, 1])
+    V2, F2 = scenes.box([1, 0, 0], [2, 1, 1])
+    V, F = _join((V1, F1), (V2, F2))
+    t = tidy(V, F)
+    assert t.closed and t.shared == 4  # two triangles from each box
+    assert "between touching parts" in t.describe()
+    P = np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [2.5, 0.5, 0.5]])
+    np.testing.assert_array_equal(_inside_per_core(V, F, P), [True, True, False])
