@@ -16,6 +16,8 @@ from helpers import (
     oracle,
     play,
     positions,
+    reopen,
+    save_in,
     seg_lengths,
     status_of,
     tris_world,
@@ -262,6 +264,46 @@ def test_error_state_groom_follows_the_last_guides_on_the_current_skin(fc):
         np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]] + lift, atol=1e-5)
         np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
         assert len(_crossing_unmarked(gout, [(box, True)])) == 0, f
+
+
+def test_reopened_held_frame_groom_follows_the_guides_shown_on_the_current_skin(fc, tmp_path):
+    """Saved mid-playback (unbaked), reopened, frames held (the playback cache is not
+    saved): the render groom follows the guides as their output shows them, its roots
+    on this frame's skin, and the clearance pass runs against this frame's box; the
+    frame that was saved is the same as played, bit for bit."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    surf = guides.data.surface
+    surf.location = (0, 0, 0)
+    surf.keyframe_insert("location", frame=1)
+    surf.location = (0.3, 0.0, 0.25)
+    surf.keyframe_insert("location", frame=8)
+    scene.frame_set(1)
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    ref, roff = world(groom), offsets_of(gout)
+    play(scene, range(1, 6))
+    played5 = world(gout).copy()
+    path = save_in(tmp_path)
+    reopen(path)
+    scene = bpy.context.scene
+    guides = bpy.data.objects["Guides"]
+    surf, box = guides.data.surface, bpy.data.objects["Box"]
+    gout = guides.furcollide.groom.output
+    guides_shown = world(guides.furcollide.output).copy()
+    for f in (7, 8, 3, 5):
+        scene.frame_set(f)
+        assert guides.furcollide.is_outdated, f
+        np.testing.assert_array_equal(world(guides.furcollide.output), guides_shown)
+        P = world(gout)
+        lift = np.array(surf.matrix_world.translation)
+        np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]] + lift, atol=1e-5)
+        np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
+        assert len(_crossing_unmarked(gout, [(box, True)])) == 0, f
+        if f == 7:
+            assert (status_of(gout) == 1).any()  # the box reached it: cleared this frame
+    np.testing.assert_array_equal(world(gout), played5)
 
 
 def test_stage_times_and_skipped_stages(fc, monkeypatch):
