@@ -96,10 +96,27 @@ def run(setup, guides_world) -> None:
     _show_note(setup, note or state.note or binding.note, guides_ok=True)
 
 
-def error_message(exc) -> str:
-    """The status of an error of this stage: "Render groom: ...", said once."""
+def error_message(exc, setup=None) -> str:
+    """The status of an error of this stage: "Render groom: ...", said once, its
+    advice one that works on ``setup`` (:func:`advice`)."""
     text = registry.describe(exc)
-    return text if text.startswith("Render groom:") else f"Render groom: {text}"
+    text = text if text.startswith("Render groom:") else f"Render groom: {text}"
+    return text if setup is None else advice(setup.ob, text)
+
+
+#: What the stage's messages tell the artist to press when the binding must be made again.
+BIND_AGAIN = "press Bind Groom again"
+#: The same while the setup's bake holds the render groom (Bind Groom is greyed then).
+FREE_AND_BIND = "press Free Bake, then Bind Groom again"
+
+
+def advice(ob, text) -> str:
+    """``text`` (a status of this stage) with advice that works when followed on the
+    setup on ``ob``: while its bake holds the render groom, Bind Groom and the groom's
+    settings are greyed ('free the bake before binding'), so it says Free Bake first."""
+    if not ob.furcollide.groom.is_baked_with:
+        return text
+    return re.sub(r"press Bind Groom(?: again)?", FREE_AND_BIND, text)
 
 
 def follow_last_guides(setup) -> None:
@@ -364,6 +381,7 @@ def _show_note(setup, note, guides_ok) -> None:
     level, msg = status_for(setup.ob)
     if level == "ERROR" or not guides_ok and msg:
         return
+    note = advice(setup.ob, note)
     if msg and note not in msg:
         note = f"{msg} {note}"
     if note == state.noted:  # (one console line per problem, not one per frame)
@@ -409,8 +427,10 @@ def groom_changes(setup, binding) -> str:
     groom = g.groom
     bound = binding.groom_name
     if groom is None:
+        choose = ("Press Free Bake and choose it again" if g.is_baked_with
+                  else "Choose it again")
         return (f"Render groom: no Render Groom is chosen (bound: '{bound}'); the groom "
-                "output keeps following the guides. Choose it again, or remove the groom "
+                f"output keeps following the guides. {choose}, or remove the groom "
                 "output (X)")
     if bound and groom.name != bound:
         return (f"Render groom: the Render Groom is now '{groom.name}' but '{bound}' is "

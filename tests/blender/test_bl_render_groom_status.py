@@ -208,6 +208,44 @@ def test_editing_the_render_groom_after_bind_is_reported(fc, edit):
     assert fc.registry.status_for(guides) == ("INFO", "")
 
 
+@pytest.mark.parametrize("edit", ["comb", "none_chosen"])
+def test_advice_on_a_baked_setup_works_when_followed(fc, tmp_path, edit):
+    """The render groom of a baked setup is combed (or unchosen from a script): Bind
+    Groom and the groom's settings are greyed while the bake holds it, so the status
+    says Free Bake first; following the advice (Free Bake, then Bind Groom) works and
+    clears it."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = _bound(fc)
+    save_in(tmp_path)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    if edit == "comb":
+        P = positions(groom).copy()
+        P[:, 0] += 0.05 * (P[:, 2] ** 2)
+        groom.data.position_data.foreach_set("vector", P.ravel())
+        groom.data.update_tag()
+    else:
+        guides.furcollide.groom.groom = None
+    scene.frame_set(3)
+    level, msg = fc.registry.status_for(guides)
+    assert level == "WARNING", msg
+    if edit == "comb":
+        assert "was edited since Bind Groom" in msg, msg
+        assert "press Free Bake, then Bind Groom again" in msg, msg
+        assert "press Bind Groom again" not in msg.replace("then Bind Groom again", ""), msg
+    else:
+        assert "Press Free Bake and choose it again" in msg, msg
+    activate(guides)
+    assert not bpy.ops.furcollide.groom_bind.poll()  # (greyed: the advice says why)
+    assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
+    if edit == "none_chosen":
+        guides.furcollide.groom.groom = groom
+    scene.frame_set(1)
+    assert bpy.ops.furcollide.groom_bind.poll()
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    scene.frame_set(2)
+    assert fc.registry.status_for(guides) == ("INFO", "")
+
+
 def test_guides_changed_since_bind_are_named_once(fc):
     """The guides' curves changed (and were solved again after Reset): the groom says it
     with one prefix and keeps following the last guides it could use."""
