@@ -89,7 +89,7 @@ def evaluate(setup) -> Outcome:
         try:
             groom_stage.run(setup, written)
         except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
-            setup.set_status("WARNING", groom_stage.error_message(exc))
+            setup.set_status("WARNING", groom_stage.error_message(exc, setup))
     setup.rt.stats = dict(setup.rt.stats, **clock.stats())
     return outcome
 

@@ -19,7 +19,8 @@ collider, and writes the result with its ``furcollide_status`` and ``furcollide_
 * when the guides' frame fails (an error, a topology change, an outdated frame), the
   groom follows the last good guides, carried with their Surface to the current frame
   (:func:`follow_last_guides`), so its roots stay on the skin and the clearance pass
-  still runs against the colliders of this frame.
+  still runs against the colliders of this frame; with none in memory (a file just
+  opened) it follows the guides as their output shows them.
 
 Render curves the solver cannot work with (a zero-length segment, a NaN point) are set
 aside at Bind Groom and shown as they are, in yellow (``Status.INVALID``); curves the
@@ -95,10 +96,27 @@ def run(setup, guides_world) -> None:
     _show_note(setup, note or state.note or binding.note, guides_ok=True)
 
 
-def error_message(exc) -> str:
-    """The status of an error of this stage: "Render groom: ...", said once."""
+def error_message(exc, setup=None) -> str:
+    """The status of an error of this stage: "Render groom: ...", said once, its
+    advice one that works on ``setup`` (:func:`advice`)."""
     text = registry.describe(exc)
-    return text if text.startswith("Render groom:") else f"Render groom: {text}"
+    text = text if text.startswith("Render groom:") else f"Render groom: {text}"
+    return text if setup is None else advice(setup.ob, text)
+
+
+#: What the stage's messages tell the artist to press when the binding must be made again.
+BIND_AGAIN = "press Bind Groom again"
+#: The same while the setup's bake holds the render groom (Bind Groom is greyed then).
+FREE_AND_BIND = "press Free Bake, then Bind Groom again"
+
+
+def advice(ob, text) -> str:
+    """``text`` (a status of this stage) with advice that works when followed on the
+    setup on ``ob``: while its bake holds the render groom, Bind Groom and the groom's
+    settings are greyed ('free the bake before binding'), so it says Free Bake first."""
+    if not ob.furcollide.groom.is_baked_with:
+        return text
+    return re.sub(r"press Bind Groom(?: again)?", FREE_AND_BIND, text)
 
 
 def follow_last_guides(setup) -> None:
@@ -274,11 +292,20 @@ def groom_stats(status, n_fixed) -> dict:
 
 def _follow(setup, state) -> None:
     """Write the groom following the last good guides, carried rigidly with their
-    Surface triangles to the Surface of this frame; nothing when there are none."""
+    Surface triangles to the Surface of this frame. With none in this session (a file
+    just opened: the playback cache is not saved), it follows the guides as their
+    output shows them (as saved), its roots on this frame's Surface; nothing when
+    the output shows other guides than the bound ones."""
+    binding = state.binding
     if state.last_guides is None:
+        guides = _guides_shown(setup, binding)
+        if guides is None:
+            return
+        points, status, stats = _compute(setup, state, guides, remember=False)
+        _write(setup, state, points, status)
+        setup.rt.stats = dict(setup.rt.stats, **stats)
         return
     guides, V_then = state.last_guides
-    binding = state.binding
     V, _ = _surface_now(setup, binding)
     if V is not None and V_then is not None and V.shape == V_then.shape and not np.array_equal(
         V, V_then
@@ -287,6 +314,23 @@ def _follow(setup, state) -> None:
     points, status, stats = _compute(setup, state, guides, remember=False)
     _write(setup, state, points, status)
     setup.rt.stats = dict(setup.rt.stats, **stats)
+
+
+def _guides_shown(setup, binding):
+    """The guides' world points (Q, 3) float64 as their output shows them now, or None
+    when it shows other curves than the bound guides (or a non-finite point)."""
+    out = setup.s.output
+    if out is None or out.type != "CURVES":
+        return None
+    data = out.data
+    offsets = bridge.curve_offsets(data)
+    if len(offsets) != len(binding.guide_offsets) or not np.array_equal(
+        offsets, binding.guide_offsets
+    ):
+        return None
+    M = bridge.matrix(out.evaluated_get(setup.depsgraph))
+    guides = bridge.transform(bridge.get_positions(data), M).astype(np.float64)
+    return guides if np.isfinite(guides).all() else None
 
 
 def _carry(setup, state, guides, V_then, V_now):
@@ -337,6 +381,7 @@ def _show_note(setup, note, guides_ok) -> None:
     level, msg = status_for(setup.ob)
     if level == "ERROR" or not guides_ok and msg:
         return
+    note = advice(setup.ob, note)
     if msg and note not in msg:
         note = f"{msg} {note}"
     if note == state.noted:  # (one console line per problem, not one per frame)
@@ -382,8 +427,10 @@ def groom_changes(setup, binding) -> str:
     groom = g.groom
     bound = binding.groom_name
     if groom is None:
+        choose = ("Press Free Bake and choose it again" if g.is_baked_with
+                  else "Choose it again")
         return (f"Render groom: no Render Groom is chosen (bound: '{bound}'); the groom "
-                "output keeps following the guides. Choose it again, or remove the groom "
+                f"output keeps following the guides. {choose}, or remove the groom "
                 "output (X)")
     if bound and groom.name != bound:
         return (f"Render groom: the Render Groom is now '{groom.name}' but '{bound}' is "

@@ -4,6 +4,7 @@ jiggle, Region of Influence and Fur Collider Distance, children and the render g
 from bpy.types import Panel
 
 from ..operators.fur_attach import has_binding
+from ..operators.groom_stage import BIND_AGAIN, advice
 from ..operators.ops_common import active_setup
 from ..operators.ops_sampler import NO_SURFACE_HAIR
 from .panel import FURCOLLIDE_PT_main
@@ -94,7 +95,7 @@ def draw_groom(layout, src):
     settings.prop(g, "groom")
     settings.prop(g, "guides")
     if g.output is not None and g.bound_guides and g.guides != g.bound_guides:
-        col.label(text=f"Bound with {g.bound_guides}: press Bind Groom again", icon="INFO")
+        col.label(text=advice(src, f"Bound with {g.bound_guides}: {BIND_AGAIN}"), icon="INFO")
     settings.prop(g, "use_clearance")
     row = col.row(align=True)
     sub = row.row(align=True)

@@ -176,10 +176,6 @@ def test_reopened_unbaked_render_groom_replays_the_same(fc, tmp_path):
     assert guides.furcollide.status_message == ""
 
 
-@pytest.mark.xfail(strict=True, reason="after reopening an unbaked file, a held (not cached) "
-                   "frame leaves the render groom frozen at the saved pose: no clearance "
-                   "against this frame's colliders, render curves inside the box shown as "
-                   "resolved (groom_stage._follow does nothing without last_guides)")
 def test_reopened_held_frame_render_groom_does_not_cross_the_moved_box(fc, tmp_path):
     """README: when the guides' frame fails (an outdated frame), the groom follows the
     last good guides and the clearance pass still runs against this frame's colliders.
@@ -200,9 +196,6 @@ def test_reopened_held_frame_render_groom_does_not_cross_the_moved_box(fc, tmp_p
     assert len(bad) == 0, (len(bad), np.bincount(status_of(gout)[bad]))
 
 
-@pytest.mark.xfail(strict=True, reason="a baked setup whose render groom was combed says "
-                   "'press Bind Groom again', but Bind Groom refuses a baked setup ('free "
-                   "the bake before binding'): the advice does not work when followed")
 def test_advice_after_combing_the_groom_of_a_baked_setup_works(fc, tmp_path):
     """The artist combs the Render Groom after baking (the groom object is not greyed).
     The status names what to press; pressing it must work."""

@@ -16,6 +16,8 @@ from helpers import (
     oracle,
     play,
     positions,
+    reopen,
+    save_in,
     seg_lengths,
     status_of,
     tris_world,
@@ -206,6 +208,44 @@ def test_editing_the_render_groom_after_bind_is_reported(fc, edit):
     assert fc.registry.status_for(guides) == ("INFO", "")
 
 
+@pytest.mark.parametrize("edit", ["comb", "none_chosen"])
+def test_advice_on_a_baked_setup_works_when_followed(fc, tmp_path, edit):
+    """The render groom of a baked setup is combed (or unchosen from a script): Bind
+    Groom and the groom's settings are greyed while the bake holds it, so the status
+    says Free Bake first; following the advice (Free Bake, then Bind Groom) works and
+    clears it."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = _bound(fc)
+    save_in(tmp_path)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    if edit == "comb":
+        P = positions(groom).copy()
+        P[:, 0] += 0.05 * (P[:, 2] ** 2)
+        groom.data.position_data.foreach_set("vector", P.ravel())
+        groom.data.update_tag()
+    else:
+        guides.furcollide.groom.groom = None
+    scene.frame_set(3)
+    level, msg = fc.registry.status_for(guides)
+    assert level == "WARNING", msg
+    if edit == "comb":
+        assert "was edited since Bind Groom" in msg, msg
+        assert "press Free Bake, then Bind Groom again" in msg, msg
+        assert "press Bind Groom again" not in msg.replace("then Bind Groom again", ""), msg
+    else:
+        assert "Press Free Bake and choose it again" in msg, msg
+    activate(guides)
+    assert not bpy.ops.furcollide.groom_bind.poll()  # (greyed: the advice says why)
+    assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
+    if edit == "none_chosen":
+        guides.furcollide.groom.groom = groom
+    scene.frame_set(1)
+    assert bpy.ops.furcollide.groom_bind.poll()
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    scene.frame_set(2)
+    assert fc.registry.status_for(guides) == ("INFO", "")
+
+
 def test_guides_changed_since_bind_are_named_once(fc):
     """The guides' curves changed (and were solved again after Reset): the groom says it
     with one prefix and keeps following the last guides it could use."""
@@ -262,6 +302,46 @@ def test_error_state_groom_follows_the_last_guides_on_the_current_skin(fc):
         np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]] + lift, atol=1e-5)
         np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
         assert len(_crossing_unmarked(gout, [(box, True)])) == 0, f
+
+
+def test_reopened_held_frame_groom_follows_the_guides_shown_on_the_current_skin(fc, tmp_path):
+    """Saved mid-playback (unbaked), reopened, frames held (the playback cache is not
+    saved): the render groom follows the guides as their output shows them, its roots
+    on this frame's skin, and the clearance pass runs against this frame's box; the
+    frame that was saved is the same as played, bit for bit."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    surf = guides.data.surface
+    surf.location = (0, 0, 0)
+    surf.keyframe_insert("location", frame=1)
+    surf.location = (0.3, 0.0, 0.25)
+    surf.keyframe_insert("location", frame=8)
+    scene.frame_set(1)
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    ref, roff = world(groom), offsets_of(gout)
+    play(scene, range(1, 6))
+    played5 = world(gout).copy()
+    path = save_in(tmp_path)
+    reopen(path)
+    scene = bpy.context.scene
+    guides = bpy.data.objects["Guides"]
+    surf, box = guides.data.surface, bpy.data.objects["Box"]
+    gout = guides.furcollide.groom.output
+    guides_shown = world(guides.furcollide.output).copy()
+    for f in (7, 8, 3, 5):
+        scene.frame_set(f)
+        assert guides.furcollide.is_outdated, f
+        np.testing.assert_array_equal(world(guides.furcollide.output), guides_shown)
+        P = world(gout)
+        lift = np.array(surf.matrix_world.translation)
+        np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]] + lift, atol=1e-5)
+        np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
+        assert len(_crossing_unmarked(gout, [(box, True)])) == 0, f
+        if f == 7:
+            assert (status_of(gout) == 1).any()  # the box reached it: cleared this frame
+    np.testing.assert_array_equal(world(gout), played5)
 
 
 def test_stage_times_and_skipped_stages(fc, monkeypatch):
