@@ -79,6 +79,14 @@ def load_binding(ob):
     return binding, key
 
 
+def _bind_again(ob) -> str:
+    """Advice that works when followed: Bind is refused on a baked setup
+    ('free the bake before binding'), so there it says Free Bake first."""
+    if ob.furcollide.is_baked:
+        return "press Free Bake, then Bind again (Fur Pipeline > Fur Attach)"
+    return "press Bind again"
+
+
 def attached_points(ob, depsgraph, offsets) -> np.ndarray:
     """Fur Attach input stage: the bound curves moved rigidly with the evaluated
     Surface of the source ``ob`` (world space, (P, 3) float64)."""
@@ -97,7 +105,7 @@ def _attached_points(ob, depsgraph, offsets) -> np.ndarray:
         C, P = len(binding.offsets) - 1, int(binding.offsets[-1])
         raise ValueError(
             f"Fur Attach: the source hair has {len(offsets) - 1} curves / {int(offsets[-1])} "
-            f"points but was bound with {C} / {P}: press Bind again"
+            f"points but was bound with {C} / {P}: {_bind_again(ob)}"
         )
     se = surf.evaluated_get(depsgraph)
     me = se.data
@@ -110,7 +118,7 @@ def _attached_points(ob, depsgraph, offsets) -> np.ndarray:
         )
         raise ValueError(
             f"Fur Attach: the Surface '{surf.name}' changed topology since binding "
-            f"({what}): press Bind again"
+            f"({what}): {_bind_again(ob)}"
         )
     V = bridge.mesh_vertices(me).astype(np.float64)
     M = bridge.matrix(se)

@@ -515,3 +515,33 @@ def test_fur_attach_render_with_the_surface_hidden(fc, tmp_path, surface_first):
     viewport = check_render(seen, statuses, [out], range(1, 6))
     assert np.abs(viewport[5][out.name] - viewport[1][out.name]).max() > 0.1
     assert surf in dependency_objects(out)
+
+
+def test_attach_surface_edited_on_a_baked_setup_says_free_bake_first(fc, tmp_path):
+    """Bind is refused on a baked setup: the advice says Free Bake first, and
+    following it (Free Bake, Bind) solves again."""
+    scene, hair, out, surf = _attach_bound(fc)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "shot.blend"))
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.frame_set(1)
+    activate(hair)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    scene.frame_set(2)
+    baked2 = fc.positions(out).copy()
+    scene.frame_set(1)
+    surf.data.vertices.add(1)
+    surf.data.update()
+    scene.frame_set(2)
+    np.testing.assert_array_equal(fc.positions(out), baked2)  # the bake is still shown
+    level, msg = fc.registry.status_for(hair)
+    assert "changed topology since binding" in msg, msg
+    assert "press Free Bake, then Bind again" in msg, msg
+    activate(hair)
+    with pytest.raises(RuntimeError, match="free the bake"):
+        bpy.ops.furcollide.fur_attach_bind()  # refused while baked, as the advice says
+    assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
+    scene.frame_set(1)
+    activate(hair)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    play(scene, range(1, 4))
+    assert fc.registry.status_for(hair) == ("INFO", "")
