@@ -930,8 +930,10 @@ class Collider:
 
         Each vote follows one fixed direction through the whole shell and
         counts back faces minus front faces crossed (the winding number: a
-        point inside overlapping closed parts is inside). The first two
-        votes are cast together, the third only where they disagree.
+        point inside overlapping closed parts is inside); a collider of one
+        closed part without an offset shell takes the first crossing's side
+        instead (the same answer, one ray query). The first two votes are
+        cast together, the third only where they disagree.
         """
         k = len(p_wo)
         be, _ = self._backend(offset_wo)
@@ -959,6 +961,20 @@ class Collider:
                 o[active] += (t * far + step)[:, None] * dirs[active]
             return balance > 0
 
+        def first_facing(points, dirs):
+            """:func:`votes` for one closed, outward-wound surface (meshfix made it
+            so; no offset shell): along a ray from a point, the crossings alternate
+            back and front faces, so the balance is that of the first crossing: a
+            back face (inside) or a front face or none (outside). One query per
+            point instead of one per crossing."""
+            prim, _, ng = be.hit_details(points, dirs * far, 1.0, normals=True)
+            hit = np.flatnonzero(prim >= 0)
+            out = np.zeros(len(points), bool)
+            out[hit] = rot_dot(ng[hit].astype(np.float64), dirs[hit]) >= 0
+            return out
+
+        if offset_wo == 0 and self.repairs.parts == 1:
+            votes = first_facing  # one closed surface, wound outward: its first hit decides
         two = votes(np.concatenate([p_lo, p_lo]), np.repeat(_PARITY_DIRS[:2], k, axis=0))
         v1, v2 = two[:k], two[k:]
         out = v1 & v2

@@ -59,7 +59,10 @@ class Tidy:
     open_edges : int
         Edges with one face only (0 with ``closed``).
     closed : bool
-        Every edge shared by exactly two faces, wound consistently.
+        Every part closed: each of its edges shared by two of its faces, wound
+        opposite ways.
+    parts : int
+        Connected parts (faces linked across edges two faces share).
     """
 
     faces: np.ndarray
@@ -70,6 +73,7 @@ class Tidy:
     flipped: int = 0
     open_edges: int = 0
     closed: bool = False
+    parts: int = 0
 
     def describe(self) -> str:
         """A short account of the repairs ('' when nothing was changed)."""
@@ -163,10 +167,10 @@ def tidy(V, F) -> Tidy:
     keep, shared = _unique_faces(Fw, n)
     duplicates = len(Fw) - len(keep) - shared
     Fw = Fw[keep]
-    flip, open_edges, closed = _orient(V, Fw, n)
+    flip, open_edges, closed, parts = _orient(V, Fw, n)
     Fw[flip] = Fw[flip][:, ::-1]
     return Tidy(Fw.astype(np.int32), welded, duplicates, collapsed, shared,
-                int(np.count_nonzero(flip)), open_edges, closed)
+                int(np.count_nonzero(flip)), open_edges, closed, parts)
 
 
 def _unique_faces(F, n):
@@ -220,11 +224,11 @@ def _edges(F, n):
 def _orient(V, F, n):
     """Faces to flip: windings agree across shared edges, each part keeps its
     majority winding, closed parts are turned as the module docstring says.
-    Returns (flip (m,) bool, number of open edges, every part closed)."""
+    Returns (flip (m,) bool, number of open edges, every part closed, parts)."""
     m = len(F)
     flip = np.zeros(m, bool)
     if m == 0:
-        return flip, 0, False
+        return flip, 0, False, 0
     key, sign, face = _edges(F, n)
     order = np.argsort(key, kind="stable")
     key, sign, face = key[order], sign[order], face[order]
@@ -262,7 +266,7 @@ def _orient(V, F, n):
     want = _wanted_senses(V, G, labels, closed_part, np.sign(part_vol))
     turn = closed_part & (np.sign(part_vol) != want) & (want != 0)
     flip ^= turn[labels]
-    return flip, open_edges, bool(closed_part.all())
+    return flip, open_edges, bool(closed_part.all()), n_parts
 
 
 def _wanted_senses(V, G, labels, closed_part, sense):

@@ -101,3 +101,26 @@ def test_the_wall_between_two_crates_goes_and_is_said():
     assert "between touching parts" in t.describe()
     P = np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [2.5, 0.5, 0.5]])
     np.testing.assert_array_equal(_inside_per_core(V, F, P), [True, True, False])
+
+
+@pytest.mark.parametrize("shape", ["torus", "bumpy", "flipped_torus"])
+def test_one_closed_part_first_crossing_decides_as_the_full_walk(shape):
+    """A collider of one closed part takes the side of the first crossing (one ray
+    query per vote): the same answers as walking every crossing (winding number)."""
+    import dataclasses
+
+    if shape == "bumpy":
+        V, F = scenes.bumpy_sphere((0, 0, 0), 1.0, amplitude=0.3, lobes=3)
+    else:
+        V, F = scenes.torus((0, 0, 0), 1.0, 0.35)
+        if shape == "flipped_torus":
+            F = F[:, ::-1]
+    P = np.random.default_rng(5).uniform(-1.5, 1.5, (3000, 3))
+    fast = Collider(V.astype(np.float32), F)
+    assert fast.repairs.parts == 1
+    walk = Collider(V.astype(np.float32), F)
+    walk.repairs = dataclasses.replace(walk.repairs, parts=2)  # (forces the walk)
+    a, b = fast.contains(P), walk.contains(P)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(a, oracle.points_inside_closed_mesh(
+        P, V, F if shape != "flipped_torus" else F[:, ::-1]))
