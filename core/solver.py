@@ -194,9 +194,9 @@ class Solver:
 
     def _non_finite(self, points):
         """Curves with a non-finite point: ``(mask (C,) bool, reason)``."""
-        finite = np.isfinite(points).all(axis=1)
-        if finite.all():
+        if np.isfinite(points.reshape(-1)).all():  # (one flat pass: the usual case)
             return np.zeros(self.n_curves, bool), ""
+        finite = np.isfinite(points).all(axis=1)
         rows = np.flatnonzero(~finite)
         owner = self.layout.owner(rows)
         bad = np.zeros(self.n_curves, bool)
