@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pipe_oracle as po
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core.errors import InputError
 from core.pipeline import jiggle, wind, wind_noise
 
-PROP = settings(max_examples=15, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(15))
 
 
 def _fur(seed=0, n=25, cvs=6):
