@@ -227,7 +227,7 @@ def run():
     if not enabled:
         raise RuntimeError("the add-on is not enabled after package_install_files")
     pkg = sys.modules[ADDON]
-    runtime = sys.modules[ADDON + ".operators.runtime"]
+    registry = sys.modules[ADDON + ".operators.registry"]
     bake = sys.modules[ADDON + ".operators.bake"]
     core = sys.modules[ADDON + ".core"]
     step("backend", embree_available=bool(core.embree_available()),
@@ -273,7 +273,7 @@ def run():
     statuses = {}
 
     def on_frame(scn, _dg=None):
-        st = runtime.status_for(fur)
+        st = registry.status_for(fur)
         statuses[scn.frame_current] = list(st) if st else None
 
     bpy.app.handlers.frame_change_post.append(on_frame)
@@ -305,7 +305,7 @@ def run():
         n_bad, tested = crossings(out, [ball, blob])
         moved = float(np.abs(_positions(out) - P0).max())
         cross[str(f)] = {"crossing_curves": n_bad, "segments_near": tested,
-                         "max_move": round(moved, 4), "status": list(runtime.status_for(fur))}
+                         "max_move": round(moved, 4), "status": list(registry.status_for(fur))}
         yield 0.1
     src_now = _positions(fur)
     step("crossings", crossings=cross, source_untouched=bool(np.array_equal(src_now, P0)))
@@ -334,7 +334,7 @@ def run():
     t1 = time.perf_counter()
     while bake.PROGRESS.get(scene.name) and time.perf_counter() - t1 < 30:
         yield 0.1
-    directory = runtime.bake_directory(fur)
+    directory = bake.bake_directory(fur)
     files_after_esc = sorted(os.path.basename(p) for p in glob.glob(os.path.join(directory, "*")))
     step("bake_esc", progress_seen=[p for p in seen if p][-3:], progress_before_esc=prog_before_esc,
          xdotool_rc=xd.returncode, xdotool_err=xd.stderr.strip(),
@@ -356,7 +356,7 @@ def run():
         scene.frame_set(f)
         n_bad, tested = crossings(out, [ball, blob])
         baked_cross[str(f)] = {"crossing_curves": n_bad, "segments_near": tested,
-                               "status": list(runtime.status_for(fur))}
+                               "status": list(registry.status_for(fur))}
     step("bake_resume", resume_return=sorted(ret), baked=bool(fur.furcollide.is_baked),
          resume_s=round(bake_s, 2), files_done=files_done, baked_crossings=baked_cross)
     yield 2.0
