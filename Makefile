@@ -34,6 +34,10 @@ lint: venv
 bench: venv
 	$(PY) bench/bench_core.py
 
+.PHONY: bench-pipeline
+bench-pipeline: venv
+	$(PY) bench/bench_pipeline.py
+
 demo: venv
 	$(PY) scripts/demo.py
 

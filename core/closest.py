@@ -1,18 +1,16 @@
-"""Exact closest point on a triangle mesh, vectorized.
+"""Exact closest point on a triangle mesh, vectorized: the one closest-point search.
 
 Used for the growth surface (Attract to Growth Surface, Put to Growth
-Surface): few queries per frame, so a uniform grid with a ring search is
-enough. Queries that the ring search cannot settle within a few rings fall
-back to brute force, so the answer is always exact.
+Surface, through ``Collider.closest_points``) and by the fur pipeline (Fur
+Attach's binding, surface values). An expanding search over the mesh's
+proximity grid (:mod:`core.proximity`), exact, ties to the lowest face.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-_GRID_CELLS = 32  # cells along the longest side of the mesh's bounds
-_MAX_RING = 2
-_BRUTE_PAIRS = 4_000_000  # point-triangle pairs per brute-force chunk
+from .proximity import TriangleGrid
 
 
 def closest_on_triangles(p, a, b, c):
@@ -61,73 +59,72 @@ def closest_on_triangles(p, a, b, c):
     return out
 
 
-class _Grid:
+#: Search boxes spanning more cells than this move to a coarser grid.
+_MAX_CELLS = 512
+#: Queries per block of the search (bounds the candidate pairs in memory).
+_QUERY_BLOCK = 8192
+#: Triangles sampled for the first upper bound of a query far from the mesh.
+_SAMPLES = 2048
+
+
+class MeshProximity:
+    """Closest-point structures of one triangle mesh: its triangles and proximity
+    grids (:class:`~core.proximity.TriangleGrid`) of cell ``tri_h * 2^k``, built
+    on first use and kept. Pass it back to :func:`closest_points_on_mesh`."""
+
     def __init__(self, V, F):
-        tri = V[F]  # (m, 3, 3)
-        lo, hi = tri.min(1), tri.max(1)
-        glo = lo.min(0)
-        size = float((hi.max(0) - glo).max()) or 1.0
-        self.h = size / _GRID_CELLS
-        self.glo = glo
-        ilo = np.floor((lo - glo) / self.h).astype(np.int64)
-        ihi = np.floor((hi - glo) / self.h).astype(np.int64)
-        span = ihi - ilo + 1
-        count = span.prod(1)
-        tid = np.repeat(np.arange(len(F)), count)
-        # Enumerate the cells of each triangle's box.
-        start = np.repeat(np.cumsum(count) - count, count)
-        local = np.arange(len(tid)) - start
-        sx, sy = span[tid, 0], span[tid, 1]
-        cx = ilo[tid, 0] + local % sx
-        cy = ilo[tid, 1] + (local // sx) % sy
-        cz = ilo[tid, 2] + local // (sx * sy)
-        keys = self._key(cx, cy, cz)
-        order = np.argsort(keys, kind="stable")
-        self.keys = keys[order]
-        self.tris = tid[order]
+        self.T = np.ascontiguousarray(np.asarray(V, np.float64)[np.asarray(F)])
+        ext = (self.T.max(1) - self.T.min(1)).max(1)
+        self.tri_h = max(float(np.median(ext)), 1e-12) if len(ext) else 1.0
+        self.centroid = self.T.mean(1)
+        self.radius = np.linalg.norm(self.T - self.centroid[:, None], axis=2).max(1)
+        lo = self.T.min((0, 1)) if len(self.T) else np.zeros(3)
+        self.eps = 1e-12 * (float(np.abs(lo).max()) + float(ext.max(initial=0.0)) + 1.0)
+        self._grids = {}
 
-    @staticmethod
-    def _key(x, y, z):
-        return ((x + 1024) * 4096 + (y + 1024)) * 4096 + (z + 1024)
+    def sample_bound(self, q):
+        """(k,) an upper bound of the distance of points ``q`` to the mesh: the exact
+        distance to the best of about ``_SAMPLES`` spread triangles (nearest centroid),
+        close to the distance for points far from the mesh."""
+        step = max(1, len(self.T) // _SAMPLES)
+        ts = np.arange(0, len(self.T), step)
+        out = np.empty(len(q))
+        for a in range(0, len(q), 256):
+            qa = q[a:a + 256]
+            d2 = ((qa[:, None, :] - self.centroid[ts][None]) ** 2).sum(-1)
+            t = ts[np.argmin(d2, 1)]
+            p = closest_on_triangles(qa, self.T[t, 0], self.T[t, 1], self.T[t, 2])
+            out[a:a + 256] = np.linalg.norm(p - qa, axis=1)
+        return out * (1 + 1e-12)
 
-    def cell(self, q):
-        return np.floor((q - self.glo) / self.h).astype(np.int64)
-
-
-def _ring_offsets(r):
-    g = np.arange(-r, r + 1)
-    d = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
-    return d[np.abs(d).max(1) == r]
-
-
-def _pairs_min(q_idx, t_idx, Q, V, F, best_d, best_t):
-    """Update best distance/triangle with candidate (query, triangle) pairs."""
-    if len(q_idx) == 0:
-        return
-    tri = F[t_idx]
-    p = closest_on_triangles(Q[q_idx], V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]])
-    d = np.linalg.norm(p - Q[q_idx], axis=1)
-    # Lexicographic (query, distance, triangle) so ties break deterministically.
-    order = np.lexsort((t_idx, d, q_idx))
-    q_s, d_s, t_s = q_idx[order], d[order], t_idx[order]
-    first = np.ones(len(q_s), bool)
-    first[1:] = q_s[1:] != q_s[:-1]
-    q_s, d_s, t_s = q_s[first], d_s[first], t_s[first]
-    better = (d_s < best_d[q_s]) | ((d_s == best_d[q_s]) & (t_s < best_t[q_s]))
-    best_d[q_s[better]] = d_s[better]
-    best_t[q_s[better]] = t_s[better]
+    def grid(self, level):
+        g = self._grids.get(level)
+        if g is None:
+            g = self._grids[level] = TriangleGrid(self.T, self.tri_h * 2.0**level)
+        return g
 
 
 def closest_points_on_mesh(V, F, Q, grid=None):
-    """Closest point on mesh (V, F) to each query point.
+    """Exact closest point on mesh (V, F) to each query point.
+
+    An expanding search over the mesh's proximity grid (cell about the median
+    triangle size), starting small (queries usually lie on or near the
+    surface): a query is settled once the closest triangle found is within
+    the searched radius, since every triangle within it was a candidate. A
+    query whose search box grows past ``_MAX_CELLS`` cells continues on a
+    grid of twice the cell size (up to one that holds the whole mesh in a
+    few cells), and a query that found no triangle yet starts from its
+    distance to a sample of the triangles (an upper bound): only the cells
+    within it are searched, so far queries do not test every triangle. Ties
+    go to the lowest face index.
 
     Parameters
     ----------
     V : (n, 3) float64
     F : (m, 3) int, m >= 1
     Q : (k, 3) float64
-    grid : object or None
-        The acceleration grid returned by a previous call on the same mesh.
+    grid : MeshProximity or None
+        The structures returned by a previous call on the same mesh.
 
     Returns
     -------
@@ -135,39 +132,89 @@ def closest_points_on_mesh(V, F, Q, grid=None):
         Closest points.
     face : (k,) int64
         Triangle of each closest point.
-    grid : object
+    grid : MeshProximity
         Pass it back in for the next query on the same mesh.
     """
     Q = np.asarray(Q, np.float64)
-    k = len(Q)
     if grid is None:
-        grid = _Grid(V, F)
-    best_d = np.full(k, np.inf)
-    best_t = np.full(k, -1, np.int64)
-    qc = grid.cell(Q)
-    active = np.arange(k)
-    for r in range(_MAX_RING + 1):
-        if len(active) == 0:
-            break
-        offs = _ring_offsets(r)
-        cells = qc[active][:, None, :] + offs[None]  # (a, c, 3)
-        keys = grid._key(cells[..., 0], cells[..., 1], cells[..., 2]).ravel()
-        lo = np.searchsorted(grid.keys, keys, "left")
-        hi = np.searchsorted(grid.keys, keys, "right")
-        n = hi - lo
-        q_of = np.repeat(np.repeat(active, len(offs)), n)
-        start = np.repeat(lo - (np.cumsum(n) - n), n)
-        t_of = grid.tris[start + np.arange(int(n.sum()))]
-        _pairs_min(q_of, t_of, Q, V, F, best_d, best_t)
-        done = best_d[active] <= r * grid.h
-        active = active[~done]
-    if len(active):  # far queries: exact brute force in bounded chunks
-        step = max(1, _BRUTE_PAIRS // len(F))
-        for a in range(0, len(active), step):
-            qa = active[a : a + step]
-            q_of = np.repeat(qa, len(F))
-            t_of = np.tile(np.arange(len(F)), len(qa))
-            _pairs_min(q_of, t_of, Q, V, F, best_d, best_t)
-    tri = F[best_t]
-    P = closest_on_triangles(Q, V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]])
-    return P, best_t, grid
+        grid = MeshProximity(V, F)
+    T = grid.T
+    k = len(Q)
+    best = np.full(k, np.inf)
+    face = np.full(k, -1, np.int64)
+    if k == 0:
+        return np.zeros((0, 3)), face, grid
+    rho = np.full(k, 0.25 * grid.grid(0).h)
+    level = np.zeros(k, np.int64)
+    todo = np.arange(k)
+    while len(todo):
+        left = []
+        for lv in np.unique(level[todo]):
+            sel = todo[level[todo] == lv]
+            g = grid.grid(int(lv))
+            r = rho[sel][:, None]
+            ilo = np.clip(np.floor((Q[sel] - r - g.glo) / g.h), -1, g.dims).astype(np.int64)
+            ihi = np.clip(np.floor((Q[sel] + r - g.glo) / g.h), -1, g.dims).astype(np.int64)
+            fit = ((ihi - ilo + 1).prod(1) <= _MAX_CELLS) | bool((g.dims <= 2).all())
+            out = sel[~fit]
+            level[out] += 1  # searched again on a coarser grid
+            lost = out[~np.isfinite(best[out])] if lv >= 2 else out[:0]
+            if len(lost):  # far from the mesh: start from the nearest vertex's distance
+                rho[lost] = np.minimum(rho[lost], grid.sample_bound(Q[lost]))
+            left.append(out)
+            sel, ilo, ihi = sel[fit], ilo[fit], ihi[fit]
+            for a in range(0, len(sel), _QUERY_BLOCK):
+                b = slice(a, a + _QUERY_BLOCK)
+                # cells within rho only: what keeps far queries cheap
+                box, ti = g.candidates(ilo[b], ihi[b], Q[sel[b]], rho[sel[b]])
+                _point_pairs(Q, grid, sel[b][box], ti, best, face)
+            more = sel[best[sel] > rho[sel]]
+            # next radius: the best distance found (an upper bound), else twice as far
+            rho[more] = np.where(np.isfinite(best[more]), best[more], 2 * rho[more])
+            left.append(more)
+        todo = np.concatenate(left)
+    P = closest_on_triangles(Q, T[face, 0], T[face, 1], T[face, 2])
+    return P, face, grid
+
+
+def closest_faces(V, F, Q):
+    """:func:`closest_points_on_mesh` without the structures: ``(P (k, 3), face (k,))``."""
+    P, face, _ = closest_points_on_mesh(V, F, Q)
+    return P, face
+
+
+def _point_pairs(Q, prox, qi, ti, best, face):
+    """Update ``best`` / ``face`` with the (query, triangle) pairs (ties: lowest face).
+
+    ``qi`` sorted. Each query's triangle with the nearest centroid is tested
+    first; then only the triangles whose bounding sphere comes within the best
+    distance so far (every triangle that can be as close, ties included).
+    """
+    if len(qi) == 0:
+        return
+    T = prox.T
+    dc = np.linalg.norm(Q[qi] - prox.centroid[ti], axis=1)
+    head = np.flatnonzero(np.r_[True, qi[1:] != qi[:-1]])
+    grp = np.repeat(np.arange(len(head)), np.diff(np.r_[head, len(qi)]))
+    low = np.minimum.reduceat(dc, head)
+    cand = np.flatnonzero(dc <= low[grp])
+    cand = cand[np.r_[True, grp[cand[1:]] != grp[cand[:-1]]]]  # one per query
+    _exact_pairs(Q, T, qi[cand], ti[cand], best, face)
+    keep = dc - prox.radius[ti] * (1 + 1e-9) - prox.eps <= best[qi]
+    keep[cand] = False
+    _exact_pairs(Q, T, qi[keep], ti[keep], best, face)
+
+
+def _exact_pairs(Q, T, qi, ti, best, face):
+    if len(qi) == 0:
+        return
+    p = closest_on_triangles(Q[qi], T[ti, 0], T[ti, 1], T[ti, 2])
+    d = np.linalg.norm(p - Q[qi], axis=1)
+    o = np.lexsort((ti, d, qi))
+    qi, ti, d = qi[o], ti[o], d[o]
+    first = np.ones(len(qi), bool)
+    first[1:] = qi[1:] != qi[:-1]
+    qi, ti, d = qi[first], ti[first], d[first]
+    better = (d < best[qi]) | ((d == best[qi]) & (ti < face[qi]))
+    best[qi[better]] = d[better]
+    face[qi[better]] = ti[better]

@@ -20,6 +20,7 @@ import numpy as np
 from . import tolerances as tol
 from .errors import ColliderError
 from .meshfix import Tidy, tidy
+from .proximity import mark_boxes
 from .rays import beside, make_backend, triangle_rows
 from .rotations import apply, apply_soa, det3, inv_affine, norm_bound
 from .rotations import dot as rot_dot
@@ -911,51 +912,16 @@ class Collider:
         grow = self.margin * 1.01 + offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 * norm_bound(
             self._Minv[:3, :3]) + 1e-9 * h
         F = [np.ascontiguousarray(self._F[:, k]) for k in range(3)]
-        span = []
-        start = []
+        ilo = np.empty((len(self._F), 3), np.int64)
+        ihi = np.empty_like(ilo)
         for i in range(3):
             x = np.ascontiguousarray(V[:, i])
             c0, c1, c2 = x.take(F[0]), x.take(F[1]), x.take(F[2])
             mn = np.minimum(np.minimum(c0, c1), c2)
             mx = np.maximum(np.maximum(c0, c1), c2)
-            a = np.floor((mn - grow - lo[i]) / h).astype(np.int64)
-            b = np.floor((mx + grow - lo[i]) / h).astype(np.int64)
-            a = np.clip(a, 0, dims[i] - 1)
-            b = np.clip(b, 0, dims[i] - 1)
-            start.append(a)
-            span.append(b - a + 1)
-        total = int(np.prod(dims))
-        touched = np.zeros(total, bool)
-        # A box at most 2 cells a side (nearly every triangle) is covered by
-        # its 8 corner cells; larger ones are summed into a difference grid.
-        small = np.flatnonzero((span[0] <= 2) & (span[1] <= 2) & (span[2] <= 2))
-        a = [start[i][small] for i in range(3)]
-        b = [start[i][small] + span[i][small] - 1 for i in range(3)]
-        for cx in (a[0], b[0]):
-            for cy in (a[1], b[1]):
-                xy = (cx * dims[1] + cy) * dims[2]
-                touched[xy + a[2]] = True
-                touched[xy + b[2]] = True
-        n = span[0] * span[1] * span[2]
-        n[small] = 0
-        big = np.flatnonzero(n > 0)
-        if len(big):
-            # Large triangles (or a large offset): their boxes summed into a
-            # difference grid (8 corners each) and integrated, O(cells + m).
-            d1 = dims + 1
-            diff = np.zeros(int(np.prod(d1)), np.int64)
-            a = [start[i][big] for i in range(3)]
-            b = [start[i][big] + span[i][big] for i in range(3)]
-            for cx, sx in ((a[0], 1), (b[0], -1)):
-                for cy, sy_ in ((a[1], 1), (b[1], -1)):
-                    for cz, sz_ in ((a[2], 1), (b[2], -1)):
-                        idx = (cx * d1[1] + cy) * d1[2] + cz
-                        diff += np.bincount(idx, minlength=len(diff)) * (sx * sy_ * sz_)
-            g = diff.reshape(tuple(d1))
-            for ax in range(3):
-                np.cumsum(g, axis=ax, out=g)
-            touched |= (g[: dims[0], : dims[1], : dims[2]] > 0).reshape(-1)
-        self._touched = touched.reshape(tuple(dims))
+            ilo[:, i] = np.floor((mn - grow - lo[i]) / h)
+            ihi[:, i] = np.floor((mx + grow - lo[i]) / h)
+        self._touched = mark_boxes(ilo, ihi, dims)
         self._touched_key = key
         return self._touched
 

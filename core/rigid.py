@@ -619,8 +619,10 @@ class RigidBatch:
 
             if ctx.threads > 1 and k >= 2 * _BLOCK:
                 # Two halves, each built and traced by one thread: numpy and
-                # embree release the GIL, so both halves' work overlaps.
-                half = k // 2
+                # embree release the GIL, so both halves' work overlaps. Cut at
+                # a block boundary: the blocks, and so their arithmetic, are
+                # those of one thread.
+                half = (k // 2) // _BLOCK * _BLOCK
                 first = beside(partial(part, 0, half, 1), ctx.threads)
                 (h2, n2) = part(half, k, 1)
                 (h1, n1) = first()

@@ -343,3 +343,69 @@ def curve_frames(t, u_shape, shape_ratio, prev_ref=None):
         out[:, 1] = e.T
         out[:, 2] = _cross3(t, e).T
     return frames, ref, e1
+
+
+# ------------------------------------------------ quaternion fits (fur pipeline)
+def quat_swing(a, b):
+    """Minimal rotation quaternions (k, 4) taking unit rows ``a`` to unit rows ``b``.
+
+    Antiparallel rows (within ``1e-12``) get the half turn about a
+    deterministic perpendicular axis.
+    """
+    c = np.sum(a * b, -1)
+    q = np.concatenate([(1.0 + c)[..., None], np.cross(a, b)], -1)
+    anti = c < -1 + 1e-12
+    if anti.any():
+        aa = a[anti]
+        e = np.zeros_like(aa)
+        e[np.arange(len(aa)), np.argmin(np.abs(aa), -1)] = 1.0
+        q[anti] = np.concatenate([np.zeros((len(aa), 1)), np.cross(aa, e)], -1)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def quat_from_matrix(R):
+    """Unit quaternions (k, 4) of rotation matrices ``R`` (k, 3, 3) (Shepperd's method)."""
+    t = np.stack([R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2], R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], 1)
+    case = np.argmax(t, 1)
+    q = np.empty((len(R), 4))
+    for c in range(4):
+        s = case == c
+        if not s.any():
+            continue
+        r = R[s]
+        if c == 0:
+            w = np.sqrt(1 + r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2]) * 2
+            q[s] = np.stack([0.25 * w, (r[:, 2, 1] - r[:, 1, 2]) / w,
+                             (r[:, 0, 2] - r[:, 2, 0]) / w, (r[:, 1, 0] - r[:, 0, 1]) / w], 1)
+        else:
+            i = c - 1
+            j, k = (i + 1) % 3, (i + 2) % 3
+            w = np.sqrt(1 + r[:, i, i] - r[:, j, j] - r[:, k, k]) * 2
+            out = np.empty((int(s.sum()), 4))
+            out[:, 0] = (r[:, k, j] - r[:, j, k]) / w
+            out[:, 1 + i] = 0.25 * w
+            out[:, 1 + j] = (r[:, j, i] + r[:, i, j]) / w
+            out[:, 1 + k] = (r[:, k, i] + r[:, i, k]) / w
+            q[s] = out
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def kabsch(H):
+    """Best rotations for correlation matrices ``H = sum a b^T`` (g, 3, 3) (Kabsch).
+
+    Returns
+    -------
+    R : (g, 3, 3)
+        The proper rotations maximizing ``sum b . R a``.
+    S : (g, 3)
+        Singular values of ``H`` (descending): a small second one means the
+        vectors do not fix a rotation.
+
+    Batched 3x3 SVDs: bind-time or per-guide work, not per render CV.
+    """
+    U, S, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.einsum("gji,gkj->gik", Vt, U)))  # det(V U^T)
+    d[d == 0] = 1.0
+    D = np.ones((len(H), 3))
+    D[:, 2] = d
+    return np.einsum("gji,gj,gkj->gik", Vt, D, U), S

@@ -305,19 +305,27 @@ class _Slerp:
         """Rows ``rows`` (all if None) at fractions ``t`` (len(rows),), as
         component quaternions (4, len(rows))."""
         take = (lambda x: x) if rows is None else (lambda x: x.take(rows, axis=-1))
-        p, q, theta = take(self.p), take(self.q), take(self.theta)
-        small, s = take(self.small), take(self.s)
+        p, q, theta, s = take(self.p), take(self.q), take(self.theta), take(self.s)
         t = np.broadcast_to(np.asarray(t, np.float64), theta.shape)
-        a = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / s)
-        b = np.where(small, t, np.sin(t * theta) / s)
+        a = np.sin((1.0 - t) * theta)
+        a /= s
+        b = np.sin(t * theta)
+        b /= s
+        small = take(self.small)
+        if small.any():
+            a = np.where(small, 1.0 - t, a)
+            b = np.where(small, t, b)
         out = p * a
         out += q * b
         sq = out[0] * out[0]  # = norm(axis=1) of the rows: the same sums
         for i in range(1, 4):
             sq += out[i] * out[i]
         out /= np.sqrt(sq)
-        out = np.where(t == 0, p, out)
-        return np.where(t == 1, take(self.q_raw), out)
+        ends = (t == 0) | (t == 1)
+        if ends.any():  # exact at the ends: t = 0 is p and t = 1 is q, bit for bit
+            out = np.where(t == 0, p, out)
+            out = np.where(t == 1, take(self.q_raw), out)
+        return out
 
     def __call__(self, t, rows=None):
         """:meth:`soa` as rows (len(rows), 4)."""

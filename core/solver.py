@@ -27,12 +27,16 @@ until the curve has recovered (no pops when hit normals change).
 
 Where things are
 ----------------
+:mod:`.layout` (``CurveLayout``: where each curve's points and segments
+are), :mod:`.state` (``SolverState``: what one step hands the next),
 :mod:`.step` (a step's shared machinery: candidates, local frames,
 deformation, batched ray queries, first hits, Put to Growth Surface),
-:mod:`.rigid` (Stiff, Bend, Shrink, Recovery, Plasticity), :mod:`.soft`
-(Soft, Affected Connected CVs, CV FallOff), :mod:`.search` (Rotation
-Precision: the batched gallop-and-bisect), :mod:`.collider` (detection,
-pinch), :mod:`.rays` (the embree adapter).
+:mod:`.rigid` (Stiff, Bend, the warm-start search, Shrink, Recovery,
+Plasticity), :mod:`.soft` (Soft, Affected Connected CVs, CV FallOff),
+:mod:`.search` (Rotation Precision: the batched gallop-and-bisect and the
+scan for Soft), :mod:`.collider` (detection, clearance margin, pinch),
+:mod:`.meshfix` (welded seams, duplicated faces, outward windings),
+:mod:`.rays` (the embree adapter).
 """
 
 from __future__ import annotations
@@ -51,6 +55,7 @@ from .status import Status, StepResult
 from .step import StepContext
 
 __all__ = ["Solver", "Status", "StepResult"]
+
 
 class Solver:
     """Frame-by-frame FurCollide solver for one set of curves.

@@ -62,14 +62,43 @@ INSIDE_SUBDIV = 2
 #: farther than the offset), at most this many times the offset.
 OFFSET_MAX_STRETCH = 4.0
 
-#: Every collider keeps curves at least this many float32 ulps of its world
-#: coordinates away (``Collider.clearance``; a shell at that offset when the
-#: Collision Offset is smaller). Embree tests in float32 and the output is
-#: rounded to float32: a segment passing within rounding distance of a sharp
-#: edge must not be clear for the solver and crossing for a float64 test.
+#: Every collider keeps curves at least this many float32 ulps of its own
+#: coordinates away (``Collider.margin``: the tested shell lies that far out
+#: along the vertex normals, plus any Collision Offset). Embree tests in
+#: float32 and the output is rounded to float32: a segment passing within
+#: rounding distance of a sharp edge must not be clear for the solver and
+#: crossing for a float64 test.
 CLEARANCE_ULPS = 4
 
 #: Collider vertices closer than this fraction of the mesh's bounding-box
 #: diagonal are one vertex for its topology (closedness, windings): seams an
 #: import left unwelded still close the mesh (``core.meshfix``).
 WELD_REL = 1e-6
+
+#: The fur pipeline's per-frame stages (``core.pipeline``) are computed with
+#: bind-time caches and blocked component arrays: the same formulas in
+#: another order of floating-point operations. Their results agree with the
+#: straightforward implementations (kept in tests/pipeline/slow_reference.py)
+#: to within ``PIPELINE_REORDER_REL`` times the scene's size (the largest
+#: absolute coordinate plus the longest curve), i.e. a few float64 ulps.
+PIPELINE_REORDER_REL = 1e-12
+
+#: Fur Collider Distance (``core.pipeline.collider_distance``) is, by default,
+#: a lower bound from a node field of each collider: exact distances at the
+#: grid nodes within one cell of the mesh, a Euclidean transform beyond, and
+#: 1-Lipschitz bounds between nodes. It is never above the true distance and
+#: at most ``DISTANCE_FIELD_CELLS`` cells ``h`` below it (the field's cell: the
+#: collider's median triangle size, halved until at most half the curves'
+#: median segment length): 2 (sqrt(3) / 2 + 1) = 3.73 cells for a piece of a
+#: segment (at most 2 cells long) from the nearest node, plus sqrt(3) cells
+#: beyond the exact band. Measured: 1.3 cells below on average, 2.6 at most.
+DISTANCE_FIELD_CELLS = 5.5
+
+#: Fur Attach orients each curve by its triangle's frame (edge, normal). The
+#: frame is undefined when the normal is shorter than ``ATTACH_FRAME_MIN_SIN``
+#: times the triangle's longest edge squared (the sine of its smallest angle,
+#: roughly, below 1e-12: float64 cannot tell the normal's direction): such a
+#: face cannot be bound (with ``DEGENERATE_AREA_REL``'s faces, the only
+#: degenerate-face rule), and a bound triangle that collapses below it later
+#: keeps its reference frame.
+ATTACH_FRAME_MIN_SIN = 1e-12

@@ -9,6 +9,10 @@
   shown only while the current inputs give the same record (see README "Time"):
   :func:`solved_inputs` makes it for a solved frame, :func:`current_inputs` afresh, and
   :func:`cached_frame_change` / :func:`baked_frame_change` say what changed.
+* The record of the frame the frame handler last evaluated is remembered
+  (:func:`seen_inputs`, :func:`saw`): the depsgraph check tells an edit from the
+  animation evaluated again by comparing the scene with it
+  (:func:`invalidation.edit_seen`).
 """
 
 from __future__ import annotations
@@ -174,6 +178,65 @@ def current_inputs(setup, inp) -> dict:
                         [(r.double_sided, r.offset) for r in refs], surface)
 
 
+def seen_inputs(setup, inp) -> dict:
+    """:func:`current_inputs`, remembered as what the frame handler saw at this frame
+    (``Runtime.seen``: the depsgraph check compares the scene with it)."""
+    new = current_inputs(setup, inp)
+    saw(setup, new)
+    return new
+
+
+def saw(setup, record) -> None:
+    """Remember ``record`` as the inputs the frame handler saw at the current frame."""
+    setup.rt.seen = ((setup.scene.name, setup.frame), record)
+
+
+def fixed_change(setup, old) -> str:
+    """What changed, in words, in the parts of record ``old`` that do not depend on the
+    frame (the settings, the colliders' number and options), '' when nothing did (or
+    ``old`` is None). A step from a cached frame checks them: that frame cannot be
+    evaluated again at this one."""
+    if old is None:
+        return ""
+    ob, scene = setup.ob, setup.scene
+    refs = collider_objects(ob, scene)
+    flags = framecache.text_digest(repr([(r.double_sided, r.offset) for r in refs]))
+    if old.get("colliders") != flags:
+        count = sum(k.startswith("collider ") and k.endswith(" matrix") for k in old)
+        if count != len(refs):
+            return f"a collider was {'added' if len(refs) > count else 'removed'}"
+        return "a collider's Double Sided or Collision Offset changed"
+    if old.get("settings") != framecache.text_digest(
+            signature(ob, scene=scene, identities=False)):
+        return "the settings changed"
+    return ""
+
+
+def changed_objects(setup, old, new) -> set | None:
+    """Names of the objects whose parts differ between the records ``old`` and ``new``
+    (the source, a collider and its instancers, the growth surface); None when
+    another part differs (settings, the colliders' number or options) or a record is
+    missing."""
+    if old is None or new is None:
+        return None
+    ob = setup.ob
+    refs = collider_objects(ob, setup.scene)
+    names = set()
+    for part in set(old) | set(new):
+        if old.get(part) == new.get(part):
+            continue
+        what = part.rpartition(" ")[0]
+        if part in ("source", "enabled"):
+            names.add(ob.name)
+        elif what == "surface" and ob.data.surface is not None:
+            names.add(ob.data.surface.name)
+        elif what.startswith("collider ") and int(what.split()[-1]) < len(refs):
+            names.update(o.name for o in refs[int(what.split()[-1])].objects)
+        else:
+            return None
+    return names
+
+
 def describe_change(ob, part, scene, old=None, new=None) -> str:
     """The change :func:`framecache.first_change` found between the records ``old`` and
     ``new``, in words naming the object."""
@@ -205,7 +268,7 @@ def cached_frame_change(setup, inp, f) -> str:
     old = setup.rt.memory.inputs(f)
     if old is None:
         return ""
-    new = current_inputs(setup, inp)
+    new = seen_inputs(setup, inp)
     part = framecache.first_change(old, new)
     return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""
 

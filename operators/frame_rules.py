@@ -6,10 +6,13 @@ Frame rules (``frame_change_post``; see README "Using it in Blender"):
   blends its two neighbouring baked frames);
 * ``f == frame_start``: reset the solver and solve;
 * ``f`` cached (memory, or disk when baked) and its inputs still hold: show it, bit
-  for bit; its inputs changed: solve it again at the start frame, else mark the setup
-  outdated and drop the playback cache;
-* ``f - 1`` cached: restore its solver state if needed and step;
-* otherwise (jump ahead): hold the newest cached frame, mark outdated;
+  for bit; its inputs changed: solve it again at the start frame; solve it again from
+  ``f - 1`` when only objects the depsgraph reported while an earlier frame held
+  changed (a key moved ahead: :func:`_key_moved_ahead`); else mark the setup outdated
+  and drop the playback cache;
+* ``f - 1`` cached with today's settings and colliders: restore its solver state if
+  needed and step (other settings: the playback cache is dropped, as any change does);
+* otherwise (jump ahead, a dropped cache): hold the newest cached frame, mark outdated;
 * ``f < frame_start``: the output follows the source; ``f > frame_end``:
   the end frame is held.
 
@@ -36,11 +39,16 @@ from .frame_inputs import (
     FrameInputs,
     baked_frame_change,
     cached_frame_change,
+    changed_objects,
+    fixed_change,
     prepare_input,
     read_inputs,
+    saw,
+    seen_inputs,
     shown,
     solved_inputs,
 )
+from .setup import signature_change
 
 
 class Outcome(enum.Enum):
@@ -82,9 +90,20 @@ def _rules(setup):
     skipped = _not_evaluated(setup)
     if skipped is not None:
         return skipped
+    setup.rt.seen = None
     inp = _read_frame(setup)
     if inp is None:
         return Outcome.TOPOLOGY, None
+    outcome, written = _frame_rules(setup, inp)
+    if setup.rt.seen is None and outcome is not Outcome.BAKE:
+        # What this frame was evaluated from (solved and cached frames made it already):
+        # the depsgraph check tells an edit from the animation evaluated again with it.
+        seen_inputs(setup, inp)
+    return outcome, written
+
+
+def _frame_rules(setup, inp):
+    """The rules once the frame's inputs are read: (Outcome, the points written)."""
     note = _input_warning(setup, inp)
     s, rt, f = setup.s, setup.rt, setup.frame
     if not s.enabled or f < s.frame_start:
@@ -97,8 +116,15 @@ def _rules(setup):
         shown = _show_cached_if_current(setup, inp, note)
         if shown is not None:
             return shown
-    if f != s.frame_start and (f - 1) not in rt.memory:
-        return _hold(setup, inp)
+    if f != s.frame_start:
+        if (f - 1) not in rt.memory:
+            return _hold(setup, inp)
+        # Frame f - 1 cannot be evaluated again from here: at least what does not
+        # depend on the frame (settings, colliders) must be what it was solved with.
+        why = fixed_change(setup, rt.memory.inputs(f - 1))
+        if why:
+            rt.drop_cache(why, s.frame_start, f)
+            return _hold(setup, inp)
     held = _prepare_solver(setup, inp)
     if held is not None:
         return held
@@ -141,8 +167,9 @@ def _read_frame(setup):
         frame_outputs.sync_output(setup, inp)
     sig = setup.signature()
     if rt.signature is not None and sig != rt.signature and not s.is_baked:
-        # Changed without an update callback (deleted collider, undo, driver).
-        rt.drop_frames_after(setup.frame - 1, s.frame_start)
+        # Changed without an update callback (deleted collider, undo, driver): like
+        # any change, it drops the playback cache.
+        rt.drop_cache(signature_change(rt.signature, sig), s.frame_start, setup.frame)
         rt.colliders.clear()
     rt.signature = sig
     return inp
@@ -184,7 +211,7 @@ def _show_cached_if_current(setup, inp, note):
     """A memory-cached frame: shown while its inputs still hold; else the setup is
     outdated (or, at the start frame, None: it is solved again, which drops every
     cached frame)."""
-    rt, f = setup.rt, setup.frame
+    rt, f, start = setup.rt, setup.frame, setup.s.frame_start
     why = cached_frame_change(setup, inp, f)
     if not why:
         written, status, stats = _show_cached(setup, inp, f)
@@ -194,9 +221,32 @@ def _show_cached_if_current(setup, inp, note):
         rt.outdated = False
         setup.set_status(*_note(setup, stats, note))
         return Outcome.CACHE, written
-    if f != setup.s.frame_start:
-        return _outdated(setup, why)
-    return None
+    if f == start:
+        return None  # solved again (which drops every cached frame)
+    if _key_moved_ahead(setup, f):
+        # Only the frames from f on were solved from other inputs (a key moved after
+        # f - 1): solve f again from f - 1.
+        rt.drop_frames_after(f - 1, start)
+        return None
+    return _outdated(setup, why)
+
+
+def _key_moved_ahead(setup, f) -> bool:
+    """Did frame ``f``'s inputs change only in objects the depsgraph reported while the
+    frame it was seen at still held (``Runtime.trusted``), and is ``f - 1`` a frame
+    known to hold since (``Runtime.verified``), with its solver state and today's
+    settings? Then f is solved again from f - 1 (an animator moved a key ahead of the
+    frame shown); anything else drops the playback cache."""
+    rt = setup.rt
+    fr = rt.memory.frames.get(f - 1)
+    if fr is None or (f - 1) not in rt.verified or not rt.trusted:
+        return False
+    if fr.state is None and rt.solver_frame != f - 1:
+        return False
+    if fixed_change(setup, fr.inputs):
+        return False
+    objects = changed_objects(setup, rt.memory.inputs(f), rt.seen[1] if rt.seen else None)
+    return objects is not None and objects <= rt.trusted
 
 
 def _prepare_solver(setup, inp):
@@ -207,6 +257,8 @@ def _prepare_solver(setup, inp):
     if f == s.frame_start:
         solver.reset()
         rt.memory.clear()
+        rt.verified.clear()
+        rt.trusted.clear()
         rt.dropped = ""
         rt.memory.start = f
         rt.memory.limit = int(s.memory_limit * 1024 * 1024)
@@ -250,13 +302,13 @@ def _changes_without_callbacks(setup) -> None:
     if rt.attach_state is not None and att != rt.attach_state and not s.is_baked:
         # Fur Attach toggled or rebound: every frame's input changed, so no cached
         # frame is valid.
-        rt.drop_frames_after(s.frame_start - 1, s.frame_start)
+        rt.drop_cache("Fur Attach changed", s.frame_start, setup.frame)
     rt.attach_state = att
     tk = setup.time_key()
     if None not in (tk, rt.time_state) and tk != rt.time_state and not s.is_baked:
         # The fps changed: wind and jiggle of every cached frame ran on the old
         # seconds. (Turning them on or off goes through the signature.)
-        rt.drop_frames_after(s.frame_start - 1, s.frame_start)
+        rt.drop_cache("the frame rate changed", s.frame_start, setup.frame)
     rt.time_state = tk
 
 
@@ -288,9 +340,13 @@ def _solve(setup, inp, note):
     rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
     result = frame_solve.solve_frame(setup, inp)
     rt.solver_frame = f
+    record = solved_inputs(setup, inp)
+    saw(setup, record)
+    rt.verified.add(f)
+    rt.verified &= rt.memory.frames.keys() | {f}  # (frames the budget dropped go)
     rt.memory.put(
         f, inp.raw, result.points, result.status, inp.offsets, rt.solver.state, result.stats,
-        result.changed, result.attributes, solved_inputs(setup, inp),
+        result.changed, result.attributes, record,
     )
     if rt.hold is None or f >= rt.hold[0]:
         rt.hold = (f, result.points, result.status)
@@ -336,11 +392,10 @@ def _outdated(setup, why):
     hold: drop the playback cache (the frames stepped from it would not be what a
     bake gives either), keep the output as it is and mark the setup outdated."""
     rt, f, start = setup.rt, setup.frame, setup.s.frame_start
-    rt.drop_frames_after(start - 1, start)
-    rt.dropped = f"{why}: the playback cache was dropped"
+    rt.drop_cache(why, start, f)
+    rt.dropped_why = f"{why} since it was cached"
     rt.outdated = True
-    setup.set_status("WARNING", f"Frame {f} is outdated: {why} since it was cached. The "
-                     f"playback cache is dropped: go to frame {start} and play, or press Bake.")
+    setup.set_status("WARNING", dropped_message(f, rt.dropped_why, start))
     return Outcome.OUTDATED, None
 
 
@@ -348,6 +403,7 @@ def _hold(setup, inp, reason=""):
     """Jump ahead past the cache: hold the newest cached frame, mark outdated."""
     rt, f = setup.rt, setup.frame
     rt.outdated = True
+    here = not reason and rt.dropped and rt.dropped_at == f  # the change was seen here
     reason = reason or rt.dropped
     k = rt.memory.newest_before(f)
     written = None
@@ -365,12 +421,21 @@ def _hold(setup, inp, reason=""):
         setup.set_status("ERROR", f"{rt.error} (frame {f} not solved: fix it, then go back "
                          f"to frame {start})")
         return Outcome.OUTDATED, written
+    if here:
+        setup.set_status("WARNING", dropped_message(f, rt.dropped_why, start))
+        return Outcome.OUTDATED, written
     why = f" ({reason})" if reason else ""
     setup.set_status(
         "WARNING",
         f"Frame {f} is not cached{why}: {held}. Play from frame {start} or bake.",
     )
     return Outcome.OUTDATED, written
+
+
+def dropped_message(f, why, start) -> str:
+    """The status of frame ``f`` when ``why`` (a change seen there) dropped the cache."""
+    return (f"Frame {f} is outdated: {why}. The playback cache is dropped: go to frame "
+            f"{start} and play, or press Bake.")
 
 
 def _show_baked(setup, inp, note):

@@ -4,9 +4,11 @@
   (:func:`frame_rules.evaluate`); an error becomes the setup's status message.
   Both this and the depsgraph check first prune the registry (:func:`registry.prune`):
   a deleted source's runtime and memory cache go.
-* ``depsgraph_update_post``: an edited source or collider drops the cached frames
-  after the current one (:func:`invalidation.invalidate`), and the dependency
-  modifiers follow the setups' inputs. It never writes hair data.
+* ``depsgraph_update_post``: an edited source or collider drops the playback cache
+  (:func:`invalidation.invalidate`), an update that changes nothing the current frame
+  was evaluated from (the animation evaluated again) does not
+  (:func:`invalidation.edit_seen`); the dependency modifiers follow the setups'
+  inputs. It never writes hair data.
 * ``load_post``: a new file forgets every runtime and completes the setups'
   dependency modifiers; ``save_pre`` / ``save_post`` keep relative bake paths
   pointing at the same files when the file is saved elsewhere.
@@ -22,7 +24,7 @@ from bpy.app.handlers import persistent
 from . import frame_rules, invalidation, registry
 from .colliders import collider_objects
 from .dependencies import dependencies_stale, update_dependencies
-from .setup import Setup, signature
+from .setup import Setup, signature, signature_change
 
 
 @persistent
@@ -44,7 +46,14 @@ def on_frame_change_post(scene, depsgraph=None):
 
 @persistent
 def on_depsgraph_update_post(scene, depsgraph=None):
-    """Invalidate (never write) when colliders or the source were edited."""
+    """Invalidate (never write) when colliders or the source were edited.
+
+    In the Blender application this handler also reports the animated objects that
+    the depsgraph evaluated again: when playback starts, and on a frame change before
+    ``frame_change_post`` runs. Those are not edits: :func:`invalidation.edit_seen`
+    compares the scene with the record of what the frame handler saw at this frame,
+    and only a real change drops the playback cache.
+    """
     if registry.busy() or depsgraph is None or getattr(depsgraph, "mode", "VIEWPORT") == "RENDER":
         return
     try:
@@ -55,23 +64,43 @@ def on_depsgraph_update_post(scene, depsgraph=None):
                 u.id, bpy.types.Object
             ):
                 edited.add(u.id.original.name)
-        if not edited and not any(True for _ in registry.setups(scene)):
+        setups = registry.setups(scene)
+        if not edited and not setups:
             return
-        for ob in registry.setups(scene):
-            rt = registry.get_runtime(ob, create=False)
-            if (rt is None or not rt.baking) and dependencies_stale(ob):
-                update_dependencies(ob)  # (a no-op next time: no update loop)
-            if rt is None or rt.baking or ob.furcollide.is_baked:
-                continue
-            inputs = {ob.name} | {o.name for r in collider_objects(ob, scene) for o in r.objects}
-            if ob.data.surface is not None:
-                inputs.add(ob.data.surface.name)
-            if edited & inputs and len(rt.memory):
-                invalidation.invalidate(ob, scene, reason="source or collider edited")
-            elif rt.signature is not None and signature(ob, scene=scene) != rt.signature:
-                invalidation.invalidate(ob, scene, reason="colliders changed", colliders=True)
+        for ob in setups:
+            try:
+                _check_edits(ob, scene, depsgraph, edited)
+            except Exception as exc:  # noqa: BLE001 - one setup's failure stays its own
+                print(f"FurCollide '{ob.name}': depsgraph update check failed: "
+                      f"{registry.describe(exc)}", flush=True)
     except Exception as exc:  # noqa: BLE001
-        print(f"FurCollide: depsgraph update check failed: {exc}")
+        print(f"FurCollide: depsgraph update check failed: {exc}", flush=True)
+
+
+def _check_edits(ob, scene, depsgraph, edited) -> None:
+    """Drop the playback cache of the setup on ``ob`` when an input really changed."""
+    rt = registry.get_runtime(ob, create=False)
+    if (rt is None or not rt.baking) and dependencies_stale(ob):
+        update_dependencies(ob)  # (a no-op next time: no update loop)
+    if rt is None or rt.baking or ob.furcollide.is_baked:
+        return
+    if rt.signature is not None and signature(ob, scene=scene) != rt.signature:
+        why = signature_change(rt.signature, signature(ob, scene=scene))
+        invalidation.invalidate(ob, scene, reason=why, colliders=True)
+        return
+    inputs = {ob.name} | {o.name for r in collider_objects(ob, scene) for o in r.objects}
+    if ob.data.surface is not None:
+        inputs.add(ob.data.surface.name)
+    if edited & inputs and len(rt.memory):
+        why = invalidation.edit_seen(Setup(ob, scene, depsgraph, rt))
+        if why:  # this frame's inputs changed: an edit
+            invalidation.invalidate(ob, scene, reason=why)
+        elif why == "":
+            # This frame still holds: the animation evaluated again, or a key moved on
+            # another frame. Only this frame is known to hold now; a cached frame whose
+            # inputs changed in these objects is solved again from a verified one.
+            rt.trusted |= edited & inputs
+            rt.verified &= {scene.frame_current}
 
 
 @persistent

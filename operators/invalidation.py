@@ -1,8 +1,9 @@
-"""What an edit drops: the cached frames after the current one, then a refresh.
+"""What an edit drops: the playback cache (as Blender's point cache), then a refresh.
 
 Settings' update callbacks, the operators and the depsgraph check call
-:func:`invalidate`; the frame rules drop frames themselves
-(:meth:`registry.Runtime.drop_frames_after`). In the UI the current frame is then
+:func:`invalidate`; the depsgraph check first asks :func:`edit_seen` whether an update
+really changed an input (the animation evaluated again is not an edit). The frame rules
+drop frames themselves (:meth:`registry.Runtime.drop_cache`). In the UI the current frame is then
 evaluated again soon (:func:`schedule_refresh`: a timer, since Blender's data must not
 be written from inside an update callback); timers never fire headless.
 """
@@ -11,19 +12,27 @@ from __future__ import annotations
 
 import bpy
 
+from ..core import framecache
 from . import frame_rules, registry
 from .dependencies import update_dependencies
+from .frame_inputs import current_inputs, describe_change, read_inputs
 from .setup import Setup
 
 
 def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=True) -> None:
-    """Drop the memory-cached frames after ``from_frame`` (default: the current frame of
-    ``scene``, the scene the change was seen in).
+    """Drop the setup's unbaked playback cache after a change, like Blender's point cache.
 
-    A baked setup is not affected (its bake is read-only until freed).
-    ``colliders`` also forgets the core Colliders and updates the output's
-    dependency modifier. ``refresh`` re-evaluates the current frame soon
-    (interactive sessions only; never from inside the frame handler).
+    Every cached frame goes (a change of a setting, of the colliders or of an input
+    changes what every frame is solved from): the frames shown next are solved again
+    from the start frame on and, until then, the setup is outdated and each frame that is
+    not cached says ``reason`` (e.g. "the settings changed"). Only ``from_frame`` at or
+    after the start frame keeps the frames up to it (a shorter frame range).
+
+    A baked setup is not affected (its bake is read-only until freed; a baked frame
+    whose inputs changed is marked outdated when shown). ``colliders`` also forgets the
+    core Colliders and updates the output's dependency modifier. ``refresh``
+    re-evaluates the current frame soon (interactive sessions only; never from inside
+    the frame handler).
     """
     ob = registry.source_of(ob)
     if ob is None:
@@ -34,14 +43,43 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
             update_dependencies(ob)
         return
     s = ob.furcollide
-    f = scene.frame_current if from_frame is None else from_frame
-    rt.drop_frames_after(f, s.frame_start)
+    if from_frame is not None and from_frame >= s.frame_start:
+        rt.drop_frames_after(from_frame, s.frame_start)
+    elif rt.drop_cache(reason, s.frame_start, scene.frame_current) and not s.is_baked:
+        f = scene.frame_current
+        if s.enabled and s.frame_start <= f:  # the output shows a result solved before
+            rt.outdated = True
+            if f > s.frame_start:  # (the start frame is solved again when shown)
+                registry.set_status(ob, "WARNING",
+                                    frame_rules.dropped_message(f, reason, s.frame_start))
     if colliders:
         rt.colliders.clear()
         rt.growth = None
         update_dependencies(ob)
     if refresh:
         schedule_refresh(ob.name)
+
+
+def edit_seen(setup) -> str | None:
+    """What changed in the setup's inputs since the frame handler evaluated the scene's
+    current frame, in words; '' when nothing did; None when the frame handler has not
+    evaluated this frame (a frame change under way: it checks the frame itself).
+
+    The depsgraph reports every object it evaluated again, and in the Blender
+    application that includes the animation: when playback starts, and on a frame
+    change before ``frame_change_post`` runs. Those are not edits: the frame's record
+    of inputs (:func:`frame_inputs.current_inputs`) is still the one the frame handler
+    saw.
+    """
+    rt = setup.rt
+    key = (setup.scene.name, setup.frame)
+    if rt.seen is None or rt.seen[0] != key:
+        return None
+    new = current_inputs(setup, read_inputs(setup))
+    old = rt.seen[1]
+    rt.seen = (key, new)
+    part = framecache.first_change(old, new)
+    return describe_change(setup.ob, part, setup.scene, old, new) if part else ""
 
 
 def refresh_groom(ob) -> None:

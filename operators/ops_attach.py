@@ -83,7 +83,7 @@ class FURCOLLIDE_OT_fur_attach_bind(SetupOperator, Operator):
         s.use_fur_attach = True
         update_dependencies(src)  # the Surface, even when hidden from render
         # Every frame's input changes: drop every cached frame (see property_helpers.update_attach).
-        invalidate(src, scene, reason="Fur Attach bound", from_frame=s.frame_start - 1)
+        invalidate(src, scene, reason="Fur Attach was bound", from_frame=s.frame_start - 1)
         err = evaluate_now(context, src)
         far = float(binding.root_distance.max()) if len(binding.root_distance) else 0.0
         self.report(
@@ -127,7 +127,7 @@ class FURCOLLIDE_OT_fur_attach_unbind(SetupOperator, Operator):
         clear_binding(src)
         s.attach_id = ""
         s.use_fur_attach = False  # its update drops every cached frame
-        invalidate(src, context.scene, reason="Fur Attach unbound",
+        invalidate(src, context.scene, reason="Fur Attach was unbound",
                    from_frame=s.frame_start - 1)
         err = evaluate_now(context, src)
         self.report({"INFO"}, f"Fur Attach: unbound '{src.name}'")

@@ -187,12 +187,14 @@ class FURCOLLIDE_OT_collider_add(SetupOperator, Operator):
         s = src.furcollide
         have = {c.object for c in s.colliders if c.object is not None}
         new = _selected_colliders(context, exclude=have | {src})
+        # (before the list changes: its update callbacks would say less)
+        invalidate(src, context.scene, reason="a collider was added", refresh=False)
         if not new:
             s.colliders.add()
         for o in new:
             s.colliders.add().object = o
         s.collider_index = len(s.colliders) - 1
-        invalidate(src, context.scene, reason="collider added", colliders=True)
+        invalidate(src, context.scene, reason="a collider was added", colliders=True)
         refresh(context)
         names = ", ".join(o.name for o in new) or "an empty slot"
         self.report({"INFO"}, f"Added {names}")
@@ -221,7 +223,7 @@ class FURCOLLIDE_OT_collider_remove(SetupOperator, Operator):
         name = s.colliders[i].object.name if s.colliders[i].object else "empty slot"
         s.colliders.remove(i)
         s.collider_index = min(i, max(0, len(s.colliders) - 1))
-        invalidate(src, context.scene, reason="collider removed", colliders=True)
+        invalidate(src, context.scene, reason="a collider was removed", colliders=True)
         refresh(context)
         self.report({"INFO"}, f"Removed collider {name}")
         return {"FINISHED"}

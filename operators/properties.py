@@ -3,7 +3,7 @@
 Solver fields mirror :class:`core.Settings` (same names, same defaults);
 the rest describes the setup: colliders, per-curve enable attribute, the
 output object, the cache. Every property that changes the result
-invalidates the cached frames after the current one (``update=``, see
+drops the playback cache, as Blender's point cache does (``update=``, see
 :mod:`.property_helpers`). The pipeline stages' settings are in
 :mod:`.properties_pipeline`. Read-only statistics are computed properties
 (``get=``) served by the runtime registry, so the frame handler never writes
@@ -34,6 +34,7 @@ from .property_helpers import (
     stat,
     toggle,
     update_attach,
+    update_collider_options,
     update_colliders,
     update_memory_limit,
     update_range,
@@ -65,15 +66,15 @@ class FurCollideCollider(PropertyGroup):
         "Double Sided", False,
         "Treat the mesh as a thin sheet that blocks hair from both sides (cloth, leaves). "
         "Off: a closed body with an inside; hair rooted inside it counts as pinched",
-        update=update_colliders,
+        update=update_collider_options,
     )
     use_offset: toggle(
         "Own Offset", False,
         "Use this collider's own Collision Offset instead of the setup's",
-        update=update_colliders,
+        update=update_collider_options,
     )
     collision_offset: offset_property(
-        "Gap kept between the hair and this mesh (needs Own Offset)", update_colliders
+        "Gap kept between the hair and this mesh (needs Own Offset)", update_collider_options
     )
 
 
@@ -133,7 +134,7 @@ class FurCollideSettings(PropertyGroup):
         "Collection Double Sided", False,
         "Treat the meshes of the collider collection as thin sheets that block hair from "
         "both sides",
-        update=update_colliders,
+        update=update_collider_options,
     )
 
     # ---------------------------------------------------------- resolution
@@ -189,7 +190,7 @@ class FurCollideSettings(PropertyGroup):
         default=0,
         min=0,
         max=1024,
-        update=update_settings,
+        # (no update: the result is the same for any count, the cache stays valid)
         description="Ray-tracing threads (0 = all CPUs). The result is identical for "
         "any count",
     )

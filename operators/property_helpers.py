@@ -1,7 +1,8 @@
 """How the setup's properties are declared: their update callbacks and factories.
 
-Every property that changes the result drops the cached frames after the current one
-through its ``update=`` callback (:func:`invalidation.invalidate`). Like the frame
+Every property that changes the result drops the playback cache (as Blender's point
+cache does; only a shorter frame range keeps the frames inside it) through its
+``update=`` callback (:func:`invalidation.invalidate`). Like the frame
 handler, the callbacks never raise (a failure is one console line; the next frame
 re-checks everything). The factories give the solver settings their few shapes (a
 toggle, a 0..1 factor, an angle...), leaving the name, default and tooltip to the call.
@@ -32,13 +33,23 @@ def never_raises(update):
 
 @never_raises
 def update_settings(self, context):
-    invalidation.invalidate(self.id_data, context.scene, reason="settings changed")
+    invalidation.invalidate(self.id_data, context.scene, reason="the settings changed")
 
 
-@never_raises
-def update_colliders(self, context):
-    invalidation.invalidate(self.id_data, context.scene, reason="colliders changed",
-                            colliders=True)
+def update_colliders_because(reason):
+    """An update for the colliders' properties: drops the playback cache saying ``reason``
+    and forgets the core Colliders."""
+
+    @never_raises
+    def update(self, context):
+        invalidation.invalidate(self.id_data, context.scene, reason=reason, colliders=True)
+
+    return update
+
+
+update_colliders = update_colliders_because("the colliders changed")
+update_collider_options = update_colliders_because(
+    "a collider's Double Sided or Collision Offset changed")
 
 
 @never_raises
@@ -51,10 +62,10 @@ def update_range(self, context):
     rt = registry.get_runtime(ob, create=False)
     if rt is not None and rt.memory.start == s.frame_start:
         # Only the end moved: frames inside the new range stay valid.
-        invalidation.invalidate(ob, context.scene, reason="frame range changed",
+        invalidation.invalidate(ob, context.scene, reason="the frame range changed",
                                 from_frame=s.frame_end)
     else:
-        invalidation.invalidate(ob, context.scene, reason="frame range changed",
+        invalidation.invalidate(ob, context.scene, reason="the frame range changed",
                                 from_frame=s.frame_start - 1)
 
 
@@ -74,7 +85,7 @@ def update_every_frame(reason):
 
 
 update_attach = update_every_frame("Fur Attach changed")
-update_motion = update_every_frame("motion changed")
+update_motion = update_every_frame("the motion settings changed")
 
 
 @never_raises

@@ -64,6 +64,20 @@ class Runtime:
     #: reason the frames that are not cached give, e.g. "'Box' moved: the playback
     #: cache was dropped".
     dropped: str = ""
+    dropped_why: str = ""  # the change itself ("'Box' moved")...
+    dropped_at: int | None = None  # ...and the frame it was seen at
+    #: ((scene name, frame), frame-inputs record) the frame handler last evaluated: the
+    #: depsgraph check compares the scene with it (an update that changes nothing the
+    #: frame was solved or shown from is the animation evaluated again, not an edit).
+    seen: tuple | None = None
+    #: Objects the depsgraph reported updated while the current frame's inputs held (the
+    #: animation evaluated again, or a key moved on another frame), since the playback
+    #: cache was last dropped; and the cached frames known to hold since: the frame it
+    #: was seen at, the frames solved after. A cached frame whose inputs changed only
+    #: in those objects is solved again from a verified previous frame (a key moved
+    #: ahead of it); any other change drops the playback cache (see frame_rules).
+    trusted: set = field(default_factory=set)
+    verified: set = field(default_factory=set)
 
     def forget_solver(self):
         self.solver = None
@@ -84,7 +98,8 @@ class Runtime:
     def drop_frames_after(self, f: int, start: int) -> None:
         """Forget the cached frames after ``f`` (every one when ``f`` is before the
         start frame ``start``), and what was derived from them."""
-        if f <= start:
+        self.verified = {k for k in self.verified if k <= f}
+        if f < start:
             self.memory.clear()
             self.hold = None
         else:
@@ -96,6 +111,21 @@ class Runtime:
         self.history.drop_after(f)
         self.groom_shown = None
         self.signature = None  # accept the new settings without a second drop
+
+    def drop_cache(self, why: str, start: int, frame: int | None = None) -> bool:
+        """Drop the whole playback cache, as Blender's point cache does on a change:
+        the frames shown next are solved again from the start frame ``start`` on, and
+        until then the frames that are not cached say ``why`` (the change, seen at
+        ``frame``). True when frames (or a solver state) were dropped."""
+        had = len(self.memory) > 0 or self.solver_frame is not None
+        self.drop_frames_after(start - 1, start)
+        self.solver_frame = None
+        self.verified.clear()
+        self.trusted.clear()
+        if had and why:
+            self.dropped = f"{why}: the playback cache was dropped"
+            self.dropped_why, self.dropped_at = why, frame
+        return had
 
 
 registry: dict[str, Runtime] = {}

@@ -155,6 +155,21 @@ def signature(ob, stable=False, scene=None, identities=True) -> str:
     return json.dumps(parts)
 
 
+def signature_change(old: str, new: str) -> str:
+    """What differs between two :func:`signature` strings, in words."""
+    try:
+        a, b = json.loads(old), json.loads(new)
+    except ValueError:
+        return "the settings changed"
+    if a[0] != b[0]:
+        if len(a[0]) != len(b[0]):
+            return f"a collider was {'added' if len(b[0]) > len(a[0]) else 'removed'}"
+        return "the colliders changed"
+    if a[4] != b[4]:
+        return "the growth surface changed"
+    return "the settings changed"
+
+
 def time_key(ob, scene):
     """The scene's frames per second when the setup's result depends on it (wind,
     jiggle), else None."""

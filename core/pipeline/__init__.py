@@ -8,6 +8,7 @@ Public API (paper names, see README "The fur pipeline")::
         wind, jiggle,                                    # wind / secondary motion
         collider_distance, region_of_influence,          # Collider Distance, RoI
         bind_groom, GroomWeights, deform_groom,          # render groom follows guides
+        GroomDeformer,                                   #   (its bind-time work, explicit)
         clearance_pass,                                  # final clearance (FurCollide)
     )
 
@@ -17,14 +18,14 @@ curve ``i`` is ``points[offsets[i]:offsets[i + 1]]``. Meshes are ``V``
 :class:`~core.errors.InputError` or :class:`~core.errors.ColliderError`.
 """
 
+from ..closest import closest_faces
 from .attach import Binding, bind, surface_values
 from .distance import (
-    closest_faces,
     collider_distance,
     segment_mesh_distance,
     segment_triangle_distance,
 )
-from .groom import GroomWeights, bind_groom, clearance_pass, deform_groom, knn
+from .groom import GroomDeformer, GroomWeights, bind_groom, clearance_pass, deform_groom, knn
 from .influence import region_of_influence
 from .motion import jiggle, spring_impulse_response, wind, wind_noise
 from .sampler import dart_throwing, neighbor_pairs, sample_guides
@@ -32,6 +33,7 @@ from .sampler import dart_throwing, neighbor_pairs, sample_guides
 __all__ = [
     "surface_values",
     "Binding",
+    "GroomDeformer",
     "GroomWeights",
     "bind",
     "bind_groom",

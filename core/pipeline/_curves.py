@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import tolerances as tol
 from ..errors import ColliderError, InputError
 from ..layout import check_offsets
 
@@ -24,9 +25,8 @@ def check_curves(points, offsets, name="points"):
     pts = as_points(points, name)
     if len(pts) != off[-1]:
         raise InputError(f"{name} has {len(pts)} rows but offsets describe {int(off[-1])} points")
-    bad = ~np.isfinite(pts).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
+    if not np.isfinite(pts).all():  # (one pass; rows only to name the culprit)
+        i = int(np.argmax(~np.isfinite(pts).all(axis=1)))
         c = int(np.searchsorted(off, i, "right") - 1)
         raise InputError(f"{name}: point {i} (curve {c}) is not finite: {pts[i].tolist()}")
     return pts, off
@@ -47,6 +47,8 @@ def as_points(points, name="points"):
 
 def check_finite(a, name, off=None):
     a = np.asarray(a, np.float64)
+    if np.isfinite(a).all():
+        return a
     bad = ~np.isfinite(a.reshape(len(a), -1)).all(axis=1) if a.ndim > 1 else ~np.isfinite(a)
     if bad.any():
         i = int(np.argmax(bad))
@@ -98,11 +100,15 @@ def triangle_areas(V, F):
     return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - a, V[F[:, 2]] - a), axis=1)
 
 
-def degenerate_faces(V, F, rel=1e-12):
-    """(m,) bool: zero-area (relative to the mesh's size) or repeated-vertex faces."""
+def degenerate_faces(V, F):
+    """(m,) bool: degenerate faces, by the colliders' rule (``Collider`` drops the same).
+
+    Repeated vertices, or an area at most ``tolerances.DEGENERATE_AREA_REL``
+    times the squared diagonal of the mesh's bounding box.
+    """
     diag = float(np.linalg.norm(V.max(0) - V.min(0))) or 1.0
     rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    return rep | (triangle_areas(V, F) <= rel * diag**2)
+    return rep | (triangle_areas(V, F) <= tol.DEGENERATE_AREA_REL * diag**2)
 
 
 def layout(off):
@@ -126,6 +132,19 @@ def layout(off):
     return curve, index, np.flatnonzero(~is_tip)
 
 
+def row_norm(v):
+    """Lengths of the rows of ``v`` (k, 3): ``np.linalg.norm(v, axis=1)`` in long passes."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
+
+
+def uniform_size(off):
+    """The common point count of the curves, or 0 when they differ (or there is none)."""
+    if len(off) < 2:
+        return 0
+    n = int(off[1] - off[0])
+    return n if int(off[-1]) == n * (len(off) - 1) and (np.diff(off) == n).all() else 0
+
+
 def segmented_cumsum(x, off):
     """Cumulative sum of rows of ``x`` restarting at every curve (inclusive).
 
@@ -137,6 +156,10 @@ def segmented_cumsum(x, off):
     C = len(sizes)
     if C == 0:
         return np.zeros_like(x, dtype=np.float64)
+    n = uniform_size(off)
+    if n:  # every curve n points: the padded array is x itself
+        return np.cumsum(np.asarray(x, np.float64).reshape((C, n) + x.shape[1:]),
+                         axis=1).reshape(x.shape)
     curve = np.repeat(np.arange(C), sizes)
     index = np.arange(len(x)) - off[curve]
     pad = np.zeros((C, int(sizes.max())) + x.shape[1:])
@@ -155,7 +178,7 @@ def arc_length(points, off):
     """
     P = len(points)
     seg_len = np.zeros(P)
-    d = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    d = row_norm(np.diff(points, axis=0))
     seg_len[1:] = d
     seg_len[off[:-1]] = 0.0
     cum = segmented_cumsum(seg_len, off)
@@ -190,8 +213,8 @@ def rechain(points, off, moved):
     v1 = np.zeros((P, 3))
     v0[1:] = np.diff(points, axis=0)
     v1[1:] = np.diff(moved, axis=0)
-    L0 = np.linalg.norm(v0, axis=1)
-    L1 = np.linalg.norm(v1, axis=1)
+    L0 = row_norm(v0)
+    L1 = row_norm(v1)
     ok = L1 > 1e-300
     v = np.where(ok[:, None], v1 * (L0 / np.where(ok, L1, 1.0))[:, None], v0)
     v[off[:-1]] = points[off[:-1]]  # the root itself starts the chain

@@ -14,9 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import rotations as rot
+from .. import tolerances as tol
+from ..closest import closest_faces
 from ..errors import ColliderError, InputError
-from ._curves import check_curves, check_surface, degenerate_faces
-from .distance import closest_faces
+from ._curves import check_curves, check_surface, degenerate_faces, uniform_size
 
 
 def _frames(V, F, face):
@@ -28,17 +30,35 @@ def _frames(V, F, face):
     ok : (k,) bool
         False where the triangle is degenerate (R is then garbage).
     """
-    a, b, c = V[F[face, 0]], V[F[face, 1]], V[F[face, 2]]
+    return _frames_of(V[F[face]])
+
+
+def _frames_of(T, rows=False):
+    """:func:`_frames` of triangles given by their corners ``T`` (k, 3, 3); with
+    ``rows``, the transposed frames (rows edge, bitangent, normal).
+
+    Computed on component arrays (the products of ``np.cross`` and the sums of
+    ``np.linalg.norm``, in long passes).
+    """
+    Tc = np.moveaxis(T, -1, 0)  # (3, k, 3): component, triangle, corner
+    a, b, c = Tc[:, :, 0], Tc[:, :, 1], Tc[:, :, 2]
     e = b - a
-    n = np.cross(e, c - a)
-    le = np.linalg.norm(e, axis=1)
-    ln = np.linalg.norm(n, axis=1)
-    scale = np.maximum(np.linalg.norm(c - a, axis=1), le)
-    ok = (le > 0) & (ln > 1e-12 * scale**2)
-    e = e / np.where(ok, le, 1.0)[:, None]
-    n = n / np.where(ok, ln, 1.0)[:, None]
-    t = np.cross(n, e)
-    return np.stack([e, t, n], axis=2), ok
+    ca = c - a
+    n = rot._cross3(e, ca)
+    le = np.sqrt(rot._dot3(e, e))
+    ln = np.sqrt(rot._dot3(n, n))
+    scale = np.maximum(np.sqrt(rot._dot3(ca, ca)), le)
+    ok = (le > 0) & (ln > tol.ATTACH_FRAME_MIN_SIN * scale**2)
+    e /= np.where(ok, le, 1.0)
+    n /= np.where(ok, ln, 1.0)
+    t = rot._cross3(n, e)
+    out = np.empty((len(T), 3, 3))
+    for k, v in enumerate((e, t, n)):
+        if rows:
+            out[:, k, :] = v.T
+        else:
+            out[:, :, k] = v.T
+    return out, ok
 
 
 def _barycentric(p, a, b, c):
@@ -168,6 +188,8 @@ class Binding:
                 f"surface vertices have shape {V.shape}, the binding expects "
                 f"({self.n_vertices}, 3) (same topology as at bind time)"
             )
+        if np.isfinite(V).all():  # (one pass over the surface; vertices only on error)
+            return V
         used = self.faces[self.face].ravel()
         bad = ~np.isfinite(V[used]).all(axis=1)
         if bad.any():
@@ -189,13 +211,22 @@ class Binding:
             triangles. A triangle collapsed to zero area keeps its reference
             orientation (its curves only translate).
         """
-        O = self.roots(V_now)
-        V = np.asarray(V_now, np.float64)
-        R, ok = _frames(V, self.faces, self.face)
-        R = np.where(ok[:, None, None], R, self.frame_ref)
-        sizes = np.diff(self.offsets)
-        curve = np.repeat(np.arange(len(sizes)), sizes)
-        return O[curve] + np.einsum("pij,pj->pi", R[curve], self.local)
+        V = self._check(V_now)
+        T = V[self.faces[self.face]]  # (C, 3, 3)
+        O = np.einsum("ck,cki->ci", self.bary, T)
+        Rt, ok = _frames_of(T, rows=True)  # R transposed
+        if not ok.all():
+            Rt[~ok] = self.frame_ref[~ok].transpose(0, 2, 1)
+        n = uniform_size(self.offsets)
+        if not n:
+            sizes = np.diff(self.offsets)
+            curve = np.repeat(np.arange(len(sizes)), sizes)
+            return O[curve] + np.einsum("pji,pj->pi", Rt[curve], self.local)
+        # every curve n CVs: one (n, 3) x (3, 3) product per curve, no per-CV gathers
+        C = len(O)
+        out = np.matmul(self.local.reshape(C, n, 3), Rt)
+        out += O[:, None, :]
+        return out.reshape(-1, 3)
 
 
 def bind(points, offsets, V_ref, F, snap_roots=True, drop_degenerate=False) -> Binding:
@@ -231,7 +262,8 @@ def bind(points, offsets, V_ref, F, snap_roots=True, drop_degenerate=False) -> B
     """
     pts, off = check_curves(points, offsets)
     V, F = check_surface(V_ref, F, "growth surface")
-    bad = degenerate_faces(V, F)
+    # degenerate by the colliders' rule, or too thin to give its curves an orientation
+    bad = degenerate_faces(V, F) | ~_frames(V, F, np.arange(len(F)))[1]
     if bad.any() and not drop_degenerate:
         i = int(np.argmax(bad))
         raise ColliderError(

@@ -11,108 +11,24 @@ resolved, and counts them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import rotations as rot
+from .. import tolerances as tol
 from ..collider import Collider
 from ..errors import InputError
+from ..proximity import knn
 from ..settings import Settings
 from ..solver import Solver
-from ._curves import as_points, check_curves, layout, segmented_cumsum
+from ..status import Status
+from ._curves import as_points, check_curves, layout, segmented_cumsum, uniform_size
 
-#: Pairs (query, reference) per chunk of the brute-force nearest neighbours.
-_KNN_CHUNK = 4_000_000
+#: Above this share of reaching curves the clearance pass solves them all (no gather).
+_CLEARANCE_ALL = 0.7
 #: Neighbouring guide roots used to find each guide's root rotation.
 _FRAME_NEIGHBORS = 4
-
-
-def _knn_brute(Q, X, k):
-    """Chunked brute force of :func:`knn`."""
-    index = np.empty((len(Q), k), np.int64)
-    dist = np.empty((len(Q), k))
-    step = max(1, _KNN_CHUNK // max(len(X), 1))
-    xx = np.einsum("ij,ij->i", X, X)
-    for a in range(0, len(Q), step):
-        q = Q[a:a + step]
-        d2 = np.maximum(xx[None] - 2 * q @ X.T + np.einsum("ij,ij->i", q, q)[:, None], 0)
-        if k < len(X):
-            part = np.argpartition(d2, k - 1, axis=1)[:, :k]
-        else:
-            part = np.broadcast_to(np.arange(len(X)), d2.shape)
-        d = np.linalg.norm(X[part] - q[:, None], axis=-1)
-        order = np.lexsort((part, d), axis=1)
-        index[a:a + step] = np.take_along_axis(part, order, 1)
-        dist[a:a + step] = np.take_along_axis(d, order, 1)
-    return index, dist
-
-
-def knn(Q, X, k):
-    """``k`` nearest rows of ``X`` to each row of ``Q``.
-
-    A uniform grid answers the queries whose ``k``-th neighbour lies within
-    one cell (all candidates in the 27 cells around the query); the others
-    fall back to a chunked brute force. Exact either way.
-
-    Returns
-    -------
-    index : (q, k) int64
-        Sorted by distance (ties: lower index first).
-    dist : (q, k) float64
-    """
-    Q = np.asarray(Q, np.float64)
-    X = np.asarray(X, np.float64)
-    k = min(k, len(X))
-    nq = len(Q)
-    if nq * len(X) <= _KNN_CHUNK or len(X) < 8 * k:
-        return _knn_brute(Q, X, k)
-    lo = X.min(0)
-    ext = float((X.max(0) - lo).max()) or 1.0
-    h = ext * np.sqrt(2.0 * k / len(X))  # ~2k points per cell on a surface
-    dims = np.floor((X.max(0) - lo) / h).astype(np.int64) + 1
-
-    def key(c):
-        c = np.clip(c, -1, dims) + 1
-        return (c[:, 0] * (dims[1] + 2) + c[:, 1]) * (dims[2] + 2) + c[:, 2]
-
-    kx = key(np.floor((X - lo) / h).astype(np.int64))
-    order = np.argsort(kx, kind="stable")
-    ks = kx[order]
-    qc = np.floor((Q - lo) / h).astype(np.int64)
-    index = np.empty((nq, k), np.int64)
-    dist = np.empty((nq, k))
-    good = np.zeros(nq, bool)
-    step = max(1, _KNN_CHUNK // (27 * 4 * k))
-    for a in range(0, nq, step):
-        qi = np.arange(a, min(nq, a + step))
-        I, J = [], []
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                for dz in (-1, 0, 1):
-                    kk = key(qc[qi] + [dx, dy, dz])
-                    s0 = np.searchsorted(ks, kk, "left")
-                    m = np.searchsorted(ks, kk, "right") - s0
-                    I.append(np.repeat(qi, m))
-                    J.append(order[np.repeat(s0 - (np.cumsum(m) - m), m)
-                                   + np.arange(int(m.sum()))])
-        i, j = np.concatenate(I), np.concatenate(J)
-        d = np.linalg.norm(X[j] - Q[i], axis=1)
-        o = np.lexsort((j, d, i))
-        i, j, d = i[o], j[o], d[o]
-        first = np.searchsorted(i, qi)
-        count = np.searchsorted(i, qi, "right") - first
-        ok = count >= k
-        sel = first[ok][:, None] + np.arange(k)
-        ok_idx = qi[ok]
-        kth = d[sel[:, -1]]
-        exact = kth <= h  # every point within h of the query is in its 27 cells
-        index[ok_idx[exact]] = j[sel[exact]]
-        dist[ok_idx[exact]] = d[sel[exact]]
-        good[ok_idx[exact]] = True
-    rest = np.flatnonzero(~good)
-    if len(rest):
-        index[rest], dist[rest] = _knn_brute(Q[rest], X, k)
-    return index, dist
 
 
 @dataclass
@@ -129,6 +45,8 @@ class GroomWeights:
 
     index: np.ndarray
     weight: np.ndarray
+    #: The :class:`GroomDeformer` of the last :func:`deform_groom` call (a cache).
+    _deformer: object = field(default=None, init=False, repr=False, compare=False)
 
     def arrays(self) -> dict:
         return {"index": self.index, "weight": self.weight}
@@ -179,147 +97,313 @@ def bind_groom(render_roots_ref, guide_roots_ref, k=4, power=1.0) -> GroomWeight
     return GroomWeights(idx, w)
 
 
-# ---------------------------------------------------------------- rotations
-def _qmul(p, q):
-    pw, pv = p[..., :1], p[..., 1:]
-    qw, qv = q[..., :1], q[..., 1:]
-    return np.concatenate([pw * qw - np.sum(pv * qv, -1, keepdims=True),
-                           pw * qv + qw * pv + np.cross(pv, qv)], -1)
+# ---------------------------------------------------------------- deform
+class GroomDeformer:
+    """:func:`deform_groom` for one bound groom, with its bind-time work done once.
 
+    Everything that depends only on the reference poses, the curve layouts
+    and the weights is computed here: each guide's root neighbourhood, the
+    rest tangents of its segments, and for every (render segment, guide)
+    pair the two guide segments to interpolate and the interpolation
+    parameter. :meth:`deform` then only finds the guides' rotations and
+    blends them onto the render segments, in cache-sized blocks of
+    component arrays. :func:`deform_groom` keeps one on its ``weights`` and
+    reuses it while its inputs are equal, so callers get this for free.
 
-def _qrot(q, v):
-    w, u = q[..., :1], q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    Parameters
+    ----------
+    render_ref_points, render_offsets, guides_ref_points, guide_offsets, weights
+        As in :func:`deform_groom` (copied: later changes to the arrays do
+        not affect the deformer).
 
-
-def _qswing(a, b):
-    """Minimal rotation (quaternions) taking unit rows ``a`` to unit rows ``b``."""
-    c = np.sum(a * b, -1)
-    q = np.concatenate([(1.0 + c)[..., None], np.cross(a, b)], -1)
-    anti = c < -1 + 1e-12
-    if anti.any():  # half turn about any perpendicular axis
-        aa = a[anti]
-        e = np.zeros_like(aa)
-        e[np.arange(len(aa)), np.argmin(np.abs(aa), -1)] = 1.0
-        ax = np.cross(aa, e)
-        q[anti] = np.concatenate([np.zeros((len(aa), 1)), ax], -1)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
-def _qfrom_matrix(R):
-    """Unit quaternions (w, x, y, z) of rotation matrices (k, 3, 3) (Shepperd)."""
-    m = R
-    t = np.stack([m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2],
-                  m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], 1)
-    case = np.argmax(t, 1)
-    q = np.empty((len(R), 4))
-    for c in range(4):
-        s = case == c
-        if not s.any():
-            continue
-        r = m[s]
-        if c == 0:
-            w = np.sqrt(1 + r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2]) * 2
-            q[s] = np.stack([0.25 * w, (r[:, 2, 1] - r[:, 1, 2]) / w,
-                             (r[:, 0, 2] - r[:, 2, 0]) / w, (r[:, 1, 0] - r[:, 0, 1]) / w], 1)
-        else:
-            i = c - 1
-            j, k = (i + 1) % 3, (i + 2) % 3
-            w = np.sqrt(1 + r[:, i, i] - r[:, j, j] - r[:, k, k]) * 2
-            out = np.empty((s.sum(), 4))
-            out[:, 0] = (r[:, k, j] - r[:, j, k]) / w
-            out[:, 1 + i] = 0.25 * w
-            out[:, 1 + j] = (r[:, j, i] + r[:, i, j]) / w
-            out[:, 1 + k] = (r[:, k, i] + r[:, i, k]) / w
-            q[s] = out
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
-def _unit(v):
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
-
-
-def _kabsch(H):
-    """Rotations R (g, 3, 3) maximizing ``sum b . R a`` for ``H = sum a b^T``; and S."""
-    U, S, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(np.einsum("gji,gkj->gik", Vt, U)))  # det(V U^T)
-    d[d == 0] = 1.0
-    D = np.ones((len(H), 3))
-    D[:, 2] = d
-    return np.einsum("gji,gj,gkj->gik", Vt, D, U), S  # V D U^T
-
-
-def _root_rotations(ref, now, off):
-    """Rotation of every guide at its root (G, 4): best fit of its root neighbourhood.
-
-    Kabsch fit of the unit vectors to the nearest guide roots, so that it
-    is the identity when the roots do not move (wind, collisions) and the
-    exact rotation under a rigid motion. Where the neighbourhood does not
-    fix a rotation (fewer than 3 guides, collinear roots) the guide's own
-    strand is added; where even that fails (a lone straight guide), the
-    minimal rotation of the first segment.
+    Raises
+    ------
+    InputError
+        As :func:`deform_groom`.
     """
-    roots_r, roots_n = ref[off[:-1]], now[off[:-1]]
-    G = len(roots_r)
-    H = np.zeros((G, 3, 3))
-    if G > 1:
-        nb, _ = knn(roots_r, roots_r, min(G, _FRAME_NEIGHBORS + 1))
-        nb = nb[:, 1:]
-        a = _unit(roots_r[nb] - roots_r[:, None])
-        b = _unit(roots_n[nb] - roots_n[:, None])
-        H += np.einsum("gki,gkj->gij", a, b)
-    R, S = _kabsch(H)
-    q = _qfrom_matrix(R)
-    weak = S[:, 1] <= 1e-9 * np.maximum(S[:, 0], 1e-300)
-    if weak.any():
-        # add the strand: its direction and the vectors from the root to its CVs
-        curve, _, _ = layout(off)
-        rel_r = _unit(ref - roots_r[curve])
-        rel_n = _unit(now - roots_n[curve])
-        Hs = H + np.stack([np.bincount(curve, rel_r[:, i] * rel_n[:, j], minlength=G)
-                           for i in range(3) for j in range(3)], 1).reshape(G, 3, 3)
-        R2, S2 = _kabsch(Hs[weak])
-        q[weak] = _qfrom_matrix(R2)
-        still = S2[:, 1] <= 1e-9 * np.maximum(S2[:, 0], 1e-300)
-        if still.any():
-            w = np.flatnonzero(weak)[still]
-            t_r = _unit(ref[off[w] + 1] - roots_r[w])
-            t_n = _unit(now[off[w] + 1] - roots_n[w])
-            q[w] = _qswing(t_r, t_n)
-    return q
 
+    #: Render segments per block of the blend (component arrays of
+    #: (4, block, k) floats stay in the CPU caches).
+    BLOCK = 8192
 
-def _segment_rotations(ref, now, off, q_root):
-    """Per-segment rotations of every guide, parallel-transported from the root.
+    def __init__(self, render_ref_points, render_offsets, guides_ref_points, guide_offsets,
+                 weights):
+        rp, roff = check_curves(render_ref_points, render_offsets, "render_ref_points")
+        gr, goff = check_curves(guides_ref_points, guide_offsets, "guides_ref_points")
+        if not isinstance(weights, GroomWeights):
+            raise InputError(f"weights must be a GroomWeights, got {type(weights).__name__}")
+        Rn, G = len(roff) - 1, len(goff) - 1
+        index = np.asarray(weights.index)
+        weight = np.asarray(weights.weight, np.float64)
+        if index.shape[0] != Rn or weight.shape != index.shape:
+            raise InputError(f"weights are for {index.shape[0]} render curves, the groom has {Rn}")
+        if (index < 0).any() or (index >= G).any():
+            raise InputError(f"weights index guides out of range (there are {G} guides)")
+        self.rp, self.roff, self.gr, self.goff = rp, roff, gr, goff
+        self.index = index.astype(np.int64)
+        self.weight = weight.copy()
+        self._bind_guides()
+        self._bind_render()
 
-    Returns
-    -------
-    (S, 4) ndarray: the rotation of each segment (in segment order).
-    """
-    curve, index, s0 = layout(off)
-    t_r = _unit(ref[s0 + 1] - ref[s0])
-    t_n = _unit(now[s0 + 1] - now[s0])
-    seg_curve = curve[s0]
-    seg_j = index[s0]
-    q = np.empty((len(s0), 4))
-    prev = q_root.copy()
-    for j in range(int(seg_j.max()) + 1):  # over the CV index, vectorized over guides
-        s = np.flatnonzero(seg_j == j)
-        c = seg_curve[s]
-        p = prev[c]
-        qj = _qmul(_qswing(_unit(_qrot(p, t_r[s])), t_n[s]), p)
-        q[s] = qj
-        prev[c] = qj
-    return q
+    def _bind_guides(self):
+        gr, goff = self.gr, self.goff
+        G = len(goff) - 1
+        curve, gidx, gs0 = layout(goff)
+        self.gs0 = gs0
+        # root neighbourhoods (reference pose): see _root_rotations
+        roots_r = gr[goff[:-1]]
+        self.nb = None
+        if G > 1:
+            nb, _ = knn(roots_r, roots_r, min(G, _FRAME_NEIGHBORS + 1))
+            self.nb = nb[:, 1:]
+            self.nb_dir = rot.normalize(roots_r[self.nb] - roots_r[:, None])
+        self.t_r = rot.normalize(gr[gs0 + 1] - gr[gs0])
+        seg_curve, seg_j = curve[gs0], gidx[gs0]
+        self.by_index = []  # parallel transport: segment j of every guide at once
+        for j in range(int(seg_j.max()) + 1 if len(gs0) else 0):
+            s = np.flatnonzero(seg_j == j)
+            self.by_index.append((s, seg_curve[s]))
+        # normalized arc positions of the guides' segment midpoints
+        glen = np.linalg.norm(gr[gs0 + 1] - gr[gs0], axis=1)
+        nseg = np.diff(goff) - 1
+        gcurve = np.repeat(np.arange(G), nseg)
+        gtot = np.bincount(gcurve, glen, minlength=G)
+        gcum = np.cumsum(glen) - np.repeat(np.cumsum(gtot) - gtot, nseg)
+        self.gmid = np.where(gtot[gcurve] > 0,
+                             (gcum - 0.5 * glen) / np.where(gtot > 0, gtot, 1)[gcurve],
+                             (gidx[gs0] + 0.5) / nseg[gcurve])
+        self.gkey = gcurve + self.gmid  # sorted: guide by guide, increasing along each
+        self.gfirst = np.cumsum(nseg) - nseg
+        self.nseg = nseg
 
+    def _bind_render(self):
+        rp, roff = self.rp, self.roff
+        Rn = len(roff) - 1
+        rcurve, ridx, rs0 = layout(roff)
+        v = rp[rs0 + 1] - rp[rs0]
+        rlen = np.linalg.norm(v, axis=1)
+        sc = rcurve[rs0]
+        rtot = np.bincount(sc, rlen, minlength=Rn)
+        rn = np.diff(roff) - 1
+        rcum = np.cumsum(rlen) - np.repeat(np.cumsum(rtot) - rtot, rn)
+        s = np.where(rtot[sc] > 0, (rcum - 0.5 * rlen) / np.where(rtot > 0, rtot, 1)[sc],
+                     (ridx[rs0] + 0.5) / rn[sc])
+        itype = np.int32 if len(self.gs0) < 2**31 - 1 else np.int64
+        self.i0 = np.empty(self.index[sc].shape, itype)
+        self.t = np.empty(self.i0.shape)
+        gf, nseg, gmid = self.gfirst, self.nseg, self.gmid
+        for a in range(0, len(rs0), 1 << 18):  # bounded temporaries
+            g = self.index[sc[a:a + (1 << 18)]]
+            sa = s[a:a + (1 << 18), None]
+            pos = np.searchsorted(self.gkey, g + sa, "right") - 1 - gf[g]
+            j0 = np.clip(pos, 0, nseg[g] - 1)
+            j1 = np.minimum(j0 + 1, nseg[g] - 1)
+            m0, m1 = gmid[gf[g] + j0], gmid[gf[g] + j1]
+            self.t[a:a + (1 << 18)] = np.where(
+                j1 > j0, np.clip((sa - m0) / np.where(j1 > j0, m1 - m0, 1), 0, 1), 0)
+            # where t > 0 the second segment is the next one (j1 = j0 + 1); where
+            # t = 0 it does not count, so it is never stored
+            self.i0[a:a + (1 << 18)] = gf[g] + j0
+        self.sc = sc
+        # (guide, segment) layout for the blend: contiguous rows per guide slot
+        self.i0k = np.ascontiguousarray(self.i0.T)
+        self.tk = np.ascontiguousarray(self.t.T)
+        del self.i0, self.t
+        self.weight_t = np.ascontiguousarray(self.weight.T)
+        self.vT = np.ascontiguousarray(v.T)  # (3, S) render segments at rest
+        sizes = np.diff(roff)
+        self.uniform = int(sizes[0]) if len(sizes) and (sizes == sizes[0]).all() else 0
+        self.rs0 = rs0
+        groot_r = self.gr[self.goff[:-1]]
+        self.rel = rp[roff[:-1]][:, None] - groot_r[self.index]  # (R, k, 3)
 
-def _blend(q, w):
-    """Weighted quaternion average (k, n, 4), weights (k, n): sign-aligned nlerp."""
-    sign = np.where(np.sum(q * q[:, :1], -1) < 0, -1.0, 1.0)
-    m = np.sum(q * (w * sign)[..., None], 1)
-    return m / np.linalg.norm(m, axis=-1, keepdims=True)
+    def matches(self, render_ref_points, render_offsets, guides_ref_points, guide_offsets,
+                weights) -> bool:
+        """Were these the arguments of the constructor (equal values)?"""
+        try:
+            return (
+                isinstance(weights, GroomWeights)
+                and np.array_equal(np.asarray(render_offsets), self.roff)
+                and np.array_equal(np.asarray(guide_offsets), self.goff)
+                and np.array_equal(np.asarray(weights.index), self.index)
+                and np.array_equal(np.asarray(weights.weight), self.weight)
+                and np.array_equal(np.asarray(guides_ref_points), self.gr)
+                and np.array_equal(np.asarray(render_ref_points), self.rp)
+            )
+        except Exception:  # noqa: BLE001 - unconvertible input: the constructor reports it
+            return False
+
+    # ----------------------------------------------------------- per frame
+    def _root_rotations(self, gn):
+        """Rotation of every guide at its root (G, 4): best fit of its root neighbourhood.
+
+        Kabsch fit of the unit vectors to the nearest guide roots, so that it
+        is the identity when the roots do not move (wind, collisions) and the
+        exact rotation under a rigid motion. Where the neighbourhood does not
+        fix a rotation (fewer than 3 guides, collinear roots) the guide's own
+        strand is added; where even that fails (a lone straight guide), the
+        minimal rotation of the first segment.
+        """
+        ref, off = self.gr, self.goff
+        roots_r, roots_n = ref[off[:-1]], gn[off[:-1]]
+        G = len(roots_r)
+        H = np.zeros((G, 3, 3))
+        if self.nb is not None:
+            b = rot.normalize(roots_n[self.nb] - roots_n[:, None])
+            H += np.einsum("gki,gkj->gij", self.nb_dir, b)
+        R, S = rot.kabsch(H)
+        q = rot.quat_from_matrix(R)
+        weak = S[:, 1] <= 1e-9 * np.maximum(S[:, 0], 1e-300)
+        if weak.any():
+            # add the strand: its direction and the vectors from the root to its CVs
+            curve, _, _ = layout(off)
+            rel_r = rot.normalize(ref - roots_r[curve])
+            rel_n = rot.normalize(gn - roots_n[curve])
+            Hs = H + np.stack([np.bincount(curve, rel_r[:, i] * rel_n[:, j], minlength=G)
+                               for i in range(3) for j in range(3)], 1).reshape(G, 3, 3)
+            R2, S2 = rot.kabsch(Hs[weak])
+            q[weak] = rot.quat_from_matrix(R2)
+            still = S2[:, 1] <= 1e-9 * np.maximum(S2[:, 0], 1e-300)
+            if still.any():
+                w = np.flatnonzero(weak)[still]
+                t_r = rot.normalize(ref[off[w] + 1] - roots_r[w])
+                t_n = rot.normalize(gn[off[w] + 1] - roots_n[w])
+                q[w] = rot.quat_swing(t_r, t_n)
+        return q
+
+    def _segment_rotations(self, gn, q_root):
+        """Per-segment rotations (S, 4) of every guide, parallel-transported from the root."""
+        gs0 = self.gs0
+        n = uniform_size(self.goff)
+        if n:
+            return self._segment_rotations_uniform(gn, q_root, n)
+        t_n = rot.normalize(gn[gs0 + 1] - gn[gs0])
+        q = np.empty((len(gs0), 4))
+        prev = q_root.copy()
+        for s, c in self.by_index:  # over the CV index, vectorized over guides
+            p = prev[c]
+            qj = rot.quat_mul(rot.quat_swing(rot.normalize(rot.quat_rotate(p, self.t_r[s])),
+                                             t_n[s]), p)
+            q[s] = qj
+            prev[c] = qj
+        return q
+
+    def _segment_rotations_uniform(self, gn, q_root, n):
+        """:meth:`_segment_rotations` for guides of ``n`` CVs each, on component arrays
+        (4, G): the formulas of rotations.quat_rotate, normalize, quat_swing, quat_mul."""
+        G = len(q_root)
+        g3 = gn.reshape(G, n, 3)
+        tr3 = self.t_r.reshape(G, n - 1, 3)
+        p = np.ascontiguousarray(q_root.T)  # (4, G)
+        out = np.empty((G, n - 1, 4))
+        for j in range(n - 1):
+            tn = (g3[:, j + 1] - g3[:, j]).T  # (3, G)
+            tn = rot._unit3(tn)
+            v = rot.quat_rotate_soa(p, np.ascontiguousarray(tr3[:, j].T))
+            v = rot._unit3(v)
+            # quat_swing(v, tn): minimal rotation taking v to tn
+            c = rot._dot3(v, tn)
+            sw = np.empty((4, G))
+            sw[0] = 1.0 + c
+            sw[1:] = rot._cross3(v, tn)
+            anti = c < -1 + 1e-12
+            if anti.any():
+                sw[:, anti] = rot.quat_swing(v[:, anti].T, tn[:, anti].T).T
+            sw /= np.sqrt(sw[0] * sw[0] + rot._dot3(sw[1:], sw[1:]))
+            # quat_mul(sw, p)
+            q = np.empty((4, G))
+            q[0] = sw[0] * p[0] - rot._dot3(sw[1:], p[1:])
+            q[1:] = sw[0] * p[1:] + p[0] * sw[1:] + rot._cross3(sw[1:], p[1:])
+            out[:, j] = q.T
+            p = q
+        return out.reshape(-1, 4)
+
+    def _blend_block(self, Qt, flip, a, b, out):
+        """Rotated render segments ``a:b`` into ``out`` (3, S): per guide, the rotation
+        interpolated along it (sign-aligned nlerp), then the weighted sign-aligned
+        average over the guides, applied to the rest segment.
+
+        ``flip`` (GS,) is true where a guide segment's rotation and the next one's
+        have a negative dot product: the nlerp then takes the next one negated.
+        Arrays are (component, guide, segment): every pass runs over contiguous
+        rows of the block's segments.
+        """
+        i0, t = self.i0k[:, a:b], self.tk[:, a:b]  # (k, n)
+        q0 = np.empty((4,) + i0.shape)
+        q1 = np.empty_like(q0)
+        i1 = i0 + (t > 0)
+        for c in range(4):
+            np.take(Qt[c], i0, out=q0[c])
+            np.take(Qt[c], i1, out=q1[c])
+        t1 = np.where(flip.take(i0), -t, t)  # (-q1) t = q1 (-t)
+        qs = q0 * (1 - t)
+        q1 *= t1
+        qs += q1
+        n = qs[0] * qs[0]
+        for c in (1, 2, 3):
+            n += qs[c] * qs[c]
+        np.sqrt(n, out=n)
+        # sign-aligned with the first guide's, weighted; the nlerp's normalization
+        # folded into the weights
+        d = qs[0] * qs[0, :1]
+        for c in (1, 2, 3):
+            d += qs[c] * qs[c, :1]
+        sw = self.weight_t[:, self.sc[a:b]]
+        sw /= n
+        np.negative(sw, out=sw, where=d < 0)
+        m = qs[:, 0] * sw[0]
+        for k in range(1, len(sw)):
+            m += qs[:, k] * sw[k]
+        n = m[0] * m[0]
+        for c in (1, 2, 3):
+            n += m[c] * m[c]
+        m /= np.sqrt(n)
+        out[:, a:b] = rot.quat_rotate_soa(m, self.vT[:, a:b])
+
+    def deform(self, guides_now_points, render_roots_now=None) -> np.ndarray:
+        """The render groom following ``guides_now_points`` (see :func:`deform_groom`).
+
+        Returns
+        -------
+        (P, 3) ndarray of float64
+        """
+        gn, _ = check_curves(guides_now_points, self.goff, "guides_now_points")
+        roff = self.roff
+        Rn = len(roff) - 1
+        if render_roots_now is not None:
+            new_roots = as_points(render_roots_now, "render_roots_now")
+            if new_roots.shape != (Rn, 3):
+                raise InputError(f"render_roots_now must have shape ({Rn}, 3)")
+        q_root = self._root_rotations(gn)
+        Qt = np.ascontiguousarray(self._segment_rotations(gn, q_root).T)  # (4, GS)
+        d = Qt[0, :-1] * Qt[0, 1:]
+        for c in (1, 2, 3):
+            d += Qt[c, :-1] * Qt[c, 1:]
+        flip = np.append(d < 0, False)  # (the next of a guide's last: never used)
+        S = len(self.rs0)
+        seg = np.empty((3, S))
+        for a in range(0, S, self.BLOCK):
+            self._blend_block(Qt, flip, a, min(S, a + self.BLOCK), seg)
+        if render_roots_now is None:  # blended guide root frames
+            gi = self.index
+            groot_n = gn[self.goff[:-1]]
+            qT = np.ascontiguousarray(q_root.T)[:, gi]  # (4, R, k)
+            cand = rot.quat_rotate_soa(qT, np.moveaxis(self.rel, -1, 0))
+            cand += np.moveaxis(groot_n[gi], -1, 0)
+            new_roots = np.einsum("rk,irk->ri", self.weight, cand)
+        if self.uniform:
+            n = self.uniform
+            out = np.empty((Rn, n, 3))
+            out[:, 0] = new_roots
+            for i in range(3):
+                out[:, 1:, i] = seg[i].reshape(Rn, n - 1)
+            for j in range(1, n):  # the sums of np.cumsum(axis=1), one CV column a pass
+                out[:, j] += out[:, j - 1]
+            return out.reshape(-1, 3)
+        step = np.empty_like(self.rp)
+        step[self.rs0 + 1] = seg.T
+        step[roff[:-1]] = new_roots
+        return segmented_cumsum(step, roff)
 
 
 def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_now_points,
@@ -333,6 +417,12 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
     guides, the rotation interpolated at ``s`` along the guide, blends them
     with the weights (quaternion averaging), and the curve is re-chained
     from its root, which follows the guides' root frames.
+
+    Everything that depends only on the reference poses and the weights is
+    computed on the first call and kept on ``weights`` (a
+    :class:`GroomDeformer`), reused while the reference arrays, offsets and
+    weights are equal (checked every call); per frame only the guides'
+    rotations and the blend remain.
 
     Parameters
     ----------
@@ -354,71 +444,16 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
         Identity when the guides do not move; a rigid motion of all guides
         moves the groom rigidly. Segment lengths are kept.
     """
-    rp, roff = check_curves(render_ref_points, render_offsets, "render_ref_points")
-    gr, goff = check_curves(guides_ref_points, guide_offsets, "guides_ref_points")
-    gn, _ = check_curves(guides_now_points, guide_offsets, "guides_now_points")
     if not isinstance(weights, GroomWeights):
         raise InputError(f"weights must be a GroomWeights, got {type(weights).__name__}")
-    Rn, G = len(roff) - 1, len(goff) - 1
-    if weights.index.shape[0] != Rn or weights.weight.shape != weights.index.shape:
-        raise InputError(
-            f"weights are for {weights.index.shape[0]} render curves, the groom has {Rn}"
-        )
-    if (weights.index < 0).any() or (weights.index >= G).any():
-        raise InputError(f"weights index guides out of range (there are {G} guides)")
-    q_root = _root_rotations(gr, gn, goff)
-    q_seg = _segment_rotations(gr, gn, goff, q_root)
-    # normalized arc positions of the guides' segment midpoints
-    _, gidx, gs0 = layout(goff)
-    glen = np.linalg.norm(gr[gs0 + 1] - gr[gs0], axis=1)
-    gcurve = np.repeat(np.arange(G), np.diff(goff) - 1)
-    gtot = np.bincount(gcurve, glen, minlength=G)
-    gcum = np.cumsum(glen) - np.repeat(np.cumsum(gtot) - gtot, np.diff(goff) - 1)
-    nseg = np.diff(goff) - 1
-    gmid = np.where(gtot[gcurve] > 0, (gcum - 0.5 * glen) / np.where(gtot > 0, gtot, 1)[gcurve],
-                    (gidx[gs0] + 0.5) / nseg[gcurve])
-    gkey = gcurve + gmid  # sorted: guide by guide, increasing along each
-    gfirst = np.cumsum(nseg) - nseg
-    # the render segments
-    rcurve, _, rs0 = layout(roff)
-    v = rp[rs0 + 1] - rp[rs0]
-    rlen = np.linalg.norm(v, axis=1)
-    sc = rcurve[rs0]
-    rtot = np.bincount(sc, rlen, minlength=Rn)
-    rn = np.diff(roff) - 1
-    rcum = np.cumsum(rlen) - np.repeat(np.cumsum(rtot) - rtot, rn)
-    _, ridx, _ = layout(roff)
-    s = np.where(rtot[sc] > 0, (rcum - 0.5 * rlen) / np.where(rtot > 0, rtot, 1)[sc],
-                 (ridx[rs0] + 0.5) / rn[sc])
-    g = weights.index[sc]  # (S, k)
-    w = weights.weight[sc]
-    pos = np.searchsorted(gkey, g + s[:, None], "right") - 1 - gfirst[g]
-    j0 = np.clip(pos, 0, nseg[g] - 1)
-    j1 = np.minimum(j0 + 1, nseg[g] - 1)
-    m0 = gmid[gfirst[g] + j0]
-    m1 = gmid[gfirst[g] + j1]
-    t = np.where(j1 > j0, np.clip((s[:, None] - m0) / np.where(j1 > j0, m1 - m0, 1), 0, 1), 0)
-    q0 = q_seg[gfirst[g] + j0]
-    q1 = q_seg[gfirst[g] + j1]
-    q1 = np.where(np.sum(q0 * q1, -1, keepdims=True) < 0, -q1, q1)
-    qs = q0 * (1 - t)[..., None] + q1 * t[..., None]
-    qs /= np.linalg.norm(qs, axis=-1, keepdims=True)
-    qb = _blend(qs, w)  # (S, 4)
-    # roots: blended guide root frames
-    rroots = rp[roff[:-1]]
-    if render_roots_now is None:
-        gi, wi = weights.index, weights.weight
-        groot_r, groot_n = gr[goff[:-1]], gn[goff[:-1]]
-        cand = groot_n[gi] + _qrot(q_root[gi], rroots[:, None] - groot_r[gi])
-        new_roots = np.einsum("rk,rki->ri", wi, cand)
-    else:
-        new_roots = as_points(render_roots_now, "render_roots_now")
-        if new_roots.shape != (Rn, 3):
-            raise InputError(f"render_roots_now must have shape ({Rn}, 3)")
-    step = np.zeros_like(rp)
-    step[rs0 + 1] = _qrot(qb, v)
-    step[roff[:-1]] = new_roots
-    return segmented_cumsum(step, roff)
+    deformer = weights._deformer
+    if deformer is None or not deformer.matches(render_ref_points, render_offsets,
+                                                guides_ref_points, guide_offsets, weights):
+        weights._deformer = None  # never keep a stale one behind an error
+        deformer = GroomDeformer(render_ref_points, render_offsets, guides_ref_points,
+                                 guide_offsets, weights)
+        weights._deformer = deformer
+    return deformer.deform(guides_now_points, render_roots_now)
 
 
 def clearance_pass(render_points, render_offsets, colliders, settings=None, growth=None):
@@ -427,7 +462,11 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     Render curves that still pass through a collider after
     :func:`deform_groom` (between the guides) are resolved by the core's
     solver with a fresh state (Stiff mode by default: minimal rotation at
-    the root, shape kept).
+    the root, shape kept). Only the curves whose bounding box meets a
+    collider's bounds go to the solver: the others can neither cross a
+    collider nor have their root inside one, so the solver would return them
+    unchanged and FREE (a curve's result never depends on the other curves
+    solved with it: the same output as solving them all).
 
     Parameters
     ----------
@@ -450,10 +489,73 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     pts, off = check_curves(render_points, render_offsets, "render_points")
     if isinstance(colliders, Collider):
         colliders = [colliders]
-    solver = Solver(off, Settings(mode="stiff") if settings is None else settings)
-    res = solver.step(pts, list(colliders), growth=growth)
-    out = np.asarray(res.points, np.float64)
-    changed = np.any(out != pts, axis=1)
-    curve = np.repeat(np.arange(len(off) - 1), np.diff(off))
-    n_fixed = int(np.count_nonzero(np.bincount(curve, changed, minlength=len(off) - 1)))
-    return out, res.status, n_fixed
+    colliders = list(colliders)
+    settings = Settings(mode="stiff") if settings is None else settings
+    R = len(off) - 1
+    reach = _reaching(pts, off, colliders, settings)
+    if R and not reach.any():
+        reach[0] = True  # (one curve, unchanged: the solver still checks its other inputs)
+    if R == 0 or reach.mean() > _CLEARANCE_ALL:  # (gathering would cost more than it saves)
+        res = Solver(off, settings).step(pts, colliders, growth=growth)
+        out = np.asarray(res.points, np.float64)
+        changed = np.any(out != pts, axis=1)
+        curve = np.repeat(np.arange(R), np.diff(off))
+        return out, res.status, int(np.count_nonzero(np.bincount(curve, changed, minlength=R)))
+    out = pts.copy()
+    status = np.zeros(R, np.int8)
+    status[_degenerate(pts, off, ~reach)] = Status.INVALID  # as the solver marks them
+    idx = np.flatnonzero(reach)
+    sizes = np.diff(off)[idx]
+    rows = np.repeat(off[idx] - (np.cumsum(sizes) - sizes), sizes) + np.arange(int(sizes.sum()))
+    sub_off = np.concatenate([[0], np.cumsum(sizes)])
+    res = Solver(sub_off, settings).step(pts[rows], colliders, growth=growth)
+    sub = np.asarray(res.points, np.float64)
+    out[rows] = sub
+    status[idx] = res.status
+    changed = np.any(sub != pts[rows], axis=1)
+    curve = np.repeat(np.arange(len(idx)), sizes)
+    n_fixed = int(np.count_nonzero(np.bincount(curve, changed, minlength=len(idx))))
+    return out, status, n_fixed
+
+
+def _degenerate(pts, off, which):
+    """The solver's zero-length segment rule (``tolerances.ZERO_SEGMENT_REL``) on
+    the curves ``which`` (bool (R,)): culled curves are INVALID as they would be
+    in the solver. Returns (R,) bool."""
+    d = np.diff(pts, axis=0)
+    L = np.sqrt(np.einsum("ij,ij->i", d, d))
+    _, _, s0 = layout(off)
+    L = L[s0]
+    nseg = np.diff(off) - 1
+    first = np.cumsum(nseg) - nseg
+    total = np.add.reduceat(L, first) if len(L) else np.zeros(0)
+    short = np.minimum.reduceat(L, first) if len(L) else np.zeros(0)
+    return which & ~(short > tol.ZERO_SEGMENT_REL * total)
+
+
+def _reaching(pts, off, colliders, settings):
+    """(R,) bool: curves whose bounding box meets the (offset) bounds of a collider.
+
+    The box is grown by a relative margin far above the solver's ray
+    extension (``tolerances.RAY_EXTEND_ULPS`` float32 ulps), so every curve
+    the solver could touch is kept.
+    """
+    R = len(off) - 1
+    n = uniform_size(off)
+    if n:  # column by column: reductions over 8 CVs are slow
+        P3 = pts.reshape(R, n, 3)
+        lo, hi = P3[:, 0].copy(), P3[:, 0].copy()
+        for j in range(1, n):
+            np.minimum(lo, P3[:, j], out=lo)
+            np.maximum(hi, P3[:, j], out=hi)
+    else:
+        lo = np.minimum.reduceat(pts, off[:-1], axis=0)
+        hi = np.maximum.reduceat(pts, off[:-1], axis=0)
+    reach = np.zeros(R, bool)
+    for c in colliders:
+        if not isinstance(c, Collider) or c.empty:
+            continue  # (the solver reports a wrong type)
+        blo, bhi = c.bounds_world(c.effective_offset(settings.collision_offset))
+        pad = 1e-4 * (float(np.linalg.norm(bhi - blo)) + float(np.abs(np.r_[blo, bhi]).max()))
+        reach |= ((lo <= bhi + pad) & (hi >= blo - pad)).all(1)
+    return reach

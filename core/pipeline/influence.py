@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ._curves import as_points, check_curves
+from ._curves import as_points, check_curves, row_norm
 
 
 def region_of_influence(points, offsets, displaced, distance, margin=0.99):
@@ -58,24 +58,22 @@ def region_of_influence(points, offsets, displaced, distance, margin=0.99):
     disp = as_points(displaced, "displaced")
     if disp.shape != pts.shape:
         raise InputError(f"displaced has shape {disp.shape}, expected {pts.shape}")
-    bad = ~np.isfinite(disp).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
+    if not np.isfinite(disp).all():
+        i = int(np.argmax(~np.isfinite(disp).all(axis=1)))
         c = int(np.searchsorted(off, i, "right") - 1)
         raise InputError(f"displaced: point {i} (curve {c}) is not finite")
     d = np.asarray(distance, np.float64)
     if d.shape != (len(pts),):
         raise InputError(f"distance must have shape ({len(pts)},), got {d.shape}")
-    bad = np.isnan(d) | (d < 0)
-    if bad.any():
-        i = int(np.argmax(bad))
+    if not (d >= 0).all():  # NaN compares false
+        i = int(np.argmax(~(d >= 0)))
         c = int(np.searchsorted(off, i, "right") - 1)
         raise InputError(f"distance of point {i} (curve {c}) must be >= 0, got {d[i]}")
     margin = float(margin)
     if not 0 < margin <= 1:
         raise InputError(f"margin must be in (0, 1], got {margin}")
     u = disp - pts
-    L = np.linalg.norm(u, axis=1)
+    L = row_norm(u)
     limit = margin * d
     over = L > limit
     scale = np.where(over, limit / np.where(over, L, 1.0), 1.0)

@@ -78,8 +78,24 @@ def wind_noise(x, t, seed=0, scale=1.0, frequency=1.0, channels=4):
     k = dirs * (2 * np.pi / scale) * rng.uniform(0.5, 1.5, n)[:, None]
     f = 2 * np.pi * frequency * rng.uniform(0.5, 1.5, n)
     phase = rng.uniform(0, 2 * np.pi, n)
-    arg = x @ k.T + (f * t + phase)[None, :]
-    return np.sin(arg).reshape(len(x), channels, _WAVES).sum(-1) * math.sqrt(2.0 / _WAVES)
+    # one contiguous row per wave (long passes), summed wave by wave per channel
+    xt = np.ascontiguousarray(np.asarray(x, np.float64).T)
+    arg = np.empty((n, len(x)))
+    for i in range(n):
+        a = arg[i]
+        np.multiply(xt[0], k[i, 0], out=a)
+        a += xt[1] * k[i, 1]
+        a += xt[2] * k[i, 2]
+        a += f[i] * t + phase[i]
+    np.sin(arg, out=arg)
+    out = np.empty((len(x), channels))
+    for c in range(channels):
+        w = arg[c * _WAVES:(c + 1) * _WAVES]
+        acc = w[0] + w[1]
+        for j in range(2, _WAVES):
+            acc += w[j]
+        out[:, c] = acc
+    return out * math.sqrt(2.0 / _WAVES)
 
 
 def wind(points, offsets, frame, direction=(1.0, 0.0, 0.0), strength=0.1, frequency=0.5,

@@ -229,6 +229,7 @@ def run():
     pkg = sys.modules[ADDON]
     registry = sys.modules[ADDON + ".operators.registry"]
     bake = sys.modules[ADDON + ".operators.bake"]
+    ops_bake = sys.modules[ADDON + ".operators.ops_bake"]  # the modal bake's PROGRESS
     core = sys.modules[ADDON + ".core"]
     step("backend", embree_available=bool(core.embree_available()),
          embree_error=core.embree_error(), addon_version=getattr(pkg, "__name__", ""))
@@ -291,12 +292,26 @@ def run():
         bpy.ops.screen.animation_cancel(restore_frame=False)
     bpy.app.handlers.frame_change_post.remove(on_frame)
     t_rigid = next((t for f, t in timeline if f >= 12), wall)
+    rt = registry.get_runtime(fur, create=False)
     step("play", played_to=scene.frame_current, play_wall_s=round(wall, 2),
          fps_rigid=round(11 / max(t_rigid, 1e-6), 2),
          fps_deforming=round(12 / max(wall - t_rigid, 1e-6), 2),
-         statuses={str(k): v for k, v in sorted(statuses.items())})
+         statuses={str(k): v for k, v in sorted(statuses.items())},
+         cached_after_play=sorted(rt.memory.frames) if rt else None)
     yield 2.0
     shot("2_panel_after_playback")
+
+    # 4b. the arrow keys (screen.frame_offset: a depsgraph update of the new frame comes
+    # before its frame handlers) over the cached frames: each is shown from the cache
+    scrub = []
+    for delta in (-1, -1, -1, 1):
+        with override():
+            bpy.ops.screen.frame_offset(delta=delta)
+        yield 0.3
+        rt = registry.get_runtime(fur, create=False)
+        scrub.append({"frame": scene.frame_current, "source": rt.stats.get("source"),
+                      "cached": len(rt.memory), "status": list(registry.status_for(fur))})
+    step("scrub", scrub=scrub)
 
     # 5. zero crossings on a few frames (independent oracle: Blender's BVH)
     cross = {}
@@ -318,7 +333,7 @@ def run():
     t0 = time.perf_counter()
     seen = []
     while time.perf_counter() - t0 < 300:
-        prog = bake.PROGRESS.get(scene.name)
+        prog = ops_bake.PROGRESS.get(scene.name)
         seen.append(prog)
         if prog and prog[0] >= 5:
             break
@@ -327,18 +342,18 @@ def run():
         yield 0.1
     yield 0.2
     shot("3_panel_baking_progress")
-    prog_before_esc = bake.PROGRESS.get(scene.name)
+    prog_before_esc = ops_bake.PROGRESS.get(scene.name)
     # a real key press: XTEST through the X server, to the window under the pointer
     xd = subprocess.run(["xdotool", "mousemove", "800", "450", "key", "Escape"],
                         capture_output=True, text=True)
     t1 = time.perf_counter()
-    while bake.PROGRESS.get(scene.name) and time.perf_counter() - t1 < 30:
+    while ops_bake.PROGRESS.get(scene.name) and time.perf_counter() - t1 < 30:
         yield 0.1
     directory = bake.bake_directory(fur)
     files_after_esc = sorted(os.path.basename(p) for p in glob.glob(os.path.join(directory, "*")))
     step("bake_esc", progress_seen=[p for p in seen if p][-3:], progress_before_esc=prog_before_esc,
          xdotool_rc=xd.returncode, xdotool_err=xd.stderr.strip(),
-         running_after_esc=bool(bake.PROGRESS.get(scene.name)),
+         running_after_esc=bool(ops_bake.PROGRESS.get(scene.name)),
          baked_after_esc=bool(fur.furcollide.is_baked), files_after_esc=files_after_esc)
     yield 1.5
     shot("4_panel_after_esc")

@@ -118,21 +118,26 @@ def test_modal_bake_shows_progress_and_esc_cancels(session):
     assert len(r["files_done"]) == 24
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug (operators/runtime.py, playback cache): in the UI, playback fires "
-    "depsgraph_update_post with the animated colliders' transform/geometry updates; "
-    "on_depsgraph_update_post takes them for edits and invalidates the cache every frame, "
-    "so playing never steps past the start frame ('Frame N is not cached: holding'). The "
-    "bpy module's frame_set fires no depsgraph_update_post, so only this lane sees it.",
-)
 def test_playback_steps_every_frame(session):
+    """Playing fires a depsgraph update with the animated colliders when it starts:
+    it is not an edit, so every frame is solved and cached (it used to drop the cache,
+    and every frame after the first said 'not cached')."""
     r = session["result"]
     assert r["played_to"] == 24
     bad = {f: s for f, s in r["statuses"].items() if s and s[0] != "INFO"}
     assert not bad, bad
+    assert r["cached_after_play"] == list(range(1, 25))
     for f, c in r["crossings"].items():
         assert c["crossing_curves"] == 0, (f, c)
+
+
+def test_arrow_keys_show_cached_frames(session):
+    """The arrow keys fire a depsgraph update of the new frame before its frame
+    handlers: the frames come from the cache, nothing is dropped."""
+    scrub = session["result"]["scrub"]
+    assert [s["frame"] for s in scrub] == [23, 22, 21, 22], scrub
+    for s in scrub:
+        assert s["source"] == "cache" and s["cached"] == 24 and s["status"][0] == "INFO", s
 
 
 def test_children_from_guides_says_why_without_hair_assets(session):

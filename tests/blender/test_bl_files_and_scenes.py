@@ -67,10 +67,11 @@ def _library_then_new_file(fc, tmp_path):
     return lib, ref
 
 
-def test_an_edit_in_a_scene_the_window_does_not_show_drops_after_its_own_frame(fc):
+def test_an_edit_in_a_scene_the_window_does_not_show_is_seen_at_its_own_frame(fc):
     """The depsgraph check of scene B, while the window shows scene A at another frame,
-    drops B's cached frames after B's current frame (nothing, at its last cached
-    frame), not after A's."""
+    compares B's collider with what B's frame handler saw at B's current frame (6),
+    not at A's: an update that changes nothing keeps B's cache, an edit drops it and
+    names the collider."""
     win = bpy.context.window
     sc_a = bpy.context.scene
     sc_b = bpy.data.scenes.new("B")
@@ -84,10 +85,14 @@ def test_an_edit_in_a_scene_the_window_does_not_show_drops_after_its_own_frame(f
     win.scene = sc_a
     sc_a.frame_set(2)
     assert bpy.context.scene == sc_a and sc_b.frame_current == 6
+    box.data.update()  # re-evaluated, unchanged
+    sc_b.view_layers[0].depsgraph.update()
+    assert sorted(rt.memory.frames) == [1, 2, 3, 4, 5, 6]
     box.data.vertices[0].co.z += 0.01  # an edit of B's collider, seen by B's depsgraph
     box.data.update()
     sc_b.view_layers[0].depsgraph.update()
-    assert sorted(rt.memory.frames) == [1, 2, 3, 4, 5, 6]
+    assert len(rt.memory) == 0
+    assert "Frame 6 is outdated: 'Box' changed shape" in hair.furcollide.status_message
 
 
 def test_moved_blend_with_its_bake_and_without(fc, tmp_path, capsys):

@@ -208,8 +208,8 @@ def test_collider_edited_in_edit_mode_on_a_cached_frame(fc, tmp_path, deform, in
     if in_edit_mode:
         same(play(scene, hair, out, (3, 8, 1), [box]), got)  # leaving edit mode: no change
     else:
-        scene.frame_set(3)
-        outdated(hair, "Frame 3 is outdated", "'Box' changed shape")
+        scene.frame_set(3)  # leaving edit mode dropped the cache (an edit seen at frame 4)
+        outdated(hair, "Frame 3 is not cached", "'Box' changed shape", "Play from frame 1")
         got = play(scene, hair, out, range(1, 9), [box])
     same(got, bake(fc, hair))
 
@@ -293,17 +293,19 @@ def test_growth_surface_moved_on_a_cached_frame(fc, tmp_path):
 
 
 def test_a_setting_changed_mid_shot_then_the_advice_works(fc, tmp_path):
-    """Play in Bend, switch Mode and Collision Offset at frame 5: the step from frame 5's
-    Bend state is refused, and going back to frame 1 as the message says solves the
-    shot with the new settings (frame 1's record has the old ones), never a stale frame."""
+    """Play in Bend, switch Mode and Collision Offset at frame 5: the playback cache is
+    dropped (as Blender's point cache), so no frame is stepped from a Bend state or
+    shown with the old settings, and going back to frame 1 as the message says solves
+    the shot with the new settings."""
     scene, hair, box, out = shot(fc, tmp_path)
     s = hair.furcollide
     before = play(scene, hair, out, range(1, 6), [box])
     s.mode, s.collision_offset = "soft", 0.02
+    outdated(hair, "Frame 5 is outdated", "the settings changed", "go to frame 1")
     scene.frame_set(6)
     outdated(hair, "Play from frame 1")
-    scene.frame_set(3)  # an earlier cached frame: solved with the old settings
-    outdated(hair, "Frame 3 is outdated", "the settings")
+    scene.frame_set(3)  # an earlier frame: it was solved with the old settings
+    outdated(hair, "Frame 3 is not cached", "the settings changed", "Play from frame 1")
     got = play(scene, hair, out, range(1, 9), [box])
     assert not np.array_equal(got[3], before[3])
     same(got, bake(fc, hair))
@@ -321,5 +323,5 @@ def test_collider_added_or_its_options_changed_on_a_cached_frame(fc, tmp_path):
     play(scene, hair, out, range(1, 6), [box, wall])
     hair.furcollide.colliders[1].double_sided = True
     scene.frame_set(2)
-    outdated(hair, "Frame 2 is outdated", "Double Sided or Collision Offset")
+    outdated(hair, "Frame 2 is not cached", "Double Sided or Collision Offset")
     same(play(scene, hair, out, range(1, 9), [box, wall]), bake(fc, hair))

@@ -62,41 +62,101 @@ def test_subframes_and_repeats_do_not_step(fc):
     assert rt.solver_frame == 6
 
 
-def test_setting_change_invalidates_after_current(fc):
+def test_setting_change_drops_the_playback_cache(fc):
+    """Like Blender's point cache: a setting changed mid-shot drops every cached frame
+    (earlier ones too: they were solved with the old value), the shown frame is marked
+    outdated and every frame says why until the start frame is played again."""
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
     rt = fc.registry.get_runtime(hair)
     rec = positions_per_frame(out, range(1, 13))
     bpy.context.scene.frame_set(6)
     hair.furcollide.mode = "stiff"
-    assert sorted(rt.memory.frames) == list(range(1, 7))
-    # an earlier cached frame was solved in the old mode: it is not shown as current
-    bpy.context.scene.frame_set(3)
-    assert hair.furcollide.is_outdated and "settings" in hair.furcollide.status_message
     assert len(rt.memory) == 0
-    assert np.array_equal(fc.positions(out), rec[6])  # the output is left as it was
-    positions_per_frame(out, range(1, 13))
-    # range changes invalidate: a shorter end drops the frames after it...
+    assert hair.furcollide.is_outdated
+    assert hair.furcollide.status_message == (
+        "Frame 6 is outdated: the settings changed. The playback cache is dropped: go to "
+        "frame 1 and play, or press Bake.")
+    for f in (3, 9):  # earlier or later: not shown as current, not stepped
+        bpy.context.scene.frame_set(f)
+        assert hair.furcollide.is_outdated and len(rt.memory) == 0
+        assert "(the settings changed: the playback cache was dropped)" in (
+            hair.furcollide.status_message)
+        assert np.array_equal(fc.positions(out), rec[6])  # the output is left as it was
+    positions_per_frame(out, range(1, 13))  # the advice
+    assert not hair.furcollide.is_outdated and len(rt.memory) == 12
+    # a shorter end keeps the frames inside the new range...
     hair.furcollide.frame_end = 4
     assert sorted(rt.memory.frames) == [1, 2, 3, 4]
     # ... a new start drops everything
     hair.furcollide.frame_start = 2
     assert len(rt.memory) == 0
+    # the thread count changes nothing in the result: the cache stays
+    positions_per_frame(out, range(2, 5))
+    hair.furcollide.threads = 1
+    assert sorted(rt.memory.frames) == [2, 3, 4]
 
 
-def test_mode_change_mid_animation_needs_the_start_frame(fc):
+def clean_run(fc, mode, frames, **settings):
+    """The output per frame of a fresh setup in ``mode`` (a new file, the same shot)."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
+    hair.furcollide.mode = mode
+    for k, v in settings.items():
+        setattr(hair.furcollide, k, v)
+    return positions_per_frame(out, frames)
+
+
+@pytest.mark.parametrize("change", [{"mode": "soft"}, {"recovery_rate": 0.9}],
+                         ids=["mode", "recovery"])
+def test_a_change_mid_animation_needs_the_start_frame_and_the_advice_works(fc, change):
+    """The issue's case: play 1-10 in Stiff, change Mode (or a slider) and play on.
+    No later frame is stepped from the old state or freezes for good: each says the
+    cache was dropped and to play from frame 1, and following that gives exactly a
+    clean play with the new setting, with no resolved curve crossing the box."""
+    hair, box = fc.make_scene()
+    out = fc.setup(hair, [box])
+    s = hair.furcollide
+    s.mode = "stiff"
+    positions_per_frame(out, range(1, 11))
+    for k, v in change.items():
+        setattr(s, k, v)
+    for f in (11, 12):
+        bpy.context.scene.frame_set(f)
+        assert s.is_outdated and "Play from frame 1" in s.status_message, s.status_message
+    got = {}
+    for f in range(1, 13):  # the advice
+        bpy.context.scene.frame_set(f)
+        check_frame(hair, out, [box])
+        got[f] = fc.positions(out).copy()
+    assert not s.is_outdated
+    ref = clean_run(fc, change.get("mode", "stiff"), range(1, 13),
+                    **{k: v for k, v in change.items() if k != "mode"})
+    for f in got:
+        np.testing.assert_array_equal(got[f], ref[f], err_msg=f"frame {f}")
+
+
+@pytest.mark.parametrize("seen", ["signature", "previous-frame-record"])
+def test_a_change_without_an_update_callback_is_not_stepped_from(fc, monkeypatch, seen):
+    """A setting changed where no update callback runs (undo, a driver: here the
+    callback's invalidation is switched off). Whichever check sees it first (the
+    setup's signature, or the record of the cached previous frame the step would
+    start from), frame 7 is not stepped from frame 6's Bend state."""
+    hair, box = fc.make_scene()
+    out = fc.setup(hair, [box])
+    rt = fc.registry.get_runtime(hair)
     positions_per_frame(out, range(1, 7))
+    monkeypatch.setattr(fc.invalidation, "invalidate", lambda *a, **k: None)
     hair.furcollide.mode = "soft"
+    if seen == "previous-frame-record":
+        rt.signature = None  # (as after a shorter frame range)
     bpy.context.scene.frame_set(7)
-    assert hair.furcollide.is_outdated and "another mode" in hair.furcollide.status_message
-    # a non-mode setting continues from the cached state
-    hair.furcollide.mode = "bend"
-    bpy.context.scene.frame_set(6)
-    hair.furcollide.recovery_rate = 0.9
-    bpy.context.scene.frame_set(7)
-    assert not hair.furcollide.is_outdated and hair.furcollide.stat_frame == 7
+    s = hair.furcollide
+    assert s.is_outdated and len(rt.memory) == 0
+    assert "Frame 7 is outdated: the settings changed" in s.status_message, s.status_message
+    positions_per_frame(out, range(1, 8))
+    assert not s.is_outdated and s.status_message == ""
 
 
 def test_mode_change_then_play_from_start(fc):
@@ -128,14 +188,20 @@ def test_deleted_and_renamed_collider(fc):
     rec = positions_per_frame(out, range(6, 13))
     for f in rec:
         assert np.array_equal(rec[f], ref[f]), f
-    # deleting it mid-animation: no error, later frames solved without it
+    # deleting it mid-animation: no error; like any change of the colliders it drops
+    # the playback cache, and the frames from the start frame on are solved without it
     bpy.context.scene.frame_set(5)
     bpy.data.objects.remove(box)
-    for f in range(6, 13):
+    bpy.context.scene.frame_set(6)
+    s = hair.furcollide
+    assert s.is_outdated and "a collider was removed" in s.status_message, s.status_message
+    assert "Play from frame 1" in s.status_message or "go to frame 1" in s.status_message
+    for f in range(1, 13):  # the advice
         bpy.context.scene.frame_set(f)
-        assert hair.furcollide.stat_colliding == 0, f
-        assert hair.furcollide.status_message == ""
-    assert hair.furcollide.colliders[0].object is None
+        assert s.stat_colliding == 0, f
+        assert s.status_message == "" and not s.is_outdated
+    np.testing.assert_array_equal(fc.positions(out), fc.positions(hair))
+    assert s.colliders[0].object is None
 
 
 def test_collider_deleted_in_the_ui_stops_colliding(fc):

@@ -244,3 +244,30 @@ def segment_triangle_distance(p0, p1, a, b, c):
                            segment_segment_distance_rows(p0, p1, b, c),
                            segment_segment_distance_rows(p0, p1, c, a)])
     return np.where(segment_crosses_triangle_rows(p0, p1, a, b, c), 0.0, d)
+
+
+def brute_segments(A, B, V, F):
+    """(S,) exact segment-mesh distance: every segment against every triangle, with the
+    oracle's own segment-triangle distance above (nothing from core)."""
+    S, m = len(A), len(F)
+    si = np.repeat(np.arange(S), m)
+    ti = np.tile(np.arange(m), S)
+    T = np.asarray(V, np.float64)[F]
+    d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
+    return d.reshape(S, m).min(1)
+
+
+def brute_cv(points, offsets, meshes):
+    """(P,) exact per-CV distance (min over the CV's segments and the meshes)."""
+    A, B, _ = segments(points, offsets)
+    seg = np.full(len(A), np.inf)
+    for V, F in meshes:
+        seg = np.minimum(seg, brute_segments(A, B, V, F))
+    out = np.full(len(points), np.inf)
+    k = 0
+    for i in range(len(offsets) - 1):
+        for j in range(offsets[i], offsets[i + 1] - 1):
+            out[j] = min(out[j], seg[k])
+            out[j + 1] = min(out[j + 1], seg[k])
+            k += 1
+    return out

@@ -125,7 +125,7 @@ def test_bad_input():
 
 
 def test_closest_faces_against_brute_force():
-    from core.pipeline.distance import closest_faces
+    from core.pipeline import closest_faces
 
     rng = np.random.default_rng(9)
     V, F = po.icosphere((0.1, 0, 0), 1.0, 2)
@@ -138,3 +138,25 @@ def test_closest_faces_against_brute_force():
     n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     np.testing.assert_allclose(np.einsum("ij,ij->i", P - T[:, 0], n), 0, atol=1e-12)
+
+
+def test_degenerate_faces_follow_the_colliders_rule():
+    """One rule (tolerances.DEGENERATE_AREA_REL, as Collider): a tiny but well-shaped
+    triangle binds (it did not under the old 1e-12 rule); a sliver whose normal float64
+    cannot orient (tolerances.ATTACH_FRAME_MIN_SIN) does not."""
+    from core import Collider
+
+    V, F = po.grid(2.0, 2)
+    s = 3e-7 * 2 * np.sqrt(2)  # edges ~3e-7 of the diagonal: area ~4e-14 diag^2
+    V = np.vstack([V, [[0.3, 0.3, 0.01], [0.3 + s, 0.3, 0.01], [0.3, 0.3 + s, 0.01]]])
+    F = np.vstack([F, [[9, 10, 11]]])
+    Collider(V, F)  # the collider keeps it
+    pts, off = po.pack([np.array([[0.3 + s / 4, 0.3 + s / 4, 0.01], [0.3, 0.3, 0.5]])])
+    b = bind(pts, off, V, F)
+    assert b.face[0] == 8
+    np.testing.assert_allclose(b.apply(V + 1.0), pts + 1.0, atol=1e-9)
+    # a sliver: an angle of ~1e-13 rad
+    V2 = np.vstack([V[:9], [[0.5, 0.5, 0], [1.5, 0.5, 0], [1.0, 0.5 + 1e-13, 0]]])
+    with pytest.raises(ColliderError, match="face 8 .* degenerate"):
+        bind(pts, off, V2, F)
+    bind(pts, off, V2, F, drop_degenerate=True)

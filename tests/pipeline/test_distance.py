@@ -1,4 +1,5 @@
-"""Fur Collider Distance: exact near colliders, never above the true distance."""
+"""Fur Collider Distance, exact search (``exact=True``): exact near colliders, never above
+the true distance. The default node field: tests/pipeline/test_distance_field.py."""
 
 from __future__ import annotations
 
@@ -48,7 +49,7 @@ def test_matches_brute_force(seed, n_cvs):
         steps = rng.normal(0, 0.25, (n_cvs - 1, 3)) + [0, 0, 0.3]
         curves.append(np.vstack([root, root + np.cumsum(steps, 0)]))
     pts, off = po.pack(curves)
-    d, exact = collider_distance(pts, off, [Collider(V, F)], return_exact=True)
+    d, exact = collider_distance(pts, off, [Collider(V, F)], return_exact=True, exact=True)
     V32 = V.astype(np.float32).astype(np.float64)  # what the Collider stores
     up, slack = _oracle_cv(pts, off, V32, F)
     assert (d <= up + 1e-9).all(), "must never overestimate"
@@ -97,8 +98,8 @@ def test_collider_matrix_equals_world_mesh():
     pts, off = po.fur_on_plane(rng, 20, 5, 1.5)
     col = Collider(V, F, matrix=M)
     Vw = V.astype(np.float32).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
-    np.testing.assert_allclose(collider_distance(pts, off, [col]),
-                               collider_distance(pts, off, [(Vw, F)]), atol=1e-9)
+    np.testing.assert_allclose(collider_distance(pts, off, [col], exact=True),
+                               collider_distance(pts, off, [(Vw, F)], exact=True), atol=1e-9)
 
 
 def test_several_colliders_take_the_minimum_and_none_is_inf():
@@ -106,9 +107,12 @@ def test_several_colliders_take_the_minimum_and_none_is_inf():
     pts, off = po.fur_on_plane(rng, 10, 4, 1.0)
     a = po.icosphere((0, 0, 2), 0.5, 1)
     b = po.icosphere((0.5, 0, 1.5), 0.3, 1)
-    da = collider_distance(pts, off, [a])
-    db = collider_distance(pts, off, [b])
-    np.testing.assert_array_equal(collider_distance(pts, off, [a, b]), np.minimum(da, db))
+    for exact in (True, False):
+        da = collider_distance(pts, off, [a], exact=exact)
+        db = collider_distance(pts, off, [b], exact=exact)
+        # (the field: b's search is capped by a's distances, another window)
+        np.testing.assert_allclose(collider_distance(pts, off, [a, b], exact=exact),
+                                   np.minimum(da, db), rtol=1e-12, atol=0)
     assert np.isinf(collider_distance(pts, off, [])).all()
     assert np.isinf(collider_distance(pts, off, [Collider(np.zeros((0, 3)), [])])).all()
 
@@ -134,7 +138,7 @@ def test_never_overestimates_near_or_far(seed, spread):
         steps = rng.normal(0, 0.1, (3, 3))
         curves.append(np.vstack([root, root + np.cumsum(steps, 0)]))
     pts, off = po.pack(curves)
-    d, exact = collider_distance(pts, off, [(V, F)], return_exact=True)
+    d, exact = collider_distance(pts, off, [(V, F)], return_exact=True, exact=True)
     up, slack = _oracle_cv(pts, off, V, F, 41)
     assert (d <= up + 1e-9).all()
     assert (d[exact] >= up[exact] - slack[exact] - 1e-9).all()
@@ -147,7 +151,7 @@ def test_never_overestimates_near_or_far(seed, spread):
 def test_huge_and_tiny_triangles_in_one_collider():
     """A ground plane of 2 huge triangles next to a fine sphere (the big-triangle list)."""
     pts, off, V, F = po.sphere_and_ground()
-    d, exact = collider_distance(pts, off, [(V, F)], return_exact=True)
+    d, exact = collider_distance(pts, off, [(V, F)], return_exact=True)  # (too big a field)
     up, slack = _oracle_cv(pts, off, V, F, 101)
     assert exact.all()
     assert (d <= up + 1e-9).all() and (d >= up - slack - 1e-9).all()

@@ -1,4 +1,5 @@
-"""Collider Distance with a cap (``max_distance``): exactly min(true distance, cap)."""
+"""Collider Distance with a cap (``max_distance``), exact search (``exact=True``): exactly
+min(true distance, cap). The default node field: tests/pipeline/test_distance_field.py."""
 
 from __future__ import annotations
 
@@ -15,33 +16,6 @@ from core.pipeline import collider_distance, segment_mesh_distance, segment_tria
 
 PROP = settings(max_examples=examples(12))
 TOL = 1e-9
-
-
-def brute_segments(A, B, V, F):
-    """(S,) exact segment-mesh distance: every segment against every triangle, with the
-    oracle's own segment-triangle distance (``pipe_oracle``, nothing from core)."""
-    S, m = len(A), len(F)
-    si = np.repeat(np.arange(S), m)
-    ti = np.tile(np.arange(m), S)
-    T = np.asarray(V, np.float64)[F]
-    d = po.segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
-    return d.reshape(S, m).min(1)
-
-
-def brute_cv(points, offsets, meshes):
-    """(P,) exact per-CV distance (min over the CV's segments and the meshes)."""
-    A, B, _ = po.segments(points, offsets)
-    seg = np.full(len(A), np.inf)
-    for V, F in meshes:
-        seg = np.minimum(seg, brute_segments(A, B, V, F))
-    out = np.full(len(points), np.inf)
-    k = 0
-    for i in range(len(offsets) - 1):
-        for j in range(offsets[i], offsets[i + 1] - 1):
-            out[j] = min(out[j], seg[k])
-            out[j + 1] = min(out[j + 1], seg[k])
-            k += 1
-    return out
 
 
 def _scene(rng, n_curves=10, n_cvs=5, spread=1.2):
@@ -158,15 +132,16 @@ def test_segment_triangle_distance_against_sampling():
 def test_capped_is_min_of_brute_force_and_cap(seed, cap, spread):
     rng = np.random.default_rng(seed)
     V, F, pts, off = _scene(rng, spread=spread)
-    truth = brute_cv(pts, off, [(V, F)])
-    d, exact = collider_distance(pts, off, [(V, F)], max_distance=cap, return_exact=True)
+    truth = po.brute_cv(pts, off, [(V, F)])
+    d, exact = collider_distance(pts, off, [(V, F)], max_distance=cap, return_exact=True,
+                                 exact=True)
     assert (d <= truth + TOL).all(), "never above the truth"
     assert (d <= cap).all()
     want = np.minimum(truth, cap)
     np.testing.assert_allclose(d[exact], want[exact], rtol=0, atol=TOL)
     assert exact.all()  # small meshes: every search settles
     # the uncapped result, capped afterwards, is the same where it is exact
-    du, eu = collider_distance(pts, off, [(V, F)], return_exact=True)
+    du, eu = collider_distance(pts, off, [(V, F)], return_exact=True, exact=True)
     np.testing.assert_allclose(d[eu], np.minimum(du, cap)[eu], rtol=0, atol=TOL)
 
 
@@ -184,9 +159,9 @@ def test_capped_collider_with_matrix(seed, cap, uniform):
     M[:3, 3] = rng.uniform(-0.3, 0.3, 3)
     col = Collider(V, F, matrix=M)
     Vw = V.astype(np.float32).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
-    truth = brute_cv(pts, off, [(Vw, F)])
+    truth = po.brute_cv(pts, off, [(Vw, F)])
     for _ in range(2):  # the second call may reuse cached structures
-        d = collider_distance(pts, off, [col], max_distance=cap)
+        d = collider_distance(pts, off, [col], max_distance=cap, exact=True)
         np.testing.assert_allclose(d, np.minimum(truth, cap), rtol=0, atol=TOL)
         assert (d <= truth + TOL).all()
 
@@ -196,11 +171,11 @@ def test_several_colliders_with_cap():
     pts, off = po.fur_on_plane(rng, 12, 5, 1.0)
     a = po.icosphere((0, 0, 1.2), 0.5, 2)
     b = po.icosphere((0.5, 0, 0.9), 0.3, 2)
-    truth = brute_cv(pts, off, [a, b])
+    truth = po.brute_cv(pts, off, [a, b])
     for cap in (0.05, 0.2, 0.6):
-        d = collider_distance(pts, off, [a, Collider(*b)], max_distance=cap)
+        d = collider_distance(pts, off, [a, Collider(*b)], max_distance=cap, exact=True)
         Vb = b[0].astype(np.float32).astype(np.float64)
-        truth = brute_cv(pts, off, [a, (Vb, b[1])])
+        truth = po.brute_cv(pts, off, [a, (Vb, b[1])])
         np.testing.assert_allclose(d, np.minimum(truth, cap), rtol=0, atol=TOL)
 
 
@@ -218,8 +193,8 @@ def test_moved_and_deformed_collider_is_not_stale():
         if step == 2:
             col.vertices = V * [1.0, 1.2, 0.8]
         Vw = col.vertices.astype(np.float64) + M[:3, 3]
-        truth = brute_cv(pts, off, [(Vw, F)])
-        d = collider_distance(pts, off, [col], max_distance=cap)
+        truth = po.brute_cv(pts, off, [(Vw, F)])
+        d = collider_distance(pts, off, [col], max_distance=cap, exact=True)
         np.testing.assert_allclose(d, np.minimum(truth, cap), rtol=0, atol=TOL)
 
 
@@ -258,7 +233,7 @@ def test_invalid_cap_raises(bad):
 def test_capped_huge_and_tiny_triangles():
     """A ground plane of 2 huge triangles next to a fine sphere (triangles in no cell)."""
     pts, off, V, F = po.sphere_and_ground()
-    truth = brute_cv(pts, off, [(V, F)])
+    truth = po.brute_cv(pts, off, [(V, F)])
     for cap in (0.02, 0.1, 0.3):
         d, exact = collider_distance(pts, off, [(V, F)], max_distance=cap, return_exact=True)
         assert exact.all()
@@ -282,10 +257,10 @@ def test_capped_fine_mesh_many_curves():
         col.matrix = M
         moved = pts + 0.01 * step
         Vw = V.astype(np.float32).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
-        truth = brute_cv(moved, off, [(Vw, F)])
+        truth = po.brute_cv(moved, off, [(Vw, F)])
         for cap in (0.01, 0.06):
             d, exact = collider_distance(moved, off, [col], max_distance=cap,
-                                         return_exact=True)
+                                         return_exact=True, exact=True)
             assert (d <= truth + TOL).all()
             np.testing.assert_allclose(d[exact], np.minimum(truth, cap)[exact], rtol=0,
                                        atol=TOL)
@@ -311,8 +286,8 @@ def test_float32_rigid_matrix_keeps_the_cache_and_never_overestimates():
         assert built is None or index is built
         built = index
         Vw = V.astype(np.float32).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
-        truth = brute_cv(pts, off, [(Vw, F)])
-        d = collider_distance(pts, off, [col], max_distance=0.3)
+        truth = po.brute_cv(pts, off, [(Vw, F)])
+        d = collider_distance(pts, off, [col], max_distance=0.3, exact=True)
         want = np.minimum(truth, 0.3)
         assert (d <= truth + TOL).all()
         np.testing.assert_allclose(d, want, rtol=1e-6, atol=TOL)
