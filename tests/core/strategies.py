@@ -34,13 +34,13 @@ def directions(draw):
 
 
 @st.composite
-def curves(draw, extent=1.0, n_cvs=(2, 10), length=(0.3, 1.2)):
+def curves(draw, extent=1.0, n_cvs=(2, 10), length=(0.3, 1.2), curl_max=0.2):
     """One curve rooted on z = 0 growing up: straight or curly (shrinks to straight)."""
     root = np.array([draw(floats(-extent, extent)), draw(floats(-extent, extent)), 0.0])
     lean = np.array([draw(floats(-0.6, 0.6)), draw(floats(-0.6, 0.6)), 1.0])
     L = draw(floats(*length))
     n = draw(st.integers(*n_cvs))
-    curl = draw(st.just(0.0) | floats(0.0, 0.2))
+    curl = draw(st.just(0.0) | floats(0.0, curl_max))
     if curl == 0.0:
         return scenes.straight_curve(root, lean, L, n)
     return scenes.curly_curve(root, lean, L, n, amplitude=curl, turns=draw(floats(0.3, 1.5)),
@@ -120,3 +120,20 @@ def fur_scenes(draw, max_curves=20, max_colliders=2, kinds=COLLIDER_KINDS, dtype
 def rigid_motions(draw, n):
     """``n`` drawn velocities (3,) for rigid collider motion (shrink toward still)."""
     return [np.array([draw(floats(-0.2, 0.2)) for _ in range(3)]) for _ in range(n)]
+
+
+@st.composite
+def sphere_scenes(draw, max_curves=20, extent=0.6, n_cvs=(3, 10),
+                  center=((-0.3, 0.3), (-0.3, 0.3), (0.7, 1.1)), radius=(0.25, 0.5),
+                  contact=True, curl_max=0.2, segments=(24, 12)):
+    """(points, offsets, V, F, centre, radius): drawn fur under a UV sphere (24 x 12) at
+    a drawn centre and radius; with ``contact`` some curve crosses it."""
+    cs = draw(st.lists(curves(extent=extent, n_cvs=n_cvs, curl_max=curl_max), min_size=1,
+                       max_size=max_curves))
+    pts, offs = scenes.pack(cs)
+    c = np.array([draw(floats(*lim)) for lim in center])
+    r = draw(floats(*radius))
+    V, F = scenes.uv_sphere(c, r, *segments)
+    if contact:
+        assume(oracle.segments_hit_mesh(pts, offs, V, F).any())
+    return pts, offs, V, F, c, r
