@@ -287,3 +287,203 @@ def test_an_unreadable_frame_file_has_no_record(tmp_path, data):
     exception: the bake's resume and the frame rules call it on any file."""
     (tmp_path / "frame_000005.npz").write_bytes(data)
     assert fc.read_inputs(str(tmp_path), 5) is None
+
+
+# ------------------------------------------- gaps make mutate found (second run)
+def test_topology_key_of_no_offsets_at_all():
+    """An empty offsets array (no layout yet) has a key too, with 0 points."""
+    assert fc.topology_key(np.zeros(0, np.int32)) == (-1, 0, zlib.crc32(b""))
+
+
+def test_curves_with_any_on_a_ragged_layout_of_uniform_size():
+    """Curves of 1, 3 and 2 points: 6 points = 3 curves x 2, but not 2 points each, so
+    the row-wise shortcut for uniform layouts must not be taken."""
+    offsets = np.array([0, 1, 4, 6], np.int32)
+    for p in range(6):
+        flags = np.eye(1, 6, p, dtype=bool)[0]
+        np.testing.assert_array_equal(fc.curves_with_any(flags, offsets),
+                                      _brute_any(flags, offsets), err_msg=str(p))
+
+
+def test_digest_of_exactly_the_small_size_is_pinned():
+    """4,096 bytes is the last size hashed as plain bytes (pinned, like the others:
+    a bake's records must not change)."""
+    assert fc._SMALL == 4096
+    assert fc.digest(np.arange(4096, dtype=np.uint8)) == 18102430450357302631
+    assert fc.digest(np.arange(1024, dtype=np.float32)) == 17651677044420214483
+    assert fc.digest(np.arange(4095, dtype=np.uint8)) == 15523956259463418600
+
+
+_UNPICKLED = []
+
+
+def _unpickled_marker():
+    _UNPICKLED.append(True)
+    return "unpickled"
+
+
+class _Marker:
+    def __reduce__(self):
+        return (_unpickled_marker, ())
+
+
+def test_bake_files_are_never_unpickled(tmp_path):
+    """Module doc: "Files are read with allow_pickle=False". A frame file with object
+    arrays (a pickle that would run code) is refused by every reader; nothing runs."""
+    d = str(tmp_path)
+    evil = np.array([_Marker()], dtype=object)
+    offsets = np.array([0, 2], np.int32)
+    with open(fc.frame_path(d, 1), "wb") as fh:
+        np.savez(fh, format=np.array([1, 1]), points=np.zeros((2, 3), np.float32),
+                 status=np.zeros(1, np.int8), offsets=offsets, state__angle=evil,
+                 attr__d=evil, inputs=evil)
+    with pytest.raises(ValueError, match="allow_pickle"):
+        fc.read_frame(d, 1)
+    with pytest.raises(ValueError, match="allow_pickle"):
+        fc.read_attributes(d, 1)
+    assert fc.read_inputs(d, 1) is None
+    assert _UNPICKLED == []
+
+
+def test_a_bake_file_stores_the_sparse_state_and_int32_offsets(tmp_path):
+    """write_frame with a SparseState stores the rows that differ (read_frame's keys
+    idx__/val__/full__), decode_state gives the state back exactly, names with double
+    underscores included; without a state nothing is stored; offsets are int32
+    whatever they were given as."""
+    d = str(tmp_path)
+    base = {"angle": np.zeros(100), "x__y": np.zeros((100, 3)), "meta": np.zeros(3)}
+    sp = fc.SparseState(base)
+    state = {k: v.copy() for k, v in base.items()}
+    state["angle"][5] = 2.0
+    state["x__y"][7] = 1.0
+    state["meta"][0] = 9.0
+    offsets = np.array([0, 2, 4], np.int64)
+    fc.write_frame(d, 1, np.zeros((4, 3)), np.zeros(2), offsets, state, sparse=sp)
+    _, _, offs, stored = fc.read_frame(d, 1)
+    assert offs.dtype == np.int32 and offs.tolist() == [0, 2, 4]
+    assert sorted(stored) == ["full__meta", "idx__angle", "idx__x__y", "val__angle",
+                              "val__x__y"], sorted(stored)
+    assert stored["idx__angle"].tolist() == [5] and stored["idx__x__y"].tolist() == [7]
+    back = fc.decode_state(stored, sp)
+    assert sorted(back) == sorted(state)
+    for k in state:
+        np.testing.assert_array_equal(back[k], state[k], err_msg=k)
+    fc.write_frame(d, 2, np.zeros((4, 3)), np.zeros(2), offsets, None, sparse=sp)
+    assert fc.read_frame(d, 2)[3] == {}
+
+
+def test_sparse_state_names_may_hold_colons():
+    """In memory, any state name comes back (the kind is split off at the first ':')."""
+    base = {"a:b": np.zeros(100), "c": np.zeros(100)}
+    sp = fc.SparseState(base)
+    state = {"a:b": np.arange(100.0), "c": np.zeros(100), "d:e:f": np.ones(3)}
+    back = sp.decode(sp.encode(state))
+    assert sorted(back) == sorted(state)
+    for k in state:
+        np.testing.assert_array_equal(back[k], state[k], err_msg=k)
+
+
+@pytest.mark.xfail(strict=True, raises=KeyError, reason="bug (core/framecache.py "
+                   "write_frame/decode_state): write_frame turns every ':' of a sparse key "
+                   "into '__', decode_state turns back only the first, so a state name "
+                   "with ':' comes back renamed ('a:b' -> 'a__b', KeyError). The solver's "
+                   "own names have no ':'; SparseState is public API")
+def test_a_state_name_with_a_colon_survives_a_bake_file(tmp_path):
+    sp = fc.SparseState({"a:b": np.zeros(100)})
+    fc.write_frame(str(tmp_path), 1, np.zeros((2, 3)), np.zeros(1), np.array([0, 2]),
+                   {"a:b": np.ones(100)}, sparse=sp)
+    back = fc.decode_state(fc.read_frame(str(tmp_path), 1)[3], sp)
+    np.testing.assert_array_equal(back["a:b"], np.ones(100))
+
+
+def test_memory_cache_put_and_get_keep_their_documented_types():
+    """put: the exact message for a shape mismatch; a state without a SparseState
+    baseline, or no state, is not kept (state() None), never an error; what a frame
+    stores and get returns: int32 curves, float32 points, int8 status."""
+    mem = fc.MemoryCache()
+    inp, out, status, offsets = _frame(changed=(0, 2), value=3.0)
+    with pytest.raises(ValueError, match=r"^cache: output and input positions differ in "
+                       r"shape$"):
+        mem.put(1, inp, out[:-1], status, offsets, None, {})
+    state = {"angle": np.ones(4)}
+    mem.put(1, inp, out, status, offsets, state, {})  # no baseline yet
+    assert mem.frames[1].state is None and mem.state(1) is None
+    mem.sparse = fc.SparseState({"angle": np.zeros(4)})
+    mem.put(2, inp, out, status, offsets, None, {})  # a baseline, no state
+    assert mem.frames[2].state is None and mem.state(2) is None
+    mem.put(3, inp, out, status, offsets, state, {})
+    np.testing.assert_array_equal(mem.state(3)["angle"], state["angle"])
+    fr = mem.frames[3]
+    assert fr.curves.dtype == np.int32 and fr.points.dtype == np.float32
+    assert fr.status_idx.dtype == np.int32 and fr.status_val.dtype == np.int8
+    assert fr.nbytes == 2 * 4 + 6 * 12 + 2 * 4 + 2 * 1 + sum(
+        a.nbytes for a in fr.state.values())
+    got, got_status, _ = mem.get(3, inp, offsets)
+    assert got_status.dtype == np.int8 and got_status.tolist() == status.tolist()
+
+
+def test_an_evicted_state_reads_as_none():
+    """state(f) of a frame whose state the budget dropped is None (it still displays)."""
+    frames = [_frame(P=400, C=100, changed=range(100), value=float(f)) for f in range(3)]
+    base = {"angle": np.zeros(5000)}
+    probe = fc.MemoryCache(limit_mb=100)
+    probe.sparse = fc.SparseState(base)
+    inp, out, status, offsets = frames[0]
+    probe.put(0, inp, out, status, offsets, {"angle": np.ones(5000)}, {})
+    size = probe.frames[0].nbytes
+    mem = fc.MemoryCache(limit_mb=(3 * size - 1) / 2**20)
+    mem.sparse = fc.SparseState(base)
+    mem.start = 0
+    for f, (inp, out, status, offsets) in enumerate(frames):
+        mem.put(f, inp, out, status, offsets, {"angle": np.full(5000, f + 1.0)}, {})
+    assert sorted(mem.frames) == [0, 1, 2] and mem.frames[1].state is None
+    assert mem.state(1) is None and mem.state(2)["angle"][0] == 3.0
+    np.testing.assert_array_equal(mem.get(1, inp, offsets)[0], frames[1][1])
+
+
+def test_budget_without_a_start_frame_counts_from_the_oldest_frame():
+    """MemoryCache.start unset (a pipeline script's cache): every 10th frame from the
+    oldest cached one keeps its state."""
+    base = {"angle": np.zeros(2000)}
+    inp, out, status, offsets = _frame(P=40, C=10, changed=range(10))
+    probe = fc.MemoryCache(limit_mb=100)
+    probe.sparse = fc.SparseState(base)
+    probe.put(0, inp, out, status, offsets, {"angle": np.ones(2000)}, {})
+    state = sum(a.nbytes for a in probe.frames[0].state.values())
+    frame = probe.frames[0].nbytes - state
+    mem = fc.MemoryCache(limit_mb=(25 * frame + 4 * state) / 2**20)
+    mem.sparse = fc.SparseState(base)
+    assert mem.start is None
+    for f in range(3, 28):
+        mem.put(f, inp, out, status, offsets, {"angle": np.full(2000, float(f))}, {})
+    assert sorted(mem.frames) == list(range(3, 28))
+    assert sorted(k for k in mem.frames if mem.frames[k].state is not None) == [3, 13, 23, 27]
+
+
+@pytest.mark.parametrize("what", ["state", "frame"])
+def test_budget_stops_dropping_exactly_at_the_limit(what):
+    """Dropping stops as soon as the total is at most the limit: a limit that one
+    dropped state (or one dropped frame) meets exactly loses that one and no more."""
+    base = {"angle": np.zeros(2000)}
+    inp, out, status, offsets = _frame(P=40, C=10, changed=range(10))
+    probe = fc.MemoryCache(limit_mb=100)
+    probe.sparse = fc.SparseState(base)
+    probe.put(0, inp, out, status, offsets, {"angle": np.ones(2000)}, {})
+    state = sum(a.nbytes for a in probe.frames[0].state.values())
+    full = probe.frames[0].nbytes
+    assert state < full < 2 * state  # the arithmetic below needs it
+    if what == "state":  # all five fit without the states of frames 1 and 2 (exactly)
+        frames, limit = (0, 1, 2, 3, 4), 5 * full - 2 * state
+    else:  # states alone do not suffice: frame 1 goes, and frame 2 (stateless) stays
+        frames, limit = (0, 1, 2, 3), 2 * full + (full - state)
+    mem = fc.MemoryCache(limit_mb=limit / 2**20)
+    mem.sparse = fc.SparseState(base)
+    mem.start = 0
+    for f in frames:
+        mem.put(f, inp, out, status, offsets, {"angle": np.full(2000, f + 1.0)}, {})
+    with_state = sorted(k for k in mem.frames if mem.frames[k].state is not None)
+    if what == "state":  # 0 is the start frame, 4 the newest; 3 keeps its state
+        assert sorted(mem.frames) == [0, 1, 2, 3, 4] and with_state == [0, 3, 4]
+    else:
+        assert sorted(mem.frames) == [0, 2, 3] and with_state == [0, 3]
+    assert mem.nbytes == limit
