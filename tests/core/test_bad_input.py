@@ -139,28 +139,65 @@ def test_a_zero_length_segment_marks_its_curve_invalid():
     np.testing.assert_array_equal(res.points[keep], ref.points[keep])
 
 
-def test_an_invalid_curve_keeps_its_state():
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+def test_an_invalid_curve_keeps_its_state(mode):
     """A curve invalid for a frame keeps its local state: when it is good again
-    the next frame equals a run in which that frame never happened for it."""
+    the next frame equals a run in which that frame never happened for it. The
+    other curves' state (Soft's per-segment rows too) moves on as usual; the sphere
+    backs off on the invalid frame, so it must."""
     pts, offs = _fur()
     col = _sphere()
-    s1 = Solver(offs, Settings(mode="stiff"))
+    s1 = Solver(offs, Settings(mode=mode, recovery_rate=0.5))
     s1.step(pts, [col])
     before = s1.state
     bad = pts.copy()
     bad[4] = np.nan
+    col.matrix = scenes.translation([0.0, 0.0, 0.3])
     r = s1.step(bad, [col])
-    assert r.status[1] == Status.INVALID
+    assert r.status[1] == Status.INVALID and r.status[0] == Status.RECOVERING
     after = s1.state
     for key in ("angle", "axis", "frame", "active"):
         np.testing.assert_array_equal(after[key][1], before[key][1], err_msg=key)
-    s2 = Solver(offs, Settings(mode="stiff"))
+    s2 = Solver(offs, Settings(mode=mode, recovery_rate=0.5))
+    col.matrix = np.eye(4)
     s2.step(pts, [col])
+    col.matrix = scenes.translation([0.0, 0.0, 0.3])
     s2.step(pts, [col], enabled=np.array([True, False, True]))
+    for key, value in s2.state.items():  # every row, curve 0's moved on in both
+        np.testing.assert_array_equal(s1.state[key], value, err_msg=key)
+    col.matrix = np.eye(4)
     a, b = s1.step(pts, [col]), s2.step(pts, [col])
     assert np.array_equal(a.points, b.points)
     assert np.all(np.isfinite(a.points))
     assert np.array_equal(np.asarray(a.status), np.asarray(b.status))
+
+
+def test_several_invalid_curves_are_counted_and_the_lowest_is_named():
+    """The step's one problem names the lowest invalid curve, whatever made it invalid
+    (here a zero-length segment in curve 0 and a NaN in curve 2), and counts them."""
+    pts, offs = _fur()
+    pts = pts.copy()
+    pts[1] = pts[0]  # curve 0: zero-length first segment
+    pts[7, 2] = np.nan  # curve 2
+    res = Solver(offs, Settings(mode="stiff")).step(pts, [_sphere()])
+    assert res.status.tolist() == [Status.INVALID, Status.COLLIDING, Status.INVALID]
+    (msg,) = res.problems
+    assert msg.startswith("curve 0") and "zero-length" in msg, msg
+    assert msg.endswith(" (2 invalid curves: left as they are, not solved)"), msg
+    pts[1] = pts[0] + [0, 0, 0.5]
+    (msg,) = Solver(offs, Settings(mode="stiff")).step(pts, [_sphere()]).problems
+    assert msg.startswith("curve 2") and msg.endswith(" (left as it is, not solved)"), msg
+
+
+def test_a_curve_without_a_finite_point_is_output_at_the_origin():
+    """_as_given: every point of a curve NaN: its output is the origin, never NaN."""
+    pts, offs = _fur()
+    pts = pts.copy()
+    pts[3:6] = np.nan
+    res = Solver(offs, Settings(mode="bend")).step(pts, [_sphere()])
+    assert res.status[1] == Status.INVALID
+    assert np.isfinite(res.points).all()
+    np.testing.assert_array_equal(res.points[3:6], np.zeros((3, 3)))
 
 
 def test_enabled_wrong_length_and_shape():
