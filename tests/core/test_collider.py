@@ -296,3 +296,65 @@ def test_inside_cell_cache_gives_the_answer_of_tracing_every_point():
                 traced = col._parity(P, off)
                 np.testing.assert_array_equal(got, traced)
             assert got.any() and not got.all()
+
+
+def test_one_collider_shared_by_solvers_with_different_offsets():
+    """Several solvers may share one collider with different Collision Offsets: each
+    gets the shell of its own offset (as with a collider of its own), in any order."""
+    rng = np.random.default_rng(4)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=40, extent=0.5)
+    V, F = scenes.uv_sphere([0, 0, 0.8], 0.35, 24, 12)
+    shared = Collider(V, F)
+    for d in (0.0, 0.1, 0.5, 0.1, 0.0, 0.5):
+        s = Settings(mode="stiff", collision_offset=d)
+        got = Solver(offs, s).step(pts, [shared])
+        want = Solver(offs, s).step(pts, [Collider(V, F)])
+        np.testing.assert_array_equal(got.points, want.points, err_msg=str(d))
+        np.testing.assert_array_equal(got.status, want.status, err_msg=str(d))
+
+
+def _two_overlapping_spheres():
+    """One mesh of two closed spheres that overlap (an artist's body of parts)."""
+    c = np.array([[0.0, 0.0, 0.0], [0.45, 0.1, 0.05]])
+    r = np.array([0.4, 0.3])
+    Va, Fa = scenes.uv_sphere(c[0], r[0], 48, 24)
+    Vb, Fb = scenes.uv_sphere(c[1], r[1], 48, 24)
+    return np.vstack([Va, Vb]), np.vstack([Fa, Fb + len(Va)]), c, r
+
+
+def test_inside_overlapping_closed_parts_is_inside():
+    """The parity test counts back minus front faces (a winding number): a point
+    inside either of two overlapping closed parts is inside, one in neither is not
+    (points within 2 % of a radius of either sphere are left out: the mesh is a
+    polygon there)."""
+    V, F, c, r = _two_overlapping_spheres()
+    col = Collider(V, F)
+    rng = np.random.default_rng(5)
+    p = rng.uniform([-0.5, -0.5, -0.5], [0.85, 0.5, 0.5], (3000, 3))
+    dist = np.linalg.norm(p[:, None] - c[None], axis=2) / r  # (n, 2), 1 on a sphere
+    clear = (np.abs(dist - 1.0) > 0.02).all(axis=1)
+    p, inside = p[clear], (dist[clear] < 1.0).any(axis=1)
+    assert inside.sum() > 500 and (~inside).sum() > 500
+    assert ((dist[clear] < 1.0).all(axis=1)).sum() > 50  # in both parts
+    np.testing.assert_array_equal(col.contains(p), inside)
+    np.testing.assert_array_equal(col._parity(p, 0.0), inside)
+    # and the solver pinches exactly the curves rooted inside
+    roots = p[:400]
+    curves = [scenes.straight_curve(x, [0, 0, 1], 0.3, 3) for x in roots]
+    pts, offs = scenes.pack(curves)
+    res = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+    np.testing.assert_array_equal(res.status == Status.PINCHED, inside[:400])
+
+
+def test_an_empty_collider_answers_in_the_documented_types():
+    """A collider without faces hits nothing: bool flags, t = inf (float64), zero
+    normals, for world and local queries."""
+    col = Collider(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+    assert col.empty
+    o, d = np.zeros((4, 3)), np.ones((4, 3))
+    for h in (col.segment_hits(o, d), col.segment_hits_local(o, d)):
+        assert h.dtype == bool and h.shape == (4,) and not h.any()
+    hit, t, n = col.segment_hit_details(o, d)
+    assert hit.dtype == bool and not hit.any()
+    assert t.dtype == np.float64 and np.isinf(t).all() and (t > 0).all()
+    assert n.shape == (4, 3) and not n.any()

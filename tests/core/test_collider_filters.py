@@ -52,7 +52,7 @@ def matrices(draw):
     K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
     R = np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
     M = np.eye(4)
-    M[:3, :3] = R * draw(strat.floats(0.5, 2.0))
+    M[:3, :3] = R * draw(strat.floats(0.2, 3.0))
     M[:3, 3] = [draw(strat.floats(-6.0, 6.0)) for _ in range(3)]
     return M
 
@@ -80,7 +80,7 @@ def test_near_surface_is_conservative(M, ax, cloud):
 
 
 @FAST
-@given(M=matrices(), M2=matrices(), ax=axes, cloud=clouds, offset=st.sampled_from([0.0, 0.05]))
+@given(M=matrices(), M2=matrices(), ax=axes, cloud=clouds, offset=st.sampled_from([0.0, 0.05, 0.3]))
 def test_cached_inside_test_equals_parity(M, M2, ax, cloud, offset):
     rng = np.random.default_rng(cloud)
     V, F = ellipsoid(axes=ax)
@@ -97,7 +97,7 @@ def test_cached_inside_test_equals_parity(M, M2, ax, cloud, offset):
 
 
 @FAST
-@given(M=matrices(), ax=axes, cloud=clouds, offset=st.sampled_from([0.0, 0.05]))
+@given(M=matrices(), ax=axes, cloud=clouds, offset=st.sampled_from([0.0, 0.05, 0.3]))
 def test_input_curve_filter_equals_all_rays(M, ax, cloud, offset):
     """Unrotated curves are only traced when their bounding ball comes near
     the mesh (StepContext.input_hits): the same answers, per segment, as
@@ -126,3 +126,30 @@ def test_input_curve_filter_equals_all_rays(M, ax, cloud, offset):
     assert np.array_equal(fast_seg, every_seg)
     assert np.array_equal(fast, every)
     assume(every.any() and (~every).any())  # an example where the filter has work
+
+
+def test_cached_inside_test_next_to_an_offset_shell_under_a_scaling_matrix():
+    """The per-cell answers of the inside test trace every cell the *offset shell*
+    touches: the shell lies ``offset * (matrix's largest inverse stretch)`` out in the
+    collider's own units (here 4x the world offset: a collider scaled by 0.25).
+    Points in a band around the shell, inside the grid (the bounds' corners), on the
+    second call (the cached path) must get the answer of plain ray parity."""
+    V, F = ellipsoid(32, 16, axes=(1.0, 1.0, 1.0))
+    a = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    M = np.eye(4)
+    M[:3, :3] = (np.eye(3) + np.sin(0.7) * K + (1 - np.cos(0.7)) * K @ K) * 0.25
+    M[:3, 3] = [1.0, -2.0, 0.5]
+    col = Collider(V, F, matrix=M)
+    offset = 0.05  # world: 0.2 in the collider's units
+    rng = np.random.default_rng(6)
+    u = rng.normal(size=(20000, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    p_lo = u * rng.uniform(1.05, 1.35, (len(u), 1))
+    p_lo = p_lo[(np.abs(p_lo) < 0.98).all(axis=1)][:1500]  # on the grid
+    assert len(p_lo) > 500
+    p = p_lo @ M[:3, :3].T + M[:3, 3]
+    want = col._parity(p, offset)
+    assert want.any() and (~want).any()  # the band straddles the shell
+    for _ in range(2):  # the second call is the cached (static) path
+        np.testing.assert_array_equal(col.contains(p, offset), want)
