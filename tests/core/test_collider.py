@@ -358,3 +358,28 @@ def test_an_empty_collider_answers_in_the_documented_types():
     assert hit.dtype == bool and not hit.any()
     assert t.dtype == np.float64 and np.isinf(t).all() and (t > 0).all()
     assert n.shape == (4, 3) and not n.any()
+
+
+def test_a_face_collapsed_by_a_deformation_keeps_the_offset_shell_whole():
+    """Degenerate faces are dropped when a collider is built, but a deformation can
+    collapse one later (a vertex pulled onto its neighbour; the topology stays). The
+    offset shell must stay finite and closed there: dense fur under the collapsed
+    faces is kept out of the mesh and about the offset away from it."""
+    rng = np.random.default_rng(8)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=300, extent=0.25, n_cvs=(4, 6),
+                                    length=(0.9, 1.1), curly=0.0)
+    V, F = scenes.uv_sphere([0, 0, 1.0], 0.3, 16, 8)
+    south = len(V) - 1
+    V2 = V.copy()
+    V2[south - 1] = V2[south]  # collapses the two faces that share both
+    col = Collider(V, F)
+    col.vertices = V2
+    d = 0.1
+    res = Solver(offs, Settings(mode="stiff", collision_offset=d)).step(pts, [col])
+    assert np.isfinite(res.points).all()
+    status = np.asarray(res.status)
+    assert (status == Status.COLLIDING).sum() > 50
+    geom.assert_no_intersection(res.points, offs, res.status, [(V2, F)])
+    A, B, _, _ = oracle.curve_segments(res.points, offs)
+    near = np.linalg.norm(np.stack([A, B]) - [0, 0, 1.0], axis=2).min()
+    assert near > 0.3 + 0.5 * d, near  # (a mesh of chords: the shell is about d out)
