@@ -200,6 +200,39 @@ def test_a_curve_without_a_finite_point_is_output_at_the_origin():
     np.testing.assert_array_equal(res.points[3:6], np.zeros((3, 3)))
 
 
+def test_leading_non_finite_points_take_the_first_finite_one_after_them():
+    """_as_given: non-finite points at the start of an invalid curve are replaced by
+    the first finite point after them (here the curve's last point)."""
+    pts, offs = _fur()
+    pts = pts.copy()
+    pts[3:5] = np.nan  # curve 1: points 3 and 4, only point 5 is finite
+    res = Solver(offs, Settings(mode="stiff")).step(pts, [_sphere()])
+    assert res.status[1] == Status.INVALID
+    np.testing.assert_array_equal(res.points[3:6], np.repeat(pts[5:6], 3, axis=0))
+
+
+@pytest.mark.parametrize("mask", [np.array([1, 0, 1]), np.array([2.5, 0.0, -1.0]),
+                                  np.array([1, 0, 1], np.uint8)])
+def test_enabled_as_numbers_means_nonzero(mask):
+    """The enabled mask may be integers or floats (an attribute read from Blender):
+    non-zero is enabled."""
+    pts, offs = _fur()
+    want = Solver(offs, Settings()).step(pts, [_sphere()], enabled=mask != 0)
+    got = Solver(offs, Settings()).step(pts, [_sphere()], enabled=mask)
+    np.testing.assert_array_equal(got.points, want.points)
+    np.testing.assert_array_equal(got.status, want.status)
+    assert got.status[1] == Status.DISABLED
+
+
+@pytest.mark.parametrize(("mask", "word"), [
+    (np.array([1, 0, 1], np.complex128), "booleans"), (np.array(["a", "b", "c"]), "booleans"),
+    (np.array([1.0, np.nan, 0.0]), "non-finite")])
+def test_enabled_of_another_kind_is_refused(mask, word):
+    pts, offs = _fur()
+    with pytest.raises(InputError, match=word):
+        Solver(offs, Settings()).step(pts, [_sphere()], enabled=mask)
+
+
 def test_enabled_wrong_length_and_shape():
     pts, offs = _fur()
     solver = Solver(offs, Settings())

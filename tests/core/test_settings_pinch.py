@@ -229,3 +229,18 @@ def test_pinched_exactly_when_root_inside(anchor, kind, mode, data, cloud):
             assert not pinched.any()
         else:
             assert np.array_equal(pinched[robust], inside[robust])
+
+
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+def test_recover_pinched_false_lets_unpinched_curves_recover(mode):
+    """Recover Pinched Fur off holds only the curves that come out of a pinch: a curve
+    that was only ever pushed recovers as usual when the collider leaves."""
+    curve = scenes.straight_curve([0, 0, 0], [0, 0, 1], 1.0, 5)
+    pts, offs = scenes.pack([curve])
+    V, F = scenes.uv_sphere([0.12, 0.0, 0.8], 0.3, 32, 16)
+    solver = Solver(offs, Settings(mode=mode, recover_pinched=False, recovery_rate=1.0))
+    r = solver.step(pts, [Collider(V, F)])
+    assert r.status[0] == Status.COLLIDING
+    r = solver.step(pts, [])
+    np.testing.assert_array_equal(r.points, pts)
+    assert r.status[0] == Status.FREE
