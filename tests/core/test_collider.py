@@ -6,6 +6,7 @@ from __future__ import annotations
 import geom
 import numpy as np
 import oracle
+import pytest
 import scenes
 
 from core import Collider, Settings, Solver, Status
@@ -298,17 +299,28 @@ def test_inside_cell_cache_gives_the_answer_of_tracing_every_point():
             assert got.any() and not got.all()
 
 
-def test_one_collider_shared_by_solvers_with_different_offsets():
+@pytest.mark.parametrize("kind", ["closed", "open sheet", "double-sided"])
+def test_one_collider_shared_by_solvers_with_different_offsets(kind):
     """Several solvers may share one collider with different Collision Offsets: each
-    gets the shell of its own offset (as with a collider of its own), in any order."""
+    gets the shell of its own offset (as with a collider of its own), in any order.
+    (An open or double-sided collider's shell has other faces with an offset than
+    without: every face of the real surface, or only its rims.)"""
     rng = np.random.default_rng(4)
     pts, offs = scenes.fur_on_plane(rng, n_curves=40, extent=0.5)
-    V, F = scenes.uv_sphere([0, 0, 0.8], 0.35, 24, 12)
-    shared = Collider(V, F)
+    if kind == "closed":
+        V, F = scenes.uv_sphere([0, 0, 0.8], 0.35, 24, 12)
+    else:
+        V, F = scenes.grid(size=1.2, n=6, z=0.6)
+    ds = kind == "double-sided"
+
+    def collider():
+        return Collider(V, F, double_sided=ds)
+
+    shared = collider()
     for d in (0.0, 0.1, 0.5, 0.1, 0.0, 0.5):
         s = Settings(mode="stiff", collision_offset=d)
         got = Solver(offs, s).step(pts, [shared])
-        want = Solver(offs, s).step(pts, [Collider(V, F)])
+        want = Solver(offs, s).step(pts, [collider()])
         np.testing.assert_array_equal(got.points, want.points, err_msg=str(d))
         np.testing.assert_array_equal(got.status, want.status, err_msg=str(d))
 
@@ -358,6 +370,36 @@ def test_an_empty_collider_answers_in_the_documented_types():
     assert hit.dtype == bool and not hit.any()
     assert t.dtype == np.float64 and np.isinf(t).all() and (t > 0).all()
     assert n.shape == (4, 3) and not n.any()
+    q = np.arange(12, dtype=np.float32).reshape(4, 3)
+    p, n = col.closest_points(q)  # no surface: the queries themselves, no normal
+    assert p.dtype == np.float64 and np.array_equal(p, q)
+    assert n.shape == (4, 3) and n.dtype == np.float64 and not n.any()
+
+
+def test_the_third_parity_vote_decides_when_the_first_two_disagree(monkeypatch):
+    """The inside test casts two rays per point and a third where they disagree (a
+    ray grazing an edge can miss a face). Fault injection: the first direction's rays
+    miss everything, so every point's two votes disagree; the third vote must give
+    each point its true side."""
+    V, F = scenes.uv_sphere([0, 0, 0], 0.5, 32, 16)
+    col = Collider(V, F)
+    rng = np.random.default_rng(9)
+    p = rng.normal(size=(400, 3)) * 0.3
+    r = np.linalg.norm(p, axis=1)
+    p, inside = p[np.abs(r - 0.5) > 0.03], r[np.abs(r - 0.5) > 0.03] < 0.5
+    be, _ = col._backend(0.0)
+    real = be.hit_details
+    first = np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0)  # the first vote's direction
+
+    def grazing(o, d, tmax, **kw):
+        prim, t, *rest = real(o, d, tmax, **kw)
+        u = d / np.linalg.norm(d, axis=1, keepdims=True)
+        miss = np.abs(u @ first - 1.0) < 1e-9
+        prim = np.where(miss, -1, prim)
+        return (prim, t, *rest)
+
+    monkeypatch.setattr(be, "hit_details", grazing)
+    np.testing.assert_array_equal(col._parity(p, 0.0), inside)
 
 
 def test_a_face_collapsed_by_a_deformation_keeps_the_offset_shell_whole():
