@@ -19,6 +19,7 @@ import pytest
 import scenes
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import Collider, Settings, Solver, Status
 
@@ -62,7 +63,7 @@ def test_the_resting_hat_gives_the_full_search_answer(mode):
     assert _same_steps(sh.fur.offsets, frames(), mode) > 5_000
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(
     mode=st.sampled_from(["stiff", "bend", "soft"]),
     kind=st.sampled_from(["sphere", "box", "plane"]),
