@@ -8,8 +8,10 @@
   ``.hypothesis/`` and replayed first next time. Run it with
   ``.venv/bin/python -m pytest tests/core tests/pipeline --hypothesis-profile=thorough``
   (or ``HYPOTHESIS_PROFILE=thorough``); pin what it finds as an explicit test.
+* ``mutation``: what ``make mutate`` runs for each mutant (``scripts/mutate.py``): 40 % of
+  the examples, reproducible, and no shrinking (one failing example kills a mutant).
 
-Health checks are on in both. Tests scale their own example counts by the profile's
+Health checks are on in all three. Tests scale their own example counts by the profile's
 ``max_examples`` (100 in ``ci``) through :func:`examples`.
 """
 
@@ -17,12 +19,16 @@ from __future__ import annotations
 
 import os
 
-from hypothesis import settings
+from hypothesis import Phase, settings
 
 settings.register_profile("ci", max_examples=100, deadline=None, derandomize=True,
                           database=None, print_blob=True)
 settings.register_profile("thorough", max_examples=1000, deadline=None, derandomize=False,
                           print_blob=True)
+# make mutate (scripts/mutate.py) runs the tests once per mutant: 40 % of the examples,
+# and no shrinking (a failing example is enough to kill a mutant)
+settings.register_profile("mutation", max_examples=40, deadline=None, derandomize=True,
+                          database=None, phases=(Phase.explicit, Phase.reuse, Phase.generate))
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
