@@ -78,7 +78,7 @@ class FURCOLLIDE_PT_main(Panel):
         if msg:
             box = layout.box()
             box.label(text="Ray tracer unavailable", icon="ERROR")
-            for line in _wrap(msg, 40):
+            for line in _wrap(msg, _line_chars(context)):
                 box.label(text=line)
         src = active_setup(context)
         if src is None:
@@ -98,12 +98,13 @@ class FURCOLLIDE_PT_main(Panel):
         if message:
             icon = {"ERROR": "ERROR", "WARNING": "ERROR"}.get(level, "INFO")
             box = layout.box()
-            for i, line in enumerate(_wrap(message, 44)):
+            for i, line in enumerate(_wrap(message, _line_chars(context))):
                 box.label(text=line, icon=icon if i == 0 else "BLANK1")
         if not context.scene.render.use_lock_interface:
             box = layout.box()
             box.label(text="Enable Render > Lock Interface", icon="ERROR")
-            box.label(text="so renders cannot crash while hair updates", icon="BLANK1")
+            for line in _wrap("so renders cannot crash while hair updates", _line_chars(context)):
+                box.label(text=line, icon="BLANK1")
             box.prop(context.scene.render, "use_lock_interface")
         layout.operator("furcollide.remove", icon="X")
 
@@ -302,6 +303,17 @@ def cached_count(src) -> tuple[int, str]:
         return n, "baked" if s.is_baked else "on disk (partial bake)"
     rt = registry.get_runtime(src, create=False)
     return (len(rt.memory) if rt else 0), "cached"
+
+
+def _line_chars(context, fallback=44) -> int:
+    """About how many characters fit on a label line of the sidebar as it is now (Blender
+    elides the middle of a longer one); ``fallback`` where the region is unknown."""
+    region = getattr(context, "region", None)
+    width = getattr(region, "width", 0) or 0
+    if width <= 1:
+        return fallback
+    scale = context.preferences.system.ui_scale
+    return max(16, int((width - 60 * scale) / (6.5 * scale)))
 
 
 def _wrap(text, width):

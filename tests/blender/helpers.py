@@ -8,8 +8,10 @@ what a panel draws. Test files import from here, never from each other.
 
 from __future__ import annotations
 
+import inspect
 import os
 import sys
+import types
 from pathlib import Path
 
 import bpy
@@ -330,43 +332,223 @@ def duplicate(ob, dx=0.0):
     return dup
 
 
-class RecordingLayout:
-    """Records what a panel draws (panels cannot be drawn headless)."""
+# ------------------------------------------------------------------ drawing
+def _layout_rna():
+    return bpy.types.UILayout.bl_rna
 
-    def __init__(self, log):
-        self.log = log
-        self.use_property_split = self.use_property_decorate = self.enabled = None
 
-    def _child(self, *args, **kw):
-        return RecordingLayout(self.log)
+def _check_value(where, param, value):
+    """``value`` fits the RNA parameter (or property) ``param``: type, enum item."""
+    t = param.type
+    if t == "STRING":
+        assert isinstance(value, str), f"{where}: {param.identifier}={value!r} is not a str"
+    elif t == "BOOLEAN":
+        assert isinstance(value, bool | np.bool_), f"{where}: {param.identifier}={value!r}"
+    elif t == "INT":
+        assert isinstance(value, int | np.integer) and not isinstance(value, bool), (
+            f"{where}: {param.identifier}={value!r} is not an int")
+    elif t == "FLOAT":
+        assert isinstance(value, float | int | np.floating) and not isinstance(value, bool), (
+            f"{where}: {param.identifier}={value!r} is not a number")
+        assert np.isfinite(value), f"{where}: {param.identifier}={value!r}"
+    elif t == "ENUM":
+        items = {e.identifier for e in param.enum_items}
+        values = value if getattr(param, "is_enum_flag", False) else {value}
+        for v in values:
+            assert v in items, f"{where}: {param.identifier}={v!r} is not one of Blender's"
 
-    box = row = column = _child
 
-    def prop(self, data, name, **kw):
-        assert hasattr(data, name), name
-        self.log.append(("prop", name))
+def _rna_property(data, name, where):
+    """The RNA property ``name`` of ``data`` (an RNA struct, not a Python object)."""
+    assert data is not None, f"{where}: data is None for property {name!r}"
+    rna = getattr(data, "bl_rna", None)
+    assert rna is not None, f"{where}: {data!r} is not an RNA struct"
+    prop = rna.properties.get(name)
+    assert prop is not None, f"{where}: {rna.identifier} has no property {name!r}"
+    return prop
 
-    def operator(self, idname, **kw):
-        mod, name = idname.split(".")
-        assert hasattr(getattr(bpy.ops, mod), name), idname
-        self.log.append(("operator", idname))
-        return type("Props", (), {})()
 
-    def prop_search(self, data, name, search_data, search_name, **kw):
-        assert hasattr(data, name) and hasattr(search_data, search_name), name
-        self.log.append(("prop", name))
+class RnaLayout:
+    """A recording stand-in for ``bpy.types.UILayout`` (panels cannot be drawn headless)
+    that checks every call against Blender's own RNA, as the real layout would:
 
-    def label(self, **kw):
-        self.log.append(("label", kw.get("text")))
+    * only functions and attributes ``UILayout`` has, with their parameter names, and
+      values of the right type (icons and other enums among Blender's items);
+    * every property name against the RNA of the object it is given (``prop``,
+      ``prop_search``, ``template_list`` ...), every operator idname against the
+      registered operators, every list type and menu or panel name against the
+      registered classes;
+    * ``template_list`` draws each item with the list class's ``draw_item``.
 
-    def separator(self, **kw):
-        pass
+    Each call is logged as a dict (``kind``, ``name``, ``text``, ``icon``, and the
+    effective ``enabled``, ``active`` and ``alert`` of the layout it was drawn in).
+    """
+
+    def __init__(self, log, context, parent=None):
+        object.__setattr__(self, "_log", log)
+        object.__setattr__(self, "_context", context)
+        object.__setattr__(self, "_parent", parent)
+        object.__setattr__(self, "_attrs", {"enabled": True, "active": True, "alert": False})
+        object.__setattr__(self, "_item", getattr(parent, "_item", None))
+
+    # attributes: only UILayout's, with values of their type
+    def __setattr__(self, name, value):
+        prop = _layout_rna().properties.get(name)
+        assert prop is not None and not prop.is_readonly, f"UILayout has no settable {name!r}"
+        _check_value(f"layout.{name}", prop, value)
+        self._attrs[name] = value
+
+    def __getattr__(self, name):
+        if name.startswith("_"):
+            raise AttributeError(name)
+        if name in _layout_rna().properties:
+            return self._attrs.get(name)
+        fn = _layout_rna().functions.get(name)
+        assert fn is not None, f"UILayout has no function {name!r}"
+        return lambda *args, **kw: self._call(name, fn, args, kw)
+
+    def _state(self, key):
+        own = bool(self._attrs.get(key))
+        if self._parent is None:
+            return own
+        if key == "alert":
+            return own or self._parent._state(key)
+        return own and self._parent._state(key)
+
+    def _call(self, name, fn, args, kw):
+        params = [p for p in fn.parameters if not p.is_output]
+        names = [p.identifier for p in params]
+        assert len(args) <= len(names), f"layout.{name}: {len(args)} positional arguments"
+        given = dict(zip(names, args, strict=False))
+        for k in kw:
+            assert k in names, f"layout.{name}() has no parameter {k!r} ({names})"
+            assert k not in given, f"layout.{name}: {k!r} given twice"
+        given.update(kw)
+        for p in params:
+            if p.is_required:
+                assert p.identifier in given, f"layout.{name}: {p.identifier!r} missing"
+            if p.identifier in given and p.type != "POINTER":
+                _check_value(f"layout.{name}", p, given[p.identifier])
+        entry = {"kind": name, "text": given.get("text"), "icon": given.get("icon"),
+                 "enabled": self._state("enabled"), "active": self._state("active"),
+                 "alert": self._state("alert"), "list_item": self._item}
+        handler = getattr(self, "_do_" + name, None)
+        result = handler(given, entry) if handler else None
+        self._log.append(entry)
+        if name in ("row", "column", "box", "split", "column_flow", "grid_flow"):
+            return RnaLayout(self._log, self._context, self)
+        return result
+
+    def _do_prop(self, g, entry):
+        _rna_property(g["data"], g["property"], "layout.prop")
+        entry["name"] = g["property"]
+        entry["data"] = g["data"]
+
+    _do_prop_menu_enum = _do_prop
+
+    def _do_prop_search(self, g, entry):
+        _rna_property(g["data"], g["property"], "layout.prop_search")
+        target = _rna_property(g["search_data"], g["search_property"], "layout.prop_search")
+        assert target.type == "COLLECTION", g["search_property"]
+        entry["name"] = g["property"]
+        entry["data"] = g["data"]
+
+    def _do_operator(self, g, entry):
+        idname = g["operator"]
+        mod, _, op = idname.partition(".")
+        assert hasattr(getattr(bpy.ops, mod), op), f"no operator {idname!r}"
+        rna = getattr(getattr(bpy.ops, mod), op).get_rna_type()
+        entry["name"] = idname
+        return OperatorProperties(rna, idname)
+
+    def _do_label(self, g, entry):
+        entry["name"] = g.get("text", "")
+
+    def _do_menu(self, g, entry):
+        assert hasattr(bpy.types, g["menu"]), f"no menu {g['menu']!r}"
+        entry["name"] = g["menu"]
+
+    def _do_popover(self, g, entry):
+        assert hasattr(bpy.types, g["panel"]), f"no panel {g['panel']!r}"
+        entry["name"] = g["panel"]
+
+    def _do_template_list(self, g, entry):
+        cls = getattr(bpy.types, g["listtype_name"], None)
+        assert cls is not None and issubclass(cls, bpy.types.UIList), g["listtype_name"]
+        coll = _rna_property(g["dataptr"], g["propname"], "template_list")
+        assert coll.type == "COLLECTION", g["propname"]
+        active = _rna_property(g["active_dataptr"], g["active_propname"], "template_list")
+        assert active.type == "INT", g["active_propname"]
+        entry["name"] = g["listtype_name"]
+        items = list(getattr(g["dataptr"], g["propname"]))
+        entry["items"] = len(items)
+        for i, item in enumerate(items):
+            row = RnaLayout(self._log, self._context, self)
+            object.__setattr__(row, "_item", i)
+            self._log.append({"kind": "list_item", "name": g["listtype_name"], "index": i,
+                              "text": None, "icon": None, "enabled": True, "active": True,
+                              "alert": False})
+            cls.draw_item(Bound(cls, layout=None), self._context, row, g["dataptr"], item, 0,
+                          g["active_dataptr"], g["active_propname"], i)
+            DRAWN.add(g["listtype_name"])
+
+
+class OperatorProperties:
+    """What ``layout.operator`` returns: only the operator's own properties can be set."""
+
+    def __init__(self, rna, idname):
+        object.__setattr__(self, "_rna", rna)
+        object.__setattr__(self, "_idname", idname)
+
+    def __setattr__(self, name, value):
+        prop = self._rna.properties.get(name)
+        assert prop is not None, f"{self._idname} has no property {name!r}"
+        _check_value(self._idname, prop, value)
+
+
+class Bound:
+    """``self`` for a panel's or a list's methods called outside Blender: the class's
+    methods bound to this object, its ``layout`` the recording one."""
+
+    def __init__(self, cls, layout):
+        self._cls = cls
+        self.layout = layout
+
+    def __getattr__(self, name):
+        if name == "bl_idname" and not hasattr(self._cls, name):
+            return self._cls.__name__  # what registering gives a class without one
+        attr = getattr(self._cls, name)
+        if inspect.isfunction(attr):
+            return types.MethodType(attr, self)
+        return attr
+
+
+#: Panel and list classes whose drawing ran (any test in this process).
+DRAWN: set = set()
+
+
+def draw_rna(panel_cls, context=None, header=True):
+    """Draw ``panel_cls`` (its header and header preset too) as Blender would when its
+    ``poll`` passes, into an :class:`RnaLayout`; returns the log (a list of dicts), or
+    None when the panel's poll refuses."""
+    context = context or bpy.context
+    if hasattr(panel_cls, "poll") and not panel_cls.poll(context):
+        return None
+    log = []
+    if header:
+        for name in ("draw_header", "draw_header_preset"):
+            if hasattr(panel_cls, name):
+                getattr(panel_cls, name)(Bound(panel_cls, RnaLayout(log, context)), context)
+    panel_cls.draw(Bound(panel_cls, RnaLayout(log, context)), context)
+    DRAWN.add(panel_cls.__name__)
+    return log
 
 
 def draw_panel(panel):
-    log = []
-    panel.draw(type("P", (), {"layout": RecordingLayout(log)})(), bpy.context)
-    return log
+    """What ``panel`` draws, as ``(kind, name)`` pairs (labels: their text)."""
+    log = draw_rna(panel, header=False) or []
+    return [(_KIND.get(e["kind"], e["kind"]), e.get("name")) for e in log
+            if e["kind"] in ("prop", "prop_search", "operator", "label")]
 
 
 class EnabledLayout:
@@ -408,11 +590,13 @@ class EnabledLayout:
 
 
 def draw_enabled(panel):
-    log = []
-    fake = type("P", (), {"layout": EnabledLayout(log), "prepare": getattr(panel, "prepare", None),
-                          "settings": getattr(panel, "settings", None)})()
-    panel.draw(fake, bpy.context)
-    return log
+    """What ``panel`` draws, as ``(kind, name, enabled)`` triples."""
+    log = draw_rna(panel, header=False) or []
+    return [(_KIND.get(e["kind"], e["kind"]), e.get("name"), e["enabled"]) for e in log
+            if e["kind"] in ("prop", "prop_search", "operator", "label")]
+
+
+_KIND = {"prop_search": "prop"}
 
 
 def small_setup(fc, frames=(1, 8), nx=4, ny=4):

@@ -85,3 +85,87 @@ def test_status_colour_attribute_follows_the_status(fc):
     want = fc.bridge.status_colors(status.astype(np.int8), offsets)
     assert (status > 0).any()
     assert np.array_equal(col.reshape(-1, 4), want)
+
+
+# ------------------------------------------------ the status palette (an oracle)
+#: README "Using it in Blender", furcollide_color: the colour of each status, by name
+#: (INVALID, yellow, is the glue's: the README's table does not list it yet).
+README_COLOURS = {0: "grey", 1: "orange", 2: "blue", 3: "magenta", 4: "red", 5: "dark",
+                  6: "yellow"}
+
+
+def colour_name(rgba):
+    """The name a person gives an RGB colour, from its hue, saturation and value
+    (the standard library's colorsys; nothing from the add-on)."""
+    import colorsys
+
+    h, s, v = colorsys.rgb_to_hsv(*(float(c) for c in rgba[:3]))
+    h *= 360
+    if v < 0.3:
+        return "dark"
+    if s < 0.15:
+        return "grey"
+    for name, lo, hi in (("red", -15, 12), ("orange", 12, 42), ("yellow", 42, 70),
+                         ("green", 70, 170), ("cyan", 170, 195), ("blue", 195, 255),
+                         ("purple", 255, 285), ("magenta", 285, 345)):
+        if lo <= (h - 360 if h >= 345 else h) < hi:
+            return name
+    return "?"
+
+
+def _colours_of(out):
+    data = out.data
+    col = np.empty(len(data.points) * 4, np.float32)
+    data.attributes["furcollide_color"].data.foreach_get("color", col)
+    return col.reshape(-1, 4)
+
+
+def _enable(hair, off):
+    a = hair.data.attributes.new("furcollide_enable", "BOOLEAN", "CURVE")
+    a.data.foreach_set("value", ~np.isin(np.arange(len(hair.data.curves)), off))
+
+
+def test_every_status_shows_the_readmes_colour(fc):
+    """Two setups between them show every status; every point of every output curve
+    has the colour the README names for its curve's status (classified by hue, not
+    compared with the add-on's own palette), and all statuses 0-6 occur."""
+    from helpers import make_box, make_hair, offsets_of, setup, status_of, sweep_box
+
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 10
+    fur = make_hair("Fur", nx=6, ny=6)
+    sweep_box("Sweep", -1.2, 1.5, (1, 6))  # in, through and out: then recovering
+    make_box("Trap", size=0.3, location=(0.5, 0.5, 0.0))  # roots inside: pinched
+    _enable(fur, [0, 1])  # disabled
+    P = np.empty(len(fur.data.points) * 3, np.float32)
+    fur.data.position_data.foreach_get("vector", P)
+    P = P.reshape(-1, 3)
+    P[5 * 7 + 2] = np.nan  # curve 7 has a non-finite point: invalid
+    fur.data.position_data.foreach_set("vector", P.ravel())
+    out_a = setup(fur, [bpy.data.objects["Sweep"], bpy.data.objects["Trap"]])
+    stuck = make_hair("Stuck", nx=3, ny=3)
+    stuck.location.x = 3.0
+    make_box("Wall", size=0.6, location=(3.0, 0.0, 0.6))
+    out_b = setup(stuck, [bpy.data.objects["Wall"]])
+    stuck.furcollide.max_angle = 1.0  # nothing clears within 1 degree: unresolved
+    seen = set()
+    for f in range(1, 11):
+        scene.frame_set(f)
+        for out in (out_a, out_b):
+            status = status_of(out)
+            names = [colour_name(c) for c in _colours_of(out)]
+            offs = offsets_of(out)
+            for c, code in enumerate(status):
+                got = set(names[offs[c]:offs[c + 1]])
+                assert got == {README_COLOURS[int(code)]}, (f, out.name, c, int(code), got)
+            seen |= set(status.tolist())
+    assert seen == set(README_COLOURS), seen
+
+
+def test_the_palette_has_one_readme_colour_per_status(fc):
+    """Every status code's colour is the one the README names (a swap of two colours,
+    or a new code without a colour, fails here even if no scene shows it)."""
+    palette = fc.bridge.STATUS_COLORS
+    codes = [int(s) for s in fc.core.Status]
+    assert len(palette) == len(codes)
+    assert {c: colour_name(palette[c]) for c in codes} == {c: README_COLOURS[c] for c in codes}

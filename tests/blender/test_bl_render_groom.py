@@ -368,8 +368,26 @@ def test_render_groom_ragged_groom(fc, capsys):
         np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
         assert len(segments_in_box(P, roff, box.matrix_world.translation)) == 0, f
         moved = max(moved, float(np.abs(P - ref).max()))
-    assert moved > 0.05 and guides.furcollide.stat_groom_fixed >= 0
+    assert moved > 0.05
     np.testing.assert_array_equal(world(rg), ref)  # the groom itself is untouched
+    # "Render curves fixed" counts the render curves the clearance pass moved: on each
+    # frame, the curves where the groom output differs from the same frame without
+    # the clearance pass (which must be the ones that crossed the box then)
+    g = guides.furcollide.groom
+    seen_fixed = 0
+    for f in (3, 5, 7):
+        g.use_clearance = True
+        scene.frame_set(f)
+        fixed, with_pass = guides.furcollide.stat_groom_fixed, world(gout)
+        g.use_clearance = False
+        scene.frame_set(f)
+        without = world(gout)
+        moved_curves = np.logical_or.reduceat((with_pass != without).any(axis=1), roff[:-1])
+        assert fixed == int(moved_curves.sum()), (f, fixed, int(moved_curves.sum()))
+        crossing = segments_in_box(without, roff, box.matrix_world.translation)
+        assert set(crossing.tolist()) <= set(np.flatnonzero(moved_curves).tolist()), f
+        seen_fixed = max(seen_fixed, fixed)
+    assert seen_fixed > 0  # the pass had work on some frame
 
 
 def test_render_groom_with_a_one_point_curve_is_refused(fc):

@@ -287,3 +287,171 @@ def test_framecache_imports_without_blender():
     proc = subprocess.run([sys.executable, "-I", "-c", code], capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0 and proc.stdout.strip() == "OK", proc.stderr[-2000:]
+
+
+# ------------------------------------------------- the budget's eviction order
+def _budget_frames(n_frames, n_curves=200, state_rows=2000):
+    """Small frames whose solver state is much larger than their positions: every
+    frame moves every curve and changes every state row (so nothing is shared)."""
+    offsets = np.arange(0, 2 * n_curves + 1, 2, dtype=np.int32)
+    inp = np.zeros((2 * n_curves, 3), np.float32)
+    base = {"angle": np.zeros(state_rows), "axis": np.zeros((state_rows, 3))}
+    for f in range(1, n_frames + 1):
+        out = inp + np.float32(f)
+        status = np.full(n_curves, Status.COLLIDING, np.int8)
+        st = {"angle": np.full(state_rows, float(f)), "axis": np.full((state_rows, 3), -f, float)}
+        yield f, inp, out, status, offsets, st, base
+
+
+def _check_budget_invariants(mem, put, start):
+    """README "Memory used by the playback cache": past the limit, solver states are
+    dropped except on every 10th frame; if that is not enough, the oldest frames go.
+    ``put``: the frames put so far, in order."""
+    kept = sorted(mem.frames)
+    newest = put[-1]
+    stateless = [k for k in kept if mem.frames[k].state is None]
+    keyed = [k for k in kept if (k - start) % fcache.KEY_EVERY == 0]
+    assert newest in kept and mem.state(newest) is not None  # it can be stepped from
+    # every 10th frame keeps its state as long as the frame is kept at all
+    assert all(mem.frames[k].state is not None for k in keyed), (keyed, stateless)
+    # states go oldest first: no frame keeps a droppable state older than one that lost it
+    droppable = [k for k in kept if k not in keyed and k != newest]
+    with_state = [k for k in droppable if mem.frames[k].state is not None]
+    if stateless and with_state:
+        assert max(stateless) < min(with_state), (stateless, with_state)
+    dropped = [k for k in put if k not in mem.frames]
+    if dropped:
+        # frames go only once no droppable state is left, and the oldest go first:
+        # what is kept is the start frame and the newest frames, without a gap
+        assert with_state == [], with_state
+        rest = [k for k in kept if k != start]
+        assert rest == put[len(put) - len(rest):], (kept, dropped)
+        assert start in kept
+    assert mem.nbytes <= mem.limit or len(mem) <= 2
+
+
+def test_budget_drops_states_but_every_10th_then_the_oldest_frames():
+    frames = list(_budget_frames(45))
+    # measure one frame (positions + status) and one state, then allow 20 frames'
+    # positions and 5 states: states must go from about frame 8 and frames from
+    # about frame 25
+    probe = fcache.MemoryCache(limit_mb=1e6)
+    probe.sparse = fcache.SparseState(frames[0][6])
+    f, inp, out, status, offsets, st, _ = frames[0]
+    probe.put(f, inp, out, status, offsets, st, {})
+    full = probe.frames[f].nbytes
+    state = sum(a.nbytes for a in probe.frames[f].state.values())
+    assert state > 3 * (full - state)  # the scenario needs heavy states
+    mem = fcache.MemoryCache(limit_mb=(20 * (full - state) + 5 * state) / 2**20)
+    mem.sparse = fcache.SparseState(frames[0][6])
+    mem.start = 1
+    put = []
+    first_state_drop = first_frame_drop = None
+    for f, inp, out, status, offsets, st, _ in frames:
+        mem.put(f, inp, out, status, offsets, st, {"f": f})
+        put.append(f)
+        _check_budget_invariants(mem, put, start=1)
+        if first_state_drop is None and any(fr.state is None for fr in mem.frames.values()):
+            first_state_drop = f
+        if first_frame_drop is None and len(mem) < len(put):
+            first_frame_drop = f
+    assert first_state_drop is not None and first_frame_drop is not None
+    assert first_state_drop < first_frame_drop, (first_state_drop, first_frame_drop)
+    kept = sorted(mem.frames)
+    assert sorted(k for k in kept if mem.frames[k].state is not None) == \
+        [k for k in kept if (k - 1) % 10 == 0 or k == 45]
+    assert kept[0] == 1 and kept[1] > 2 and kept[-1] == 45 and 41 in kept
+    # a frame without its state still displays bit for bit
+    for k in mem.frames:
+        got, got_status, stats = mem.get(k, frames[0][1], frames[0][4])
+        assert np.array_equal(got, frames[k - 1][2]) and stats == {"f": k}
+        assert np.array_equal(got_status, frames[k - 1][3])
+    # and a kept state is exact
+    assert np.array_equal(mem.state(41)["angle"], frames[40][5]["angle"])
+
+
+def test_budget_counts_from_the_setups_start_frame():
+    """The states kept are those of every 10th frame from Frame Start (a pre-roll
+    starting at -4 keeps -4, 6, 16 ...), not of frames divisible by 10."""
+    frames = list(_budget_frames(30))
+    mem = fcache.MemoryCache(limit_mb=0.6)  # 30 frames' positions and 4 or 5 states
+    mem.sparse = fcache.SparseState(frames[0][6])
+    mem.start = -4
+    for f, inp, out, status, offsets, st, _ in frames:
+        mem.put(f - 5, inp, out, status, offsets, st, {})
+    keyed = sorted(k for k in mem.frames if mem.frames[k].state is not None)
+    assert len(mem) == 30 and [k for k in keyed if k < 20] == [-4, 6, 16], keyed
+
+
+# ---------------------------------------------------------- atomic bake writes
+def _partial_savez(fail_after=0.5):
+    """A stand-in for ``np.savez`` that writes the first part of a real npz into the
+    open file, then fails as a full disk or a killed process would."""
+    real = np.savez
+
+    def savez(fh, **arrays):
+        import io
+
+        buf = io.BytesIO()
+        real(buf, **arrays)
+        data = buf.getvalue()
+        fh.write(data[: int(len(data) * fail_after)])
+        fh.flush()
+        raise OSError(28, "No space left on device (simulated, in the middle of a frame)")
+
+    return savez
+
+
+def _frame(f, n=64):
+    offsets = np.arange(0, (n + 1) * 2, 2, dtype=np.int32)
+    pts = np.full((2 * n, 3), float(f), np.float32)
+    return pts, np.full(n, f % 5, np.int8), offsets
+
+
+@pytest.mark.parametrize("fail_after", [0.0, 0.02, 0.5, 0.999])
+def test_a_write_failing_midway_keeps_the_previous_file(tmp_path, monkeypatch, fail_after):
+    """README "Bake": files are written to a temporary file, then moved into place,
+    so a crash never leaves a half-written frame. Re-baking frame 3 fails in the
+    middle: frame 3's previous file is intact; a new frame 4 that fails does not
+    exist at all (list_frames never offers a partial frame to resume from)."""
+    d = str(tmp_path / "bake")
+    for f in (1, 2, 3):
+        fcache.write_frame(d, f, *_frame(f), None, inputs={"source": f})
+    before = (tmp_path / "bake" / "frame_000003.npz").read_bytes()
+    with monkeypatch.context() as m:
+        m.setattr(fcache.np, "savez", _partial_savez(fail_after))
+        for f in (3, 4):
+            with pytest.raises(OSError, match="simulated"):
+                fcache.write_frame(d, f, *_frame(f + 100), None, inputs={"source": 0})
+    assert (tmp_path / "bake" / "frame_000003.npz").read_bytes() == before
+    p, st, offs, _ = fcache.read_frame(d, 3)
+    assert np.array_equal(p, _frame(3)[0]) and fcache.read_inputs(d, 3) == {"source": 3}
+    assert fcache.list_frames(d) == [1, 2, 3]
+    assert not (tmp_path / "bake" / "frame_000004.npz").exists()
+    # Free Bake removes the leftovers of the failed writes too
+    leftovers = len(os.listdir(d))
+    assert fcache.remove_frames(d) == leftovers
+    assert not (tmp_path / "bake").exists()
+
+
+def test_a_frame_file_is_synced_before_it_is_moved_into_place(tmp_path, monkeypatch):
+    """The finished temporary file is flushed to disk (fsync) and only then renamed
+    over the frame's name with os.replace (atomic on POSIX and Windows)."""
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        return real_fsync(fd)
+
+    def replace(src, dst):
+        events.append(("replace", os.fspath(src), os.fspath(dst)))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(fcache.os, "fsync", fsync)
+    monkeypatch.setattr(fcache.os, "replace", replace)
+    d = str(tmp_path / "bake")
+    path = fcache.write_frame(d, 7, *_frame(7), None)
+    tmp = [e for e in events if e[0] == "replace"][0][1]
+    assert tmp != path and os.path.dirname(tmp) == os.path.dirname(path)
+    assert events == [("fsync", os.path.realpath(tmp)), ("replace", tmp, path)], events

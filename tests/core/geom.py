@@ -2,27 +2,18 @@
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import oracle
-from hypothesis import HealthCheck, settings
+from hypothesis import settings
+from hypothesis_profiles import examples
 
 from core import Status
 
-#: Property-test presets: reproducible (derandomize) and without deadline.
-#: FURCOLLIDE_TEST_SCALE=10 (environment) multiplies the number of examples
-#: for a deeper local run; CI uses the default (1).
-#: FURCOLLIDE_TEST_RANDOM=1 draws fresh examples (exploration); failures it
-#: finds should be pinned as explicit regression tests.
-_SCALE = float(os.environ.get("FURCOLLIDE_TEST_SCALE", "1"))
-_DERANDOMIZE = os.environ.get("FURCOLLIDE_TEST_RANDOM", "0") != "1"
-FAST = settings(max_examples=max(1, int(15 * _SCALE)), deadline=None,
-                derandomize=_DERANDOMIZE, database=None,
-                suppress_health_check=list(HealthCheck))
-MEDIUM = settings(max_examples=max(1, int(30 * _SCALE)), deadline=None,
-                  derandomize=_DERANDOMIZE, database=None,
-                  suppress_health_check=list(HealthCheck))
+#: Property-test sizes: the loaded hypothesis profile (tests/conftest.py: ``ci`` by
+#: default, ``--hypothesis-profile=thorough`` for ten times as many fresh examples)
+#: decides randomness, database and scale; health checks stay on.
+FAST = settings(max_examples=examples(15))
+MEDIUM = settings(max_examples=examples(30))
 
 #: The core's status codes, by name (``core.Status`` is their only definition).
 FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED, DISABLED = (

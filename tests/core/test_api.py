@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import time
 
 import numpy as np
 import scenes
@@ -42,6 +43,28 @@ def test_step_result_and_defaults():
     # colliders may be any iterable; a tuple works
     res3 = Solver(offs, Settings()).step(pts, (col,))
     assert np.array_equal(res.points, res3.points)
+
+
+def test_timings_are_milliseconds_per_phase_and_the_ray_count():
+    """README: ``res.timings`` holds milliseconds per phase (set-up, pinch, local
+    frames, solve, output, total) and ``rays``, the number of rays cast."""
+    pts, offs = scenes.pack([scenes.straight_curve([x, 0, 0], [0, 0, 1], 1.0, 6)
+                             for x in np.linspace(-0.3, 0.3, 40)])
+    V, F = scenes.uv_sphere([0.0, 0, 0.8], 0.3, 32, 16)
+    solver = Solver(offs, Settings(mode="soft"))
+    t0 = time.perf_counter()
+    res = solver.step(pts, [Collider(V, F)])
+    wall = (time.perf_counter() - t0) * 1e3
+    t = res.timings
+    phases = ("setup", "pinch", "frames", "solve", "output")
+    assert set(phases) | {"total", "rays"} <= set(t), sorted(t)
+    for k in (*phases, "total"):
+        assert isinstance(t[k], float) and t[k] >= 0.0, (k, t[k])
+    assert t["total"] <= wall
+    # the phases run one after another (the pinch beside the local frames)
+    assert t["setup"] + t["frames"] + t["solve"] + t["output"] <= t["total"]
+    assert t["total"] >= 0.5 * wall or wall < 1.0, (t, wall)  # milliseconds, not seconds
+    assert t["solve"] > 0.0 and isinstance(t["rays"], int) and t["rays"] > 0
 
 
 def test_collider_properties_roundtrip():

@@ -6,6 +6,7 @@ from __future__ import annotations
 import geom
 import numpy as np
 import oracle
+import pytest
 import scenes
 
 from core import Collider, Settings, Solver, Status
@@ -296,3 +297,131 @@ def test_inside_cell_cache_gives_the_answer_of_tracing_every_point():
                 traced = col._parity(P, off)
                 np.testing.assert_array_equal(got, traced)
             assert got.any() and not got.all()
+
+
+@pytest.mark.parametrize("kind", ["closed", "open sheet", "double-sided"])
+def test_one_collider_shared_by_solvers_with_different_offsets(kind):
+    """Several solvers may share one collider with different Collision Offsets: each
+    gets the shell of its own offset (as with a collider of its own), in any order.
+    (An open or double-sided collider's shell has other faces with an offset than
+    without: every face of the real surface, or only its rims.)"""
+    rng = np.random.default_rng(4)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=40, extent=0.5)
+    if kind == "closed":
+        V, F = scenes.uv_sphere([0, 0, 0.8], 0.35, 24, 12)
+    else:
+        V, F = scenes.grid(size=1.2, n=6, z=0.6)
+    ds = kind == "double-sided"
+
+    def collider():
+        return Collider(V, F, double_sided=ds)
+
+    shared = collider()
+    for d in (0.0, 0.1, 0.5, 0.1, 0.0, 0.5):
+        s = Settings(mode="stiff", collision_offset=d)
+        got = Solver(offs, s).step(pts, [shared])
+        want = Solver(offs, s).step(pts, [collider()])
+        np.testing.assert_array_equal(got.points, want.points, err_msg=str(d))
+        np.testing.assert_array_equal(got.status, want.status, err_msg=str(d))
+
+
+def _two_overlapping_spheres():
+    """One mesh of two closed spheres that overlap (an artist's body of parts)."""
+    c = np.array([[0.0, 0.0, 0.0], [0.45, 0.1, 0.05]])
+    r = np.array([0.4, 0.3])
+    Va, Fa = scenes.uv_sphere(c[0], r[0], 48, 24)
+    Vb, Fb = scenes.uv_sphere(c[1], r[1], 48, 24)
+    return np.vstack([Va, Vb]), np.vstack([Fa, Fb + len(Va)]), c, r
+
+
+def test_inside_overlapping_closed_parts_is_inside():
+    """The parity test counts back minus front faces (a winding number): a point
+    inside either of two overlapping closed parts is inside, one in neither is not
+    (points within 2 % of a radius of either sphere are left out: the mesh is a
+    polygon there)."""
+    V, F, c, r = _two_overlapping_spheres()
+    col = Collider(V, F)
+    rng = np.random.default_rng(5)
+    p = rng.uniform([-0.5, -0.5, -0.5], [0.85, 0.5, 0.5], (3000, 3))
+    dist = np.linalg.norm(p[:, None] - c[None], axis=2) / r  # (n, 2), 1 on a sphere
+    clear = (np.abs(dist - 1.0) > 0.02).all(axis=1)
+    p, inside = p[clear], (dist[clear] < 1.0).any(axis=1)
+    assert inside.sum() > 500 and (~inside).sum() > 500
+    assert ((dist[clear] < 1.0).all(axis=1)).sum() > 50  # in both parts
+    np.testing.assert_array_equal(col.contains(p), inside)
+    np.testing.assert_array_equal(col._parity(p, 0.0), inside)
+    # and the solver pinches exactly the curves rooted inside
+    roots = p[:400]
+    curves = [scenes.straight_curve(x, [0, 0, 1], 0.3, 3) for x in roots]
+    pts, offs = scenes.pack(curves)
+    res = Solver(offs, Settings(mode="stiff")).step(pts, [col])
+    np.testing.assert_array_equal(res.status == Status.PINCHED, inside[:400])
+
+
+def test_an_empty_collider_answers_in_the_documented_types():
+    """A collider without faces hits nothing: bool flags, t = inf (float64), zero
+    normals, for world and local queries."""
+    col = Collider(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+    assert col.empty
+    o, d = np.zeros((4, 3)), np.ones((4, 3))
+    for h in (col.segment_hits(o, d), col.segment_hits_local(o, d)):
+        assert h.dtype == bool and h.shape == (4,) and not h.any()
+    hit, t, n = col.segment_hit_details(o, d)
+    assert hit.dtype == bool and not hit.any()
+    assert t.dtype == np.float64 and np.isinf(t).all() and (t > 0).all()
+    assert n.shape == (4, 3) and not n.any()
+    q = np.arange(12, dtype=np.float32).reshape(4, 3)
+    p, n = col.closest_points(q)  # no surface: the queries themselves, no normal
+    assert p.dtype == np.float64 and np.array_equal(p, q)
+    assert n.shape == (4, 3) and n.dtype == np.float64 and not n.any()
+
+
+def test_the_third_parity_vote_decides_when_the_first_two_disagree(monkeypatch):
+    """The inside test casts two rays per point and a third where they disagree (a
+    ray grazing an edge can miss a face). Fault injection: the first direction's rays
+    miss everything, so every point's two votes disagree; the third vote must give
+    each point its true side."""
+    V, F = scenes.uv_sphere([0, 0, 0], 0.5, 32, 16)
+    col = Collider(V, F)
+    rng = np.random.default_rng(9)
+    p = rng.normal(size=(400, 3)) * 0.3
+    r = np.linalg.norm(p, axis=1)
+    p, inside = p[np.abs(r - 0.5) > 0.03], r[np.abs(r - 0.5) > 0.03] < 0.5
+    be, _ = col._backend(0.0)
+    real = be.hit_details
+    first = np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0)  # the first vote's direction
+
+    def grazing(o, d, tmax, **kw):
+        prim, t, *rest = real(o, d, tmax, **kw)
+        u = d / np.linalg.norm(d, axis=1, keepdims=True)
+        miss = np.abs(u @ first - 1.0) < 1e-9
+        prim = np.where(miss, -1, prim)
+        return (prim, t, *rest)
+
+    monkeypatch.setattr(be, "hit_details", grazing)
+    np.testing.assert_array_equal(col._parity(p, 0.0), inside)
+
+
+def test_a_face_collapsed_by_a_deformation_keeps_the_offset_shell_whole():
+    """Degenerate faces are dropped when a collider is built, but a deformation can
+    collapse one later (a vertex pulled onto its neighbour; the topology stays). The
+    offset shell must stay finite and closed there: dense fur under the collapsed
+    faces is kept out of the mesh and about the offset away from it."""
+    rng = np.random.default_rng(8)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=300, extent=0.25, n_cvs=(4, 6),
+                                    length=(0.9, 1.1), curly=0.0)
+    V, F = scenes.uv_sphere([0, 0, 1.0], 0.3, 16, 8)
+    south = len(V) - 1
+    V2 = V.copy()
+    V2[south - 1] = V2[south]  # collapses the two faces that share both
+    col = Collider(V, F)
+    col.vertices = V2
+    d = 0.1
+    res = Solver(offs, Settings(mode="stiff", collision_offset=d)).step(pts, [col])
+    assert np.isfinite(res.points).all()
+    status = np.asarray(res.status)
+    assert (status == Status.COLLIDING).sum() > 50
+    geom.assert_no_intersection(res.points, offs, res.status, [(V2, F)])
+    A, B, _, _ = oracle.curve_segments(res.points, offs)
+    near = np.linalg.norm(np.stack([A, B]) - [0, 0, 1.0], axis=2).min()
+    assert near > 0.3 + 0.5 * d, near  # (a mesh of chords: the shell is about d out)

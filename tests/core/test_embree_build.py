@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import Collider, rays
 
@@ -37,7 +38,7 @@ def rays_through(rng, k=3000):
     return o, d
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(n=st.integers(3, 200), m=st.integers(1, 400), seed=st.integers(0, 2**31 - 1))
 def test_fast_build_gives_the_hits_of_plain_arrays(n, m, seed):
     rng = np.random.default_rng(seed)
@@ -131,7 +132,7 @@ def test_nothing_calls_into_a_library_directly():
                 assert not any(n.split(".")[0] == "ctypes" for n in names), path
 
 
-@settings(max_examples=20, deadline=None)
+@settings(max_examples=examples(20), deadline=None)
 @given(seed=st.integers(0, 2**31 - 1))
 def test_any_hit_agrees_with_first_hit(seed):
     """The occlusion query (any_hit, used by every probe) answers exactly as the

@@ -5,6 +5,7 @@ from __future__ import annotations
 import geom
 import numpy as np
 import scenes
+import strategies as strat
 from geom import FAST
 from hypothesis import given
 from hypothesis import strategies as st
@@ -89,23 +90,24 @@ def test_enabled_all_true_equals_no_mask():
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(["stiff", "bend", "soft"]),
-       n_frames=st.integers(2, 6))
-def test_random_masks_over_frames(seed, mode, n_frames):
+@given(fur=st.lists(strat.curves(extent=0.5, n_cvs=(3, 8)), min_size=1, max_size=20),
+       mode=st.sampled_from(["stiff", "bend", "soft"]), n_frames=st.integers(2, 6),
+       rate=st.floats(0.0, 1.0), data=st.data())
+def test_random_masks_over_frames(fur, mode, n_frames, rate, data):
     """Static input, a moving ball, a random enabled mask per frame: a
     disabled curve shows exactly its previous frame's output; every enabled
     curve keeps the invariants."""
-    rng = np.random.default_rng(seed)
-    pts, offs = scenes.fur_on_plane(rng, n_curves=20, curly=0.2, extent=0.5, n_cvs=(3, 8))
+    pts, offs = scenes.pack(fur)
     V, F = scenes.uv_sphere([0, 0, 0], 0.35, 24, 12)
     col = Collider(V, F)
     C = len(offs) - 1
-    solver = Solver(offs, Settings(mode=mode, recovery_rate=float(rng.uniform(0, 1))))
+    solver = Solver(offs, Settings(mode=mode, recovery_rate=rate))
     prev = pts.copy()
     for f in range(n_frames):
         M = scenes.translation([0.15 * f - 0.3, 0.0, 0.9])
         col.matrix = M
-        enabled = rng.random(C) < 0.6
+        enabled = np.array(data.draw(st.lists(st.booleans(), min_size=C, max_size=C),
+                                     label=f"enabled {f}"))
         r = solver.step(pts, [col], enabled=enabled)
         status = np.asarray(r.status)
         assert np.all((status == Status.DISABLED) == ~enabled)

@@ -1,4 +1,8 @@
-"""Property tests of the solver's invariants on random scenes (oracle-checked)."""
+"""Property tests of the solver's invariants on random scenes (oracle-checked).
+
+Scenes are drawn from their parameters (``strategies.fur_scenes``: every curve and
+collider, shrinkable) and each has at least one curve whose input crosses a collider.
+"""
 
 from __future__ import annotations
 
@@ -9,18 +13,12 @@ import scenes
 from geom import EXCLUDED, FAST, MEDIUM
 from hypothesis import given
 from hypothesis import strategies as st
+from strategies import fur_scenes, rigid_motions
 
 from core import Collider, Settings, Solver, Status
 
 MODES = ("stiff", "bend", "soft")
 VALID_STATUS = {int(s) for s in Status}
-
-
-def _build(seed, kinds, n_curves, dtype, curly=0.15):
-    rng = np.random.default_rng(seed)
-    pts, offs = scenes.fur_on_plane(rng, n_curves=n_curves, curly=curly, dtype=dtype)
-    specs = [scenes.random_collider(rng, k) for k in kinds]
-    return rng, pts, offs, specs
 
 
 def _colliders(specs, backend=None):
@@ -57,15 +55,13 @@ def _check_frame(pts, offs, res, specs, lengths=True, cols=None):
             assert not hit.any(), f"collider #{k} hits curves {np.unique(cid[hit]).tolist()}"
 
 
-kinds_st = st.lists(st.sampled_from(scenes.COLLIDER_KINDS), min_size=1, max_size=2)
+modes = st.sampled_from(MODES)
 
 
 @MEDIUM
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), kinds=kinds_st,
-       n_curves=st.integers(1, 25), f32=st.booleans())
-def test_single_frame_invariants(seed, mode, kinds, n_curves, f32):
-    dtype = np.float32 if f32 else np.float64
-    _, pts, offs, specs = _build(seed, kinds, n_curves, dtype)
+@given(scene=fur_scenes(max_curves=25), mode=modes)
+def test_single_frame_invariants(scene, mode):
+    pts, offs, specs = scene
     solver = Solver(offs, Settings(mode=mode))
     pts_before = pts.copy()
     cols = _colliders(specs)
@@ -91,15 +87,15 @@ def test_single_frame_invariants(seed, mode, kinds, n_curves, f32):
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), kinds=kinds_st,
-       n_curves=st.integers(1, 20), f32=st.booleans(), n_frames=st.integers(2, 6))
-def test_moving_colliders_invariants(seed, mode, kinds, n_curves, f32, n_frames):
+@given(scene=fur_scenes(), mode=modes, n_frames=st.integers(2, 6), data=st.data(),
+       rate=st.floats(0.1, 1.0))
+def test_moving_colliders_invariants(scene, mode, n_frames, data, rate):
     """Colliders sweep through the fur (rigid motion via matrix) while the
     fur itself sways: every frame keeps every invariant."""
-    dtype = np.float32 if f32 else np.float64
-    rng, pts0, offs, specs = _build(seed, kinds, n_curves, dtype)
-    vel = rng.normal(size=(len(specs), 3)) * 0.15
-    solver = Solver(offs, Settings(mode=mode, recovery_rate=float(rng.uniform(0.1, 1))))
+    pts0, offs, specs = scene
+    dtype = pts0.dtype
+    vel = data.draw(rigid_motions(len(specs)), label="velocities")
+    solver = Solver(offs, Settings(mode=mode, recovery_rate=rate))
     cols = _colliders(specs)
     for f in range(n_frames):
         # sway the input curves rigidly about their roots (input animation)
@@ -121,10 +117,9 @@ def test_moving_colliders_invariants(seed, mode, kinds, n_curves, f32, n_frames)
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), kinds=kinds_st,
-       n_curves=st.integers(1, 20))
-def test_deterministic_and_thread_independent(seed, mode, kinds, n_curves):
-    _, pts, offs, specs = _build(seed, kinds, n_curves, np.float64)
+@given(scene=fur_scenes(dtype=np.float64), mode=modes)
+def test_deterministic_and_thread_independent(scene, mode):
+    pts, offs, specs = scene
     runs = []
     for threads in (1, 2, 1, None):
         solver = Solver(offs, Settings(mode=mode, threads=threads))
@@ -145,10 +140,9 @@ def test_deterministic_and_thread_independent(seed, mode, kinds, n_curves):
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), kinds=kinds_st,
-       n_curves=st.integers(1, 20), k=st.integers(1, 4))
-def test_state_snapshot_restore(seed, mode, kinds, n_curves, k):
-    _, pts, offs, specs = _build(seed, kinds, n_curves, np.float64)
+@given(scene=fur_scenes(dtype=np.float64), mode=modes, k=st.integers(1, 4))
+def test_state_snapshot_restore(scene, mode, k):
+    pts, offs, specs = scene
     settings = Settings(mode=mode, recovery_rate=0.3, plasticity=0.2)
     solver = Solver(offs, settings)
     cols = _colliders(specs)
@@ -190,10 +184,9 @@ def test_state_snapshot_restore(seed, mode, kinds, n_curves, k):
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES),
-       kinds=kinds_st, n_curves=st.integers(1, 20))
-def test_reset_forgets_history(seed, mode, kinds, n_curves):
-    _, pts, offs, specs = _build(seed, kinds, n_curves, np.float64)
+@given(scene=fur_scenes(dtype=np.float64), mode=modes)
+def test_reset_forgets_history(scene, mode):
+    pts, offs, specs = scene
     cols = _colliders(specs)
     solver = Solver(offs, Settings(mode=mode))
     first = solver.step(pts, cols)
@@ -210,11 +203,9 @@ def test_reset_forgets_history(seed, mode, kinds, n_curves):
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), kinds=kinds_st,
-       n_curves=st.integers(1, 20), f32=st.booleans())
-def test_recovery_rate_one_returns_exact_input(seed, mode, kinds, n_curves, f32):
-    dtype = np.float32 if f32 else np.float64
-    _, pts, offs, specs = _build(seed, kinds, n_curves, dtype)
+@given(scene=fur_scenes(), mode=modes)
+def test_recovery_rate_one_returns_exact_input(scene, mode):
+    pts, offs, specs = scene
     solver = Solver(offs, Settings(mode=mode, recovery_rate=1.0, plasticity=0.0))
     solver.step(pts, _colliders(specs))
     res = solver.step(pts, [])
@@ -222,12 +213,11 @@ def test_recovery_rate_one_returns_exact_input(seed, mode, kinds, n_curves, f32)
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), kinds=kinds_st,
-       n_curves=st.integers(1, 20))
-def test_status_free_once_back_at_input(seed, mode, kinds, n_curves):
+@given(scene=fur_scenes(dtype=np.float64), mode=modes)
+def test_status_free_once_back_at_input(scene, mode):
     """Documented: with recovery_rate=1 the next step returns the input AND
     status FREE; likewise, any curve whose output is its input is FREE."""
-    _, pts, offs, specs = _build(seed, kinds, n_curves, np.float64)
+    pts, offs, specs = scene
     for rate in (1.0, 0.5):
         solver = Solver(offs, Settings(mode=mode, recovery_rate=rate, plasticity=0.0))
         solver.step(pts, _colliders(specs))
@@ -244,10 +234,10 @@ def test_status_free_once_back_at_input(seed, mode, kinds, n_curves):
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), kinds=kinds_st,
-       n_curves=st.integers(1, 15), rate=st.sampled_from([0.2, 0.5, 0.8]))
-def test_recovery_monotone_then_exact(seed, mode, kinds, n_curves, rate):
-    _, pts, offs, specs = _build(seed, kinds, n_curves, np.float64)
+@given(scene=fur_scenes(max_curves=15, dtype=np.float64), mode=modes,
+       rate=st.sampled_from([0.2, 0.5, 0.8]))
+def test_recovery_monotone_then_exact(scene, mode, rate):
+    pts, offs, specs = scene
     solver = Solver(offs, Settings(mode=mode, recovery_rate=rate, plasticity=0.0))
     r0 = solver.step(pts, _colliders(specs))
     excluded = np.isin(np.asarray(r0.status), EXCLUDED)

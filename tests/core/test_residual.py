@@ -25,6 +25,7 @@ import oracle
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import Collider, Settings, Solver, Status
 
@@ -91,7 +92,7 @@ def _ridge():
     return V, F
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40), deadline=None)
 @given(
     height=st.floats(0.5002, 0.53),
     along=st.floats(-0.4, 0.4),

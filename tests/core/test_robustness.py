@@ -7,8 +7,9 @@ import numpy as np
 import oracle
 import pytest
 import scenes
+import strategies as strat
 from geom import EXCLUDED, FAST
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from core import Collider, Settings, Solver, Status
@@ -17,7 +18,16 @@ from core.errors import InputError
 MODES = ("stiff", "bend", "soft")
 
 
-def _scene(seed, n_curves=15):
+def _scene(data, n_curves=15):
+    """Drawn fur, a sphere over it and a tilted sheet across it (a collision drawn)."""
+    pts, offs, V, F, _c, _r = data.draw(strat.sphere_scenes(max_curves=n_curves), label="scene")
+    tilt = data.draw(strat.floats(-0.3, 0.3), label="tilt")
+    Vp, Fp = scenes.quad([-1.5, -1.5, 0.6], [3, 0, tilt], [0, 3, 0.1])
+    return pts, offs, [(V, F, False), (Vp, Fp, True)]
+
+
+def _fixed_scene(seed, n_curves=15):
+    """The same kind of scene from a fixed seed, for the example-based tests."""
     rng = np.random.default_rng(seed)
     pts, offs = scenes.fur_on_plane(rng, n_curves=n_curves, curly=0.2, extent=0.6,
                                     n_cvs=(3, 9))
@@ -36,11 +46,14 @@ def _solve(pts, offs, meshes, settings, transform=None):
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES),
+@given(data=st.data(), mode=st.sampled_from(MODES),
        scale=st.sampled_from([1e-3, 1e3]))
-def test_units_do_not_matter(seed, mode, scale):
-    """Millimetres or kilometres: same statuses, same shapes (scaled)."""
-    pts, offs, meshes = _scene(seed)
+def test_units_do_not_matter(data, mode, scale):
+    """Millimetres or kilometres: same statuses, same shapes (scaled). Curves that pass
+    through a mesh vertex (where the push direction can be parallel to the curve and
+    the axis is any perpendicular one) are left to the strict xfail below."""
+    pts, offs, meshes = _scene(data)
+    assume(not _through_a_vertex(pts, offs, meshes))
     s = Settings(mode=mode)
     ref = _solve(pts, offs, meshes, s)
 
@@ -58,14 +71,44 @@ def test_units_do_not_matter(seed, mode, scale):
                                 [(tf(V), F) for V, F, _ in meshes])
 
 
+def _through_a_vertex(pts, offs, meshes, tol=1e-9):
+    """Does a segment pass within ``tol`` (relative) of a mesh vertex?"""
+    A, B, _, _ = oracle.curve_segments(pts, offs)
+    for V, _F, _ds in meshes:
+        V = np.asarray(V, float)
+        ab = B - A
+        t = np.clip(((V[:, None] - A[None]) * ab[None]).sum(-1) / (ab * ab).sum(-1), 0, 1)
+        d = np.linalg.norm(V[:, None] - (A[None] + t[..., None] * ab[None]), axis=-1)
+        if (d <= tol * np.linalg.norm(ab, axis=1)[None]).any():
+            return True
+    return False
+
+
+@pytest.mark.xfail(strict=True, reason="bug (core, rotation axis): a curve that hits a "
+                   "collider exactly at a vertex where the push direction is parallel to "
+                   "the root-to-hit vector (a straight curve through a UV sphere's pole) "
+                   "gets an arbitrary perpendicular axis from rounding noise, so scaling "
+                   "the scene by 1e-3 or 1e3 turns it another way (tip at (0.75, 0.10, "
+                   "0.65) at scale 1, (0.45, 0.59, 0.67) at 1e-3)")
+@pytest.mark.parametrize("scale", [1e-3, 1e3])
+def test_units_do_not_matter_through_a_pole(scale):
+    pts = np.array([[0, 0, 0], [0, 0, 0.5], [0, 0, 1.0]])
+    offs = np.array([0, 3])
+    V, F = scenes.uv_sphere([0, 0, 0.75], 0.25, 24, 12)
+    s = Settings(mode="stiff")
+    ref = _solve(pts, offs, [(V, F, False)], s)
+    res = _solve(pts * scale, offs, [(V * scale, F, False)], s)
+    np.testing.assert_allclose(res.points / scale, ref.points, atol=1e-5)
+
+
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES),
+@given(data=st.data(), mode=st.sampled_from(MODES),
        scale=st.sampled_from([1e-3, 1.0, 1e3]), shift=st.sampled_from([50.0, 1000.0]))
-def test_placement_away_from_origin(seed, mode, scale, shift):
+def test_placement_away_from_origin(data, mode, scale, shift):
     """The whole scene far from the origin (collider vertices given in world
     space): still collision free, same statuses up to borderline steps, and
     shapes agree to float32 hit-point precision."""
-    pts, offs, meshes = _scene(seed)
+    pts, offs, meshes = _scene(data)
     s = Settings(mode=mode)
     ref = _solve(pts, offs, meshes, s)
     t = np.array([shift, -shift, 0.5 * shift]) * scale
@@ -111,7 +154,7 @@ def test_mirrored_collider(mode):
 
 
 def test_layouts_and_integer_types():
-    pts, offs, meshes = _scene(6)
+    pts, offs, meshes = _fixed_scene(6)
     V, F, _ = meshes[0]
     ref = Solver(offs, Settings()).step(pts, [Collider(V, F)])
     big = np.zeros((len(pts), 6))
@@ -131,7 +174,7 @@ def test_layouts_and_integer_types():
 
 
 def test_output_does_not_alias_input_or_state():
-    pts, offs, meshes = _scene(7)
+    pts, offs, meshes = _fixed_scene(7)
     V, F, _ = meshes[0]
     solver = Solver(offs, Settings(mode="stiff"))
     r = solver.step(pts, [Collider(V, F)])
@@ -148,7 +191,7 @@ def test_output_does_not_alias_input_or_state():
 
 
 def test_state_validation():
-    pts, offs, meshes = _scene(8)
+    pts, offs, meshes = _fixed_scene(8)
     V, F, _ = meshes[0]
     s = Solver(offs, Settings())
     s.step(pts, [Collider(V, F)])
@@ -172,7 +215,7 @@ def test_state_validation():
 @pytest.mark.parametrize("kw", [dict(attract_to_growth_surface=True),
                                 dict(pinch_resolution="growth_surface")])
 def test_growth_settings_need_growth(kw):
-    pts, offs, meshes = _scene(9)
+    pts, offs, meshes = _fixed_scene(9)
     V, F, _ = meshes[0]
     with pytest.raises(InputError, match="growth"):
         Solver(offs, Settings(**kw)).step(pts, [Collider(V, F)])
@@ -221,15 +264,16 @@ def test_tiny_scene_away_from_origin_is_resolved(mode):
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), mode=st.sampled_from(MODES), attract=st.booleans())
-def test_rigid_motion_equivariance(seed, mode, attract):
+@given(data=st.data(), mode=st.sampled_from(MODES), attract=st.booleans(),
+       axis=strat.directions(), angle=strat.floats(0.1, 3.0),
+       t=st.tuples(strat.floats(-2, 2), strat.floats(-2, 2), strat.floats(-2, 2)))
+def test_rigid_motion_equivariance(data, mode, attract, axis, angle, t):
     """Rotating and moving the whole scene (fur, colliders through their
     matrices, growth surface) rotates and moves the result with it."""
-    rng = np.random.default_rng(seed)
-    pts, offs, meshes = _scene(seed)
+    pts, offs, meshes = _scene(data)
     Vg, Fg = scenes.grid(size=6.0, n=6, z=0.0)
-    R = scenes.rotation_matrix(rng.normal(size=3), rng.uniform(0.1, 3.0))
-    t = rng.uniform(-2, 2, 3)
+    R = scenes.rotation_matrix(axis, angle)
+    t = np.asarray(t)
     M = scenes.affine(R, t)
     s = Settings(mode=mode, attract_to_growth_surface=attract)
     ref = Solver(offs, s).step(pts, [Collider(V, F, double_sided=ds) for V, F, ds in meshes],

@@ -7,6 +7,7 @@ from __future__ import annotations
 import geom
 import numpy as np
 import scenes
+import strategies as strat
 from geom import EXCLUDED, MEDIUM
 from hypothesis import given
 from hypothesis import strategies as st
@@ -34,22 +35,18 @@ settings_st = st.builds(
 
 
 @MEDIUM
-@given(seed=st.integers(0, 2**31 - 1), s=settings_st,
-       kinds=st.lists(st.sampled_from(scenes.COLLIDER_KINDS), min_size=1, max_size=2),
-       f32=st.booleans())
-def test_any_settings_keep_invariants(seed, s, kinds, f32):
-    rng = np.random.default_rng(seed)
-    dtype = np.float32 if f32 else np.float64
-    pts, offs = scenes.fur_on_plane(rng, n_curves=int(rng.integers(1, 15)), curly=0.2,
-                                    dtype=dtype)
-    specs = [scenes.random_collider(rng, k) for k in kinds]
+@given(scene=strat.fur_scenes(max_curves=15), s=settings_st, data=st.data())
+def test_any_settings_keep_invariants(scene, s, data):
+    pts, offs, specs = scene
+    f32 = pts.dtype == np.float32
     cols = [Collider(sp["V"], sp["F"], double_sided=sp["double_sided"], matrix=sp["matrix"])
             for sp in specs]
     Vg, Fg = scenes.grid(size=6.0, n=6, z=0.0)
     growth = Collider(Vg, Fg)
-    vel = rng.normal(size=(len(specs), 3)) * 0.1
+    vel = data.draw(strat.rigid_motions(len(specs)), label="velocities")
     solver = Solver(offs, s)
     C = len(offs) - 1
+    mask = np.array(data.draw(st.lists(st.booleans(), min_size=C, max_size=C), label="mask"))
     for f in range(4):
         meshes = []
         for sp, col, v in zip(specs, cols, vel, strict=True):
@@ -57,7 +54,7 @@ def test_any_settings_keep_invariants(seed, s, kinds, f32):
             M[:3, 3] += v * f
             col.matrix = M
             meshes.append((scenes.world_vertices(dict(sp, matrix=M)), sp["F"]))
-        enabled = None if f != 2 else rng.random(C) < 0.7
+        enabled = None if f != 2 else mask
         cur = cols if f != 3 else []  # last frame: colliders gone
         res = solver.step(pts, cur, growth=growth, enabled=enabled)
         status = np.asarray(res.status)

@@ -7,8 +7,9 @@ import geom
 import numpy as np
 import oracle
 import scenes
+import strategies as strat
 from geom import FAST
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from core import Collider, Settings, Solver, Status
@@ -25,23 +26,22 @@ def _brute_force_clearing_angle(curve, axis, step_deg, V, F, max_deg=180.0):
     return None
 
 
+lean = strat.floats(-0.5, 0.5)
+
+
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), precision=st.sampled_from([0.25, 1.0, 2.5, 7.0]))
-def test_stiff_angle_is_smallest_clearing_step(seed, precision):
-    rng = np.random.default_rng(seed)
-    curve = scenes.curly_curve([0, 0, 0], [rng.normal() * 0.2, rng.normal() * 0.2, 1], 1.0,
-                               int(rng.integers(3, 9)), amplitude=rng.uniform(0, 0.15))
+@given(lx=lean, ly=lean, n=st.integers(3, 8), amp=strat.floats(0.0, 0.15),
+       phi=strat.floats(0.0, 2 * np.pi), r=strat.floats(0.15, 0.4), up=strat.floats(0.6, 1.0),
+       out=strat.floats(0.2, 0.9), precision=st.sampled_from([0.25, 1.0, 2.5, 7.0]))
+def test_stiff_angle_is_smallest_clearing_step(lx, ly, n, amp, phi, r, up, out, precision):
+    curve = scenes.curly_curve([0, 0, 0], [lx, ly, 1], 1.0, n, amplitude=amp)
     pts, offs = scenes.pack([curve])
     # convex collider: a sphere touching the upper part of the curve
-    d = rng.normal(size=3)
-    d[2] = 0
-    d /= np.linalg.norm(d)
-    r = rng.uniform(0.15, 0.4)
-    center = curve[-1] * rng.uniform(0.6, 1.0) + d * r * rng.uniform(0.2, 0.9)
+    d = np.array([np.cos(phi), np.sin(phi), 0.0])
+    center = curve[-1] * up + d * r * out
     center[2] = max(center[2], r + 0.05)  # root stays outside
     V, F = scenes.icosphere(center, r, 3)
-    if not oracle.segments_hit_mesh(pts, offs, V, F, eps=oracle.SURE)[0]:
-        return  # nothing to resolve in this draw
+    assume(oracle.segments_hit_mesh(pts, offs, V, F, eps=oracle.SURE)[0])  # a collision
     res = Solver(offs, Settings(mode="stiff", rotation_precision=precision)).step(
         pts, [Collider(V, F)])
     assert np.asarray(res.status)[0] == Status.COLLIDING
@@ -113,23 +113,19 @@ def _bend(curve, axis, theta_rad):
 
 
 @FAST
-@given(seed=st.integers(0, 2**31 - 1), precision=st.sampled_from([0.25, 1.0, 4.0]))
-def test_bend_angle_is_smallest_clearing_step(seed, precision):
+@given(lx=lean, ly=lean, n=st.integers(3, 8), amp=strat.floats(0.05, 0.15),
+       phi=strat.floats(0.0, 2 * np.pi), r=strat.floats(0.15, 0.35), up=strat.floats(0.7, 1.0),
+       out=strat.floats(0.2, 0.9), precision=st.sampled_from([0.25, 1.0, 4.0]))
+def test_bend_angle_is_smallest_clearing_step(lx, ly, n, amp, phi, r, up, out, precision):
     """Bend: the tip angle theta is the smallest clearing multiple of the
     precision along the curve's axis (brute force with the oracle)."""
-    rng = np.random.default_rng(seed)
-    curve = scenes.curly_curve([0, 0, 0], [rng.normal() * 0.2, rng.normal() * 0.2, 1], 1.0,
-                               int(rng.integers(3, 9)), amplitude=rng.uniform(0.05, 0.15))
+    curve = scenes.curly_curve([0, 0, 0], [lx, ly, 1], 1.0, n, amplitude=amp)
     pts, offs = scenes.pack([curve])
-    d = rng.normal(size=3)
-    d[2] = 0
-    d /= np.linalg.norm(d)
-    r = rng.uniform(0.15, 0.35)
-    center = curve[-1] * rng.uniform(0.7, 1.0) + d * r * rng.uniform(0.2, 0.9)
+    d = np.array([np.cos(phi), np.sin(phi), 0.0])
+    center = curve[-1] * up + d * r * out
     center[2] = max(center[2], r + 0.3)
     V, F = scenes.icosphere(center, r, 3)
-    if not oracle.segments_hit_mesh(pts, offs, V, F, eps=oracle.SURE)[0]:
-        return
+    assume(oracle.segments_hit_mesh(pts, offs, V, F, eps=oracle.SURE)[0])  # a collision
     res = Solver(offs, Settings(mode="bend", rotation_precision=precision)).step(
         pts, [Collider(V, F)])
     if np.asarray(res.status)[0] != Status.COLLIDING:

@@ -113,6 +113,27 @@ def test_plasticity_target_is_fraction_of_max_angle(p):
         np.testing.assert_allclose(r.points, r2.points, atol=1e-12)
 
 
+@pytest.mark.parametrize(("rate", "p"), [(0.3, 0.5), (0.5, 0.25)])
+def test_partial_recovery_toward_a_plastic_target_per_frame(rate, p):
+    """README: each frame the angle moves ``recovery_rate`` of the way to the target
+    ``plasticity * largest angle``, and lands on it within half a precision step."""
+    pts, offs, col, _ = _setup()
+    solver = Solver(offs, Settings(mode="stiff", recovery_rate=rate, plasticity=p,
+                                   rotation_precision=PREC))
+    theta = _angle_deg(pts, solver.step(pts, [col]).points)
+    target = p * theta
+    for _ in range(100):
+        new = _angle_deg(pts, solver.step(pts, []).points)
+        expect = theta - rate * (theta - target)
+        if expect - target < PREC / 2:
+            assert new == pytest.approx(target, abs=1e-7)
+            break
+        assert new == pytest.approx(expect, abs=1e-7), (theta, new, target)
+        theta = new
+    else:
+        pytest.fail("never reached the target")
+
+
 @pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
 def test_plasticity_one_keeps_max_rotation(mode):
     pts, offs, col, _ = _setup()

@@ -24,8 +24,9 @@ import io
 import geom
 import numpy as np
 import scenes
+import strategies as strat
 from geom import FAST
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from core import Collider, Settings, Solver, Status
@@ -35,16 +36,19 @@ MODES = ("stiff", "bend", "soft")
 KINDS = ("icosphere", "box", "plane", "plane2", "bumpy", "sphere")
 #: How a collider is animated.
 MOTIONS = ("static", "rigid", "deform", "both")
+modes = st.sampled_from(MODES)
+dtypes = st.sampled_from([np.float32, np.float64])
 
 
 # ---------------------------------------------------------------- scenes
-def _deformed(V0, rng, n_frames, hold):
+def _deformed(V0, wave, n_frames, hold):
     """Local vertices per frame: a breathing, wobbling mesh (same topology).
-    ``hold[f]``: frame f repeats frame f-1's vertices exactly."""
+    ``wave``: (amplitude, phase, k (3,)) drawn; ``hold[f]``: frame f repeats frame
+    f-1's vertices exactly."""
+    amp, phase, k = wave
     center = V0.mean(axis=0)
     ext = float(np.abs(V0 - center).max()) or 1.0
-    noise = rng.normal(size=V0.shape) * 0.03 * ext
-    phase = rng.uniform(0, 2 * np.pi)
+    noise = amp * ext * np.sin((V0 - center) @ k + phase)[:, None] * np.array([1, -0.5, 0.7])
     out = []
     for f in range(n_frames):
         if f and hold[f]:
@@ -55,14 +59,10 @@ def _deformed(V0, rng, n_frames, hold):
     return out
 
 
-def _matrices(M0, rng, n_frames, hold):
-    """World matrices per frame: translation, rotation and (for some
-    colliders) a scale pulse, uniform or not (a new offset shell each frame)."""
-    vel = rng.normal(size=3) * 0.12
-    axis = rng.normal(size=3)
-    w = rng.uniform(-0.3, 0.3)
-    pulse = rng.choice([0.0, 0.0, 0.1]) * (rng.uniform(0.5, 1.5, 3) if rng.random() < 0.5
-                                           else np.ones(3))
+def _matrices(M0, motion, n_frames, hold):
+    """World matrices per frame: translation, rotation and (for some colliders) a
+    scale pulse, uniform or not (a new offset shell each frame); ``motion`` drawn."""
+    vel, axis, w, pulse = motion
     out = []
     for f in range(n_frames):
         if f and hold[f]:
@@ -76,21 +76,41 @@ def _matrices(M0, rng, n_frames, hold):
     return out
 
 
-def make_scene(seed, n_frames, n_cols=None, dtype=np.float64, masks=True):
-    """A random animated scene, fully precomputed (so every run replays it).
+@st.composite
+def waves(draw):
+    return (draw(strat.floats(0.0, 0.03)), draw(strat.floats(0.0, 2 * np.pi)),
+            np.array([draw(strat.floats(-4.0, 4.0)) for _ in range(3)]))
 
-    Returns a dict: ``offs``, ``points[f]``, ``enabled[f]`` and ``cols``, a
-    list of collider specs with per-frame ``V[f]`` (local) and ``M[f]``.
-    """
-    rng = np.random.default_rng(seed)
-    n_curves = int(rng.integers(20, 41))
-    ragged = rng.random() < 0.5
-    n_cvs = (3, 8) if ragged else (int(rng.integers(3, 8)),) * 2
-    pts0, offs = scenes.fur_on_plane(rng, n_curves=n_curves, n_cvs=n_cvs, extent=0.8,
-                                     curly=0.2, dtype=np.float64)
+
+@st.composite
+def rigid(draw):
+    vel = np.array([draw(strat.floats(-0.3, 0.3)) for _ in range(3)])
+    pulse = draw(st.sampled_from([0.0, 0.1]))
+    aniso = (np.array([draw(strat.floats(0.5, 1.5)) for _ in range(3)]) if draw(st.booleans())
+             else np.ones(3))
+    return vel, draw(strat.directions()), draw(strat.floats(-0.3, 0.3)), pulse * aniso
+
+
+@st.composite
+def animated_scenes(draw, n_frames, n_cols=(1, 3), dtype=None, masks=True, contact=True):
+    """A drawn animated scene, fully precomputed (so every run replays it): curves that
+    sway, 1-3 colliders (static, rigid, deforming or both; held on some frames),
+    per-frame enable masks. Everything is a drawn parameter (shrinkable); with
+    ``contact`` some curve crosses a collider at frame 0.
+
+    Returns a dict: ``offs``, ``points[f]``, ``enabled[f]`` and ``cols``, a list of
+    collider specs with per-frame ``V[f]`` (local) and ``M[f]``."""
+    if dtype is None:
+        dtype = draw(dtypes)
+    ragged = draw(st.booleans())
+    if ragged:
+        cs = draw(st.lists(strat.curves(extent=0.8, n_cvs=(3, 8)), min_size=1, max_size=40))
+    else:
+        n = draw(st.integers(3, 7))
+        cs = draw(st.lists(strat.curves(extent=0.8, n_cvs=(n, n)), min_size=1, max_size=40))
+    pts0, offs = scenes.pack(cs, np.float64)
     C = len(offs) - 1
-    sway_axis = rng.normal(size=3)
-    sway_axis[2] = 0.0
+    sway_axis = draw(strat.directions()) * [1.0, 1.0, 0.0] + [1e-3, 0.0, 0.0]
     points = []
     for f in range(n_frames):
         ang = 0.06 * np.sin(0.7 * f)
@@ -99,32 +119,34 @@ def make_scene(seed, n_frames, n_cols=None, dtype=np.float64, masks=True):
         p[offs[:-1]] = pts0[offs[:-1]].astype(dtype)
         points.append(p)
     enabled = []
-    for _ in range(n_frames):
-        if not masks or rng.random() < 0.3:
+    for _ in range(n_frames):  # a drawn fraction of the curves, in a drawn stripe pattern
+        if not masks or draw(st.booleans()):
             enabled.append(None)
         else:
-            enabled.append(rng.random(C) < rng.uniform(0.4, 0.95))
-    if n_cols is None:
-        n_cols = int(rng.integers(1, 4))
+            frac, k = draw(strat.floats(0.4, 0.95)), draw(st.integers(1, 7))
+            enabled.append(((np.arange(C) * k * 0.618034) % 1.0) < frac)
     cols = []
-    for i in range(n_cols):
-        kind = KINDS[int(rng.integers(len(KINDS)))]
-        spec = scenes.random_collider(rng, kind)
-        motion = MOTIONS[int(rng.integers(len(MOTIONS)))]
-        hold = rng.random(n_frames) < 0.25
+    for i in range(draw(st.integers(*n_cols))):
+        spec = draw(strat.collider_specs(cs, KINDS))
+        motion = draw(st.sampled_from(MOTIONS))
+        hold = draw(st.lists(st.booleans(), min_size=n_frames, max_size=n_frames))
         V0 = np.asarray(spec["V"], float)
         M0 = np.asarray(spec["matrix"], float)
-        Vs = (_deformed(V0, rng, n_frames, hold) if motion in ("deform", "both")
+        Vs = (_deformed(V0, draw(waves()), n_frames, hold) if motion in ("deform", "both")
               else [V0] * n_frames)
-        Ms = (_matrices(M0, rng, n_frames, hold) if motion in ("rigid", "both")
+        Ms = (_matrices(M0, draw(rigid()), n_frames, hold) if motion in ("rigid", "both")
               else [M0] * n_frames)
         cols.append(dict(
-            name=f"{kind}{i}", F=spec["F"], V=Vs, M=Ms, motion=motion,
+            name=f"{spec['kind']}{i}", F=spec["F"], V=Vs, M=Ms, motion=motion,
             double_sided=bool(spec["double_sided"]),
-            offset=(None if rng.random() < 0.6 else float(rng.choice([0.0, 0.01, 0.03]))),
-            deforming=[None, True, False][int(rng.integers(3))],
+            offset=draw(st.sampled_from([None, None, 0.0, 0.01, 0.03])),
+            deforming=draw(st.sampled_from([None, True, False])),
         ))
-    return dict(offs=offs, points=points, enabled=enabled, cols=cols, C=C)
+    scene = dict(offs=offs, points=points, enabled=enabled, cols=cols, C=C)
+    if contact:
+        assume(strat.colliding(points[0], offs, [dict(V=c["V"][0], F=c["F"], matrix=c["M"][0])
+                                                  for c in cols]).any())
+    return scene
 
 
 def build_colliders(scene, frame=0, deforming="spec"):
@@ -188,14 +210,14 @@ def assert_same_state(a, b, what):
         assert np.array_equal(a[key], b[key]), f"{what}: state[{key!r}] differs"
 
 
-def random_settings(draw_mode, rng_seed):
-    rng = np.random.default_rng(rng_seed + 7)
+@st.composite
+def solver_settings(draw, mode=None):
     return Settings(
-        mode=draw_mode,
-        recovery_rate=float(rng.choice([0.2, 0.5, 1.0])),
-        plasticity=float(rng.choice([0.0, 0.3])),
-        collision_offset=float(rng.choice([0.0, 0.0, 0.02])),
-        rotation_precision=float(rng.choice([0.25, 1.0])),
+        mode=draw(modes) if mode is None else mode,
+        recovery_rate=draw(st.sampled_from([0.2, 0.5, 1.0])),
+        plasticity=draw(st.sampled_from([0.0, 0.3])),
+        collision_offset=draw(st.sampled_from([0.0, 0.0, 0.02])),
+        rotation_precision=draw(st.sampled_from([0.25, 1.0])),
     )
 
 
@@ -208,23 +230,18 @@ def savez_roundtrip(state):
         return {k: z[k] for k in z.files}
 
 
-seeds = st.integers(0, 2**31 - 1)
-modes = st.sampled_from(MODES)
-dtypes = st.sampled_from([np.float32, np.float64])
 
 
 # ---------------------------------------------------------------- 1. snapshot / restore
 @FAST
-@given(seed=seeds, mode=modes, n_frames=st.integers(3, 6), data=st.data(),
-       threads=st.sampled_from([1, 2]), dtype=dtypes)
-def test_restore_into_a_fresh_solver_continues_bit_for_bit(seed, mode, n_frames, data, threads,
-                                                           dtype):
+@given(n_frames=st.integers(3, 6), data=st.data(), threads=st.sampled_from([1, 2]))
+def test_restore_into_a_fresh_solver_continues_bit_for_bit(n_frames, data, threads):
     """0..N in one go == 0..k, snapshot, a fresh Solver restored, k+1..N (the
     same colliders, in the same state). Re-stepping k+1 from the restored
     state twice gives the same result both times."""
     k = data.draw(st.integers(0, n_frames - 2), label="k")
-    scene = make_scene(seed, n_frames, dtype=dtype)
-    s = random_settings(mode, seed).replace(threads=threads)
+    scene = data.draw(animated_scenes(n_frames), label="scene")
+    s = data.draw(solver_settings(), label="settings").replace(threads=threads)
     ref, solver_a, _ = run(scene, s, range(n_frames))
 
     first, solver_b, cols_b = run(scene, s, range(k + 1))
@@ -246,10 +263,10 @@ def test_restore_into_a_fresh_solver_continues_bit_for_bit(seed, mode, n_frames,
 
 # ---------------------------------------------------------------- 2. thread count
 @FAST
-@given(seed=seeds, mode=modes, n_frames=st.integers(2, 5), dtype=dtypes)
-def test_thread_count_never_changes_a_bit(seed, mode, n_frames, dtype):
-    scene = make_scene(seed, n_frames, dtype=dtype)
-    s = random_settings(mode, seed)
+@given(n_frames=st.integers(2, 5), data=st.data())
+def test_thread_count_never_changes_a_bit(n_frames, data):
+    scene = data.draw(animated_scenes(n_frames), label="scene")
+    s = data.draw(solver_settings(), label="settings")
     runs = {t: run(scene, s.replace(threads=t), range(n_frames))[:2] for t in (1, 2, 3)}
     for t in (2, 3):
         for f in range(n_frames):
@@ -258,24 +275,30 @@ def test_thread_count_never_changes_a_bit(seed, mode, n_frames, dtype):
 
 
 @settings(FAST, max_examples=max(1, FAST.max_examples // 3))
-@given(seed=seeds, mode=modes, offset=st.sampled_from([0.0, 0.01]),
-       dtype=dtypes, masked=st.booleans())
-def test_thread_count_never_changes_a_bit_on_split_batches(seed, mode, offset, dtype, masked):
+@given(mode=modes, offset=st.sampled_from([0.0, 0.01]), dtype=dtypes, masked=st.booleans(),
+       phase=st.tuples(strat.floats(0, 6.28), strat.floats(0, 6.28)),
+       double=st.booleans(), lean=strat.floats(0.0, 0.4))
+def test_thread_count_never_changes_a_bit_on_split_batches(mode, offset, dtype, masked, phase,
+                                                          double, lean):
     """Enough curves (> 2 x 4096 rays per query) that the ray batches are
     really split over the pool, with a deforming sheet built on a ray thread
-    and the state stored beside the output."""
-    rng = np.random.default_rng(seed)
-    pts, offs = scenes.fur_on_plane(rng, n_curves=2500, n_cvs=(6, 6), extent=1.0,
-                                    curly=0.2, dtype=dtype)
+    and the state stored beside the output. (The 2,500 curves are a fixed grid
+    leaning by a drawn amount: drawing each would be data, not a scene.)"""
+    g = (np.arange(50) + 0.5) / 50 * 2 - 1
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    curves = [scenes.straight_curve([x, y, 0], [lean * np.sin(7 * x), lean * np.cos(5 * y), 1],
+                                    0.5 + 0.4 * abs(np.sin(3 * x * y)), 6)
+              for x, y in zip(X.ravel(), Y.ravel(), strict=True)]
+    pts, offs = scenes.pack(curves, dtype)
     V, F = scenes.grid(size=3.0, n=12, z=0.0)
-    phase = rng.uniform(0, 6.28, 2)
     shapes = []
     for f in range(3):
         W = V.copy()
         W[:, 2] = 0.5 + 0.1 * np.sin(3 * W[:, 0] + f + phase[0]) * np.cos(2 * W[:, 1] + phase[1])
         shapes.append(W)
-    masks = [rng.random(len(offs) - 1) < 0.8 if masked else None for _ in range(3)]
-    double = bool(rng.random() < 0.5)
+    C = len(offs) - 1
+    masks = [((np.arange(C) * 0.618034 + 0.3 * f) % 1.0) < 0.8 if masked else None
+             for f in range(3)]
     runs = {}
     for t in (1, 2, 3):
         col = Collider(V, F, double_sided=double)
@@ -295,14 +318,13 @@ def test_thread_count_never_changes_a_bit_on_split_batches(seed, mode, offset, d
 
 # ---------------------------------------------------------------- 3. collider history
 @FAST
-@given(seed=seeds, mode=modes, n_frames=st.integers(2, 5),
-       threads=st.sampled_from([1, 2]), dtype=dtypes)
-def test_explicit_deforming_flag_makes_history_irrelevant(seed, mode, n_frames, threads, dtype):
+@given(n_frames=st.integers(2, 5), threads=st.sampled_from([1, 2]), data=st.data())
+def test_explicit_deforming_flag_makes_history_irrelevant(n_frames, threads, data):
     """Every frame: colliders animated frame by frame (history) and colliders
     built fresh at that frame (same explicit flag) give the same result from
     the same solver state."""
-    scene = make_scene(seed, n_frames, dtype=dtype)
-    s = random_settings(mode, seed).replace(threads=threads)
+    scene = data.draw(animated_scenes(n_frames), label="scene")
+    s = data.draw(solver_settings(), label="settings").replace(threads=threads)
     solver = Solver(scene["offs"], s)
     cols = build_colliders(scene, 0, "explicit")
     for f in range(n_frames):
@@ -316,18 +338,18 @@ def test_explicit_deforming_flag_makes_history_irrelevant(seed, mode, n_frames, 
 
 
 @FAST
-@given(seed=seeds, mode=modes, n_frames=st.integers(2, 5))
-def test_deforming_true_history_irrelevant_for_deformed_colliders(seed, mode, n_frames):
+@given(n_frames=st.integers(2, 5), data=st.data())
+def test_deforming_true_history_irrelevant_for_deformed_colliders(n_frames, data):
     """Every collider deforms, all with deforming=True: one built fresh at
     frame k's vertices (and matrix) equals the one deformed frame by frame
     up to k."""
-    scene = make_scene(seed, n_frames)
+    scene = data.draw(animated_scenes(n_frames), label="scene")
     for c in scene["cols"]:
         if c["motion"] == "static":
             c["motion"] = "deform"
         if c["motion"] == "rigid":
             c["motion"] = "both"
-    s = random_settings(mode, seed)
+    s = data.draw(solver_settings(), label="settings")
     solver = Solver(scene["offs"], s)
     cols = build_colliders(scene, 0, True)
     for f in range(n_frames):
@@ -341,10 +363,10 @@ def test_deforming_true_history_irrelevant_for_deformed_colliders(seed, mode, n_
 
 # ---------------------------------------------------------------- 4. float64
 @FAST
-@given(seed=seeds, mode=modes, n_frames=st.integers(2, 5))
-def test_float64_in_float64_out_and_invariants(seed, mode, n_frames):
-    scene = make_scene(seed, n_frames, dtype=np.float64)
-    s = random_settings(mode, seed)
+@given(n_frames=st.integers(2, 5), data=st.data())
+def test_float64_in_float64_out_and_invariants(n_frames, data):
+    scene = data.draw(animated_scenes(n_frames, dtype=np.float64), label="scene")
+    s = data.draw(solver_settings(), label="settings")
     solver = Solver(scene["offs"], s)
     cols = build_colliders(scene)
     offs = scene["offs"]
@@ -383,26 +405,27 @@ def _reach_meets_box(scene, f, k, offset):
 
 
 @FAST
-@given(seed=seeds, mode=modes, n_frames=st.integers(3, 7), data=st.data())
-def test_far_collider_builds_only_for_vertex_sets_it_meets(seed, mode, n_frames, data):
+@given(n_frames=st.integers(3, 7), data=st.data())
+def test_far_collider_builds_only_for_vertex_sets_it_meets(n_frames, data):
     """One collider jumps between far (50 units away) and near frames while
     it deforms (on some frames it keeps its vertices). Its build count never
     exceeds the number of distinct shapes (vertex set, and with an offset the
     matrix's metric) on frames where its bounds are within the curves' reach,
     whatever the thread count, and results equal the single-threaded run's."""
-    scene = make_scene(seed, n_frames, n_cols=1)
+    scene = data.draw(animated_scenes(n_frames, n_cols=(1, 1)), label="scene")
     near = data.draw(st.lists(st.booleans(), min_size=n_frames, max_size=n_frames),
                      label="near")
     spec = scene["cols"][0]
     spec["motion"] = "deform"
-    rng = np.random.default_rng(seed + 1)
-    hold = rng.random(n_frames) < 0.3
-    spec["V"] = _deformed(np.asarray(spec["V"][0], float), rng, n_frames, hold)
+    hold = data.draw(st.lists(st.booleans(), min_size=n_frames, max_size=n_frames),
+                     label="hold")
+    spec["V"] = _deformed(np.asarray(spec["V"][0], float), data.draw(waves(), label="wave"),
+                          n_frames, hold)
     spec["M"] = [M.copy() for M in spec["M"]]
     for f in range(n_frames):
         if not near[f]:
             spec["M"][f][:3, 3] += [50.0, 0.0, 0.0]
-    s = random_settings(mode, seed)
+    s = data.draw(solver_settings(), label="settings")
     off = spec["offset"] if spec["offset"] is not None else s.collision_offset
     meets = [_reach_meets_box(scene, f, 0, off) for f in range(n_frames)]
 

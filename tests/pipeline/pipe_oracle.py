@@ -164,18 +164,95 @@ def sphere_and_ground(seed=12):
     return pts, off, np.vstack([Vs, Vp]), np.vstack([Fs, Fp])
 
 
-def brute_segments(A, B, V, F):
-    """(S,) exact segment-mesh distance: every segment against every triangle.
+# ------------------------------------------------- exact segment-triangle distance
+def _rowdot(u, v):
+    return (u * v).sum(-1)
 
-    (The one oracle here that uses core: ``segment_triangle_distance``, itself
-    checked against sampling in test_distance_cap.py.)
-    """
+
+def point_segment_distance_rows(p, a, b):
+    """(n,) distance of p[i] to segment [a[i], b[i]] (a point when a == b)."""
+    ab = b - a
+    L2 = _rowdot(ab, ab)
+    t = np.clip(_rowdot(p - a, ab) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
+
+
+def segment_segment_distance_rows(p0, p1, q0, q1):
+    """(n,) distance between segments [p0, p1] and [q0, q1], row by row.
+
+    |p0 + s u - q0 - t v|^2 is a convex quadratic on the unit square: its minimum is
+    the unconstrained one when that lies inside, else on an edge of the square, i.e.
+    an end point of one segment against the other segment."""
+    d = np.minimum.reduce([point_segment_distance_rows(p0, q0, q1),
+                           point_segment_distance_rows(p1, q0, q1),
+                           point_segment_distance_rows(q0, p0, p1),
+                           point_segment_distance_rows(q1, p0, p1)])
+    u, v, w = p1 - p0, q1 - q0, p0 - q0
+    a, b, c = _rowdot(u, u), _rowdot(u, v), _rowdot(v, v)
+    dd, e = _rowdot(u, w), _rowdot(v, w)
+    den = a * c - b * b
+    ok = den > 1e-14 * a * c
+    den = np.where(ok, den, 1.0)
+    s = (b * e - c * dd) / den
+    t = (a * e - b * dd) / den
+    inside = ok & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
+    gap = np.linalg.norm(w + s[:, None] * u - t[:, None] * v, axis=1)
+    return np.where(inside, np.minimum(d, gap), d)
+
+
+def point_triangle_distance_rows(p, a, b, c):
+    """(n,) exact distance of p[i] to triangle (a[i], b[i], c[i]) (non-degenerate)."""
+    n = np.cross(b - a, c - a)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    h = _rowdot(p - a, n)
+    q = p - h[:, None] * n
+    inside = np.ones(len(p), bool)
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= _rowdot(np.cross(v - u, q - u), n) >= 0
+    d = np.minimum.reduce([point_segment_distance_rows(p, a, b),
+                           point_segment_distance_rows(p, b, c),
+                           point_segment_distance_rows(p, c, a)])
+    return np.where(inside, np.abs(h), d)
+
+
+def segment_crosses_triangle_rows(p0, p1, a, b, c):
+    """(n,) bool: the segment meets the triangle's interior (Moller-Trumbore, no
+    tolerance; coplanar segments count as not crossing: their distance is then an end
+    point's or an edge's, which the caller takes anyway)."""
+    e1, e2, d = b - a, c - a, p1 - p0
+    pv = np.cross(d, e2)
+    det = _rowdot(e1, pv)
+    ok = det != 0
+    inv = 1.0 / np.where(ok, det, 1.0)
+    tv = p0 - a
+    uu = _rowdot(tv, pv) * inv
+    qv = np.cross(tv, e1)
+    vv = _rowdot(d, qv) * inv
+    t = _rowdot(e2, qv) * inv
+    return ok & (uu >= 0) & (vv >= 0) & (uu + vv <= 1) & (t >= 0) & (t <= 1)
+
+
+def segment_triangle_distance(p0, p1, a, b, c):
+    """(n,) exact distance between segment [p0, p1] and triangle (a, b, c), row by row,
+    written from its definition: 0 where they meet, else the smallest of the two end
+    points' distances to the triangle and the segment's distances to its three edges
+    (two disjoint convex sets are closest at an end point or an edge)."""
+    p0, p1, a, b, c = (np.asarray(x, np.float64).reshape(-1, 3) for x in (p0, p1, a, b, c))
+    d = np.minimum.reduce([point_triangle_distance_rows(p0, a, b, c),
+                           point_triangle_distance_rows(p1, a, b, c),
+                           segment_segment_distance_rows(p0, p1, a, b),
+                           segment_segment_distance_rows(p0, p1, b, c),
+                           segment_segment_distance_rows(p0, p1, c, a)])
+    return np.where(segment_crosses_triangle_rows(p0, p1, a, b, c), 0.0, d)
+
+
+def brute_segments(A, B, V, F):
+    """(S,) exact segment-mesh distance: every segment against every triangle, with the
+    oracle's own segment-triangle distance above (nothing from core)."""
     S, m = len(A), len(F)
     si = np.repeat(np.arange(S), m)
     ti = np.tile(np.arange(m), S)
-    T = V[F]
-    from core.pipeline import segment_triangle_distance
-
+    T = np.asarray(V, np.float64)[F]
     d = segment_triangle_distance(A[si], B[si], T[ti, 0], T[ti, 1], T[ti, 2])
     return d.reshape(S, m).min(1)
 

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pipe_oracle as po
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core.errors import ColliderError, InputError
 from core.pipeline import Binding, bind
 
-PROP = settings(max_examples=15, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(15))
 
 
 def _scene(seed):

@@ -8,15 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 import pipe_oracle as po
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import Collider
 from core.closest import closest_on_triangles, closest_points_on_mesh
 from core.pipeline import closest_faces
 
-PROP = settings(max_examples=20, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(20))
 
 
 def _brute(V, F, Q):

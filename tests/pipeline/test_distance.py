@@ -6,15 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pipe_oracle as po
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import Collider
 from core.errors import InputError
 from core.pipeline import collider_distance, segment_mesh_distance
 
-PROP = settings(max_examples=10, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(10))
 N_SAMPLES = 201
 
 

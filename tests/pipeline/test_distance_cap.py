@@ -6,15 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pipe_oracle as po
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import Collider
 from core.errors import InputError
 from core.pipeline import collider_distance, segment_mesh_distance, segment_triangle_distance
 
-PROP = settings(max_examples=12, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(12))
 TOL = 1e-9
 
 
@@ -27,6 +27,89 @@ def _scene(rng, n_curves=10, n_cvs=5, spread=1.2):
         curves.append(np.vstack([root, root + np.cumsum(steps, 0)]))
     pts, off = po.pack(curves)
     return V, F, pts, off
+
+
+def _tricky_pairs(rng, k):
+    """Segments and triangles in the configurations that break distance code: parallel
+    to the plane above the interior or an edge, coplanar (crossing, outside, along an
+    edge), through a vertex or an edge, touching with an end point, zero-length,
+    parallel to an edge, and random ones."""
+    t0, t1, t2 = (rng.normal(0, 1, (k, 3)) for _ in range(3))
+    n = np.cross(t1 - t0, t2 - t0)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    bary = rng.dirichlet([1, 1, 1], k)
+    inner = bary[:, :1] * t0 + bary[:, 1:2] * t1 + bary[:, 2:] * t2
+    dirs = np.cross(n, rng.normal(0, 1, (k, 3)))  # in the plane
+    h = rng.uniform(-1, 1, (k, 1))
+    kind = np.arange(k) % 10
+    a = rng.normal(0, 1, (k, 3))
+    b = rng.normal(0, 1, (k, 3))
+    sel = [kind == i for i in range(10)]
+    a[sel[0]] = (inner + h * n - dirs)[sel[0]]  # parallel, above the interior
+    b[sel[0]] = (inner + h * n + dirs)[sel[0]]
+    a[sel[1]] = (inner - dirs * 3)[sel[1]]  # coplanar, through the triangle
+    b[sel[1]] = (inner + dirs * 3)[sel[1]]
+    far = inner + 5 * (inner - t0)
+    a[sel[2]] = far[sel[2]]  # coplanar, outside
+    b[sel[2]] = (far + dirs)[sel[2]]
+    a[sel[3]] = (t0 + 0.2 * (t1 - t0))[sel[3]]  # along an edge
+    b[sel[3]] = (t0 + 0.7 * (t1 - t0))[sel[3]]
+    a[sel[4]] = (t2 - n)[sel[4]]  # through a vertex
+    b[sel[4]] = (t2 + n)[sel[4]]
+    mid = 0.5 * (t0 + t1)
+    a[sel[5]] = (mid - n)[sel[5]]  # through an edge
+    b[sel[5]] = (mid + n)[sel[5]]
+    a[sel[6]] = inner[sel[6]]  # an end point on the triangle
+    b[sel[6]] = (inner + h * n)[sel[6]]
+    b[sel[7]] = a[sel[7]]  # zero length
+    a[sel[8]] = (mid + h * n + 0.3 * (t1 - t0))[sel[8]]  # parallel to an edge, above it
+    b[sel[8]] = (mid + h * n - 0.3 * (t1 - t0))[sel[8]]
+    return a, b, t0, t1, t2
+
+
+def test_the_oracles_segment_triangle_distance_against_sampling():
+    """The oracle itself (pipe_oracle.segment_triangle_distance) against dense sampling
+    of the segment: exact up to the sampling's own bound."""
+    rng = np.random.default_rng(4)
+    a, b, t0, t1, t2 = _tricky_pairs(rng, 400)
+    d = po.segment_triangle_distance(a, b, t0, t1, t2)
+    n = 2001
+    for i in range(0, 400, 3):
+        q = a[i] + np.linspace(0, 1, n)[:, None] * (b[i] - a[i])
+        est = po.point_mesh_distance(q, np.array([t0[i], t1[i], t2[i]]),
+                                     np.array([[0, 1, 2]])).min()
+        slack = np.linalg.norm(b[i] - a[i]) / (2 * (n - 1))
+        assert est - slack - 1e-12 <= d[i] <= est + 1e-12, (i, i % 10, d[i], est)
+
+
+def test_segment_triangle_distance_equals_the_oracle():
+    """core.pipeline.segment_triangle_distance against the independent oracle, to
+    1e-12, on random and degenerate configurations."""
+    rng = np.random.default_rng(5)
+    a, b, t0, t1, t2 = _tricky_pairs(rng, 4000)
+    want = po.segment_triangle_distance(a, b, t0, t1, t2)
+    got = segment_triangle_distance(a, b, t0, t1, t2)
+    bad = np.flatnonzero(np.abs(got - want) > 1e-12)
+    assert len(bad) == 0, [(int(i), int(i % 10), got[i], want[i]) for i in bad[:5]]
+    assert (want[np.arange(4000) % 10 == 1] < 1e-12).all()  # coplanar through: they meet
+
+
+def test_segment_segment_distance_equals_the_oracle():
+    """core's segment-segment distance (Ericson's clamping) against the oracle's
+    (the unconstrained minimum if inside the unit square, else the end points')."""
+    from core.pipeline.distance import segment_segment_distance
+
+    rng = np.random.default_rng(6)
+    k = 3000
+    p0, p1, q0, q1 = (rng.normal(0, 1, (k, 3)) for _ in range(4))
+    kind = np.arange(k) % 5
+    q1[kind == 1] = (q0 + (p1 - p0) * 0.7)[kind == 1]  # parallel
+    q0[kind == 2] = (p0 + 0.5 * (p1 - p0))[kind == 2]  # touching
+    p1[kind == 3] = p0[kind == 3]  # a point
+    q1[kind == 4] = (q0 - (p1 - p0) * 2.0)[kind == 4]  # anti-parallel
+    want = po.segment_segment_distance_rows(p0, p1, q0, q1)
+    got = segment_segment_distance(p0, p1, q0, q1)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
 
 
 def test_segment_triangle_distance_against_sampling():

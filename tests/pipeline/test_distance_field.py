@@ -10,16 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 import pipe_oracle as po
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import Collider
 from core import tolerances as tol
 from core.pipeline import collider_distance, region_of_influence, wind
 from core.pipeline.distance import _collider_index
 
-PROP = settings(max_examples=15, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(15))
 TOL = 1e-9
 
 

@@ -14,15 +14,15 @@ import numpy as np
 import pipe_oracle as po
 import pytest
 import slow_reference as ref
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import tolerances as tol
 from core.errors import InputError
 from core.pipeline import GroomDeformer, bind_groom, deform_groom, wind
 
-PROP = settings(max_examples=25, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(25))
 
 
 def _close(a, b, *scenes):

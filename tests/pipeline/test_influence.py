@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pipe_oracle as po
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core import Collider
 from core.errors import InputError
 from core.pipeline import collider_distance, region_of_influence
 
-PROP = settings(max_examples=8, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(8))
 
 
 def _scene(seed):

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pipe_oracle as po
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis_profiles import examples
 
 from core.errors import ColliderError, InputError
 from core.pipeline import dart_throwing, neighbor_pairs, sample_guides
 
-PROP = settings(max_examples=10, deadline=None, derandomize=True, database=None,
-                suppress_health_check=list(HealthCheck))
+PROP = settings(max_examples=examples(10))
 
 # a 2 x 1 plane made of triangles of very different sizes
 _X = np.array([0.0, 0.1, 0.3, 1.2, 2.0])
