@@ -146,7 +146,7 @@ def test_last_frame_shows_the_statistics_of_the_frame_shown(fc):
     assert stats[:6] == ["Frame 4", f"Colliding: {s.stat_colliding}",
                          f"Recovering: {s.stat_recovering}", f"Pinched: {s.stat_pinched}",
                          f"Unresolved: {s.stat_unresolved}", f"Disabled: {s.stat_disabled}"]
-    assert stats[-1] == f"Solve: {s.stat_solve_ms:.1f} ms"
+    assert f"Solve: {s.stat_solve_ms:.1f} ms" in stats  # (then the time of each stage)
     assert "4 of 8 frames cached" in labels(draw_everything()["FURCOLLIDE_PT_cache"])
 
 

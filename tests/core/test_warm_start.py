@@ -136,15 +136,16 @@ def test_moving_and_jumping_colliders_give_the_full_search_answer(
 
 
 @pytest.mark.parametrize(("mode", "static_ratio", "sway_ratio"),
-                         [("stiff", 0.7, 0.92), ("bend", 0.7, 0.94), ("soft", 0.5, 0.8)])
+                         [("stiff", 0.8, 0.96), ("bend", 0.7, 0.96), ("soft", 0.5, 0.8)])
 def test_a_lasting_contact_costs_fewer_rays_than_the_full_search(mode, static_ratio,
                                                                  sway_ratio):
     """What the warm start is for (rigid.Plan, SoftSolve.recover): a lasting contact
     is confirmed from the last step's answer in two or three probes instead of
     searched for. The ray count (``res.timings['rays']``, deterministic) of frames
     3-8 of a hat resting on the fur, still and swinging slowly, must stay well under
-    the full search's (measured: still 0.57 Stiff/Bend, 0.39 Soft; swinging 0.84,
-    0.87, 0.66)."""
+    the full search's (measured with probes traced tip first, which makes the blocked
+    probes both searches make cheap: still 0.74 Stiff, 0.62 Bend, 0.39 Soft; swinging
+    0.93, 0.92, 0.68)."""
     sh = scene.sustained_contact(1_000, 8, 20_000)
     for ratio, moving in ((static_ratio, False), (sway_ratio, True)):
         rays = {}
