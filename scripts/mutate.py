@@ -99,6 +99,13 @@ def drawn(files, sample, seed) -> list[str]:
 def run(files, jobs, fresh, sample, seed):
     if fresh:
         shutil.rmtree(MUTANTS, ignore_errors=True)
+    stats = MUTANTS / "mutmut-stats.json"
+    if stats.exists():
+        # mutmut traces which tests reach which function once, and later only new
+        # tests: a test edited since would keep its old reach. Re-trace them all.
+        newest = max(p.stat().st_mtime for p in (ROOT / "tests").rglob("*.py"))
+        if newest > stats.stat().st_mtime:
+            stats.unlink()
     if not sample:
         _mutmut_run([module_of(f) + ".*" for f in files], jobs)
         return
@@ -134,7 +141,8 @@ def explained() -> dict[str, str]:
         return {}
     why = {}
     for line in EXPLAINED.read_text().splitlines():
-        m = re.match(r"\|\s*`([\w.ǁ]+__mutmut_\d+)`\s*\|[^|]*\|\s*(.*?)\s*\|\s*$", line)
+        m = re.match(r"\|\s*`([\w.ǁ]+__mutmut_\d+)`\s*\|(?:[^|\\]|\\.)*\|\s*(.*?)\s*\|\s*$",
+                     line)
         if m:
             why[m.group(1)] = m.group(2)
     return why
