@@ -47,6 +47,7 @@ import hashlib
 import json
 import os
 import re
+import zipfile
 import zlib
 from dataclasses import dataclass, field
 
@@ -70,6 +71,10 @@ def _frame_of(name: str) -> int | None:
         return None
     return int(m.group(1))
 
+
+#: What reading a frame file that is not a finished frame raises (cut short, empty,
+#: not a zip, an older format): such a file holds no frame.
+UNREADABLE = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile)
 
 _STATE_PREFIX = "state__"
 _ATTRIBUTE_PREFIX = "attr__"
@@ -111,6 +116,7 @@ def rows_differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         d = a != b
     d = d.reshape(n, -1)
     if d.shape[1] in _UINT:  # a row of 1/2/4/8 flags is one integer
+        d = np.ascontiguousarray(d)  # (the view needs C-ordered rows: Fortran input)
         return d.view(_UINT[d.shape[1]]).reshape(n) != 0
     m = d[:, 0].copy()
     for j in range(1, d.shape[1]):
@@ -445,7 +451,7 @@ def write_frame(directory, f, points, status, offsets, state, sparse=None,
     (:func:`read_extra`).
     """
     if sparse is not None and state is not None:
-        state = {k.replace(":", "__"): v for k, v in sparse.encode(state).items()}
+        state = {k.replace(":", "__", 1): v for k, v in sparse.encode(state).items()}
     os.makedirs(directory, exist_ok=True)
     path = frame_path(directory, f)
     tmp = path + ".tmp"
@@ -503,7 +509,7 @@ def read_inputs(directory, f) -> dict | None:
             if _INPUTS_KEY not in z.files:
                 return None
             return decode_inputs(z[_INPUTS_KEY])
-    except (OSError, ValueError, KeyError):
+    except UNREADABLE:
         return None
 
 

@@ -151,7 +151,7 @@ def resume_frame(ob, directory) -> int | None:
             with np.load(framecache.frame_path(directory, f), allow_pickle=False) as z:
                 key = next((k for k in z.files if k.endswith("__fingerprint")), None)
                 ok = key is not None and z[key].tobytes().decode() == fp
-        except (OSError, ValueError, KeyError):
+        except framecache.UNREADABLE:
             ok = False
         if not ok:
             break

@@ -75,8 +75,7 @@ def on_depsgraph_update_post(scene, depsgraph=None):
             try:
                 _check_edits(ob, scene, depsgraph, edited)
             except Exception as exc:  # noqa: BLE001 - one setup's failure stays its own
-                print(f"FurCollide '{ob.name}': depsgraph update check failed: "
-                      f"{registry.describe(exc)}", flush=True)
+                registry.record_error(ob, exc)  # its status (and one console line)
     except Exception as exc:  # noqa: BLE001
         print(f"FurCollide: depsgraph update check failed: {exc}", flush=True)
 

@@ -260,15 +260,9 @@ def test_a_failure_while_writing_a_frame_keeps_the_previous_frames_and_resumes(
             np.testing.assert_array_equal(state[k], full[f][3][k], err_msg=f"{f} {k}")
 
 
-_PARTIAL_BUG = pytest.mark.xfail(
-    strict=True, reason="bug (operators/bake.py resume_frame, also framecache.read_inputs): "
-    "only OSError, ValueError and KeyError mean 'not a finished frame'; np.load raises "
-    "EOFError on an empty file and zipfile.BadZipFile on a cut zip, so Bake fails with "
-    "'EOFError: No data left in file' / 'BadZipFile: File is not a zip file'")
 
 
-@pytest.mark.parametrize("keep", [pytest.param(0, marks=_PARTIAL_BUG), 3,
-                                  pytest.param(0.5, marks=_PARTIAL_BUG)])
+@pytest.mark.parametrize("keep", [0, 3, 0.5])
 def test_resume_does_not_trust_a_partial_frame_file(fc, tmp_path, monkeypatch, capsys, keep):
     """A frame file cut short (copied from a full disk, written by a tool that does not
     write atomically: 0 bytes, 3 bytes or half of it) is not a finished frame: the next

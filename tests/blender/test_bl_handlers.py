@@ -80,10 +80,6 @@ def test_depsgraph_check_never_raises(fc, capfd, monkeypatch, module, name):
     assert _module("handlers").on_depsgraph_update_post(scene, dg) is None
 
 
-@pytest.mark.xfail(strict=True, reason="bug (operators/handlers.py on_depsgraph_update_post): "
-                   "an error in the depsgraph check is only printed ('FurCollide: depsgraph "
-                   "update check failed: ...'); README promises it becomes the setup's status "
-                   "message, as in the frame handler and the refresh timer")
 def test_a_depsgraph_check_error_becomes_the_setups_status(fc, capfd, monkeypatch):
     scene = bpy.context.scene
     hair, box, out = small_setup(fc)
