@@ -75,13 +75,17 @@ def on_depsgraph_update_post(scene, depsgraph=None):
             try:
                 _check_edits(ob, scene, depsgraph, edited)
             except Exception as exc:  # noqa: BLE001 - one setup's failure stays its own
-                registry.record_error(ob, exc)  # its status (and one console line)
+                # its status (and one console line), as a frame's error would be
+                registry.set_status(ob, "ERROR", "depsgraph update check failed: "
+                                    f"{registry.describe(exc)}")
     except Exception as exc:  # noqa: BLE001
         print(f"FurCollide: depsgraph update check failed: {exc}", flush=True)
 
 
 def _check_edits(ob, scene, depsgraph, edited) -> None:
     """Drop the playback cache of the setup on ``ob`` when an input really changed."""
+    if not ob.evaluated_get(depsgraph).is_evaluated:
+        return  # hidden from this depsgraph: nothing to compare (as the frame handler)
     rt = registry.get_runtime(ob, create=False)
     if (rt is None or not rt.baking) and dependencies_stale(ob):
         update_dependencies(ob)  # (a no-op next time: no update loop)
