@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import tolerances as tol
+from .rays import NumpyBackend
 
 
 @dataclass(frozen=True)
@@ -197,13 +198,11 @@ def _unique_faces(F, n):
     if not pair.any():
         return keep, 0
     key, _, face = _edges(F[keep], n)
-    uk, ucount = np.unique(key, return_counts=True)
-    per_face = np.zeros(len(keep), np.int64)  # its edges' smallest face count
-    per_face[:] = np.iinfo(np.int64).max
-    np.minimum.at(per_face, face, ucount[np.searchsorted(uk, key)])
-    ek = np.zeros(len(keep), np.int64)
-    np.maximum.at(ek, face, ucount[np.searchsorted(uk, key)])
-    wall = pair & (per_face == 4) & (ek == 4)  # (both faces of a pair decide alike)
+    _, inv_key, ucount = np.unique(key, return_inverse=True, return_counts=True)
+    # every edge of the face shared by exactly 4 kept faces: the pair and two more
+    four = np.ones(len(keep), bool)
+    np.logical_and.at(four, face, ucount[inv_key.reshape(-1)] == 4)
+    wall = pair & four  # (both faces of a pair decide alike)
     # any other pair: one duplicated face, the first kept
     low = np.full(len(gcount), len(keep))
     np.minimum.at(low, grp, np.arange(len(keep)))
@@ -319,26 +318,11 @@ _RAY = np.array([0.5773502691896258, 0.5773502691896257, 0.5773502691896259]) + 
 
 def _inside(points, T):
     """(k,) bool: is each point inside the closed triangle set ``T`` (m, 3, 3)?
-    Ray parity along one generic direction (Moeller-Trumbore, in chunks)."""
-    d = _RAY / np.linalg.norm(_RAY)
-    odd = np.zeros(len(points), np.int64)
-    e1 = T[:, 1] - T[:, 0]
-    e2 = T[:, 2] - T[:, 0]
-    pv = np.cross(d, e2)  # (m, 3)
-    det = np.einsum("ij,ij->i", e1, pv)
-    ok = np.abs(det) > 1e-300
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    step = max(1, 2_000_000 // max(len(T), 1))
-    for a in range(0, len(points), step):
-        P = points[a:a + step]
-        tv = P[:, None, :] - T[None, :, 0]  # (k, m, 3)
-        u = np.einsum("kmj,mj->km", tv, pv) * inv
-        qv = np.cross(tv, e1[None])
-        v = np.einsum("j,kmj->km", d, qv) * inv
-        t = np.einsum("kmj,mj->km", qv, e2) * inv
-        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
-        odd[a:a + step] = hit.sum(axis=1)
-    return odd % 2 == 1
+    Ray parity along one generic direction (the numpy ray backend)."""
+    m = len(T)
+    be = NumpyBackend(T.reshape(-1, 3), np.arange(3 * m).reshape(m, 3))
+    d = np.broadcast_to(_RAY / np.linalg.norm(_RAY), (len(points), 3))
+    return be.crossings(points, d) % 2 == 1
 
 
 def _components(f1, f2, m):

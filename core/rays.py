@@ -290,6 +290,16 @@ class NumpyBackend:
         self._e1 = V[F[:, 1]] - self._v0
         self._e2 = V[F[:, 2]] - self._v0
 
+    def crossings(self, o, d):
+        """(k,) number of triangles each ray ``o + t d`` (t >= 0, no end) crosses."""
+        o = np.asarray(o, dtype=np.float64)
+        d = np.asarray(d, dtype=np.float64)
+        out = np.zeros(len(o), np.int64)
+        step = max(1, 2_000_000 // max(1, len(self._v0)))
+        for a in range(0, len(o), step):
+            out[a : a + step] = np.isfinite(self._all_t(o[a : a + step], d[a : a + step])).sum(1)
+        return out
+
     def _all_t(self, o, d):
         """(k, m) ray parameter of every ray-triangle hit (inf where none)."""
         p = np.cross(d[:, None, :], self._e2[None])
