@@ -193,8 +193,8 @@ class Plan:
         ic, ir, io = i[pred_col], i[pred_rec], i[rest]
         kc, kr = kc[pred_col], kr[pred_rec]
         ko = np.where(self.moving[io], 0, self.K[io])  # as the full search
-        kc2 = np.maximum(kc - 1, 0)
-        two = kc > 1  # (kc - 1 == 0 is th0 itself)
+        kc2 = kc - 1  # (probed only where kc > 1: step 0 is th0 itself)
+        two = kc > 1
         kr1 = kr >= 1
         # The recovery step too, where it moves: clear there, a curve
         # recovers to it, as in the full search (whatever the rest says).
@@ -262,9 +262,8 @@ class Plan:
         self.lo[rec0], self.hi[rec0] = -1, 0
         keep = ~np.isin(pend, rec0)
         self._regime_test(batch, pend[keep], pend_k[keep])
-        # a recovery whose bracket is closed is found
-        done = (self.regime == 2) & (self.k == -2) & (self.hi >= 0) & (self.hi - self.lo <= 1)
-        self.k[done] = self.hi[done]
+        # (a recovery whose bracket is closed goes to the search all the same:
+        # gallop_bisect returns a settled bracket's top without a probe)
 
     # --------------------------------------------------------- searches
     def collisions_to_guess(self):
@@ -328,8 +327,9 @@ def resolve_collisions(ctx, batch, items, k, status):
                 np.zeros(n, np.int64), np.full(n, -1, np.int64), np.ones(n, np.int64),
                 np.ones(n, bool), guess=seed,
             )
+            # (still restyled: they end UNRESOLVED, which the next step does
+            # not remember as a contact either way)
             ctx.state.stiff[cr[k2 < 0]] = False
-            ctx.restyled[cr[k2 < 0]] = False
             ok2 = k2 >= 0
             k[retry[ok2]] = k2[ok2]
             th0[retry[ok2]] = 0.0

@@ -194,6 +194,11 @@ def test_bend_falls_back_to_stiff_when_bending_cannot_clear():
     # it stays rigid until recovered, then recovers exactly
     solver = Solver(offs, Settings(mode="bend", recovery_rate=0.5))
     solver.step(pts, [Collider(V, F)])
+    state = solver.state
+    assert state["stiff"][0] and state["contact"][0]
+    # its angle is now counted on Stiff's grid: the search's memory of the last
+    # change (a Bend angle's) does not carry over
+    assert state["delta"][0] == 0.0
     for _ in range(100):
         r = solver.step(pts, [])
         a = geom.angle_between(np.diff(pts, axis=0), np.diff(r.points, axis=0))
