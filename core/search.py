@@ -9,6 +9,15 @@ from __future__ import annotations
 import numpy as np
 
 
+def _steps(x, name):
+    """``x`` as int64 steps; a float array is refused rather than truncated (a step
+    computed as a float, NaN included, is a caller's bug, not a step)."""
+    x = np.asarray(x)
+    if x.size and x.dtype.kind not in "iu":
+        raise TypeError(f"gallop_bisect: {name} must be integer steps, got {x.dtype}")
+    return x.astype(np.int64, copy=False)
+
+
 def gallop_bisect(n, test, k_max, lo=None, hi=None, width=4, stride=None):
     """Smallest integer ``k`` in ``(lo, k_max]`` with ``test`` true, per item.
 
@@ -41,10 +50,10 @@ def gallop_bisect(n, test, k_max, lo=None, hi=None, width=4, stride=None):
     (n,) int
         The good ``k`` found, -1 where none up to ``k_max``.
     """
-    lo = np.zeros(n, np.int64) if lo is None else np.asarray(lo, np.int64).copy()
-    hi = np.full(n, -1, np.int64) if hi is None else np.asarray(hi, np.int64).copy()
-    stride = np.ones(n, np.int64) if stride is None else np.maximum(stride, 1).astype(np.int64)
-    k_max = np.broadcast_to(np.asarray(k_max, np.int64), (n,))
+    lo = np.zeros(n, np.int64) if lo is None else _steps(lo, "lo").copy()
+    hi = np.full(n, -1, np.int64) if hi is None else _steps(hi, "hi").copy()
+    stride = np.ones(n, np.int64) if stride is None else np.maximum(_steps(stride, "stride"), 1)
+    k_max = np.broadcast_to(_steps(k_max, "k_max"), (n,))
     ladder = 2 ** np.arange(width)
     frac = np.arange(1, width + 1) / (width + 1)
     for _ in range(128):  # bounded: each round multiplies the stride or divides the bracket
