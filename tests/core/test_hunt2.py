@@ -1,0 +1,145 @@
+"""QA probes (hunt 2): pops and broken promises an artist or TD would meet, through the core.
+
+Each probe checks an invariant (no pop larger than the colliders' motion explains, the
+smallest clearing rotation, Max Angle, the warm start equal to the full search) on a
+case the other core tests do not build. A probe that fails today is a strict xfail
+naming what is wrong (see docs/hunt2-report.md); it turns red when the bug is fixed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scenes
+
+from core import Collider, Settings, Solver, Status
+
+_BALL = scenes.uv_sphere((0.0, 0.0, 0.0), 1.0, 32, 16)
+
+
+def _ball(center, radius=0.3):
+    V, F = _BALL
+    return Collider(V.astype(np.float32), F, matrix=scenes.affine(t=center, s=radius))
+
+
+def _other_side_shot():
+    """One upright curve (8 CVs, length 1). Ball A (r 0.3) slides in from +x at 0.1 per
+    frame, presses the curve toward -x (frames 7-9), and slides back out; ball B slides
+    in from -x at 0.1 per frame and stops pressing the curve's other side (from frame 13
+    on). Every collider moves by at most 0.1 per frame."""
+    def centres(f):
+        ax = 1.0 - 0.1 * f if f <= 8 else 0.2 + 0.1 * (f - 8)
+        bx = min(-0.25, -1.6 + 0.1 * f)
+        return (ax, 0.0, 0.8), (bx, 0.0, 0.8)
+    return centres
+
+
+def _xfail_rigid(reason):
+    def params(modes):
+        return [pytest.param(m, marks=pytest.mark.xfail(strict=True, reason=reason))
+                if m in ("stiff", "bend") else m for m in modes]
+    return params
+
+
+_WHIP = ("Stiff/Bend keep the first contact's axis and only search angles above the "
+         "current one: a collider arriving from the other side of a curve still "
+         "recovering (or settled at its Plasticity imprint) whips it the long way round "
+         "under the collider in one frame")
+
+
+@pytest.mark.parametrize("plasticity", [0.0, 0.6])
+@pytest.mark.parametrize("mode", _xfail_rigid(_WHIP)(["stiff", "bend", "soft"]))
+def test_a_collider_from_the_other_side_does_not_whip_the_curve_around(mode, plasticity):
+    """Grass trampled from the right, then a second foot from the left: the curve is
+    pushed back over by about the rotation a fresh solve needs (a few degrees), not
+    swung 40-50 degrees the other way, under the second ball, in a single frame."""
+    pts, offs = scenes.pack([scenes.straight_curve([0, 0, 0], [0, 0, 1], 1.0, 8)],
+                            np.float32)
+    centres = _other_side_shot()
+    a, b = _ball(centres(0)[0]), _ball(centres(0)[1])
+    solver = Solver(offs, Settings(mode=mode, plasticity=plasticity))
+    prev, worst, worst_frame = None, 0.0, -1
+    for f in range(22):
+        ca, cb = centres(f)
+        a.matrix = scenes.affine(t=ca, s=0.3)
+        b.matrix = scenes.affine(t=cb, s=0.3)
+        res = solver.step(pts, [a, b])
+        P = np.asarray(res.points, np.float64)
+        if prev is not None:
+            jump = float(np.linalg.norm(P - prev, axis=1).max())
+            if jump > worst:
+                worst, worst_frame = jump, f
+        prev = P
+    # (a collider moves 0.1 per frame; the recovery moves the tip by < 0.05 per frame)
+    assert worst <= 0.3, f"a CV jumped {worst:.3f} in one frame (frame {worst_frame})"
+    # only ball B touches the curve now: its picture is about a fresh solve's
+    fresh = Solver(offs, Settings(mode=mode)).step(pts, [b])
+    tip, tip_fresh = P[-1], np.asarray(fresh.points, np.float64)[-1]
+    assert np.linalg.norm(tip - tip_fresh) <= 0.15, (tip, tip_fresh)
+
+
+_MAX_ANGLE = ("lowering Max Angle mid-shot: the warm-start search (the default) keeps "
+              "curves rotated beyond the new Max Angle and calls them COLLIDING, where the "
+              "full search (Solver.warm_start = False) says UNRESOLVED or turns them back")
+
+
+def _sweep(f):
+    t = f / 40
+    return scenes.affine(t=(-0.6 + 1.2 * t, 0.0, 0.75 - 0.2 * np.sin(np.pi * t)), s=0.35)
+
+
+def _fur_grid(n=10, ext=0.6, length=0.6, ncv=8):
+    xs = np.linspace(-ext, ext, n)
+    curves = [scenes.straight_curve([x, y, 0.0], [0.15 * x, 0.1 * y, 1.0], length, ncv)
+              for x in xs for y in xs]
+    return scenes.pack(curves, np.float32)
+
+
+def _state_before_max_angle_change(mode):
+    """Play a ball pressing into a fur patch 25 frames (Max Angle 180), then
+    snapshot: the artist lowers Max Angle to 60 here and plays on."""
+    pts, offs = _fur_grid()
+    V, F = _BALL
+    col = Collider(V.astype(np.float32), F)
+    solver = Solver(offs, Settings(mode=mode))
+    for f in range(25):
+        col.matrix = _sweep(f)
+        solver.step(pts, [col])
+    col.matrix = _sweep(25)
+    return pts, offs, col, solver.state
+
+
+@pytest.mark.xfail(strict=True, reason=_MAX_ANGLE)
+@pytest.mark.parametrize("mode", ["stiff", "bend"])
+def test_lowering_max_angle_mid_shot_warm_start_equals_full_search(mode):
+    """README: the warm start's result is bit-identical to the full search from the same
+    state. After Max Angle is lowered mid-shot (a setting changed during playback: the
+    next frame steps from the cached state with the new settings) they disagree."""
+    pts, offs, col, snap = _state_before_max_angle_change(mode)
+    out = {}
+    for warm in (True, False):
+        s = Solver(offs, Settings(mode=mode, max_angle=60.0))
+        s.state = snap
+        s.warm_start = warm
+        out[warm] = s.step(pts, [col])
+    np.testing.assert_array_equal(out[True].status, out[False].status)
+    np.testing.assert_array_equal(out[True].points, out[False].points)
+
+
+@pytest.mark.xfail(strict=True, reason=_MAX_ANGLE)
+def test_lowering_max_angle_mid_shot_no_colliding_curve_beyond_it():
+    """Max Angle is the largest rotation before a curve counts as unresolvable (Bend: of
+    the tip segment). After it is lowered to 60 degrees mid-shot, a curve reported
+    COLLIDING has its tip segment turned by at most 60 degrees (plus a precision step)."""
+    pts, offs, col, snap = _state_before_max_angle_change("bend")
+    s = Solver(offs, Settings(mode="bend", max_angle=60.0))
+    s.state = snap
+    res = s.step(pts, [col])
+    P, I = np.asarray(res.points, np.float64), pts.astype(np.float64)
+    a = I[offs[1:] - 1] - I[offs[1:] - 2]
+    b = P[offs[1:] - 1] - P[offs[1:] - 2]
+    cos = np.einsum("ij,ij->i", a, b) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+    turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    colliding = np.asarray(res.status) == Status.COLLIDING
+    over = np.flatnonzero(colliding & (turn > 60.0 + 0.5))
+    assert len(over) == 0, f"COLLIDING curves {over.tolist()} turned {turn[over].round(1)} deg"
