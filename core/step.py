@@ -186,8 +186,11 @@ class StepContext:
 
     # ------------------------------------------------------------ frames
     def load_state(self):
-        self.angle = self.state.angle.copy()
-        self.angle_max = self.state.angle_max.copy()
+        # A Max Angle lowered mid-shot: a curve turned further than it now starts
+        # from it (the full and the warm search alike), and is UNRESOLVED where
+        # that shape collides.
+        self.angle = np.minimum(self.state.angle, self.max_angle)
+        self.angle_max = np.minimum(self.state.angle_max, self.max_angle)
         self.guess = np.zeros(self.layout.n_curves)  # first probe of the angle search
         self.guess_stiff = np.zeros(self.layout.n_curves)
         self.axis = np.zeros((self.layout.n_curves, 3))
