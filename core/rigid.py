@@ -72,7 +72,8 @@ def solve(ctx, idx, status):
     k_col, k_rec = search_angles(ctx, batch, items, angle[batch.curves[items]], lo, hi, stride,
                                  guess, plan.recovery_searches())
     plan.recovery_found(k_rec)
-    resolve_collisions(ctx, batch, items, k_col, status)
+    again = restart_contacts(ctx, batch, items, k_col, status)
+    resolve_collisions(ctx, batch, items[~again], k_col[~again], status)
     rec = plan.recovered_items()
     recover(ctx, act[rec], th0[rec], plan.recovered_angle(rec), plan.blocked(rec), status)
     rec = far[ctx.active[far]]  # far from every collider: nothing to check
@@ -295,6 +296,99 @@ class Plan:
     def blocked(self, r):
         """Recoveries stopped before contact (answer above the recovery step)."""
         return (self.k[r] > 0) & self.moving[r]
+
+
+def restart_contacts(ctx, batch, items, k, status):
+    """Contacts pushed back the other way start again from the input shape.
+
+    A curve keeps the axis of its first hit until it has recovered (paper
+    3.2.1), and a collision only turns it further about it. A collider that
+    arrives from the other side of a curve still turned (recovering, or held
+    at its Plasticity imprint) would then whip it the long way round, under
+    that collider. Where the search's answer ``k`` turns curve
+    ``batch.curves[items]`` further by more than its whole angle (or finds no
+    angle), the curve is also solved as a new contact: its input shape, an
+    axis from the input's first hit, the smallest clearing angle from zero
+    (or zero itself where the input is clear). The new contact is kept where
+    it moves the curve's CVs (from their place at the current angle) less than
+    ``tol.RESTART_GAIN`` times what turning further would, or where turning
+    further finds no angle. Everything here depends only on ``k`` and the
+    curve, so the warm start still equals the full search.
+
+    Returns
+    -------
+    (len(items),) bool
+        The items started again (their angle, axis and status are set).
+    """
+    again = np.zeros(len(items), bool)
+    if len(items) == 0:
+        return again
+    p = ctx.prec
+    c = batch.curves[items]
+    th0 = ctx.angle[c]
+    turn = np.where(k >= 0, k * p, np.inf)
+    sel = np.flatnonzero((th0 > 0) & (turn > th0 + tol.RESTART_MIN_STEPS * p))
+    if len(sel) == 0:
+        return again
+    cs = c[sel]
+    axis0 = ctx.axis[cs].copy()
+    stiff0 = ctx.state.stiff[cs].copy()
+    # the new contact: a fresh solve of the input shape (as Bend, not Stiff)
+    phi = np.zeros(len(cs))
+    axis1 = axis0.copy()
+    found = np.ones(len(cs), bool)
+    hit0, seg_hit = ctx.input_hits(cs)
+    hb = np.flatnonzero(hit0)
+    if len(hb):
+        cb = cs[hb]
+        seg_hit = seg_hit[np.repeat(hit0, ctx.layout.nseg[cs])]
+        ctx.state.stiff[cb] = False
+        o, d, _, rep, starts = ctx.input_rays(cb)
+        axis1[hb] = ctx.new_axes(cb, o, d, rep, starts, seg_hit)
+        ctx.axis[cb] = axis1[hb]
+        n = len(cb)
+        kb, _ = search_angles(ctx, RigidBatch(ctx, cb), np.arange(n), np.zeros(n),
+                              np.zeros(n, np.int64), np.full(n, -1, np.int64),
+                              np.ones(n, np.int64), np.ones(n, bool))
+        found[hb] = kb >= 0
+        phi[hb] = np.where(kb >= 0, np.minimum(kb * p, ctx.max_angle), 0.0)
+    # how far each choice moves the CVs from where they are now
+    ctx.state.stiff[cs] = stiff0
+    ctx.axis[cs] = axis0
+    now = _ends(ctx, cs, th0[sel], axis0)
+    ok = np.isfinite(turn[sel])
+    further = _moved(ctx, cs, now,
+                     _ends(ctx, cs, th0[sel] + np.where(ok, turn[sel], 0.0), axis0))
+    further[~ok] = np.inf
+    ctx.state.stiff[cs] = False
+    anew = _moved(ctx, cs, now, _ends(ctx, cs, phi, axis1))
+    ctx.state.stiff[cs] = stiff0
+    take = found & (anew < tol.RESTART_GAIN * further)
+    cr = cs[take]
+    if len(cr):
+        ctx.state.stiff[cr] = False
+        ctx.restyled[cr] = True  # a new grid: no memory of the last change
+        ctx.axis[cr] = axis1[take]
+        ctx.angle[cr] = phi[take]
+        ctx.angle_max[cr] = phi[take]
+        status[cr] = np.where(phi[take] > 0, Status.COLLIDING, Status.FREE)
+        again[sel[take]] = True
+    return again
+
+
+def _ends(ctx, idx, angle, axis):
+    """(k, 3) segment ends of curves ``idx`` turned by ``angle`` (n,) about
+    ``axis`` (n, 3), in the rows of :meth:`StepContext.deform`."""
+    o, d, _, _, _ = ctx.deform(idx, angle=np.asarray(angle, np.float64), axis=axis)
+    return o + d
+
+
+def _moved(ctx, idx, a, b):
+    """Largest CV displacement of each curve ``idx`` between segment ends ``a``
+    and ``b`` (rows as :meth:`StepContext.deform` gives them)."""
+    starts = np.concatenate([[0], np.cumsum(ctx.layout.nseg[idx])[:-1]])
+    dist = np.sqrt(rot.dot(a - b, a - b))
+    return np.maximum.reduceat(dist, starts)
 
 
 def resolve_collisions(ctx, batch, items, k, status):

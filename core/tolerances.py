@@ -29,6 +29,14 @@ ZERO_SEGMENT_REL = 1e-9
 #: recovering curve reaches its input shape bit for bit.
 SNAP_FRACTION = 0.5
 
+#: A Stiff/Bend contact starts again from the input shape (new axis) when its
+#: kept axis would turn it further by more than its whole angle plus this many
+#: Rotation Precision steps (a collider pushing it back the other way, see
+#: ``rigid.restart_contacts``), and only if the new contact moves its CVs less
+#: than ``RESTART_GAIN`` times what turning further would.
+RESTART_MIN_STEPS = 2
+RESTART_GAIN = 0.9
+
 #: Below this |cross| (unit vectors) two directions count as parallel and a
 #: fallback rotation axis is used.
 PARALLEL_EPS = 1e-6
