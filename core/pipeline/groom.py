@@ -677,7 +677,8 @@ def _to_solve(pts, off, colliders, settings, skip):
             # clearance margin within a few margins (own units)
             need = (offset * tol.OFFSET_MAX_STRETCH * 1.01
                     + 16.0 * c.margin * rot.norm_bound(c.matrix[:3, :3]) + pad)
-            w = w[~_ClearanceField.of(c).clear(pts, off, w, c.matrix, need)]
+            mag = max(float(np.abs(lo[w]).max()), float(np.abs(hi[w]).max()))
+            w = w[~_ClearanceField.of(c).clear(pts, off, w, c.matrix, need, mag)]
         touch[w] = True
         if c.detects_pinch:
             pinch_box |= ((roots >= blo - pad) & (roots <= bhi + pad)).all(1)
@@ -719,14 +720,15 @@ class _ClearanceField:
     def of(cls, c):
         return c.derived("clearance_field", c.version, lambda: cls(c))
 
-    def clear(self, pts, off, w, M, need):
+    def clear(self, pts, off, w, M, need, mag):
         """(len(w),) bool: is every segment of curves ``w`` farther than ``need``
         (world units) from the mesh, the collider's world matrix being ``M``?
+        ``mag``: the largest absolute coordinate of their points.
 
         A segment of midpoint ``m`` and length ``L`` is at least ``lb(m) - L / 2``
         from the mesh, ``lb`` the field's value at ``m``. Computed in float32 in
-        cell units: its rounding (about 1e-5 cells) is covered by a margin of
-        1e-3 cells.
+        cell units: a margin of 1e-3 cells plus 2e-6 (about 30 float32 ulps) of
+        the largest cell coordinate covers the rounding.
         """
         Minv = rot.inv_affine(M)
         M3 = M[:3, :3]
@@ -784,7 +786,8 @@ class _ClearanceField:
         np.sqrt(lb, out=lb)
         half2 *= 0.25
         lb -= np.sqrt(half2, out=half2)
-        ok = lb > np.float32(need / (s * self.h) + 1e-3)
+        big = float(np.abs(A).sum(1).max()) * mag + float(np.abs(b).max()) + float(self.dims.max())
+        ok = lb > np.float32(need / (s * self.h) + 1e-3 + 2e-6 * big)
         if n:
             return ok.all(axis=1)
         nseg = np.diff(sub) - 1
