@@ -549,7 +549,7 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     # only the solved curves can have moved (a non-finite one is INVALID)
     with np.errstate(invalid="ignore"):
         if n:
-            moved = (out.reshape(R, -1)[idx] != pts.reshape(R, -1)[idx]).any(axis=1)
+            moved = _rows_any(out.reshape(R, -1)[idx] != pts.reshape(R, -1)[idx])
         else:
             moved = (_take(out, off, idx, 0)[0] != _take(pts, off, idx, 0)[0]).any(axis=1)
             sizes = np.diff(off)[idx]
@@ -566,6 +566,21 @@ def _take(pts, off, idx, n):
                 np.arange(len(idx) + 1, dtype=np.int64) * n)
     rows, sub_off = _gather(off, idx)
     return pts[rows], sub_off
+
+
+def _rows_any(B):
+    """``B.any(axis=1)`` of a (k, m) bool array, a few words per row at a time
+    (numpy's reductions over short rows are slow)."""
+    B = np.ascontiguousarray(B)
+    k, m = B.shape
+    if m % 8 == 0:
+        W = B.view(np.uint64)
+    else:
+        W = B.view(np.uint8)
+    acc = W[:, 0].copy()
+    for j in range(1, W.shape[1]):
+        acc |= W[:, j]
+    return acc != 0
 
 
 def _put(out, off, idx, n, values):
@@ -592,12 +607,20 @@ def _degenerate(pts, off, idx, n):
     if n:  # column by column (reductions over 8 CVs are slow)
         Q = sub.reshape(-1, n, 3)
         d = Q[:, 1:] - Q[:, :-1]
-        d *= d
-        L = np.sqrt(d[..., 0] + d[..., 1] + d[..., 2])
+        L2 = np.einsum("ijk,ijk->ij", d, d)
+        lo2, hi2 = L2[:, 0].copy(), L2[:, 0].copy()
+        for j in range(1, n - 1):
+            np.minimum(lo2, L2[:, j], out=lo2)
+            np.maximum(hi2, L2[:, j], out=hi2)
+        # the rule can only fail where the shortest segment is below
+        # ZERO_SEGMENT_REL * (n - 1) times the longest: the rule itself on those
+        maybe = np.flatnonzero(~(lo2 > (tol.ZERO_SEGMENT_REL * (n - 1)) ** 2 * hi2 * (1 + 1e-6)))
+        L = np.sqrt(L2[maybe])
         total, short = L[:, 0].copy(), L[:, 0].copy()
         for j in range(1, n - 1):
             total += L[:, j]
             np.minimum(short, L[:, j], out=short)
+        return idx[maybe[~(short > tol.ZERO_SEGMENT_REL * total)]]
     else:
         d = np.diff(sub, axis=0)
         L = np.sqrt(np.einsum("ij,ij->i", d, d))[layout(sub_off)[2]]
@@ -606,6 +629,7 @@ def _degenerate(pts, off, idx, n):
         total = np.add.reduceat(L, first)
         short = np.minimum.reduceat(L, first)
     return idx[~(short > tol.ZERO_SEGMENT_REL * total)]
+
 
 def _boxes(pts, off):
     """Bounding boxes ``(lo, hi)`` (R, 3) of the curves."""
