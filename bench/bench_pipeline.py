@@ -15,7 +15,10 @@ Per frame, in the order of the add-on's frame handler:
 * ``motion``: ``wind`` after collision + ``collider_distance`` (capped at the
   longest displacement, as the add-on does) + ``region_of_influence``;
 * ``groom``: ``deform_groom`` of the render groom (roots from its Fur Attach);
-* ``clearance``: ``clearance_pass`` of the deformed render groom.
+* ``clearance``: ``clearance_pass`` of the deformed render groom;
+* ``clear_all``: for scale, what the clearance pass did before it culled the
+  curves that cannot change (the solver, fresh, Stiff, on every render curve:
+  the same points and statuses). Printed, not a pipeline stage.
 
 Each stage's time is printed as a ratio to the *rigid floor* measured in the
 same run, interleaved with the frames (``bench/floor.py``: one embree ray per
@@ -71,7 +74,7 @@ BLAS = OpenBlas()
 
 #: Targets of issue 11, as ratios to the rigid floor of the same run.
 TARGETS = {"groom": 3.0, "motion": 1.0, "clearance": 3.0, "attach": 0.5}
-STAGES = ("attach", "collide", "motion", "groom", "clearance")
+STAGES = ("attach", "collide", "motion", "groom", "clearance", "clear_all")
 HEAD_CENTRE = np.array([0.0, 0.0, 0.0])
 SWING_DEG = 25.0
 
@@ -327,6 +330,9 @@ def run_frames(sc, args, pool):
         with Clock() as c:
             _pts, _st, n_fixed = stage_clearance(sc, r_now)
         t["clearance"] = c
+        with Clock() as c:
+            Solver(sc.roff, Settings(mode="stiff")).step(r_now, [sc.col])
+        t["clear_all"] = c
         info["fixed"].append(n_fixed)
         info["colliding"].append(int((np.asarray(res.status) == 1).sum()))
         fw, fc = floor_once(sc, np.asarray(r_now, np.float32), sc.col.matrix, pool, scn, seg0)

@@ -24,6 +24,7 @@ from ..settings import Settings
 from ..solver import Solver
 from ..status import Status
 from ._curves import as_points, check_curves, layout, segmented_cumsum, uniform_size
+from .distance import _LowerBoundField
 
 #: Above this share of reaching curves the clearance pass solves them all (no gather).
 _CLEARANCE_ALL = 0.7
@@ -463,11 +464,17 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     Render curves that still pass through a collider after
     :func:`deform_groom` (between the guides) are resolved by the core's
     solver with a fresh state (Stiff mode by default: minimal rotation at
-    the root, shape kept). Only the curves whose bounding box meets a
-    collider's bounds go to the solver: the others can neither cross a
-    collider nor have their root inside one, so the solver would return them
-    unchanged and FREE (a curve's result never depends on the other curves
-    solved with it: the same output as solving them all).
+    the root, shape kept). Only the curves that may touch a collider go to
+    the solver; every other curve is one the solver would return unchanged
+    and FREE (or PINCHED: its root inside a closed collider, unchanged), so
+    it is marked so without solving it. A curve may touch a collider when
+    its bounding box meets the collider's (offset) bounds, its bounding
+    ball comes near the collider's surface (``Collider.near_surface``) and,
+    for a collider whose shape has not changed since the last pass, one of
+    its segments comes near the surface (a lower-bound distance field of
+    the collider, built once per shape: :class:`_ClearanceField`). A curve's
+    result never depends on the other curves solved with it, nor on the
+    previous frames: the output is that of solving every curve.
 
     Curves the solver cannot work with (a zero-length segment, a non-finite
     point) are left as they are and marked ``Status.INVALID``, as the solver
@@ -503,43 +510,85 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     colliders = list(colliders)
     settings = Settings(mode="stiff") if settings is None else settings
     R = len(off) - 1
-    finite = np.isfinite(pts).all(axis=1)
     nonfinite = np.zeros(R, bool)
-    if not finite.all():
+    finite = None  # (None: every point is finite, the usual case)
+    if not np.isfinite(pts.reshape(-1)).all():
+        finite = np.isfinite(pts).all(axis=1)
         nonfinite[np.repeat(np.arange(R), np.diff(off))[~finite]] = True
-    reach = _reaching(np.where(finite[:, None], pts, 0.0), off, colliders, settings)
-    reach |= nonfinite  # the solver sets them aside (INVALID, never NaN)
-    if R and not reach.any():
-        reach[0] = True  # (one curve, unchanged: the solver still checks its other inputs)
-    if R == 0 or reach.mean() > _CLEARANCE_ALL:  # (gathering would cost more than it saves)
+    clean = pts if finite is None else np.where(finite[:, None], pts, 0.0)
+    solve = _to_solve(clean, off, colliders, settings, nonfinite)
+    solve |= nonfinite  # the solver sets them aside (INVALID, never NaN)
+    if R and not solve.any():
+        solve[0] = True  # (one curve, unchanged: the solver still checks its other inputs)
+    status = np.zeros(R, np.int8)
+    n = uniform_size(off)
+    if R == 0 or solve.mean() > _CLEARANCE_ALL:  # (gathering would cost more than it saves)
         res = Solver(off, settings).step(pts, colliders, growth=growth)
         out = np.asarray(res.points, np.float64)
         status = res.status
+        idx = np.arange(R)
     else:
         out = pts.copy()
-        status = np.zeros(R, np.int8)
-        status[_degenerate(pts, off, ~reach)] = Status.INVALID  # as the solver marks them
-        idx = np.flatnonzero(reach)
-        rows, sub_off = _gather(off, idx)
-        res = Solver(sub_off, settings).step(pts[rows], colliders, growth=growth)
-        out[rows] = res.points
+        status[_degenerate(pts, off, np.flatnonzero(~solve), n)] = Status.INVALID  # (as the
+        idx = np.flatnonzero(solve)  # solver marks them)
+        sub, sub_off = _take(pts, off, idx, n)
+        res = Solver(sub_off, settings).step(sub, colliders, growth=growth)
+        _put(out, off, idx, n, res.points)
         status[idx] = res.status
     if fallback is not None and R:
         again = np.flatnonzero(status == Status.UNRESOLVED)
         if len(again):
-            rows, sub_off = _gather(off, again)
-            res = Solver(sub_off, fallback).step(pts[rows], colliders, growth=growth)
+            sub, sub_off = _take(pts, off, again, n)
+            res = Solver(sub_off, fallback).step(sub, colliders, growth=growth)
             took = res.status != Status.UNRESOLVED
             if took.any():
-                keep = np.repeat(took, np.diff(sub_off))
-                out[rows[keep]] = res.points[keep]
-                status[again[took]] = res.status[took]
+                keep = again[took]
+                _put(out, off, keep, n, _take(np.asarray(res.points, np.float64), sub_off,
+                                              np.flatnonzero(took), n)[0])
+                status[keep] = res.status[took]
+    # only the solved curves can have moved (a non-finite one is INVALID)
     with np.errstate(invalid="ignore"):
-        changed = np.any(out != pts, axis=1) & finite
-    curve = np.repeat(np.arange(R), np.diff(off))
-    moved = np.bincount(curve, changed, minlength=R) > 0
-    return out, status, int(np.count_nonzero(moved & (status != Status.INVALID)))
+        if n:
+            moved = _rows_any(out.reshape(R, -1)[idx] != pts.reshape(R, -1)[idx])
+        else:
+            moved = (_take(out, off, idx, 0)[0] != _take(pts, off, idx, 0)[0]).any(axis=1)
+            sizes = np.diff(off)[idx]
+            moved = (np.logical_or.reduceat(moved, np.cumsum(sizes) - sizes) if len(idx)
+                     else np.zeros(0, bool))
+    return out, status, int(np.count_nonzero(moved & (status[idx] != Status.INVALID)))
 
+
+def _take(pts, off, idx, n):
+    """Points and offsets of the curves ``idx`` as a curve set of their own
+    (``n``: the common point count, 0 if none)."""
+    if n:
+        return (pts.reshape(-1, n, 3)[idx].reshape(-1, 3),
+                np.arange(len(idx) + 1, dtype=np.int64) * n)
+    rows, sub_off = _gather(off, idx)
+    return pts[rows], sub_off
+
+
+def _rows_any(B):
+    """``B.any(axis=1)`` of a (k, m) bool array, a few words per row at a time
+    (numpy's reductions over short rows are slow)."""
+    B = np.ascontiguousarray(B)
+    k, m = B.shape
+    if m % 8 == 0:
+        W = B.view(np.uint64)
+    else:
+        W = B.view(np.uint8)
+    acc = W[:, 0].copy()
+    for j in range(1, W.shape[1]):
+        acc |= W[:, j]
+    return acc != 0
+
+
+def _put(out, off, idx, n, values):
+    """``out``'s rows of the curves ``idx`` set to ``values`` (their points in order)."""
+    if n:
+        out.reshape(-1, n, 3)[idx] = np.asarray(values).reshape(-1, n, 3)
+    else:
+        out[_gather(off, idx)[0]] = values
 
 def _gather(off, idx):
     """Rows of the curves ``idx`` and their offsets as a curve set of their own."""
@@ -548,28 +597,42 @@ def _gather(off, idx):
     return rows, np.concatenate([[0], np.cumsum(sizes)])
 
 
-def _degenerate(pts, off, which):
+def _degenerate(pts, off, idx, n):
     """The solver's zero-length segment rule (``tolerances.ZERO_SEGMENT_REL``) on
-    the curves ``which`` (bool (R,)): culled curves are INVALID as they would be
-    in the solver. Returns (R,) bool."""
-    d = np.diff(pts, axis=0)
-    L = np.sqrt(np.einsum("ij,ij->i", d, d))
-    _, _, s0 = layout(off)
-    L = L[s0]
-    nseg = np.diff(off) - 1
-    first = np.cumsum(nseg) - nseg
-    total = np.add.reduceat(L, first) if len(L) else np.zeros(0)
-    short = np.minimum.reduceat(L, first) if len(L) else np.zeros(0)
-    return which & ~(short > tol.ZERO_SEGMENT_REL * total)
+    the curves ``idx``: curves the pass does not solve are INVALID as they would
+    be in the solver. Returns the offending curves of ``idx``."""
+    if len(idx) == 0:
+        return idx
+    sub, sub_off = _take(pts, off, idx, n)
+    if n:  # column by column (reductions over 8 CVs are slow)
+        Q = sub.reshape(-1, n, 3)
+        d = Q[:, 1:] - Q[:, :-1]
+        L2 = np.einsum("ijk,ijk->ij", d, d)
+        lo2, hi2 = L2[:, 0].copy(), L2[:, 0].copy()
+        for j in range(1, n - 1):
+            np.minimum(lo2, L2[:, j], out=lo2)
+            np.maximum(hi2, L2[:, j], out=hi2)
+        # the rule can only fail where the shortest segment is below
+        # ZERO_SEGMENT_REL * (n - 1) times the longest: the rule itself on those
+        maybe = np.flatnonzero(~(lo2 > (tol.ZERO_SEGMENT_REL * (n - 1)) ** 2 * hi2 * (1 + 1e-6)))
+        L = np.sqrt(L2[maybe])
+        total, short = L[:, 0].copy(), L[:, 0].copy()
+        for j in range(1, n - 1):
+            total += L[:, j]
+            np.minimum(short, L[:, j], out=short)
+        return idx[maybe[~(short > tol.ZERO_SEGMENT_REL * total)]]
+    else:
+        d = np.diff(sub, axis=0)
+        L = np.sqrt(np.einsum("ij,ij->i", d, d))[layout(sub_off)[2]]
+        nseg = np.diff(sub_off) - 1
+        first = np.cumsum(nseg) - nseg
+        total = np.add.reduceat(L, first)
+        short = np.minimum.reduceat(L, first)
+    return idx[~(short > tol.ZERO_SEGMENT_REL * total)]
 
 
-def _reaching(pts, off, colliders, settings):
-    """(R,) bool: curves whose bounding box meets the (offset) bounds of a collider.
-
-    The box is grown by a relative margin far above the solver's ray
-    extension (``tolerances.RAY_EXTEND_ULPS`` float32 ulps), so every curve
-    the solver could touch is kept.
-    """
+def _boxes(pts, off):
+    """Bounding boxes ``(lo, hi)`` (R, 3) of the curves."""
     R = len(off) - 1
     n = uniform_size(off)
     if n:  # column by column: reductions over 8 CVs are slow
@@ -578,14 +641,178 @@ def _reaching(pts, off, colliders, settings):
         for j in range(1, n):
             np.minimum(lo, P3[:, j], out=lo)
             np.maximum(hi, P3[:, j], out=hi)
-    else:
-        lo = np.minimum.reduceat(pts, off[:-1], axis=0)
-        hi = np.maximum.reduceat(pts, off[:-1], axis=0)
-    reach = np.zeros(R, bool)
-    for c in colliders:
-        if not isinstance(c, Collider) or c.empty:
-            continue  # (the solver reports a wrong type)
-        blo, bhi = c.bounds_world(c.effective_offset(settings.collision_offset))
+        return lo, hi
+    if R == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.minimum.reduceat(pts, off[:-1], axis=0), np.maximum.reduceat(pts, off[:-1], axis=0)
+
+
+def _shape_seen(c) -> bool:
+    """Has an earlier pass seen collider ``c`` with its current shape? (A rigid
+    collider: from its second frame on; a deforming one: never.) Decides only
+    whether the pass builds a :class:`_ClearanceField` for it, never a result."""
+    first = []
+    c.derived("clearance_shape", c.version, lambda: first.append(True))
+    return not first
+
+
+def _to_solve(pts, off, colliders, settings, skip):
+    """(R,) bool: the curves the clearance pass hands to the solver.
+
+    Every other curve is certain to come back from the solver unchanged and
+    FREE (or INVALID, see :func:`_degenerate`): with a fresh state the solver
+    moves a curve only when one of its (input) segments hits a collider, and
+    marks it otherwise only when its root is inside a closed collider (a
+    pinch). A curve is left out when, for every collider, its box misses the
+    collider's (offset) bounds, or its bounding ball is not near the surface
+    (``Collider.near_surface``, the solver's own test), or every one of its
+    segments is provably farther from the mesh than the offset shell reaches
+    (:class:`_ClearanceField`, colliders whose shape an earlier pass saw);
+    and its root is outside every closed collider (``Collider.contains``
+    where all colliders keep their shape, else: outside their bounds). The
+    margins (``pad``, relative 1e-4) are far above the solver's ray
+    extension (``tolerances.RAY_EXTEND_ULPS`` float32 ulps).
+
+    ``skip`` (R,) bool: curves to hand over whatever they are (non-finite).
+    """
+    R = len(off) - 1
+    lo, hi = _boxes(pts, off)
+    reach = np.zeros(R, bool)  # box meets a collider's bounds (the solver may look at it)
+    touch = np.zeros(R, bool)  # may touch a collider
+    pinch_box = np.zeros(R, bool)  # root within a closed collider's bounds
+    cols = [c for c in colliders if isinstance(c, Collider) and not c.empty]
+    # (the solver reports a wrong type)
+    seen = [_shape_seen(c) for c in cols]
+    static = all(seen)
+    roots = pts[off[:-1]]
+    for c, known in zip(cols, seen, strict=True):
+        offset = c.effective_offset(settings.collision_offset)
+        blo, bhi = c.bounds_world(offset)
         pad = 1e-4 * (float(np.linalg.norm(bhi - blo)) + float(np.abs(np.r_[blo, bhi]).max()))
-        reach |= ((lo <= bhi + pad) & (hi >= blo - pad)).all(1)
-    return reach
+        r = ((lo <= bhi + pad) & (hi >= blo - pad)).all(1)
+        reach |= r
+        w = np.flatnonzero(r & ~touch & ~skip)
+        if len(w):
+            centre = 0.5 * (lo[w] + hi[w])
+            radius = 0.5 * np.sqrt(((hi[w] - lo[w]) ** 2).sum(1)) * (1 + 1e-6) + pad
+            w = w[c.near_surface(centre, radius, offset)]
+        if len(w) and known:
+            # the offset shell lies within OFFSET_MAX_STRETCH offsets of the mesh, the
+            # clearance margin within a few margins (own units)
+            need = (offset * tol.OFFSET_MAX_STRETCH * 1.01
+                    + 16.0 * c.margin * rot.norm_bound(c.matrix[:3, :3]) + pad)
+            mag = max(float(np.abs(lo[w]).max()), float(np.abs(hi[w]).max()))
+            w = w[~_ClearanceField.of(c).clear(pts, off, w, c.matrix, need, mag)]
+        touch[w] = True
+        if c.detects_pinch:
+            pinch_box |= ((roots >= blo - pad) & (roots <= bhi + pad)).all(1)
+    clear = reach & ~touch & ~skip
+    maybe = np.flatnonzero(clear & pinch_box)
+    if len(maybe):
+        if static:  # (contains caches its answers per shape: cheap for these)
+            inside = np.zeros(len(maybe), bool)
+            for c in cols:
+                if c.detects_pinch:
+                    inside |= c.contains(roots[maybe], c.effective_offset(
+                        settings.collision_offset))
+            maybe = maybe[inside]
+        clear[maybe] = False
+    return reach & ~clear
+
+
+class _ClearanceField:
+    """A lower bound of the distance to a collider's mesh (its own space).
+
+    The windowed lower-bound distance field of the mesh's cells
+    (``distance._LowerBoundField``: 128 cells along the mesh's box, distances
+    up to 8 cells): a point in a cell is at least the cell's value from every
+    triangle. Built once per collider shape (about 0.1 s for 130,000
+    triangles) and kept on the collider (``Collider.derived``).
+    """
+
+    DIMS = 128
+    WINDOW = 8
+
+    def __init__(self, c):
+        V = np.asarray(c.vertices, np.float64)
+        T = V[np.asarray(c.faces, np.int64)]
+        f = _LowerBoundField(T, 0.0, dims=self.DIMS, window=self.WINDOW)
+        self.glo, self.h, self.dims = f.glo, float(f.h), f.dims
+        self.D = np.ascontiguousarray(f.D, np.float32).reshape(-1)
+
+    @classmethod
+    def of(cls, c):
+        return c.derived("clearance_field", c.version, lambda: cls(c))
+
+    def clear(self, pts, off, w, M, need, mag):
+        """(len(w),) bool: is every segment of curves ``w`` farther than ``need``
+        (world units) from the mesh, the collider's world matrix being ``M``?
+        ``mag``: the largest absolute coordinate of their points.
+
+        A segment of midpoint ``m`` and length ``L`` is at least ``lb(m) - L / 2``
+        from the mesh, ``lb`` the field's value at ``m``. Computed in float32 in
+        cell units: a margin of 1e-3 cells plus 2e-6 (about 30 float32 ulps) of
+        the largest cell coordinate covers the rounding.
+        """
+        Minv = rot.inv_affine(M)
+        M3 = M[:3, :3]
+        # smallest singular value of M3, from below (Weyl): world distances are at
+        # least s times the distances in the collider's space
+        G = np.einsum("ki,kj->ij", M3, M3)
+        g = float(np.trace(G)) / 3.0
+        s2 = g - float(np.sqrt(((G - g * np.eye(3)) ** 2).sum()))
+        if not s2 > 0 or len(w) == 0:
+            return np.zeros(len(w), bool)
+        s = float(np.sqrt(s2)) * (1 - 1e-6)
+        n = uniform_size(off)
+        if n:
+            Q = pts.reshape(-1, n, 3)[w]  # (k, n, 3)
+            xyz = [Q[..., i] for i in range(3)]
+        else:
+            rows, sub = _gather(off, w)
+            xyz = [pts[rows, i] for i in range(3)]
+        # cell coordinates (float32) of the points: x_cell = (Minv x - glo) / h
+        A = Minv[:3, :3] / self.h
+        b = (Minv[:3, 3] - self.glo) / self.h
+        c = []
+        for i in range(3):
+            y = np.multiply(xyz[0], A[i, 0], dtype=np.float32)
+            y += np.multiply(xyz[1], A[i, 1], dtype=np.float32)
+            y += np.multiply(xyz[2], A[i, 2], dtype=np.float32)
+            y += np.float32(b[i])
+            c.append(y)
+        if n:
+            a, e = [y[:, :-1] for y in c], [y[:, 1:] for y in c]
+        else:
+            _, _, s0 = layout(sub)
+            a, e = [y[s0] for y in c], [y[s0 + 1] for y in c]
+        half2 = None  # (L / 2)^2 and the cell of the midpoint, in cell units
+        gap2 = None
+        cell = None
+        for i in range(3):
+            m = a[i] + e[i]
+            m *= 0.5
+            d = e[i] - a[i]
+            d *= d
+            half2 = d if half2 is None else np.add(half2, d, out=half2)
+            # a midpoint outside the grid: its projection q' onto the grid's box is in
+            # a border cell, and |m - x|^2 >= |m - q'|^2 + |q' - x|^2 for x in the box
+            g = np.maximum(-m, m - np.float32(self.dims[i]))
+            np.maximum(g, 0, out=g)
+            g *= g
+            gap2 = g if gap2 is None else np.add(gap2, g, out=gap2)
+            np.clip(m, 0, self.dims[i] - 1, out=m)
+            k = m.astype(np.int32)  # (floor: m >= 0)
+            cell = k if cell is None else np.add(cell * np.int32(self.dims[i]), k, out=k)
+        lb = self.D.take(cell)
+        lb *= lb
+        lb += gap2
+        np.sqrt(lb, out=lb)
+        half2 *= 0.25
+        lb -= np.sqrt(half2, out=half2)
+        big = float(np.abs(A).sum(1).max()) * mag + float(np.abs(b).max()) + float(self.dims.max())
+        ok = lb > np.float32(need / (s * self.h) + 1e-3 + 2e-6 * big)
+        if n:
+            return ok.all(axis=1)
+        nseg = np.diff(sub) - 1
+        return np.logical_and.reduceat(ok.reshape(-1), np.cumsum(nseg) - nseg)
