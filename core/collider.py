@@ -118,9 +118,13 @@ class Collider:
         Used in error messages (e.g. the Blender object's name).
     deforming : bool or None
         A hint that the vertices change every frame (skinning, shape keys,
-        cloth). Accepted for compatibility; it changes nothing: the BVH is a
-        function of the vertices (and, with an offset, of the shell) alone,
-        so results never depend on the frames played before.
+        cloth). It changes no result (the BVH is a function of the vertices
+        and, with an offset, of the shell alone, so results never depend on
+        the frames played before), only work: the inside test of a deforming
+        collider never builds its fine per-shape grid (see
+        :meth:`contains_grid`), which a second query of the same frame (the
+        render groom's clearance pass after the guides) would otherwise build
+        every frame for one use.
 
     Raises
     ------
@@ -825,15 +829,16 @@ class Collider:
         the collider; the rest are traced. A collider whose shape stays
         (rigid: any motion) uses a fine grid whose touched cells are found
         from the triangles once per shape, so only roots right next to the
-        surface are traced. A collider deformed since the last call uses the
-        coarse occupancy grid (no per-triangle work every frame): points
-        near a vertex are traced. Both give the answer of tracing every
-        point.
+        surface are traced. A collider deformed since the last call, or made
+        with ``deforming=True``, uses the coarse occupancy grid (no
+        per-triangle work every frame): points near a vertex are traced. Both
+        give the answer of tracing every point.
         """
         k = len(p_wo)
         if not self.detects_pinch or k == 0:
             return np.zeros(k, bool)
-        static = getattr(self, "_contains_version", None) == self._version
+        static = (getattr(self, "_contains_version", None) == self._version
+                  and not self.deforming)
         self._contains_version = self._version
         if static:
             lo, h, dims, inside = self._inside_grid()

@@ -425,3 +425,38 @@ def test_a_face_collapsed_by_a_deformation_keeps_the_offset_shell_whole():
     A, B, _, _ = oracle.curve_segments(res.points, offs)
     near = np.linalg.norm(np.stack([A, B]) - [0, 0, 1.0], axis=2).min()
     assert near > 0.3 + 0.5 * d, near  # (a mesh of chords: the shell is about d out)
+
+
+def test_a_deforming_collider_queried_twice_a_frame_builds_no_fine_grid(monkeypatch):
+    """The add-on queries a deforming collider twice per frame (the guides' pinch test,
+    then the render groom's clearance pass): with ``deforming=True`` the inside test
+    stays on the coarse grid (the fine per-shape grid would be built for one use every
+    frame), with the same answers as without the hint."""
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 1.0, 32, 16)
+    rng = np.random.default_rng(5)
+    p = rng.uniform(-1.3, 1.3, (4000, 3))
+    built = []
+    surface_cells = Collider._surface_cells
+
+    def spy(self, *a, **k):
+        built.append(self.deforming)
+        return surface_cells(self, *a, **k)
+
+    monkeypatch.setattr(Collider, "_surface_cells", spy)
+    answers = {}
+    for flag in (True, None):
+        col = Collider(V, F, deforming=flag)
+        got = []
+        for f in range(3):
+            col.vertices = V * np.float32(1.0 + 0.02 * f)
+            got.append([col.contains(p), col.contains(p)])  # two queries per frame
+        answers[flag] = got
+    assert True not in built  # the hinted collider never built it
+    assert None in built  # (the heuristic alone does, on the second query)
+    for f in range(3):
+        r = np.linalg.norm(p, axis=1)
+        scale = 1.0 + 0.02 * f
+        for a, b in zip(answers[True][f], answers[None][f], strict=True):
+            assert np.array_equal(a, b)
+            clear = np.abs(r - scale) > 0.01  # away from the faceted surface
+            assert np.array_equal(a[clear], (r < scale)[clear])
