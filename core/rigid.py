@@ -72,8 +72,15 @@ def solve(ctx, idx, status):
     k_col, k_rec = search_angles(ctx, batch, items, angle[batch.curves[items]], lo, hi, stride,
                                  guess, plan.recovery_searches())
     plan.recovery_found(k_rec)
-    again = restart_contacts(ctx, batch, items, k_col, status)
-    resolve_collisions(ctx, batch, items[~again], k_col[~again], status)
+    # Contacts pushed back the other way: a turn further by more than their
+    # whole angle; then, after Bend's fall back to Stiff, those still unresolved.
+    again = np.zeros(len(items), bool)
+    turns = k_col >= 0
+    again[turns] = restart_contacts(ctx, batch, items[turns], k_col[turns], status)
+    left = items[~again]
+    resolve_collisions(ctx, batch, left, k_col[~again], status)
+    left = left[status[batch.curves[left]] == Status.UNRESOLVED]
+    restart_contacts(ctx, batch, left, np.full(len(left), -1, np.int64), status)
     rec = plan.recovered_items()
     recover(ctx, act[rec], th0[rec], plan.recovered_angle(rec), plan.blocked(rec), status)
     rec = far[ctx.active[far]]  # far from every collider: nothing to check
@@ -306,11 +313,12 @@ def restart_contacts(ctx, batch, items, k, status):
     arrives from the other side of a curve still turned (recovering, or held
     at its Plasticity imprint) would then whip it the long way round, under
     that collider. Where the search's answer ``k`` turns curve
-    ``batch.curves[items]`` further by more than its whole angle (or finds no
-    angle), the curve is also solved as a new contact: its input shape, an
-    axis from the input's first hit, the smallest clearing angle from zero
-    (or zero itself where the input is clear). The new contact is kept where
-    it moves the curve's CVs (from their place at the current angle) less than
+    ``batch.curves[items]`` further by more than its whole angle (``k = -1``:
+    no angle, e.g. still unresolved after Bend's fall back to Stiff), the
+    curve is also solved as a new contact: its input shape, an axis from the
+    input's first hit, the smallest clearing angle from zero (or zero itself
+    where the input is clear). The new contact is kept where it moves the
+    curve's CVs (from their place at the current angle) less than
     ``tol.RESTART_GAIN`` times what turning further would, or where turning
     further finds no angle. Everything here depends only on ``k`` and the
     curve, so the warm start still equals the full search.
