@@ -129,3 +129,34 @@ def test_lowering_max_angle_mid_shot_no_colliding_curve_beyond_it():
     colliding = np.asarray(res.status) == Status.COLLIDING
     over = np.flatnonzero(colliding & (turn > 60.0 + 0.5))
     assert len(over) == 0, f"COLLIDING curves {over.tolist()} turned {turn[over].round(1)} deg"
+
+
+@pytest.mark.parametrize("plasticity", [0.0, 0.6])
+@pytest.mark.parametrize("mode", ["stiff", "bend"])
+def test_a_contact_started_again_is_the_same_for_the_warm_and_the_full_search(mode, plasticity):
+    """The restart depends only on the search's answer: the warm start (default) and the
+    full search give the same curves, bit for bit, on every frame of the shot that
+    starts contacts again; and no resolved curve crosses a ball."""
+    import oracle
+
+    pts, offs = scenes.pack([scenes.straight_curve([x, 0, 0], [0, 0, 1], 1.0, 8)
+                             for x in (-0.05, 0.0, 0.05)], np.float32)
+    centres = _other_side_shot()
+    solvers = {}
+    for warm in (True, False):
+        solvers[warm] = Solver(offs, Settings(mode=mode, plasticity=plasticity))
+        solvers[warm].warm_start = warm
+    V, F = _BALL
+    for f in range(22):
+        out = {}
+        for warm, solver in solvers.items():
+            cols = [_ball(c) for c in centres(f)]
+            out[warm] = solver.step(pts, cols)
+        np.testing.assert_array_equal(out[True].points, out[False].points)
+        np.testing.assert_array_equal(out[True].status, out[False].status)
+        ok = np.isin(np.asarray(out[True].status), [Status.FREE, Status.COLLIDING,
+                                                    Status.RECOVERING])
+        for c in centres(f):
+            Vw = V * 0.3 + np.asarray(c)
+            hit = oracle.segments_hit_mesh(np.asarray(out[True].points, np.float64), offs, Vw, F)
+            assert not (hit & ok).any(), f"frame {f}: a resolved curve crosses a ball"
