@@ -605,17 +605,21 @@ def small_setup(fc, frames=(1, 8), nx=4, ny=4):
     return hair, box, out
 
 
-def render_spy(fc, tmp_path, hair, out, tag):
-    """Render the animation; {frame: (world points, status, outdated)} as the
-    RENDER depsgraph's frame changes left them (after FurCollide's handler)."""
+def render_spy(fc, tmp_path, hair, out, tag, record=None):
+    """Render the animation; {frame: record()} as the RENDER depsgraph's frame
+    changes left them (after FurCollide's handler). Default record: (world
+    points, status, outdated)."""
     scene = bpy.context.scene
     scene.render.filepath = str(tmp_path / f"{tag}_####")
     seen = {}
+    if record is None:
+        def record():
+            return (world(out).copy(), fc.registry.status_for(hair),
+                    hair.furcollide.is_outdated)
 
     def spy(sc, depsgraph):
         if depsgraph is not None and depsgraph.mode == "RENDER":
-            seen[sc.frame_current] = (world(out).copy(), fc.registry.status_for(hair),
-                                      hair.furcollide.is_outdated)
+            seen[sc.frame_current] = record()
 
     bpy.app.handlers.frame_change_post.append(spy)
     try:
@@ -623,6 +627,26 @@ def render_spy(fc, tmp_path, hair, out, tag):
     finally:
         bpy.app.handlers.frame_change_post.remove(spy)
     return seen
+
+
+def world_mesh(oe, M):
+    """Vertices (placed by the 4x4 ``M``) and triangles of evaluated object ``oe``
+    (``to_mesh``: also right for a mesh in edit mode)."""
+    me = oe.to_mesh()
+    try:
+        me.calc_loop_triangles()
+        V = np.array([v.co for v in me.vertices], np.float64).reshape(-1, 3)
+        F = np.array([t.vertices[:] for t in me.loop_triangles], np.int64).reshape(-1, 3)
+    finally:
+        oe.to_mesh_clear()
+    M = np.array(M)
+    return V @ M[:3, :3].T + M[:3, 3], F
+
+
+def evaluated_world_mesh(ob):
+    """World vertices and triangles of ``ob`` as the depsgraph evaluates it now."""
+    oe = ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    return world_mesh(oe, oe.matrix_world)
 
 
 def mesh_object(name, verts, edges=(), faces=()):

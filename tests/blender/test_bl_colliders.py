@@ -11,6 +11,7 @@ from helpers import (
     assert_unchanged,
     check_render,
     dependency_objects,
+    evaluated_world_mesh,
     linear,
     make_box,
     make_hair,
@@ -31,6 +32,7 @@ from helpers import (
     sweep_box,
     sweep_setup,
     world,
+    world_mesh,
 )
 
 from core import Status
@@ -64,25 +66,6 @@ def sweep(ob, x0, x1, frames):
     ob.location.x = x1
     ob.keyframe_insert("location", frame=frames[1])
     linear(ob)
-
-
-def world_mesh(oe, M):
-    """Vertices (placed by the 4x4 ``M``) and triangles of evaluated object ``oe``."""
-    me = oe.to_mesh()
-    try:
-        me.calc_loop_triangles()
-        V = np.array([v.co for v in me.vertices], np.float64).reshape(-1, 3)
-        F = np.array([t.vertices[:] for t in me.loop_triangles], np.int64).reshape(-1, 3)
-    finally:
-        oe.to_mesh_clear()
-    M = np.array(M)
-    return V @ M[:3, :3].T + M[:3, 3], F
-
-
-def evaluated_world_mesh(ob):
-    """World vertices and triangles of ``ob`` as the depsgraph evaluates it now."""
-    oe = ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    return world_mesh(oe, oe.matrix_world)
 
 
 def crossing_free_curves(out, V, F):

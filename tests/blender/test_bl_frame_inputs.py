@@ -20,6 +20,7 @@ import pytest
 from helpers import (
     activate,
     bake_crashing_at,
+    evaluated_world_mesh,
     make_box,
     make_hair,
     make_surface,
@@ -63,20 +64,6 @@ def shot(fc, tmp_path, x=(-1.0, 1.0), deform=False, deform_in_edit_mode=True):
     return scene, hair, box, out
 
 
-def world_mesh(ob):
-    """World vertices and triangles of ``ob`` as the depsgraph evaluates it now
-    (``to_mesh``: also right for a mesh in edit mode)."""
-    oe = ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    me = oe.to_mesh()
-    try:
-        me.calc_loop_triangles()
-        V = np.array([v.co for v in me.vertices], np.float64).reshape(-1, 3)
-        F = np.array([t.vertices[:] for t in me.loop_triangles], np.int64).reshape(-1, 3)
-    finally:
-        oe.to_mesh_clear()
-    return oracle.transform(V, np.array(oe.matrix_world)), F
-
-
 def offsets_of(ob):
     off = np.empty(len(ob.data.curves) + 1, np.int32)
     ob.data.curve_offset_data.foreach_get("value", off)
@@ -95,7 +82,7 @@ def crossing(hair_ob, *colliders, status=None):
     P, offs = positions(hair_ob), offsets_of(hair_ob)
     hit = np.zeros(len(offs) - 1, bool)
     for c in colliders:
-        V, F = world_mesh(c)
+        V, F = evaluated_world_mesh(c)
         hit |= oracle.segments_hit_mesh(P, offs, V, F)
     if status is not None:
         hit &= ~np.isin(status, (PINCHED, UNRESOLVED))

@@ -27,6 +27,7 @@ from helpers import (
     positions_per_frame,
     record,
     render_camera,
+    render_spy,
     save_in,
     seg_lengths,
     small_setup,
@@ -45,21 +46,8 @@ def _render_local_spy(fc, tmp_path, hair, out, tag):
     """Render the animation; {frame: (output local points, status, status message)}
     as the RENDER depsgraph's frame changes left them. (Local: the originals'
     matrix_world is the viewport's, not the rendered frame's.)"""
-    scene = bpy.context.scene
-    scene.render.filepath = str(tmp_path / f"{tag}_####")
-    seen = {}
-
-    def spy(sc, depsgraph):
-        if depsgraph is not None and depsgraph.mode == "RENDER":
-            seen[sc.frame_current] = (positions(out).copy(), status_of(out).copy(),
-                                      fc.registry.status_for(hair))
-
-    bpy.app.handlers.frame_change_post.append(spy)
-    try:
-        bpy.ops.render.render(animation=True)
-    finally:
-        bpy.app.handlers.frame_change_post.remove(spy)
-    return seen
+    return render_spy(fc, tmp_path, hair, out, tag, record=lambda: (
+        positions(out).copy(), status_of(out).copy(), fc.registry.status_for(hair)))
 
 
 def _unit_run(fc, scale_length):
