@@ -7,70 +7,27 @@ once (module fixture, ~2 minutes) and asserts on what it reported, on its exit c
 on the absence of a crash log, and on the screenshots it left in ``out/app/shots/``.
 """
 
-import json
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
-from scripts import package as pkg  # noqa: E402
+from app_session import ROOT, run_session
 
 WORK = ROOT / "out" / "app"
-CHROOT = ROOT / "scripts" / "blender_chroot.sh"
 CHECK_FRAMES = ("6", "12", "18", "24")
-
-
-def _run(cmd, timeout, **kw):
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kw)
 
 
 @pytest.fixture(scope="module")
 def session():
     """Build (or reuse) the chroot and the cp313 zip, run one Blender UI session."""
-    if os.geteuid() != 0:
-        pytest.fail("the real-Blender lane needs root (debootstrap, chroot, mount)")
-    built = _run([str(CHROOT), "build"], timeout=3000)
-    if built.returncode != 0:
-        pytest.fail(f"the Blender chroot could not be prepared:\n{built.stderr[-3000:]}")
-    shutil.rmtree(WORK, ignore_errors=True)
-    (WORK / "tmp").mkdir(parents=True)
-    try:
-        (res,) = pkg.build(platforms=["linux-x64"], pythons=["3.13"], output_dir=WORK)
-    except pkg.PackageError as err:
-        pytest.fail(f"packaging the cp313 zip failed: {err}")
-    zip_path = Path(res["zip"])
-    shutil.copy2(Path(__file__).with_name("blender_driver.py"), WORK / "blender_driver.py")
-    inner = (
-        "cd /work && blender -b --factory-startup --python-expr "
-        "'import bpy; bpy.ops.wm.save_as_mainfile(filepath=\"/work/start.blend\")' >/dev/null"
-        " && env TMPDIR=/work/tmp BLENDER_USER_RESOURCES=/work/user FC_APP_CURVES=50000"
-        " xvfb-run -a -s '-screen 0 1600x900x24 +extension GLX'"
-        " blender /work/start.blend -p 0 0 1600 900 --python /work/blender_driver.py"
-        f" -- /work/{zip_path.name} /work"
-    )
-    env = dict(os.environ, FURCOLLIDE_CHROOT_BIND=str(WORK))
-    try:
-        proc = _run([str(CHROOT), "run", "sh", "-c", inner], timeout=1200, env=env)
-    except subprocess.TimeoutExpired as exc:
-        pytest.fail(f"the Blender session did not finish in 20 minutes: {exc}")
-    (WORK / "blender.log").write_text(proc.stdout + "\n--- stderr ---\n" + proc.stderr)
-    result_file = WORK / "result.json"
-    result = json.loads(result_file.read_text()) if result_file.is_file() else {}
-    return {"rc": proc.returncode, "log": (proc.stdout + proc.stderr)[-6000:],
-            "result": result, "zip": zip_path}
+    return run_session(WORK, "blender_driver.py", timeout=1200,
+                       env_vars="FC_APP_CURVES=50000")
 
 
 def test_blender_exits_cleanly_without_a_crash(session):
-    assert session["rc"] == 0, session["log"]
+    assert session["rc"] == 0, session["log"][-6000:]
     crash = list((WORK / "tmp").glob("*.crash.txt")) + list(WORK.glob("*.crash.txt"))
     assert not crash, (crash, crash and crash[0].read_text()[-3000:])
     r = session["result"]
-    assert r.get("finished") and not r.get("errors"), r.get("errors") or session["log"]
+    assert r.get("finished") and not r.get("errors"), r.get("errors") or session["log"][-6000:]
     assert r["blender"].startswith("4.3") and r["python"].startswith("3.13")
     assert r["numpy"].startswith("2.")
 

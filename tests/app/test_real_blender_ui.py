@@ -10,21 +10,11 @@ cannot do either: panels are not drawn there and undo needs a window
 (``tests/blender/test_bl_panels.py`` draws them into an RNA-checking recorder instead).
 """
 
-import json
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
-from scripts import package as pkg  # noqa: E402
+from app_session import ROOT, run_session
 
 WORK = ROOT / "out" / "app_ui"
-CHROOT = ROOT / "scripts" / "blender_chroot.sh"
 STATES = ("no_setup", "setup", "played", "error", "outdated", "lock_interface_on", "baked",
           "baked_outdated", "no_output")
 #: Panels drawn once a setup exists (their poll needs one).
@@ -35,38 +25,7 @@ SETUP_PANELS = ("FURCOLLIDE_PT_colliders", "FURCOLLIDE_PT_resolution", "FURCOLLI
 
 @pytest.fixture(scope="module")
 def session():
-    if os.geteuid() != 0:
-        pytest.fail("the real-Blender lane needs root (debootstrap, chroot, mount)")
-    built = subprocess.run([str(CHROOT), "build"], capture_output=True, text=True, timeout=3000)
-    if built.returncode != 0:
-        pytest.fail(f"the Blender chroot could not be prepared:\n{built.stderr[-3000:]}")
-    shutil.rmtree(WORK, ignore_errors=True)
-    (WORK / "tmp").mkdir(parents=True)
-    try:
-        (res,) = pkg.build(platforms=["linux-x64"], pythons=["3.13"], output_dir=WORK)
-    except pkg.PackageError as err:
-        pytest.fail(f"packaging the cp313 zip failed: {err}")
-    zip_path = Path(res["zip"])
-    shutil.copy2(Path(__file__).with_name("ui_driver.py"), WORK / "ui_driver.py")
-    inner = (
-        "cd /work && blender -b --factory-startup --python-expr "
-        "'import bpy; bpy.ops.wm.save_as_mainfile(filepath=\"/work/start.blend\")' >/dev/null"
-        " && env TMPDIR=/work/tmp BLENDER_USER_RESOURCES=/work/user"
-        " xvfb-run -a -s '-screen 0 1600x900x24 +extension GLX'"
-        " blender /work/start.blend -p 0 0 1600 900 --python /work/ui_driver.py"
-        f" -- /work/{zip_path.name} /work"
-    )
-    env = dict(os.environ, FURCOLLIDE_CHROOT_BIND=str(WORK))
-    try:
-        proc = subprocess.run([str(CHROOT), "run", "sh", "-c", inner], capture_output=True,
-                              text=True, timeout=600, env=env)
-    except subprocess.TimeoutExpired as exc:
-        pytest.fail(f"the Blender session did not finish in 10 minutes: {exc}")
-    log = proc.stdout + "\n--- stderr ---\n" + proc.stderr
-    (WORK / "blender.log").write_text(log)
-    result_file = WORK / "result.json"
-    result = json.loads(result_file.read_text()) if result_file.is_file() else {}
-    return {"rc": proc.returncode, "log": log, "result": result}
+    return run_session(WORK, "ui_driver.py", timeout=600)
 
 
 def test_session_ran_to_the_end_without_a_crash(session):
