@@ -1,0 +1,136 @@
+"""Hunt 3: wrong pictures, lost work and broken promises of the Blender add-on.
+
+Each ``xfail(strict=True)`` test fails today because of the bug its reason names
+(``docs/hunt3-report.md``); it turns red (XPASS) when the bug is fixed. Run:
+
+    .venv/bin/python -m pytest -q -p no:cacheprovider tests/blender/test_bl_hunt3.py
+    .venv/bin/python -m pytest -q -p no:cacheprovider --runxfail tests/blender/test_bl_hunt3.py
+"""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+import numpy as np
+import pytest
+from helpers import bake_crashing_at, bake_files, positions, save_in, world
+
+
+# ------------------------------------------------------------ 1. bake directory
+@pytest.mark.xfail(strict=True, reason="a failed or cancelled bake pins bake_path: a new "
+                   "Cache Directory is ignored by the next Bake")
+def test_a_new_cache_directory_after_a_failed_bake_is_used(fc, tmp_path):
+    """The Cache Directory points at a file (a typo, an unmounted share): Bake fails at
+    frame 1. The artist fixes the Directory (Cache panel, still editable) and presses
+    Bake again: it must bake there, not fail again on the old path."""
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    blocker = tmp_path / "cache_is_a_file"
+    blocker.write_text("not a directory")
+    hair.furcollide.cache_directory = str(blocker) + os.sep
+    save_in(tmp_path)
+    with pytest.raises(RuntimeError, match="Not a directory"):
+        bpy.ops.furcollide.bake()
+    good = tmp_path / "good cache"
+    hair.furcollide.cache_directory = str(good) + os.sep
+    bpy.ops.furcollide.bake()  # raises today: the same NotADirectoryError
+    assert hair.furcollide.is_baked
+    assert os.path.abspath(bpy.path.abspath(hair.furcollide.bake_path)).startswith(str(good))
+
+
+@pytest.mark.xfail(strict=True, reason="a partial bake keeps writing to its old folder "
+                   "after the Cache Directory changed")
+def test_a_partial_bake_resumed_after_a_directory_change_goes_to_the_new_directory(
+        fc, tmp_path, monkeypatch):
+    """A bake crashes at frame 4 (frames 1-3 on disk, next to the .blend). The artist
+    then points Directory at the farm share and presses Bake: every frame must end up
+    on the share (the render nodes read only it)."""
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    save_in(tmp_path)
+    bake_crashing_at(fc, monkeypatch, 4)
+    share = tmp_path / "farm share"
+    hair.furcollide.cache_directory = str(share) + os.sep
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    d = bpy.path.abspath(hair.furcollide.bake_path)
+    assert os.path.abspath(d).startswith(str(share)), d
+    assert len(bake_files(d)) == 12
+
+
+# ------------------------------------------------- 2. motion blur at Frame End
+@pytest.mark.xfail(strict=True, reason="baked subframe after Frame End writes nothing: the "
+                   "previous motion step's blend stays")
+def test_motion_blur_steps_of_the_last_baked_frame(fc, tmp_path):
+    """Cycles renders a motion-blurred frame F as F, F-0.25, F+0.25, F (its frame
+    handler calls; see the report). Baked, F-0.25 is a blend of F-1 and F; at Frame End,
+    F+0.25 has no next baked frame and must show Frame End (held after it, README
+    "Time"), not keep the F-0.25 blend: the hair would be at F-0.25 at both ends of
+    the shutter."""
+    hair, box = fc.make_scene(frames=(1, 4), nx=5, ny=5)
+    out = fc.setup(hair, [box])
+    scene = bpy.context.scene
+    save_in(tmp_path)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    scene.frame_set(3)
+    p3 = world(out).copy()
+    scene.frame_set(4)
+    p4 = world(out).copy()
+    assert not np.array_equal(p3, p4)
+    # an inner frame: both motion steps are blends of their baked neighbours
+    scene.frame_set(3, subframe=0.25)
+    assert not np.array_equal(world(out), p3)
+    # the last frame, in Cycles' order
+    scene.frame_set(4)
+    scene.frame_set(3, subframe=0.75)
+    before = world(out).copy()
+    np.testing.assert_allclose(before, p3 + (p4 - p3) * 0.75, atol=1e-6)
+    scene.frame_set(4, subframe=0.25)
+    np.testing.assert_array_equal(world(out), p4)
+
+
+# ----------------------------------- 3. the source's other data never reach the output
+def _radius_modifier(ob, value):
+    """A geometry-nodes modifier on ``ob`` setting every curve's radius (what the
+    artist uses for the render width); returns its Set Curve Radius node."""
+    ng = bpy.data.node_groups.new("Width", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi, go = ng.nodes.new("NodeGroupInput"), ng.nodes.new("NodeGroupOutput")
+    sr = ng.nodes.new("GeometryNodeSetCurveRadius")
+    sr.inputs["Radius"].default_value = value
+    ng.links.new(gi.outputs[0], sr.inputs["Curve"])
+    ng.links.new(sr.outputs[0], go.inputs[0])
+    ob.modifiers.new("Width", "NODES").node_group = ng
+    return sr
+
+
+def _radii(ob):
+    d = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    r = np.empty(len(d.points), np.float32)
+    d.attributes["radius"].data.foreach_get("value", r)
+    return r
+
+
+@pytest.mark.xfail(strict=True, reason="source attributes (radius...) are copied to the "
+                   "output only at Add or on a topology change")
+def test_the_output_follows_the_evaluated_sources_radius(fc):
+    """README: each frame FurCollide reads the *evaluated* source (after its modifiers)
+    and the output has its curves. The artist widens the fur after Add (the source's
+    Set Curve Radius modifier: 0.01 -> 0.05) and plays: the output, which is what
+    renders (the source is hidden from render), must get the new width. Today it keeps
+    0.01 forever, through Reset Cache too; only Remove + Add (which deletes the output
+    and the artist's modifiers on it) picks it up."""
+    hair, box = fc.make_scene()
+    sr = _radius_modifier(hair, 0.01)
+    out = fc.setup(hair, [box])
+    np.testing.assert_allclose(_radii(out), 0.01)
+    sr.inputs["Radius"].default_value = 0.05
+    scene = bpy.context.scene
+    for f in range(1, 5):
+        scene.frame_set(f)
+    np.testing.assert_allclose(_radii(hair), 0.05)
+    bpy.context.view_layer.objects.active = hair
+    assert bpy.ops.furcollide.reset() == {"FINISHED"}
+    scene.frame_set(1)
+    np.testing.assert_allclose(_radii(out), 0.05)
