@@ -14,8 +14,14 @@ import os
 import bpy
 import numpy as np
 import pytest
-from helpers import (bake_crashing_at, bake_files, positions, render_camera, render_watching,
-                     save_in, world)
+from helpers import (
+    bake_crashing_at,
+    bake_files,
+    render_camera,
+    render_watching,
+    save_in,
+    world,
+)
 
 
 # ------------------------------------------------------------ 1. bake directory
