@@ -27,10 +27,30 @@ from .setup import Setup, core_settings, signature
 
 
 def bake_directory(ob) -> str:
-    """Absolute bake directory of the setup (raises ValueError if unsaved)."""
+    """Absolute bake directory of the setup (raises ValueError if unsaved).
+
+    A finished bake is read where it was written (``bake_path``, kept valid by Save
+    As). A partial one (a failed, cancelled or crashed bake) is resumed there only
+    while the Cache Directory still names that folder: once the artist points the
+    Directory elsewhere (a typo fixed, the farm's share), the next Bake goes there.
+    """
     s = ob.furcollide
-    if s.bake_path:
+    if s.bake_path and s.is_baked:
         return bpy.path.abspath(s.bake_path)
+    wanted = directory_from_settings(ob)
+    if s.bake_path and not _same_path(bpy.path.abspath(s.bake_path), wanted):
+        return wanted
+    return bpy.path.abspath(s.bake_path) if s.bake_path else wanted
+
+
+def _same_path(a, b) -> bool:
+    return os.path.normcase(os.path.abspath(a)) == os.path.normcase(os.path.abspath(b))
+
+
+def directory_from_settings(ob) -> str:
+    """The bake directory the setup's Cache Directory names (raises ValueError if a
+    relative Directory needs an unsaved .blend)."""
+    s = ob.furcollide
     if not bpy.data.filepath and s.cache_directory.startswith("//"):
         raise ValueError(
             "Save the .blend file first: the bake cache is written next to it "
@@ -196,6 +216,11 @@ class BakeJob:
                 directory = bake_directory(ob)
             except ValueError as exc:
                 raise BakeError(str(exc)) from None
+            old = bpy.path.abspath(s.bake_path) if s.bake_path else ""
+            if old and not _same_path(old, directory) and verbose:
+                print(f"FurCollide bake '{ob.name}': the Cache Directory changed since the "
+                      f"partial bake in '{old}': baking into '{directory}' (the old folder "
+                      "is left as it is)", flush=True)
             last = resume_frame(ob, directory)
             if last is not None and not resume_inputs_match(ob, directory, last, scene):
                 if verbose:
@@ -244,10 +269,10 @@ class BakeJob:
                 st = bake_frame(Setup(ob, self.scene, depsgraph), directory,
                                 trust_solver=(last == f - 1))
             except Exception as exc:  # noqa: BLE001 - becomes a report
-                raise BakeError(
-                    f"'{ob.name}' frame {f}: {registry.describe(exc)} (frames before {f} "
-                    f"are kept; bake again to resume)"
-                ) from exc
+                kept = (f"frames {s.frame_start}-{f - 1} are kept; bake again to resume"
+                        if f > s.frame_start else "no frame was written")
+                raise BakeError(f"'{ob.name}' frame {f}: {registry.describe(exc)} ({kept})"
+                                ) from exc
             job[3] = f
             if self.verbose:
                 print(

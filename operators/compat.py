@@ -16,6 +16,9 @@ versions it was seen on (the test matrix runs every test on each of them).
   Surface's ``rest_position`` (not its deformed shape) is "Surface Rest Position" in
   4.2-5.0 and "Resting Surface" (on by default) in 5.2; every version reads the
   attribute Blender adds with ``Object.add_rest_position_attribute``.
+* **Blend-relative path properties**: 4.5+ accept ``options={'PATH_SUPPORTS_BLEND_RELATIVE'}``
+  on a path property (without it 5.0 warns when a script sets a ``//`` path), 4.2 refuses
+  the option at registration (:data:`BLEND_RELATIVE_PATH`).
 * **Geometry-nodes modifier inputs**: up to 5.0 they are ID properties
   (``mod["Input_15"] = 10``, ``mod["Input_18_use_attribute"]``); 5.2 replaced them with
   ``mod.properties.inputs.Input_15.value`` / ``.type`` / ``.attribute_name``
@@ -31,6 +34,11 @@ import bpy
 
 #: The running Blender, as a tuple (major, minor, patch).
 VERSION: tuple = tuple(bpy.app.version)
+
+#: Options of a path property that takes ``//`` (blend-relative) paths: 4.5+ only.
+BLEND_RELATIVE_PATH: set = (
+    {"PATH_SUPPORTS_BLEND_RELATIVE"} if VERSION >= (4, 5, 0) else set()
+)
 
 #: Blender's bundled hair node-group assets (file name).
 HAIR_ASSET_FILE = "procedural_hair_node_assets.blend"

@@ -501,10 +501,14 @@ def _owner_name(out) -> str:
 
 def _baked_subframe(setup):
     """Blend the two baked frames around a subframe into the output; the written
-    points, or None (nothing written) when they are not both baked."""
+    points, or None (nothing written) when they are not both baked. From Frame End
+    on, Frame End itself (held after the end, as whole frames are): the second
+    motion step of Frame End's motion blur."""
     s, f = setup.s, setup.frame
     directory = bpy.path.abspath(s.bake_path)
     a, b = f, f + 1
+    if a >= s.frame_end:
+        a = b = s.frame_end
     if not (s.frame_start <= a and b <= s.frame_end):
         return None
     if not (os.path.exists(framecache.frame_path(directory, a)) and os.path.exists(

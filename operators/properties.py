@@ -21,7 +21,7 @@ from bpy.props import (
 )
 from bpy.types import PropertyGroup
 
-from . import registry
+from . import compat, registry
 from .properties_pipeline import FurCollideGroom, FurCollideMotion
 from .property_helpers import (
     choice,
@@ -274,6 +274,7 @@ class FurCollideSettings(PropertyGroup):
         name="Cache Directory",
         default="//furcollide_cache/",
         subtype="DIR_PATH",
+        options=compat.BLEND_RELATIVE_PATH,
         description="Where bakes are written. '//' is the folder of the saved .blend "
         "file; each setup gets its own sub-folder",
     )

@@ -25,8 +25,6 @@ from helpers import (
 
 
 # ------------------------------------------------------------ 1. bake directory
-@pytest.mark.xfail(strict=True, reason="a failed or cancelled bake pins bake_path: a new "
-                   "Cache Directory is ignored by the next Bake")
 def test_a_new_cache_directory_after_a_failed_bake_is_used(fc, tmp_path):
     """The Cache Directory points at a file (a typo, an unmounted share): Bake fails at
     frame 1. The artist fixes the Directory (Cache panel, still editable) and presses
@@ -46,8 +44,6 @@ def test_a_new_cache_directory_after_a_failed_bake_is_used(fc, tmp_path):
     assert os.path.abspath(bpy.path.abspath(hair.furcollide.bake_path)).startswith(str(good))
 
 
-@pytest.mark.xfail(strict=True, reason="a partial bake keeps writing to its old folder "
-                   "after the Cache Directory changed")
 def test_a_partial_bake_resumed_after_a_directory_change_goes_to_the_new_directory(
         fc, tmp_path, monkeypatch):
     """A bake crashes at frame 4 (frames 1-3 on disk, next to the .blend). The artist
@@ -66,8 +62,6 @@ def test_a_partial_bake_resumed_after_a_directory_change_goes_to_the_new_directo
 
 
 # ------------------------------------------------- 2. motion blur at Frame End
-@pytest.mark.xfail(strict=True, reason="baked subframe after Frame End writes nothing: the "
-                   "previous motion step's blend stays")
 def test_motion_blur_steps_of_the_last_baked_frame(fc, tmp_path):
     """Cycles renders a motion-blurred frame F as F, F-0.25, F+0.25, F (its frame
     handler calls; see the report). Baked, F-0.25 is a blend of F-1 and F; at Frame End,
@@ -228,8 +222,6 @@ def test_a_source_denser_in_renders_renders_its_render_curves(fc, tmp_path):
 
 
 # ------------------------------------------- 6. the Cache Directory's "//" on 5.0
-@pytest.mark.xfail(strict=True, reason="cache_directory lacks PATH_SUPPORTS_BLEND_RELATIVE: "
-                   "Blender 5.0 warns on the README's own '//' form")
 def test_a_relative_cache_directory_set_from_a_script_does_not_warn(fc):
     """README: the Directory defaults to ``//furcollide_cache/`` ('//' = next to the
     .blend). A TD's script setting another relative folder the same way gets, on
