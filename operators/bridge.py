@@ -228,6 +228,14 @@ def copy_topology(src, dst) -> None:
         dst.add_curves(sizes.tolist())
     if len(curve_offsets(dst)) != len(offs) or not np.array_equal(curve_offsets(dst), offs):
         raise BridgeError(f"could not give '{dst.name}' the curve layout of '{src.name}'")
+    copy_attributes(src, dst)
+    _copy_curve_types(src, dst)
+    set_positions(dst, get_positions(src))
+
+
+def copy_attributes(src, dst) -> None:
+    """Copy every non-internal POINT and CURVE attribute of ``src`` into ``dst`` (the
+    same curve layout; positions, status and colours are left as they are)."""
     for attr in src.attributes:
         name = attr.name
         if name in _SKIP_ATTRIBUTES or name.startswith("."):
@@ -238,8 +246,23 @@ def copy_topology(src, dst) -> None:
             _copy_attribute(attr, dst)
         except (RuntimeError, TypeError, ValueError, KeyError) as exc:
             print(f"FurCollide: attribute '{name}' not copied to '{dst.name}': {exc}")
-    _copy_curve_types(src, dst)
-    set_positions(dst, get_positions(src))
+
+
+def attribute_state(src) -> tuple:
+    """What of ``src``'s attributes the output copies, cheaply: (the list of copied
+    attributes with their domain and type, the radius values or None). Compared frame
+    to frame (:func:`frame_outputs.sync_output`): a new, removed or retyped attribute,
+    or another radius (the render width), copies them all again."""
+    names = tuple(sorted((a.name, a.domain, a.data_type) for a in src.attributes
+                         if a.name not in _SKIP_ATTRIBUTES and not a.name.startswith(".")
+                         and a.domain in {"POINT", "CURVE"}))
+    radius = src.attributes.get("radius")
+    values = None
+    if radius is not None and radius.data_type == "FLOAT":
+        values = np.empty(len(radius.data), np.float32)
+        if len(values):
+            radius.data.foreach_get("value", values)
+    return names, values
 
 
 def _copy_curve_types(src, dst) -> None:

@@ -103,11 +103,27 @@ def write_attributes(data, attributes: dict) -> None:
 
 
 def sync_output(setup, inputs) -> None:
-    """Give the output the evaluated source's topology when it differs."""
+    """Give the output the evaluated source's curves and attributes when they differ.
+
+    Copied again when the curve layout differs, when the list of the source's
+    attributes changed, when its radius (the render width) changed, and on the first
+    frame a runtime evaluates (a file opened, Reset Cache): other attribute values
+    changed after Add (a colour painted again) follow with Reset Cache.
+    """
     ob = setup.ob
     out = ob.furcollide.output
+    src = ob.evaluated_get(setup.depsgraph).data
+    names, radius = bridge.attribute_state(src)
+    rt = setup.rt
+    old = rt.output_attributes
+    same = (old is not None and old[0] == names
+            and (radius is None) == (old[1] is None)
+            and (radius is None or np.array_equal(radius, old[1])))
     if framecache.topology_key(bridge.curve_offsets(out.data)) != inputs.key:
-        bridge.copy_topology(ob.evaluated_get(setup.depsgraph).data, compat.emptied_curves(out))
+        bridge.copy_topology(src, compat.emptied_curves(out))
+    elif not same:  # (the output's points stay: a held frame is still shown)
+        bridge.copy_attributes(src, out.data)
+    rt.output_attributes = (names, radius)
 
 
 # ---------------------------------------------------------------- viewport

@@ -82,6 +82,9 @@ class Runtime:
     #: next status says of colliders just built (``colliders.collider_note``).
     told: dict = field(default_factory=dict)
     fresh_notes: list = field(default_factory=list)
+    #: What the output last got of the evaluated source's attributes
+    #: (``bridge.attribute_state``; None: nothing yet, copy them on the next frame).
+    output_attributes: tuple | None = None
 
     def forget_solver(self):
         self.solver = None

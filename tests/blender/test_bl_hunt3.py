@@ -113,8 +113,6 @@ def _radii(ob):
     return r
 
 
-@pytest.mark.xfail(strict=True, reason="source attributes (radius...) are copied to the "
-                   "output only at Add or on a topology change")
 def test_the_output_follows_the_evaluated_sources_radius(fc):
     """README: each frame FurCollide reads the *evaluated* source (after its modifiers)
     and the output has its curves. The artist widens the fur after Add (the source's
