@@ -22,7 +22,13 @@ from ..core import framecache
 from . import frame_outputs, frame_rules, frame_solve, groom_stage, motion, registry
 from .clock import clock
 from .colliders import read_for_solve
-from .frame_inputs import current_inputs, prepare_input, read_inputs, solved_inputs
+from .frame_inputs import (
+    current_inputs,
+    first_change,
+    prepare_input,
+    read_inputs,
+    solved_inputs,
+)
 from .setup import Setup, core_settings, signature
 
 
@@ -154,7 +160,7 @@ def resume_inputs_match(ob, directory, f, scene) -> bool:
         if old is None:  # baked before FurCollide stored the record: start over
             return False
         now = current_inputs(setup, read_inputs(setup))
-        return framecache.first_change(old, now) is None
+        return first_change(setup, old, now) is None
 
 
 def resume_frame(ob, directory) -> int | None:

@@ -345,6 +345,22 @@ def collider_inputs(M, V, key) -> tuple[int, int]:
             framecache.digest(V, np.frombuffer(repr(key).encode(), np.uint8)))
 
 
+def renders_otherwise(o) -> bool:
+    """Does Blender evaluate ``o`` with other modifier settings in renders than in the
+    viewport? (A modifier shown in only one of them, or a Subdivision Surface or
+    Multiresolution modifier whose render levels differ from its viewport levels: a
+    Subdivision Surface at Blender's defaults, 1 and 2.) Geometry-node switches on *Is
+    Viewport* cannot be seen from here."""
+    for m in getattr(o, "modifiers", ()):
+        if m.show_render != m.show_viewport:
+            return True
+        if m.type == "SUBSURF" and m.show_render and m.render_levels != m.levels:
+            return True
+        if m.type == "MULTIRES" and m.show_render and m.render_levels != m.levels:
+            return True
+    return False
+
+
 def read_collider_inputs(o, depsgraph, matrix=None) -> tuple[int, int]:
     """:func:`collider_inputs` of object ``o`` as ``depsgraph`` evaluates it now
     (``matrix``: its world matrix when it is not its own, see :meth:`ColliderRef.matrix`)."""

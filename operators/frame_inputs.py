@@ -23,7 +23,7 @@ import numpy as np
 
 from ..core import framecache
 from . import bridge, motion
-from .colliders import collider_objects, read_collider_inputs
+from .colliders import collider_objects, read_collider_inputs, renders_otherwise
 from .fur_attach import attached_points
 from .setup import signature
 
@@ -158,9 +158,20 @@ def solved_inputs(setup, inp) -> dict:
     rt = setup.rt
     growth = rt.growth if rt.growth is not None and uses_growth(rt.solver.settings) else None
     entries = list(rt.colliders.values())
-    return frame_inputs(inp, setup.signature(identities=False),
-                        [e.inputs for e in entries], [(e.double_sided, e.offset) for e in entries],
-                        growth.inputs if growth is not None else None)
+    return _tagged(setup, frame_inputs(
+        inp, setup.signature(identities=False), [e.inputs for e in entries],
+        [(e.double_sided, e.offset) for e in entries],
+        growth.inputs if growth is not None else None))
+
+
+#: Part of a frame-inputs record made from a render's depsgraph (see :func:`first_change`).
+RENDER_PART = "render"
+
+
+def _tagged(setup, record) -> dict:
+    if getattr(setup.depsgraph, "mode", "VIEWPORT") == "RENDER":
+        record[RENDER_PART] = 1
+    return record
 
 
 def current_inputs(setup, inp) -> dict:
@@ -174,8 +185,9 @@ def current_inputs(setup, inp) -> dict:
     surface = None
     if uses_growth(ob.furcollide) and surf is not None and surf.type == "MESH":
         surface = read_collider_inputs(surf, depsgraph)
-    return frame_inputs(inp, signature(ob, scene=scene, identities=False), cols,
-                        [(r.double_sided, r.offset) for r in refs], surface)
+    return _tagged(setup, frame_inputs(inp, signature(ob, scene=scene, identities=False),
+                                       cols, [(r.double_sided, r.offset) for r in refs],
+                                       surface))
 
 
 def seen_inputs(setup, inp) -> dict:
@@ -219,6 +231,7 @@ def changed_objects(setup, old, new) -> set | None:
     missing."""
     if old is None or new is None:
         return None
+    old, new = _comparable(setup, old, new)
     ob = setup.ob
     refs = collider_objects(ob, setup.scene)
     names = set()
@@ -269,7 +282,7 @@ def cached_frame_change(setup, inp, f) -> str:
     if old is None:
         return ""
     new = seen_inputs(setup, inp)
-    part = framecache.first_change(old, new)
+    part = first_change(setup, old, new)
     return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""
 
 
@@ -280,5 +293,28 @@ def baked_frame_change(setup, inp, directory, f) -> str:
     if old is None:
         return ""
     new = current_inputs(setup, inp)
-    part = framecache.first_change(old, new)
+    part = first_change(setup, old, new)
     return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""
+
+
+def first_change(setup, old, new) -> str | None:
+    """The first part that differs between frame-inputs records ``old`` and ``new``
+    (:func:`framecache.first_change`), where one was made from a render's depsgraph
+    and the other from the viewport's: a collider that Blender evaluates with other
+    modifier settings in renders (:func:`colliders.renders_otherwise`, e.g. a
+    Subdivision Surface at its defaults) has another shape in each, which is not an
+    edit (its placement still counts). So F12 keeps the playback cache, a bake (made
+    from the viewport) is not outdated in its renders, and frames solved in a render
+    are shown in the viewport."""
+    return framecache.first_change(*_comparable(setup, old, new))
+
+
+def _comparable(setup, old, new) -> tuple[dict, dict]:
+    """``old`` and ``new`` without what :func:`first_change` does not compare."""
+    skip = {RENDER_PART}
+    if (RENDER_PART in old) != (RENDER_PART in new):
+        refs = collider_objects(setup.ob, setup.scene)
+        skip |= {f"collider {i} shape" for i, r in enumerate(refs)
+                 if renders_otherwise(r.object)}
+    return ({k: v for k, v in old.items() if k not in skip},
+            {k: v for k, v in new.items() if k not in skip})

@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import bpy
 
-from ..core import framecache
 from . import baked, frame_rules, registry
 from .dependencies import update_dependencies
-from .frame_inputs import current_inputs, describe_change, read_inputs
+from .frame_inputs import current_inputs, describe_change, first_change, read_inputs
 from .setup import Setup
 
 
@@ -81,7 +80,7 @@ def edit_seen(setup) -> str | None:
     new = current_inputs(setup, read_inputs(setup))
     old = rt.seen[1]
     rt.seen = (key, new)
-    part = framecache.first_change(old, new)
+    part = first_change(setup, old, new)
     return describe_change(setup.ob, part, setup.scene, old, new) if part else ""
 
 

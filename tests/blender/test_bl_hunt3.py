@@ -149,8 +149,6 @@ def _played_with_a_subdivided_box(fc, frames=(1, 6)):
     return scene, hair, box, out
 
 
-@pytest.mark.xfail(strict=True, reason="the render depsgraph's collider (render levels) "
-                   "fails the cached frame's record: F12 drops the playback cache")
 def test_f12_with_a_subdivided_collider_keeps_the_playback_cache(fc, tmp_path):
     """Play the shot, stop at frame 5, press F12. Nobody changed the box; today the
     render reads its render-level mesh, the frame's record no longer holds, the whole
@@ -168,8 +166,6 @@ def test_f12_with_a_subdivided_collider_keeps_the_playback_cache(fc, tmp_path):
     assert len(rt.memory) == 6, hair.furcollide.status_message
 
 
-@pytest.mark.xfail(strict=True, reason="a bake is made from the viewport evaluation: every "
-                   "rendered frame of a subdivided collider says the bake is outdated")
 def test_render_of_a_bake_with_a_subdivided_collider_is_not_outdated(fc, tmp_path):
     """Baked, then rendered (the README's way): every rendered frame says "Frame N of
     the bake is outdated: 'Box' changed shape since it was baked ... press Free Bake,
@@ -179,6 +175,25 @@ def test_render_of_a_bake_with_a_subdivided_collider_is_not_outdated(fc, tmp_pat
     assert bpy.ops.furcollide.bake() == {"FINISHED"}
     seen, statuses = render_watching(tmp_path, "baked", [out], hair)
     assert [s for s in statuses if s[1]] == []
+
+
+def test_frames_solved_in_a_render_of_a_subdivided_collider_are_shown_in_the_viewport(
+        fc, tmp_path):
+    """Played to frame 3, then the animation rendered: frames 4-6 are solved in the
+    render (against the box at render levels) and cached. Back in the viewport they are
+    shown as they are: the box's other render evaluation is not an edit either way."""
+    scene, hair, box, out = _played_with_a_subdivided_box(fc)
+    for f in range(1, 4):
+        scene.frame_set(f)
+    rt = fc.registry.get_runtime(hair, create=False)
+    seen, statuses = render_watching(tmp_path, "anim", [out], hair)
+    assert [s for s in statuses if s[1]] == []
+    assert len(rt.memory) == 6
+    for f in (4, 5, 6, 3):
+        scene.frame_set(f)
+        assert hair.furcollide.status_message == "" and not hair.furcollide.is_outdated
+        np.testing.assert_array_equal(world(out), seen[(f, 0.0)][-1][out.name])
+    assert len(rt.memory) == 6
 
 
 def _render_only_subdivision():
