@@ -333,6 +333,18 @@ def _check_topology(setup, inp) -> bool:
         return True
     old, new = rt.topology, inp.key
     what = "bake" if s.is_baked else "cached frames"
+    if getattr(setup.depsgraph, "mode", "VIEWPORT") == "RENDER":
+        # The viewport still has the curves the frames were solved for: a modifier
+        # evaluates the source otherwise for renders. Reset would change nothing.
+        setup.set_status(
+            "ERROR",
+            f"'{setup.ob.name}' has other curves in this render ({new[0]} curves / "
+            f"{new[1]} points) than in the viewport ({old[0]} / {old[1]}): a modifier "
+            "evaluates it otherwise for renders (e.g. Interpolate Hair Curves' Viewport "
+            "Amount, an Is Viewport switch). The render shows the viewport's curves: make "
+            "the source the same in both, or collide the dense hair as a Render Groom.",
+        )
+        return False
     setup.set_status(
         "ERROR",
         f"Source hair changed from {old[0]} curves / {old[1]} points to {new[0]} / {new[1]}: "
