@@ -174,8 +174,7 @@ class Plan:
         (clear,) = self._probe(batch, [(i, k, False)])
         r = i[clear]
         self.regime[r] = 2
-        self.k[r] = k[clear]  # clear at the recovery step: recovered
-        self.lo[r], self.hi[r] = k[clear] - 1, k[clear]
+        self.k[r] = k[clear]  # clear at the recovery step: recovered (no search)
         b = i[~clear]
         m = self.moving[b]
         self._regime_test(batch, b[m], np.zeros(int(m.sum()), np.int64))
@@ -221,8 +220,7 @@ class Plan:
         # the rest: as the full search
         r = io[c_o]
         self.regime[r] = 2
-        self.k[r] = ko[c_o]
-        self.lo[r], self.hi[r] = ko[c_o] - 1, ko[c_o]
+        self.k[r] = ko[c_o]  # recovered (no search)
         b = io[~c_o]
         m = self.moving[b]
         pend_i, pend_lo = [b[m]], [np.zeros(int(m.sum()), np.int64)]
@@ -267,7 +265,6 @@ class Plan:
         rec0 = mv[c_mv]
         self.regime[rec0] = 2
         self.k[rec0] = 0
-        self.lo[rec0], self.hi[rec0] = -1, 0
         keep = ~np.isin(pend, rec0)
         self._regime_test(batch, pend[keep], pend_k[keep])
         # (a recovery whose bracket is closed goes to the search all the same:
@@ -443,9 +440,7 @@ def resolve_collisions(ctx, batch, items, k, status):
     bad = c[~ok]
     status[bad] = Status.UNRESOLVED
     # Fallback: the state of the previous frame (last collision-free).
-    angle[bad] = th0[~ok]
-    fresh = bad[ctx.state.angle[bad] == 0]
-    ctx.active[fresh] = ctx.state.active[fresh]
+    angle[bad] = th0[~ok]  # (a new contact left at 0 is released by release())
 
 
 def recovery_step(ctx, rec):

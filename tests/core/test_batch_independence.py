@@ -38,3 +38,35 @@ def test_removing_earlier_curves_leaves_the_others_bit_for_bit(mode, seed):
         np.testing.assert_array_equal(a.status[drop:], b.status)
         np.testing.assert_array_equal(a.points[offs[drop]:], b.points)
     assert (a.status != 0).any()  # the sphere met the fur
+
+
+@pytest.mark.parametrize("shrink", [False, True])
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+def test_a_uniform_groom_equals_the_same_curves_in_a_ragged_one(mode, shrink):
+    """Curves of one CV count are solved on component arrays (``RigidBatch._init_uniform``,
+    ``StepContext._deform_uniform``), a groom of mixed counts row by row: one far-away
+    curve of another count added to a uniform groom leaves every other curve's search
+    (statuses, angles) exactly as it was, Shrink included, and its points to the last
+    float64 bits (the two paths sum a segment's terms in another order)."""
+    rng = np.random.default_rng(7)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=60, curly=0.3, lean=0.3, extent=1.0,
+                                    n_cvs=(6, 6))
+    extra, eo = scenes.pack([scenes.straight_curve([9.0, 9.0, 0.0], [0, 0, 1], 0.5, 3)])
+    pts2 = np.concatenate([pts, extra])
+    offs2 = np.concatenate([offs, offs[-1] + eo[1:]])
+    V, F = scenes.uv_sphere([0, 0, 0], 0.45, 24, 12)
+    s = Settings(mode=mode, shrink=shrink, scale_minimum=0.6, scale_angle=60.0)
+    a_sol, b_sol = Solver(offs, s), Solver(offs2, s)
+    col = Collider(V, F)
+    for f in range(5):
+        col.matrix = scenes.affine(scenes.rotation_matrix([0, 1, 0.3], 0.15 * f),
+                                   t=[-0.5 + 0.25 * f, 0.05 * f, 0.55 - 0.04 * f])
+        a = a_sol.step(pts, [col])
+        b = b_sol.step(pts2, [col])
+        np.testing.assert_array_equal(a.status, b.status[:-1])
+        sa, sb = a_sol.state, b_sol.state
+        np.testing.assert_array_equal(sa["angle"], sb["angle"][:-1])
+        if mode == "soft":  # per-segment rotations, to the last bits
+            np.testing.assert_allclose(sa["quat"], sb["quat"][:len(sa["quat"])], atol=1e-14)
+        np.testing.assert_allclose(a.points, b.points[:len(pts)], rtol=0, atol=1e-14)
+    assert (a.status != 0).any()

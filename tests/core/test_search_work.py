@@ -195,3 +195,60 @@ def test_a_contact_pushed_further_starts_from_the_tangent_plane_estimate(monkeyp
     assert a2 > a1 + np.radians(5.0)  # a search of more than 20 steps
     # th1, th0, the estimate's round (4) and a bisection of its bracket (<= 6)
     assert sum(probes) <= 2 + 4 + 6
+
+
+def test_each_curve_spreads_its_first_round_around_its_own_estimate():
+    """The estimate round (``use_guess``) probes 0.8, 1, 1.25 and 1.6 times each
+    curve's own estimate: a curve with a small estimate next to one with a large one
+    is bracketed near its own answer, not at the other's probes."""
+    n = 8
+    th0 = np.zeros(n)
+    kmax_angle = 3.0
+    answer = np.where(np.arange(n) % 2 == 0, 80, 4)  # big and small, interleaved
+    batch = Batch(th0 + answer * P)
+    ctx = _ctx(n, max_angle=kmax_angle)
+    guess = answer * P  # exact estimates
+    k, _ = rigid.search_angles(ctx, batch, np.arange(n), th0, np.zeros(n, np.int64),
+                               np.full(n, -1, np.int64), np.ones(n, np.int64),
+                               np.ones(n, bool), guess=guess)
+    np.testing.assert_array_equal(k, answer)
+    small = answer == 4
+    # 4 probes, then the bracket (3, 4] of the spread: closed at once
+    assert batch.probes[small].max() <= 4 + 1
+
+
+def test_probe_stages_trace_every_segment_once_tip_first():
+    """A probe's segments are traced in ranges (``rigid._stages``): together they are
+    every segment exactly once, and the first is the tip segment alone (a colliding
+    probe usually collides there: one ray)."""
+    for ns in range(1, 40):
+        stages = rigid._stages(ns)
+        covered = np.concatenate([np.arange(a, b) for a, b in stages])
+        np.testing.assert_array_equal(np.sort(covered), np.arange(ns))
+        if ns - ns // 2 >= 3:  # (shorter curves: the outer half, then the rest)
+            assert stages[0] == (ns - 1, ns)
+
+
+def test_a_released_curve_forgets_its_largest_angle():
+    """A curve back at its input shape drops its local state (``rigid.release``): its
+    largest angle too, so Plasticity turned on later imprints the next contact's own
+    largest angle, not the old contact's."""
+    import scenes
+
+    from core import Collider, Settings, Solver
+
+    pts, offs = scenes.pack([scenes.straight_curve([0.0, 0.0, 0.0], [0, 0, 1], 1.0, 6)])
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 1.0, 24, 12)
+    solver = Solver(offs, Settings(mode="stiff", recovery_rate=1.0))
+    big = Collider(V, F, matrix=scenes.affine(t=[0.1, 0.0, 0.7], s=0.4))
+    solver.step(pts, [big])
+    assert solver.state["angle_max"][0] > np.radians(20)
+    solver.step(pts, [])  # recovery rate 1: back at the input shape, released
+    assert solver.state["angle"][0] == 0.0 and solver.state["angle_max"][0] == 0.0
+    solver.settings = Settings(mode="stiff", recovery_rate=1.0, plasticity=0.5)
+    small = Collider(V, F, matrix=scenes.affine(t=[0.2, 0.0, 0.8], s=0.35))
+    solver.step(pts, [small])
+    a = solver.state["angle"][0]
+    assert 0 < a < np.radians(15)
+    solver.step(pts, [])
+    np.testing.assert_allclose(solver.state["angle"][0], 0.5 * a, atol=np.radians(0.25))
