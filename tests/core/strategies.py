@@ -128,7 +128,10 @@ def sphere_scenes(draw, max_curves=20, extent=0.6, n_cvs=(3, 10),
                   contact=True, curl_max=0.2, segments=(24, 12)):
     """(points, offsets, V, F, centre, radius): drawn fur under a UV sphere (24 x 12) at
     a drawn centre and radius; with ``contact`` some curve crosses it."""
-    cs = draw(st.lists(curves(extent=extent, n_cvs=n_cvs, curl_max=curl_max), min_size=1,
+    # (a few curves at least: a drawn sphere then meets one in most examples, so the
+    # contact filter below rejects few)
+    cs = draw(st.lists(curves(extent=extent, n_cvs=n_cvs, curl_max=curl_max),
+                       min_size=min(4, max_curves) if contact else 1,
                        max_size=max_curves))
     pts, offs = scenes.pack(cs)
     c = np.array([draw(floats(*lim)) for lim in center])
