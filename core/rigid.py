@@ -191,7 +191,7 @@ class Plan:
         delta = ctx.state.delta[self.act]
         # a contact that was turning further: it likely turns as much again
         pred_col = contact & (delta > 0) & (self.kmax >= 1)
-        kc = np.clip(np.rint(delta / p), 1, np.maximum(self.kmax, 1)).astype(np.int64)
+        kc = np.clip(np.rint(delta / p), 1, self.kmax).astype(np.int64)  # (used: kmax >= 1)
         # a contact that held or gave way: the same change on the recovery grid
         pred_rec = contact & ~pred_col & self.moving
         kr = np.clip(np.ceil((self.th0 + np.minimum(delta, 0) - self.th1) / p - 1e-9),

@@ -56,6 +56,8 @@ def test_a_collider_from_the_other_side_does_not_whip_the_curve_around(mode, pla
         b.matrix = scenes.affine(t=cb, s=0.3)
         res = solver.step(pts, [a, b])
         P = np.asarray(res.points, np.float64)
+        if res.status[0] == Status.FREE:  # FREE: exactly the input shape
+            assert np.array_equal(res.points, pts), f"frame {f}"
         if prev is not None:
             jump = float(np.linalg.norm(P - prev, axis=1).max())
             if jump > worst:
@@ -64,6 +66,7 @@ def test_a_collider_from_the_other_side_does_not_whip_the_curve_around(mode, pla
     # (a collider moves 0.1 per frame; the recovery moves the tip by < 0.05 per frame)
     assert worst <= 0.3, f"a CV jumped {worst:.3f} in one frame (frame {worst_frame})"
     # only ball B touches the curve now: its picture is about a fresh solve's
+    assert res.status[0] == Status.COLLIDING
     fresh = Solver(offs, Settings(mode=mode)).step(pts, [b])
     tip, tip_fresh = P[-1], np.asarray(fresh.points, np.float64)[-1]
     assert np.linalg.norm(tip - tip_fresh) <= 0.15, (tip, tip_fresh)
@@ -160,3 +163,21 @@ def test_a_contact_started_again_is_the_same_for_the_warm_and_the_full_search(mo
             Vw = V * 0.3 + np.asarray(c)
             hit = oracle.segments_hit_mesh(np.asarray(out[True].points, np.float64), offs, Vw, F)
             assert not (hit & ok).any(), f"frame {f}: a resolved curve crosses a ball"
+
+
+@pytest.mark.parametrize("mode", ["stiff", "bend"])
+def test_a_contact_pushed_back_past_its_input_shape_returns_to_it_free(mode):
+    """Ball A leans the curve over (26 degrees Stiff, 69 Bend); then A is gone and ball
+    B fills the space from that lean to far beyond it, but not the upright input: the
+    kept axis would turn the curve the long way round past B; the input shape is clear
+    and moves it less, so it goes back there (bit for bit) and is FREE, not COLLIDING."""
+    pts, offs = scenes.pack([scenes.straight_curve([0.0, 0.0, 0.0], [0, 0, 1], 1.0, 6)])
+    V, F = _BALL
+    solver = Solver(offs, Settings(mode=mode))
+    solver.step(pts, [Collider(V, F, matrix=scenes.affine(t=[0.1, 0.0, 0.7], s=0.4))])
+    assert solver.state["angle"][0] > np.radians(20)
+    a = np.radians(45.0)
+    B = Collider(V, F, matrix=scenes.affine(t=[-0.7 * np.sin(a), 0, 0.7 * np.cos(a)], s=0.3))
+    res = solver.step(pts, [B])
+    assert np.array_equal(res.points, pts)
+    assert res.status[0] == Status.FREE

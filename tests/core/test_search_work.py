@@ -252,3 +252,17 @@ def test_a_released_curve_forgets_its_largest_angle():
     assert 0 < a < np.radians(15)
     solver.step(pts, [])
     np.testing.assert_allclose(solver.state["angle"][0], 0.5 * a, atol=np.radians(0.25))
+
+
+def test_a_contact_one_step_below_max_angle_is_confirmed_in_one_round():
+    """A contact turning by one step that reaches Max Angle with it (one step left:
+    kmax = 1) is predicted like any other: th0 (blocked), the step (clear) and the
+    recovery step (blocked), and nothing left to search."""
+    n = 3
+    max_angle = 1.0
+    th0 = np.full(n, max_angle - 0.5 * P)
+    plan, k, probes = _warm(th0, th0 - 0.1, np.full(n, P), np.full(n, max_angle + 0.25 * P),
+                            max_angle=max_angle)
+    np.testing.assert_array_equal(plan.kmax, 1)
+    np.testing.assert_array_equal(k, 1)
+    np.testing.assert_array_equal(probes, 3)

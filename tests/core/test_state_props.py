@@ -299,7 +299,7 @@ def test_thread_count_never_changes_a_bit_on_split_batches(mode, offset, dtype, 
     C = len(offs) - 1
     masks = [((np.arange(C) * 0.618034 + 0.3 * f) % 1.0) < 0.8 if masked else None
              for f in range(3)]
-    runs = {}
+    runs, rays = {}, {}
     for t in (1, 2, 3):
         col = Collider(V, F, double_sided=double)
         solver = Solver(offs, Settings(mode=mode, threads=t, collision_offset=offset))
@@ -308,12 +308,14 @@ def test_thread_count_never_changes_a_bit_on_split_batches(mode, offset, dtype, 
             col.vertices = shapes[f]
             r = solver.step(pts, [col], enabled=masks[f])
             out.append((r.points.copy(), np.asarray(r.status).copy()))
+            rays.setdefault(t, []).append(r.timings["rays"])
         runs[t] = (out, solver.state)
     assert (runs[1][0][0][1] == Status.COLLIDING).sum() > 500  # in play
     for t in (2, 3):
         for f in range(3):
             assert_same(runs[t][0][f], runs[1][0][f], f"threads={t} frame {f}")
         assert_same_state(runs[t][1], runs[1][1], f"threads={t} final state")
+        assert rays[t] == rays[1]  # the same rays traced, counted once each
 
 
 # ---------------------------------------------------------------- 3. collider history
