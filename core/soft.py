@@ -46,7 +46,7 @@ class SoftSolve:
             for i in range(4):
                 qs[i] = q[..., i].T
             todo = todo[ctx.quat_curve_hits(todo, qs)]
-        for _ in range(int(ctx.layout.nseg.max(initial=0)) + 1):
+        for _ in range(int(ctx.layout.nseg.max()) + 1):  # (run: curves to solve)
             if len(todo) == 0:
                 break
             seg, rep, starts = ctx.segments(todo)
@@ -75,7 +75,7 @@ class SoftSolve:
             root_k = k == starts[hit]
 
             turn = _SegmentTurn(ctx, todo, o_k, d_k, axis, root_k)
-            kmax = np.full(len(todo), int(np.ceil(ctx.max_angle / p - 1e-9)))
+            kmax = int(np.ceil(ctx.max_angle / p - 1e-9))  # every curve's
             kk = scan_bisect(len(todo), lambda items, ks, t=turn: t.clear(items, ks * p), kmax)
             ok = kk >= 0
             if ok.any():
