@@ -362,34 +362,42 @@ class Collider:
             self._components_key = self._version
         return self._components
 
-    def _face_normals(self, prim, unit=True):
+    def _corners(self):
+        """The face corners (``F.T.ravel()``: corner k of every face, k = 0, 1, 2)
+        sorted by vertex, stably (topology only, cached): ``(order, face of each
+        sorted corner, first sorted corner of each vertex, those vertices)``."""
+        if getattr(self, "_corner_cache", None) is None:
+            corner = self._F.T.ravel()
+            order = np.argsort(corner, kind="stable")
+            first = np.flatnonzero(np.r_[True, corner[order][1:] != corner[order][:-1]])
+            self._corner_cache = (order, order % len(self._F), first, corner[order][first])
+        return self._corner_cache
+
+    def _face_normals(self, prim):
         """Face normals (right-handed, local space) of triangles ``prim``.
 
-        Computed on demand: only hit triangles ever need one. Once the unit
-        normals asked for one shape of the collider add up to a quarter of
-        its faces (a rigid collider, frame after frame), all of them are
-        computed once and looked up (the same values).
+        Unit normals, computed on demand: only hit triangles ever need one.
+        Once the normals asked for one shape of the collider add up to a
+        quarter of its faces (a rigid collider, frame after frame), all of
+        them are computed once and looked up (the same values).
         """
-        if unit:
-            key, asked, table = self._normals_cache
-            if key != self._version:
-                key, asked, table = self._version, 0, None
-            if table is None:
-                asked += len(prim)
-                if asked * 4 >= len(self._F):
-                    table = self._face_normals_of(np.arange(len(self._F)), True)
-            self._normals_cache = (key, asked, table)
-            if table is not None:
-                return table[prim]
-        return self._face_normals_of(prim, unit)
+        key, asked, table = self._normals_cache
+        if key != self._version:
+            key, asked, table = self._version, 0, None
+        if table is None:
+            asked += len(prim)
+            if asked * 4 >= len(self._F):
+                table = self._face_normals_of(np.arange(len(self._F)))
+        self._normals_cache = (key, asked, table)
+        if table is not None:
+            return table[prim]
+        return self._face_normals_of(prim)
 
-    def _face_normals_of(self, prim, unit):
+    def _face_normals_of(self, prim):
         V = self._V
         F = self._F[prim]
         a = V[F[:, 0]].astype(np.float64)
         n = np.cross(V[F[:, 1]] - a, V[F[:, 2]] - a)
-        if not unit:
-            return n
         return _unit(n, np.linalg.norm(n, axis=1, keepdims=True))
 
     def _offset_directions(self):
@@ -422,13 +430,8 @@ class Collider:
                 vn[:, i] += np.bincount(F[:, k], weights=fn[:, i] * angle, minlength=n)
         vn = _unit(vn, np.linalg.norm(vn, axis=1, keepdims=True))
         # smallest cos(vertex normal, face normal) over the faces around each vertex
-        corner = F.T.ravel()
         cos = np.concatenate([rot_dot(vn[F[:, k]], fn) for k in range(3)])
-        if getattr(self, "_corner_order", None) is None:
-            order = np.argsort(corner, kind="stable")
-            first = np.flatnonzero(np.r_[True, corner[order][1:] != corner[order][:-1]])
-            self._corner_order = (order, first, corner[order][first])
-        order, first, verts = self._corner_order
+        order, _, first, verts = self._corners()
         lowest = np.ones(n)
         lowest[verts] = np.minimum.reduceat(cos[order], first)
         stretch = 1.0 / np.clip(lowest, 1.0 / tol.OFFSET_MAX_STRETCH, 1.0)
@@ -543,8 +546,8 @@ class Collider:
             i0 = _cell_index((q[i] - r) / h, dims[i])
             i1 = _cell_index((q[i] + r) / h, dims[i])
             outside |= (i1 < 0) | (i0 >= dims[i])
-            i0 = np.clip(i0, 0, dims[i] - 1, out=i0)
-            i1 = np.clip(i1, 0, dims[i] - 1, out=i1)
+            np.clip(i0, 0, dims[i] - 1, out=i0)
+            np.clip(i1, 0, dims[i] - 1, out=i1)
             i1 += 1
             i0 *= step[i]
             i1 *= step[i]
@@ -691,12 +694,7 @@ class Collider:
         fa = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
               e1[0] * e2[1] - e1[1] * e2[0]]
         # sum over each vertex's corners: corners sorted by vertex once (topology)
-        if getattr(self, "_corner_sort", None) is None:
-            corner = self._F.T.ravel()
-            order = np.argsort(corner, kind="stable")
-            first = np.flatnonzero(np.r_[True, corner[order][1:] != corner[order][:-1]])
-            self._corner_sort = (order % len(self._F), first, corner[order][first])
-        face_of, first, verts = self._corner_sort
+        _, face_of, first, verts = self._corners()
         n = len(self._V)
         vn = np.zeros((n, 3))
         for i in range(3):
