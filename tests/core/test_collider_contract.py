@@ -1,0 +1,86 @@
+"""Collider promises not held elsewhere: the errors a bad matrix gets, the faces of
+an empty collider, a shell per Collision Offset kept while several are in use, an
+offset shell that follows a change of the matrix's stretch, and the inside test
+at the corners of the collider's grid."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scenes
+
+from core import Collider, ColliderError
+
+
+@pytest.mark.parametrize(("matrix", "words"), [
+    (np.diag([1.0, 1.0, np.nan, 1.0]), "non-finite entries"),
+    (np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 2.0]]), "affine"),
+    (np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0.5, 0, 0, 1.0]]), "affine"),
+    (np.diag([1.0, 0.0, 1.0, 1.0]), "singular"),
+    (np.eye(3), "4x4"),
+])
+def test_a_bad_matrix_is_refused_with_what_is_wrong(matrix, words):
+    V, F = scenes.box()
+    with pytest.raises(ColliderError, match=f"^collider matrix .*{words}"):
+        Collider(V, F, matrix=matrix)
+    col = Collider(V, F)
+    with pytest.raises(ColliderError, match=f"^collider matrix .*{words}"):
+        col.matrix = matrix
+    np.testing.assert_array_equal(col.matrix, np.eye(4))  # unchanged
+
+
+def test_an_empty_collider_has_no_faces_of_the_documented_shape():
+    for F in (np.zeros((0, 3), np.int64), []):
+        col = Collider(np.zeros((0, 3)), F)
+        assert col.empty and col.faces.shape == (0, 3) and col.faces.dtype == np.int32
+
+
+def test_shells_of_several_offsets_are_kept_while_in_use():
+    """One collider queried with three offsets in turn builds each shell once."""
+    V, F = scenes.uv_sphere([0, 0, 0], 0.5, 24, 12)
+    col = Collider(V, F)
+    rng = np.random.default_rng(2)
+    o, d = rng.normal(size=(200, 3)), rng.normal(size=(200, 3))
+    want = {off: Collider(V, F).segment_hits(o, d, off) for off in (0.0, 0.05, 0.2)}
+    for _ in range(3):
+        for off in (0.0, 0.05, 0.2):
+            np.testing.assert_array_equal(col.segment_hits(o, d, off), want[off])
+    assert col.build_count == 3
+
+
+def test_an_offset_shell_follows_a_new_stretch_of_the_matrix():
+    """The offset is in world units: after the matrix stretches the collider
+    along one axis, its offset shell is the one of a collider made with that
+    matrix (the BVH of the shell is rebuilt; a plain move never rebuilds it)."""
+    V, F = scenes.uv_sphere([0, 0, 0], 0.5, 24, 12)
+    rng = np.random.default_rng(3)
+    o, d = rng.uniform(-1.2, 1.2, size=(400, 3)), 0.3 * rng.normal(size=(400, 3))
+    off = 0.1
+    col = Collider(V, F)
+    for M in (np.diag([1.0, 1.0, 1.0, 1.0]), np.diag([2.0, 1.0, 1.0, 1.0]),
+              np.diag([1.0, 1.0, 3.0, 1.0])):
+        col.matrix = M
+        fresh = Collider(V, F, matrix=M)
+        np.testing.assert_array_equal(col.segment_hits(o, d, off), fresh.segment_hits(o, d, off))
+        np.testing.assert_array_equal(col.contains(o, off), fresh.contains(o, off))
+        np.testing.assert_array_equal(col.contains(o, off), fresh.contains(o, off))
+    built = col.build_count
+    col.matrix = scenes.affine(t=(0.3, -0.2, 0.1)) @ np.diag([1.0, 1.0, 3.0, 1.0])
+    col.segment_hits(o, d, off)
+    assert col.build_count == built
+
+
+def test_points_in_the_corner_cells_of_the_grid():
+    """Points in the first and last cells of the inside test's grid (the corners
+    of the collider's bounds: outside a ball) are outside, on the coarse grid and
+    on the fine one."""
+    V, F = scenes.uv_sphere([0.2, -0.1, 0.3], 0.5, 24, 12)
+    col = Collider(V, F)
+    lo, hi = V.min(0), V.max(0)
+    eps = 1e-4 * (hi - lo)
+    corners = np.array([[x, y, z] for x in (lo[0] + eps[0], hi[0] - eps[0])
+                        for y in (lo[1] + eps[1], hi[1] - eps[1])
+                        for z in (lo[2] + eps[2], hi[2] - eps[2])])
+    P = np.vstack([corners, [[0.2, -0.1, 0.3]]])  # and the centre: inside
+    for _ in range(3):
+        np.testing.assert_array_equal(col.contains(P), [False] * 8 + [True])
