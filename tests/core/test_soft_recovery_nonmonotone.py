@@ -105,3 +105,31 @@ def test_a_thin_obstacle_between_two_levels_recovers_to_the_largest_clear_level(
     assert solver.state["delta"][0] == best / LEVELS
     for V, F in walls:
         assert not oracle.segments_hit_mesh(r.points, OFFS, V, F)[0]
+
+
+def test_the_landing_step_is_probed_where_it_lands():
+    """Within half a precision step of its target, a recovering curve lands on the
+    target (not ``recovery_rate`` of the way): the full step probed for clearance is
+    that landing. A thin wall across the target but short of the plain step's
+    position: the curve stops before the wall instead of landing in it."""
+    prec, rate = 2.0, 0.5
+    solver = Solver(OFFS, Settings(mode="soft", recovery_rate=rate, rotation_precision=prec))
+    ball = scenes.uv_sphere([-0.2, 0.0, 0.8], 0.5, 32, 16)
+    r = solver.step(PTS, [Collider(*ball)])
+    a = _angle(r.points)
+    half = np.radians(0.5 * prec)
+    for _ in range(20):  # recover freely until the next step lands on the input
+        if a * (1 - rate) < half:
+            break
+        r = solver.step(PTS, [])
+        assert np.asarray(r.status)[0] == Status.RECOVERING
+        a = _angle(r.points)
+    assert 0 < a * (1 - rate) < half
+    V, F = _wall(-a, a * (1 - rate) / 2)  # the target (angle 0) blocked, a (1 - rate) clear
+    start = r.points.copy()
+    assert oracle.segments_hit_mesh(PTS, OFFS, V, F)[0]
+    assert not oracle.segments_hit_mesh(_level_points(start, LEVELS * rate), OFFS, V, F)[0]
+    r = solver.step(PTS, [Collider(V, F)])
+    assert np.asarray(r.status)[0] == Status.COLLIDING
+    assert not oracle.segments_hit_mesh(r.points, OFFS, V, F)[0]
+    assert 0 < _angle(r.points) <= a
