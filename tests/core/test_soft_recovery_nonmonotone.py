@@ -133,3 +133,39 @@ def test_the_landing_step_is_probed_where_it_lands():
     assert np.asarray(r.status)[0] == Status.COLLIDING
     assert not oracle.segments_hit_mesh(r.points, OFFS, V, F)[0]
     assert 0 < _angle(r.points) <= a
+
+
+def _stopped_at(m):
+    """A solver whose curve stopped at level ``m`` of its recovery last frame (a
+    wall across every level from m + 1/2 on), and that curve's points."""
+    solver = Solver(OFFS, Settings(mode="soft", recovery_rate=1.0))
+    ball = scenes.uv_sphere([-0.2, 0.0, 0.8], 0.5, 32, 16)
+    r = solver.step(PTS, [Collider(*ball)])
+    a = _angle(r.points)
+    r = solver.step(PTS, [Collider(*_wall(a * (1 - (m + 0.5) / LEVELS), -0.2 * a))])
+    assert np.asarray(r.status)[0] == Status.COLLIDING
+    assert solver.state["contact"][0] and solver.state["delta"][0] == m / LEVELS
+    return solver, r.points.copy()
+
+
+def test_from_a_clear_level_above_a_blocked_one_the_search_bisects_up_to_the_largest():
+    """Remembered level 1 blocked, 2 clear, the full step blocked: the search
+    bisects between the clear level 2 it knows and the blocked full step, with
+    walls across levels 1, 4-9 and 11-16 (clear: 0, 2, 3, 10). It takes the
+    largest clear level, 10, not 3 (right above what it knows) nor below 2."""
+    m = 1
+    solver, start = _stopped_at(m)
+    b = _angle(start)
+
+    def at(level):
+        return b * (1 - level / LEVELS)
+
+    walls = [_wall(at(0.5), at(1.5)), _wall(at(3.5), at(9.5)), _wall(at(10.5), -0.2 * b)]
+    clear = _clear_levels(start, walls)
+    want = np.zeros(LEVELS + 1, bool)
+    want[[0, 2, 3, 10]] = True
+    np.testing.assert_array_equal(clear, want)
+    r = solver.step(PTS, [Collider(*w) for w in walls])
+    assert np.asarray(r.status)[0] == Status.COLLIDING
+    np.testing.assert_allclose(r.points, _level_points(start, 10), atol=1e-6)
+    assert solver.state["delta"][0] == 10 / LEVELS
