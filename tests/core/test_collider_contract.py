@@ -84,3 +84,68 @@ def test_points_in_the_corner_cells_of_the_grid():
     P = np.vstack([corners, [[0.2, -0.1, 0.3]]])  # and the centre: inside
     for _ in range(3):
         np.testing.assert_array_equal(col.contains(P), [False] * 8 + [True])
+
+
+@pytest.mark.parametrize("scale", [0.01, 1.0, 100.0])
+def test_degenerate_faces_are_found_at_any_scale(scale):
+    """A face is degenerate when its area is below ``DEGENERATE_AREA_REL`` times
+    the squared diagonal of the collider's bounds: the same faces at any scale. A
+    sliver ten times above that stays, one ten times below it is dropped."""
+    from core import tolerances
+
+    def mesh(area_rel):
+        diag2 = 2.0  # the bounds of (0, 0, 0)..(1, 1, 0)
+        h = 2.0 * area_rel * tolerances.DEGENERATE_AREA_REL * diag2  # base 1: area h / 2
+        V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.5, h, 0]], float) * scale
+        return V, np.array([[0, 2, 1], [0, 1, 3]])
+
+    V, F = mesh(10.0)
+    col = Collider(V, F)  # no error: nothing degenerate
+    assert col.dropped_faces == 0 and len(col.faces) == 2
+    V, F = mesh(0.1)
+    with pytest.raises(ColliderError, match="degenerate"):
+        Collider(V, F)
+    col = Collider(V, F, drop_degenerate=True)
+    assert col.dropped_faces == 1 and len(col.faces) == 1
+
+
+def test_an_open_collider_contains_nothing_in_bools():
+    V, F = scenes.grid(size=2.0, n=4, z=0.0)
+    for col in (Collider(V, F), Collider(*scenes.box(), double_sided=True)):
+        got = col.contains(np.zeros((5, 3)))
+        assert got.dtype == bool and got.shape == (5,) and not got.any()
+
+
+def test_only_points_next_to_the_surface_are_traced(monkeypatch):
+    """``contains`` on a collider that keeps its shape answers a point in a grid
+    cell no triangle touches with its cell's answer: once the cells are known,
+    only points within a few cells of the surface are traced one by one."""
+    V, F = scenes.uv_sphere([0.1, 0.0, -0.2], 0.5, 32, 16)
+    col = Collider(V, F)
+    rng = np.random.default_rng(8)
+    lo, hi = V.min(0) + 1e-3, V.max(0) - 1e-3
+    P = rng.uniform(lo, hi, size=(3000, 3))  # on the grid, its corner cells too
+    P[:8] = [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    want = np.linalg.norm(P - [0.1, 0.0, -0.2], axis=1) < 0.49
+    col.contains(P)
+    first = col.contains(P)  # the fine grid: its cells' answers now known
+    traced = []
+    parity = Collider._parity
+
+    def spy(self, p_wo, offset_wo):
+        traced.append(np.array(p_wo))
+        return parity(self, p_wo, offset_wo)
+
+    monkeypatch.setattr(Collider, "_parity", spy)
+    got = col.contains(P)
+    np.testing.assert_array_equal(got, first)
+    far = np.abs(np.linalg.norm(P - [0.1, 0.0, -0.2], axis=1) - 0.5) > 0.02
+    np.testing.assert_array_equal(got[far], want[far])
+    t = np.concatenate(traced) if traced else np.zeros((0, 3))
+    # a traced point's cell meets a triangle's bounding box (grown by the margin)
+    tri = V[F]
+    box = float(np.linalg.norm(tri.max(axis=1) - tri.min(axis=1), axis=1).max())
+    h = 1.0 / 128  # a fine cell: the bounds' largest side / (64 x 2)
+    dist = np.abs(np.linalg.norm(t - [0.1, 0.0, -0.2], axis=1) - 0.5)
+    assert 0 < len(t) < len(P) // 2
+    assert dist.max() < box + 2 * np.sqrt(3) * h, (dist.max(), box)
