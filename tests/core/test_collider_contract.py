@@ -149,3 +149,26 @@ def test_only_points_next_to_the_surface_are_traced(monkeypatch):
     dist = np.abs(np.linalg.norm(t - [0.1, 0.0, -0.2], axis=1) - 0.5)
     assert 0 < len(t) < len(P) // 2
     assert dist.max() < box + 2 * np.sqrt(3) * h, (dist.max(), box)
+
+
+@pytest.mark.parametrize("off", [0.0, 0.1, 0.4])
+def test_world_bounds_hold_the_offset_shell_and_little_more(off):
+    """``bounds_world(offset)`` holds every point the offset shell can reach (its
+    vertices move out at most ``OFFSET_MAX_STRETCH`` offsets) and is no looser than
+    that reach by more than a few per cent (curves are candidates by these bounds)."""
+    from core import tolerances
+
+    V, F = scenes.box([-0.3, -0.2, 0.1], [0.5, 0.2, 0.4])
+    M = scenes.affine(scenes.rotation_matrix([0, 0, 1], 0.3), t=(1.0, 2.0, -0.5))
+    col = Collider(V, F, matrix=M)
+    lo, hi = col.bounds_world(off)
+    Vw = V @ M[:3, :3].T + M[:3, 3]
+    reach = off * tolerances.OFFSET_MAX_STRETCH
+    assert (lo <= Vw.min(0) - off).all() and (hi >= Vw.max(0) + off).all()
+    assert (lo >= Vw.min(0) - 1.05 * reach - 1e-4).all()
+    assert (hi <= Vw.max(0) + 1.05 * reach + 1e-4).all()
+    rng = np.random.default_rng(1)
+    o = rng.uniform(lo - 1.0, hi + 1.0, size=(300, 3))
+    hit, t, _ = col.segment_hit_details(o, (Vw.mean(0) - o) * 2.0, off)
+    p = o[hit] + t[hit, None] * (Vw.mean(0) - o[hit]) * 2.0
+    assert hit.sum() > 100 and (p >= lo).all() and (p <= hi).all()
