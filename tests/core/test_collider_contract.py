@@ -116,19 +116,24 @@ def test_an_open_collider_contains_nothing_in_bools():
         assert got.dtype == bool and got.shape == (5,) and not got.any()
 
 
-def test_only_points_next_to_the_surface_are_traced(monkeypatch):
+@pytest.mark.parametrize("off", [0.0, 0.003])
+def test_only_points_next_to_the_surface_are_traced(monkeypatch, off):
     """``contains`` on a collider that keeps its shape answers a point in a grid
-    cell no triangle touches with its cell's answer: once the cells are known,
-    only points within a few cells of the surface are traced one by one."""
-    V, F = scenes.uv_sphere([0.1, 0.0, -0.2], 0.5, 32, 16)
-    col = Collider(V, F)
+    cell no triangle of the shell touches with its cell's answer: once the cells
+    are known, only points within a few cells of the shell are traced one by one
+    (the collider moved far from the origin, with and without an offset)."""
+    c = np.array([0.1, 0.0, -0.2])
+    V, F = scenes.uv_sphere(c, 0.5, 32, 16)
+    move = np.array([6.0, -4.0, 3.0])
+    col = Collider(V, F, matrix=scenes.translation(move))
     rng = np.random.default_rng(8)
     lo, hi = V.min(0) + 1e-3, V.max(0) - 1e-3
     P = rng.uniform(lo, hi, size=(3000, 3))  # on the grid, its corner cells too
     P[:8] = [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-    want = np.linalg.norm(P - [0.1, 0.0, -0.2], axis=1) < 0.49
-    col.contains(P)
-    first = col.contains(P)  # the fine grid: its cells' answers now known
+    r = np.linalg.norm(P - c, axis=1)
+    P = P + move
+    col.contains(P, off)
+    first = col.contains(P, off)  # the fine grid: its cells' answers now known
     traced = []
     parity = Collider._parity
 
@@ -137,38 +142,42 @@ def test_only_points_next_to_the_surface_are_traced(monkeypatch):
         return parity(self, p_wo, offset_wo)
 
     monkeypatch.setattr(Collider, "_parity", spy)
-    got = col.contains(P)
+    got = col.contains(P, off)
     np.testing.assert_array_equal(got, first)
-    far = np.abs(np.linalg.norm(P - [0.1, 0.0, -0.2], axis=1) - 0.5) > 0.02
-    np.testing.assert_array_equal(got[far], want[far])
+    far = np.abs(r - 0.5) > 0.02 + 4 * off
+    np.testing.assert_array_equal(got[far], r[far] < 0.5)
     t = np.concatenate(traced) if traced else np.zeros((0, 3))
-    # a traced point's cell meets a triangle's bounding box (grown by the margin)
+    # a traced point's cell meets a triangle's bounding box, grown by how far the
+    # shell moves it (OFFSET_MAX_STRETCH offsets at most)
     tri = V[F]
     box = float(np.linalg.norm(tri.max(axis=1) - tri.min(axis=1), axis=1).max())
     h = 1.0 / 128  # a fine cell: the bounds' largest side / (64 x 2)
-    dist = np.abs(np.linalg.norm(t - [0.1, 0.0, -0.2], axis=1) - 0.5)
-    assert 0 < len(t) < len(P) // 2
-    assert dist.max() < box + 2 * np.sqrt(3) * h, (dist.max(), box)
+    dist = np.abs(np.linalg.norm(t - move - c, axis=1) - 0.5)
+    assert 0 < len(t) < len(P) * (0.5 if off == 0 else 0.8)
+    # (the shell's reach per world unit of offset, bounded without an SVD: 4 * |A|_F)
+    reach = 4.0 * 1.01 * np.sqrt(3) * off
+    assert dist.max() < box + reach + 2 * np.sqrt(3) * h, (dist.max(), box)
 
 
+@pytest.mark.parametrize("scale", [1.0, 1000.0])
 @pytest.mark.parametrize("off", [0.0, 0.1, 0.4])
-def test_world_bounds_hold_the_offset_shell_and_little_more(off):
+def test_world_bounds_hold_the_offset_shell_and_little_more(off, scale):
     """``bounds_world(offset)`` holds every point the offset shell can reach (its
     vertices move out at most ``OFFSET_MAX_STRETCH`` offsets) and is no looser than
     that reach by more than a few per cent (curves are candidates by these bounds)."""
     from core import tolerances
 
     V, F = scenes.box([-0.3, -0.2, 0.1], [0.5, 0.2, 0.4])
-    M = scenes.affine(scenes.rotation_matrix([0, 0, 1], 0.3), t=(1.0, 2.0, -0.5))
+    M = scenes.affine(scenes.rotation_matrix([0, 0, 1], 0.3), t=(1.0, 2.0, -0.5), s=scale)
     col = Collider(V, F, matrix=M)
     lo, hi = col.bounds_world(off)
     Vw = V @ M[:3, :3].T + M[:3, 3]
     reach = off * tolerances.OFFSET_MAX_STRETCH
     assert (lo <= Vw.min(0) - off).all() and (hi >= Vw.max(0) + off).all()
-    assert (lo >= Vw.min(0) - 1.05 * reach - 1e-4).all()
-    assert (hi <= Vw.max(0) + 1.05 * reach + 1e-4).all()
+    assert (lo >= Vw.min(0) - 1.05 * reach - 1e-4 * scale).all()
+    assert (hi <= Vw.max(0) + 1.05 * reach + 1e-4 * scale).all()
     rng = np.random.default_rng(1)
-    o = rng.uniform(lo - 1.0, hi + 1.0, size=(300, 3))
+    o = rng.uniform(lo - scale, hi + scale, size=(300, 3))
     hit, t, _ = col.segment_hit_details(o, (Vw.mean(0) - o) * 2.0, off)
     p = o[hit] + t[hit, None] * (Vw.mean(0) - o[hit]) * 2.0
     assert hit.sum() > 100 and (p >= lo).all() and (p <= hi).all()
