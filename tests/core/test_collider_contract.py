@@ -181,3 +181,19 @@ def test_world_bounds_hold_the_offset_shell_and_little_more(off, scale):
     hit, t, _ = col.segment_hit_details(o, (Vw.mean(0) - o) * 2.0, off)
     p = o[hit] + t[hit, None] * (Vw.mean(0) - o[hit]) * 2.0
     assert hit.sum() > 100 and (p >= lo).all() and (p <= hi).all()
+
+
+def test_a_turning_collider_with_an_offset_never_rebuilds_its_shell():
+    """A rigid collider turning and moving (its matrix read from Blender in float32,
+    so its rotation part is orthonormal only to float32 rounding) keeps its offset
+    shell: the shell depends on the matrix's stretch, and rounding is no stretch."""
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 0.5, 24, 12)
+    col = Collider(V, F)
+    rng = np.random.default_rng(12)
+    o, d = rng.normal(size=(100, 3)), rng.normal(size=(100, 3))
+    for k in range(24):
+        R = scenes.rotation_matrix([1.0, 2.0, 3.0 + k], 0.37 * k)
+        M = scenes.affine(R, t=(0.1 * k, -0.2, 0.05 * k)).astype(np.float32)
+        col.matrix = M
+        col.segment_hits(o, d, 0.05)
+    assert col.build_count == 1
