@@ -37,6 +37,25 @@ _PARITY_DIRS = np.array(
 _PARITY_DIRS /= np.linalg.norm(_PARITY_DIRS, axis=1, keepdims=True)
 
 
+def _unit(x, length):
+    """Rows of ``x`` (k, 3) divided by their ``length`` (k, 1); zero rows where
+    the length is 0 (a degenerate face's normal, a vertex whose normals cancel)."""
+    return np.divide(x, length, out=np.zeros_like(x), where=length > 0)
+
+
+def _cell_index(x, n):
+    """Integer cell index ``floor(x)`` of an axis of ``n`` cells, clipped in float
+    first to [-1, n + 1] (far-away points must not overflow the int cast)."""
+    return np.floor(np.clip(x, -1, n + 1)).astype(np.int64)
+
+
+def _edge_keys(F, n):
+    """One int64 key ``a * n + b`` (``a < b``) per face edge of ``F`` (m, 3) over
+    ``n`` vertices, edges (0, 1), (1, 2), (2, 0) of every face in turn (3m,)."""
+    e = np.sort(np.concatenate([F[:, [k, (k + 1) % 3]] for k in range(3)]))  # per row
+    return e[:, 0].astype(np.int64) * n + e[:, 1]
+
+
 def _as_vertices(V, what="vertices") -> np.ndarray:
     try:
         V = np.asarray(V)
@@ -333,6 +352,11 @@ class Collider:
                 self._geometry_cache = (np.zeros(3), np.zeros(3))
         return self._geometry_cache
 
+    def _local_vertices(self):
+        """The vertices in the centred local space of the BVH, float64 (n, 3)
+        (the float32 vertices minus the float64 centre)."""
+        return self._V - self._center
+
     def _used_components(self):
         """The used vertices as three contiguous float32 component arrays
         (cached per vertices): per-axis passes over (n, 3) rows are slow."""
@@ -342,36 +366,43 @@ class Collider:
             self._components_key = self._version
         return self._components
 
-    def _face_normals(self, prim, unit=True):
+    def _corners(self):
+        """The face corners (``F.T.ravel()``: corner k of every face, k = 0, 1, 2)
+        sorted by vertex, stably (topology only, cached): ``(order, face of each
+        sorted corner, first sorted corner of each vertex, those vertices)``."""
+        if getattr(self, "_corner_cache", None) is None:
+            corner = self._F.T.ravel()
+            order = np.argsort(corner, kind="stable")
+            first = np.flatnonzero(np.r_[True, corner[order][1:] != corner[order][:-1]])
+            self._corner_cache = (order, order % len(self._F), first, corner[order][first])
+        return self._corner_cache
+
+    def _face_normals(self, prim):
         """Face normals (right-handed, local space) of triangles ``prim``.
 
-        Computed on demand: only hit triangles ever need one. Once the unit
-        normals asked for one shape of the collider add up to a quarter of
-        its faces (a rigid collider, frame after frame), all of them are
-        computed once and looked up (the same values).
+        Unit normals, computed on demand: only hit triangles ever need one.
+        Once the normals asked for one shape of the collider add up to a
+        quarter of its faces (a rigid collider, frame after frame), all of
+        them are computed once and looked up (the same values).
         """
-        if unit:
-            key, asked, table = self._normals_cache
-            if key != self._version:
-                key, asked, table = self._version, 0, None
-            if table is None:
-                asked += len(prim)
-                if asked * 4 >= len(self._F):
-                    table = self._face_normals_of(np.arange(len(self._F)), True)
-            self._normals_cache = (key, asked, table)
-            if table is not None:
-                return table[prim]
-        return self._face_normals_of(prim, unit)
+        key, asked, table = self._normals_cache
+        if key != self._version:
+            key, asked, table = self._version, 0, None
+        if table is None:
+            asked += len(prim)
+            if asked * 4 >= len(self._F):
+                table = self._face_normals_of(np.arange(len(self._F)))
+        self._normals_cache = (key, asked, table)
+        if table is not None:
+            return table[prim]
+        return self._face_normals_of(prim)
 
-    def _face_normals_of(self, prim, unit):
+    def _face_normals_of(self, prim):
         V = self._V
         F = self._F[prim]
         a = V[F[:, 0]].astype(np.float64)
         n = np.cross(V[F[:, 1]] - a, V[F[:, 2]] - a)
-        if not unit:
-            return n
-        ln = np.linalg.norm(n, axis=1, keepdims=True)
-        return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+        return _unit(n, np.linalg.norm(n, axis=1, keepdims=True))
 
     def _offset_directions(self):
         """Local displacement of each vertex for a world offset of 1, (n, 3).
@@ -387,13 +418,12 @@ class Collider:
         vertices).
         """
         S = self._M[:3, :3]
-        Vw = apply(S, self._V.astype(np.float64) - self._center)
+        Vw = apply(S, self._local_vertices())
         F = self._F
         fa = np.cross(Vw[F[:, 1]] - Vw[F[:, 0]], Vw[F[:, 2]] - Vw[F[:, 0]])
         if det3(S) < 0:  # a mirroring matrix flips the winding: keep normals outward
             fa = -fa
-        ln = np.linalg.norm(fa, axis=1, keepdims=True)
-        fn = np.divide(fa, ln, out=np.zeros_like(fa), where=ln > 0)
+        fn = _unit(fa, np.linalg.norm(fa, axis=1, keepdims=True))
         n = len(self._V)
         vn = np.zeros((n, 3))
         for k in range(3):
@@ -402,16 +432,10 @@ class Collider:
             angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1), rot_dot(e1, e2))
             for i in range(3):
                 vn[:, i] += np.bincount(F[:, k], weights=fn[:, i] * angle, minlength=n)
-        lv = np.linalg.norm(vn, axis=1, keepdims=True)
-        vn = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
+        vn = _unit(vn, np.linalg.norm(vn, axis=1, keepdims=True))
         # smallest cos(vertex normal, face normal) over the faces around each vertex
-        corner = F.T.ravel()
         cos = np.concatenate([rot_dot(vn[F[:, k]], fn) for k in range(3)])
-        if getattr(self, "_corner_order", None) is None:
-            order = np.argsort(corner, kind="stable")
-            first = np.flatnonzero(np.r_[True, corner[order][1:] != corner[order][:-1]])
-            self._corner_order = (order, first, corner[order][first])
-        order, first, verts = self._corner_order
+        order, _, first, verts = self._corners()
         lowest = np.ones(n)
         lowest[verts] = np.minimum.reduceat(cos[order], first)
         stretch = 1.0 / np.clip(lowest, 1.0 / tol.OFFSET_MAX_STRETCH, 1.0)
@@ -454,8 +478,7 @@ class Collider:
         np.cumsum(body, axis=1, dtype=np.int32, out=body)
         np.cumsum(body, axis=2, dtype=np.int32, out=body)
         if getattr(self, "_edges", None) is None:  # unique edges: topology only
-            e = np.sort(np.concatenate([self._F[:, [k, (k + 1) % 3]] for k in range(3)]), 1)
-            key = np.unique(e[:, 0].astype(np.int64) * len(self._V) + e[:, 1])
+            key = np.unique(_edge_keys(self._F, len(self._V)))
             self._edges = [
                 np.ascontiguousarray(key // len(self._V)),
                 np.ascontiguousarray(key % len(self._V)),
@@ -524,12 +547,11 @@ class Collider:
         corner = []
         step = (sat.shape[1] * sat.shape[2], sat.shape[2], 1)
         for i in range(3):
-            # clip in float first: far-away points must not overflow the int cast
-            i0 = np.floor(np.clip((q[i] - r) / h, -1, dims[i] + 1)).astype(np.int64)
-            i1 = np.floor(np.clip((q[i] + r) / h, -1, dims[i] + 1)).astype(np.int64)
+            i0 = _cell_index((q[i] - r) / h, dims[i])
+            i1 = _cell_index((q[i] + r) / h, dims[i])
             outside |= (i1 < 0) | (i0 >= dims[i])
-            i0 = np.clip(i0, 0, dims[i] - 1, out=i0)
-            i1 = np.clip(i1, 0, dims[i] - 1, out=i1)
+            np.clip(i0, 0, dims[i] - 1, out=i0)
+            np.clip(i1, 0, dims[i] - 1, out=i1)
             i1 += 1
             i0 *= step[i]
             i1 *= step[i]
@@ -601,7 +623,7 @@ class Collider:
         for k, be, faces in self._built:
             if k == key:
                 return be, faces
-        V = self._V.astype(np.float64) - self._center
+        V = self._local_vertices()
         F = self._F
         m, n = len(F), len(self._V)
         # Every shell keeps the clearance margin (see margin), plus the
@@ -676,18 +698,12 @@ class Collider:
         fa = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
               e1[0] * e2[1] - e1[1] * e2[0]]
         # sum over each vertex's corners: corners sorted by vertex once (topology)
-        if getattr(self, "_corner_sort", None) is None:
-            corner = self._F.T.ravel()
-            order = np.argsort(corner, kind="stable")
-            first = np.flatnonzero(np.r_[True, corner[order][1:] != corner[order][:-1]])
-            self._corner_sort = (order % len(self._F), first, corner[order][first])
-        face_of, first, verts = self._corner_sort
+        _, face_of, first, verts = self._corners()
         n = len(self._V)
         vn = np.zeros((n, 3))
         for i in range(3):
             vn[verts, i] = np.add.reduceat(fa[i].take(face_of), first)
-        lv = np.sqrt(np.einsum("ij,ij->i", vn, vn))[:, None]
-        self._margin_dirs = np.divide(vn, lv, out=np.zeros_like(vn), where=lv > 0)
+        self._margin_dirs = _unit(vn, np.sqrt(np.einsum("ij,ij->i", vn, vn))[:, None])
         self._margin_key = self._version
         return self._margin_dirs
 
@@ -695,10 +711,8 @@ class Collider:
         """Faces with an edge no other face shares (an open mesh's rims;
         topology only, cached)."""
         if getattr(self, "_rim_cache", None) is None:
-            F = self._F.astype(np.int64)
-            e = np.sort(np.concatenate([F[:, [k, (k + 1) % 3]] for k in range(3)]), axis=1)
-            key = e[:, 0] * len(self._V) + e[:, 1]
-            _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+            keys = _edge_keys(self._F, len(self._V))
+            _, inv, cnt = np.unique(keys, return_inverse=True, return_counts=True)
             once = (cnt[inv] == 1).reshape(3, -1).any(axis=0)
             self._rim_cache = np.flatnonzero(once)
         return self._rim_cache
@@ -736,8 +750,7 @@ class Collider:
         idx, flip = faces.real[prim], faces.flip[prim]
         n_lo = self._face_normals(idx) * np.where(flip, -1.0, 1.0)[:, None]
         n_wo = apply(self._Minv[:3, :3].T, n_lo)  # inverse-transpose for normals
-        ln = np.linalg.norm(n_wo, axis=1, keepdims=True)
-        return np.divide(n_wo, ln, out=np.zeros_like(n_wo), where=ln > 0)
+        return _unit(n_wo, np.linalg.norm(n_wo, axis=1, keepdims=True))
 
     # ------------------------------------------------------------- queries
     def segment_hits(self, o_wo, d_wo, offset_wo=0.0, threads=1) -> np.ndarray:
@@ -887,7 +900,7 @@ class Collider:
     def _cells(q, h, dims):
         """Flat cell index of points ``q`` (3, k) in a grid of cell size ``h``
         and ``dims`` cells (-1 off the grid)."""
-        c = [np.floor(np.clip(q[i] / h, -1, dims[i] + 1)).astype(np.int64) for i in range(3)]
+        c = [_cell_index(q[i] / h, dims[i]) for i in range(3)]
         ok = (c[0] >= 0) & (c[0] < dims[0]) & (c[1] >= 0) & (c[1] < dims[1])
         ok &= (c[2] >= 0) & (c[2] < dims[2])
         flat = (c[0] * dims[1] + c[1]) * dims[2] + c[2]
@@ -913,7 +926,7 @@ class Collider:
         if getattr(self, "_touched_key", None) == key:
             return self._touched
         lo, h, dims, _ = self._inside_grid()
-        V = self._V.astype(np.float64) - self._center
+        V = self._local_vertices()
         grow = self.margin * 1.01 + offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 * norm_bound(
             self._Minv[:3, :3]) + 1e-9 * h
         F = [np.ascontiguousarray(self._F[:, k]) for k in range(3)]
@@ -1012,7 +1025,7 @@ class Collider:
             self._closest = None
             self._closest_key = self._version
         p_lo, face, self._closest = closest_points_on_mesh(
-            self._V.astype(np.float64) - self._center, self._F, q_lo, self._closest
+            self._local_vertices(), self._F, q_lo, self._closest
         )
         p_wo = apply(self._M[:3, :3], p_lo + self._center) + self._M[:3, 3]
         m = len(self._F)

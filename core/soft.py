@@ -27,7 +27,7 @@ class SoftSolve:
         self.ctx = ctx
         s = ctx.s
         A = s.affected_connected_cvs
-        self.weights = (1.0 - s.cv_falloff) ** np.arange(1, A + 1) if A else np.zeros(0)
+        self.weights = (1.0 - s.cv_falloff) ** np.arange(1, A + 1)  # (A,): empty for 0
 
     def run(self, idx, status):
         ctx, p = self.ctx, self.ctx.prec
@@ -46,7 +46,7 @@ class SoftSolve:
             for i in range(4):
                 qs[i] = q[..., i].T
             todo = todo[ctx.quat_curve_hits(todo, qs)]
-        for _ in range(int(ctx.layout.nseg.max(initial=0)) + 1):
+        for _ in range(int(ctx.layout.nseg.max()) + 1):  # (run: curves to solve)
             if len(todo) == 0:
                 break
             seg, rep, starts = ctx.segments(todo)
@@ -75,7 +75,7 @@ class SoftSolve:
             root_k = k == starts[hit]
 
             turn = _SegmentTurn(ctx, todo, o_k, d_k, axis, root_k)
-            kmax = np.full(len(todo), int(np.ceil(ctx.max_angle / p - 1e-9)))
+            kmax = int(np.ceil(ctx.max_angle / p - 1e-9))  # every curve's
             kk = scan_bisect(len(todo), lambda items, ks, t=turn: t.clear(items, ks * p), kmax)
             ok = kk >= 0
             if ok.any():
@@ -162,12 +162,13 @@ class SoftSolve:
                 return ~ctx.quat_curve_hits(c, q.reshape(4, len(c), ns).transpose(0, 2, 1))
             return ~ctx.curve_hits(c, quat=np.ascontiguousarray(q.T))
 
-        # Per checked curve: the lowest level known blocked (``none``: not
-        # known) and the highest known clear (0: the current state is clear).
+        # Per checked curve: the lowest level known blocked and the highest
+        # known clear (0: the current state is clear). Every curve probes the
+        # full step (``levels``) first: where it is clear, hi is ``levels`` and
+        # lo no longer matters.
         n = len(chk)
-        none = levels + 1
-        lo = np.full(n, none, np.int64)
-        hi = np.zeros(n, np.int64)
+        lo = np.full(n, levels, np.int64)
+        hi = np.zeros_like(lo)
         mem = ctx.state.contact[rec[chk]] & ctx.warm_soft
         m = np.clip(np.rint(ctx.state.delta[rec[chk]] * levels), 0, levels - 1).astype(np.int64)
         warm = np.flatnonzero(mem)
@@ -180,13 +181,10 @@ class SoftSolve:
         ok = clear(items, ks) if len(items) else np.zeros(0, bool)
         np.minimum.at(lo, items[~ok], ks[~ok])
         np.maximum.at(hi, items[ok], ks[ok])
-        lo = np.where(lo <= hi, none, lo)  # (a blocked level below a clear one: not monotone)
-        # Where the full step's fate is unknown, it decides next.
-        unknown = np.flatnonzero((lo == none) & (hi < levels))
-        if len(unknown):
-            okf = clear(unknown, np.full(len(unknown), levels))
-            hi[unknown[okf]] = levels
-            lo[unknown[~okf]] = levels
+        # A blocked level below a clear one (not monotone): what it says of the
+        # levels above is void; the full step, probed by all and blocked unless
+        # hi == levels, is the lowest level still known blocked.
+        lo = np.where(lo <= hi, levels, lo)
         # The rest: the largest clear level in [hi, lo), bisected (the
         # smallest good k of the reversed grid).
         todo = np.flatnonzero((hi < levels) & (lo - hi > 1))
@@ -197,10 +195,9 @@ class SoftSolve:
             kr = gallop_bisect(len(todo), test_rev, levels - hi[todo],
                                lo=levels - lo[todo], hi=levels - hi[todo])
             hi[todo] = levels - kr
-        blocked = np.zeros(len(rec), bool)
         level = np.full(len(rec), levels, np.int64)
         level[chk] = hi
-        blocked[chk] = hi < levels
+        blocked = level < levels
         b = np.flatnonzero(blocked)
         if len(b):
             sseg, _, _ = ctx.segments(rec[b])
@@ -217,7 +214,7 @@ class SoftSolve:
         status[rec] = np.maximum(status[rec], st)
         # Back exactly at the input shape: drop the state.
         done = rec[identity]
-        ctx.active[done] = False
+        ctx.active[rec] &= ~identity
         dseg, _, _ = ctx.segments(done)
         ctx.quat_max[dseg] = ident[: len(dseg)]
 
@@ -296,7 +293,7 @@ class _Slerp:
         self.q = np.ascontiguousarray(np.where(flip[:, None], -q, q).T)
         self.q_raw = np.ascontiguousarray(q.T)
         d = np.abs(d)
-        self.theta = np.arccos(np.clip(d, -1.0, 1.0))
+        self.theta = np.arccos(np.minimum(d, 1.0))  # (d >= 0 here)
         s = np.sin(self.theta)
         self.small = s < 1e-9
         self.s = np.where(self.small, 1.0, s)

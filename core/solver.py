@@ -57,6 +57,12 @@ from .step import StepContext
 __all__ = ["Solver", "Status", "StepResult"]
 
 
+def _ms_since(t0: float) -> float:
+    """Milliseconds since ``t0`` (a ``time.perf_counter()`` reading): every
+    phase of ``res.timings``."""
+    return (time.perf_counter() - t0) * 1e3
+
+
 class Solver:
     """Frame-by-frame FurCollide solver for one set of curves.
 
@@ -250,8 +256,8 @@ class Solver:
         last_of = np.repeat(np.r_[start[1:], len(p)] - 1, np.diff(np.r_[start, len(p)]))
         nxt = np.where(nxt <= last_of, nxt, -1)
         src = np.where(fwd >= 0, fwd, nxt)
-        fixed = np.where(src[:, None] >= 0, p[np.maximum(src, 0)], 0.0)
-        return pts, np.where(ok[:, None], p, fixed)
+        # a finite point is its own source (its last finite point so far)
+        return pts, np.where(src[:, None] >= 0, p[np.maximum(src, 0)], 0.0)
 
     def _check_enabled(self, enabled):
         if enabled is None:
@@ -346,7 +352,7 @@ class Solver:
             seg_invalid = np.repeat(invalid, layout.nseg)
             kept = state.rows(invalid, seg_invalid) if invalid.any() else None
             timings = ctx.timings
-            timings["setup"] = (time.perf_counter() - t_start) * 1e3
+            timings["setup"] = _ms_since(t_start)
 
             C = self.n_curves
             status = np.zeros(C, np.int8)
@@ -360,14 +366,14 @@ class Solver:
                 pinched = np.zeros(C, bool)
                 for k in range(len(cols)):
                     pinched |= ctx.roots_inside(k, enabled)
-                timings["pinch"] = (time.perf_counter() - t0) * 1e3
+                timings["pinch"] = _ms_since(t0)
                 return pinched
 
             pinch_result = beside(pinch, ctx.threads if cols else 1)
             waits.append(pinch_result)
             t0 = time.perf_counter()
             ctx.load_state()
-            timings["frames"] = (time.perf_counter() - t0) * 1e3
+            timings["frames"] = _ms_since(t0)
             pinched = pinch_result()
             for b in waits:  # wait for the builds (and re-raise their errors)
                 b()
@@ -395,7 +401,7 @@ class Solver:
         if len(idx):
             ctx.solve(idx, status)
         ctx.remember(status, enabled)
-        timings["solve"] = (time.perf_counter() - t0) * 1e3
+        timings["solve"] = _ms_since(t0)
 
         t0 = time.perf_counter()
         # Independent: the next step's state on a ray thread, the output here.
@@ -413,7 +419,7 @@ class Solver:
             out[rows] = own
             status[invalid] = Status.INVALID
             state.put_rows(invalid, seg_invalid, kept)  # their state: as before this step
-        timings["output"] = (time.perf_counter() - t0) * 1e3
-        timings["total"] = (time.perf_counter() - t_start) * 1e3
+        timings["output"] = _ms_since(t0)
+        timings["total"] = _ms_since(t_start)
         timings["rays"] = ctx.n_rays
         return StepResult(out, status, timings, problems)

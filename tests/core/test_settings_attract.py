@@ -26,7 +26,7 @@ def _scene():
     return pts, offs, Collider(Vg, Fg), (V, F)
 
 
-@pytest.mark.parametrize("mode", ["stiff", "bend"])
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
 def test_attract_brings_curves_closer_to_growth_surface(mode):
     pts, offs, growth, (V, F) = _scene()
     out = {}

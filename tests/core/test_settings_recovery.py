@@ -245,3 +245,30 @@ def test_recovery_follows_animated_input():
         assert _angle_deg(moved, r.points) == pytest.approx(expect, abs=1e-6)
         theta = expect
     pytest.fail("never recovered")
+
+
+def test_soft_lands_on_its_plastic_target():
+    """Soft: each frame every segment goes ``recovery_rate`` of the way to its
+    plastic target and, within half a precision step of it, lands on it (README
+    Recovery Rate): the steps shrink by ``1 - recovery_rate`` until one takes the
+    whole rest, and the curve then keeps that shape (the imprint)."""
+    pts, offs, col, _ = _setup()
+    rate = 0.5
+    solver = Solver(offs, Settings(mode="soft", recovery_rate=rate, plasticity=0.5,
+                                   rotation_precision=PREC))
+    prev = solver.step(pts, [col]).points
+    moves = []
+    for _ in range(20):
+        r = solver.step(pts, [])
+        moves.append(float(np.abs(r.points - prev).max()))
+        prev = r.points
+    moves = np.array(moves)
+    landed = int(np.argmax(moves < 1e-12))
+    assert 3 < landed <= 12, moves
+    assert (moves[landed:] < 1e-12).all(), moves
+    # until the landing, each move is (1 - rate) of the one before (a slerp toward
+    # a fixed target); the landing step takes the whole rest (at least as much)
+    ratio = moves[1:landed - 1] / moves[: landed - 2]
+    np.testing.assert_allclose(ratio[2:], 1 - rate, rtol=0.05)
+    assert moves[landed - 1] >= 0.9 * (1 - rate) * moves[landed - 2]
+    assert not np.array_equal(prev, pts)  # the imprint: not back at the input

@@ -1,0 +1,199 @@
+"""Collider promises not held elsewhere: the errors a bad matrix gets, the faces of
+an empty collider, a shell per Collision Offset kept while several are in use, an
+offset shell that follows a change of the matrix's stretch, and the inside test
+at the corners of the collider's grid."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scenes
+
+from core import Collider, ColliderError
+
+
+@pytest.mark.parametrize(("matrix", "words"), [
+    (np.diag([1.0, 1.0, np.nan, 1.0]), "non-finite entries"),
+    (np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 2.0]]), "affine"),
+    (np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0.5, 0, 0, 1.0]]), "affine"),
+    (np.diag([1.0, 0.0, 1.0, 1.0]), "singular"),
+    (np.eye(3), "4x4"),
+])
+def test_a_bad_matrix_is_refused_with_what_is_wrong(matrix, words):
+    V, F = scenes.box()
+    with pytest.raises(ColliderError, match=f"^collider matrix .*{words}"):
+        Collider(V, F, matrix=matrix)
+    col = Collider(V, F)
+    with pytest.raises(ColliderError, match=f"^collider matrix .*{words}"):
+        col.matrix = matrix
+    np.testing.assert_array_equal(col.matrix, np.eye(4))  # unchanged
+
+
+def test_an_empty_collider_has_no_faces_of_the_documented_shape():
+    for F in (np.zeros((0, 3), np.int64), []):
+        col = Collider(np.zeros((0, 3)), F)
+        assert col.empty and col.faces.shape == (0, 3) and col.faces.dtype == np.int32
+
+
+def test_shells_of_several_offsets_are_kept_while_in_use():
+    """One collider queried with three offsets in turn builds each shell once."""
+    V, F = scenes.uv_sphere([0, 0, 0], 0.5, 24, 12)
+    col = Collider(V, F)
+    rng = np.random.default_rng(2)
+    o, d = rng.normal(size=(200, 3)), rng.normal(size=(200, 3))
+    want = {off: Collider(V, F).segment_hits(o, d, off) for off in (0.0, 0.05, 0.2)}
+    for _ in range(3):
+        for off in (0.0, 0.05, 0.2):
+            np.testing.assert_array_equal(col.segment_hits(o, d, off), want[off])
+    assert col.build_count == 3
+
+
+def test_an_offset_shell_follows_a_new_stretch_of_the_matrix():
+    """The offset is in world units: after the matrix stretches the collider
+    along one axis, its offset shell is the one of a collider made with that
+    matrix (the BVH of the shell is rebuilt; a plain move never rebuilds it)."""
+    V, F = scenes.uv_sphere([0, 0, 0], 0.5, 24, 12)
+    rng = np.random.default_rng(3)
+    o, d = rng.uniform(-1.2, 1.2, size=(400, 3)), 0.3 * rng.normal(size=(400, 3))
+    off = 0.1
+    col = Collider(V, F)
+    for M in (np.diag([1.0, 1.0, 1.0, 1.0]), np.diag([2.0, 1.0, 1.0, 1.0]),
+              np.diag([1.0, 1.0, 3.0, 1.0])):
+        col.matrix = M
+        fresh = Collider(V, F, matrix=M)
+        np.testing.assert_array_equal(col.segment_hits(o, d, off), fresh.segment_hits(o, d, off))
+        np.testing.assert_array_equal(col.contains(o, off), fresh.contains(o, off))
+        np.testing.assert_array_equal(col.contains(o, off), fresh.contains(o, off))
+    built = col.build_count
+    col.matrix = scenes.affine(t=(0.3, -0.2, 0.1)) @ np.diag([1.0, 1.0, 3.0, 1.0])
+    col.segment_hits(o, d, off)
+    assert col.build_count == built
+
+
+def test_points_in_the_corner_cells_of_the_grid():
+    """Points in the first and last cells of the inside test's grid (the corners
+    of the collider's bounds: outside a ball) are outside, on the coarse grid and
+    on the fine one."""
+    V, F = scenes.uv_sphere([0.2, -0.1, 0.3], 0.5, 24, 12)
+    col = Collider(V, F)
+    lo, hi = V.min(0), V.max(0)
+    eps = 1e-4 * (hi - lo)
+    corners = np.array([[x, y, z] for x in (lo[0] + eps[0], hi[0] - eps[0])
+                        for y in (lo[1] + eps[1], hi[1] - eps[1])
+                        for z in (lo[2] + eps[2], hi[2] - eps[2])])
+    P = np.vstack([corners, [[0.2, -0.1, 0.3]]])  # and the centre: inside
+    for _ in range(3):
+        np.testing.assert_array_equal(col.contains(P), [False] * 8 + [True])
+
+
+@pytest.mark.parametrize("scale", [0.01, 1.0, 100.0])
+def test_degenerate_faces_are_found_at_any_scale(scale):
+    """A face is degenerate when its area is below ``DEGENERATE_AREA_REL`` times
+    the squared diagonal of the collider's bounds: the same faces at any scale. A
+    sliver ten times above that stays, one ten times below it is dropped."""
+    from core import tolerances
+
+    def mesh(area_rel):
+        diag2 = 2.0  # the bounds of (0, 0, 0)..(1, 1, 0)
+        h = 2.0 * area_rel * tolerances.DEGENERATE_AREA_REL * diag2  # base 1: area h / 2
+        V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.5, h, 0]], float) * scale
+        return V, np.array([[0, 2, 1], [0, 1, 3]])
+
+    V, F = mesh(10.0)
+    col = Collider(V, F)  # no error: nothing degenerate
+    assert col.dropped_faces == 0 and len(col.faces) == 2
+    V, F = mesh(0.1)
+    with pytest.raises(ColliderError, match="degenerate"):
+        Collider(V, F)
+    col = Collider(V, F, drop_degenerate=True)
+    assert col.dropped_faces == 1 and len(col.faces) == 1
+
+
+def test_an_open_collider_contains_nothing_in_bools():
+    V, F = scenes.grid(size=2.0, n=4, z=0.0)
+    for col in (Collider(V, F), Collider(*scenes.box(), double_sided=True)):
+        got = col.contains(np.zeros((5, 3)))
+        assert got.dtype == bool and got.shape == (5,) and not got.any()
+
+
+@pytest.mark.parametrize("off", [0.0, 0.003])
+def test_only_points_next_to_the_surface_are_traced(monkeypatch, off):
+    """``contains`` on a collider that keeps its shape answers a point in a grid
+    cell no triangle of the shell touches with its cell's answer: once the cells
+    are known, only points within a few cells of the shell are traced one by one
+    (the collider moved far from the origin, with and without an offset)."""
+    c = np.array([0.1, 0.0, -0.2])
+    V, F = scenes.uv_sphere(c, 0.5, 32, 16)
+    move = np.array([6.0, -4.0, 3.0])
+    col = Collider(V, F, matrix=scenes.translation(move))
+    rng = np.random.default_rng(8)
+    lo, hi = V.min(0) + 1e-3, V.max(0) - 1e-3
+    P = rng.uniform(lo, hi, size=(3000, 3))  # on the grid, its corner cells too
+    P[:8] = [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    r = np.linalg.norm(P - c, axis=1)
+    P = P + move
+    col.contains(P, off)
+    first = col.contains(P, off)  # the fine grid: its cells' answers now known
+    traced = []
+    parity = Collider._parity
+
+    def spy(self, p_wo, offset_wo):
+        traced.append(np.array(p_wo))
+        return parity(self, p_wo, offset_wo)
+
+    monkeypatch.setattr(Collider, "_parity", spy)
+    got = col.contains(P, off)
+    np.testing.assert_array_equal(got, first)
+    far = np.abs(r - 0.5) > 0.02 + 4 * off
+    np.testing.assert_array_equal(got[far], r[far] < 0.5)
+    t = np.concatenate(traced) if traced else np.zeros((0, 3))
+    # a traced point's cell meets a triangle's bounding box, grown by how far the
+    # shell moves it (OFFSET_MAX_STRETCH offsets at most)
+    tri = V[F]
+    box = float(np.linalg.norm(tri.max(axis=1) - tri.min(axis=1), axis=1).max())
+    h = 1.0 / 128  # a fine cell: the bounds' largest side / (64 x 2)
+    dist = np.abs(np.linalg.norm(t - move - c, axis=1) - 0.5)
+    assert 0 < len(t) < len(P) * (0.5 if off == 0 else 0.8)
+    # (the shell's reach per world unit of offset, bounded without an SVD: 4 * |A|_F)
+    reach = 4.0 * 1.01 * np.sqrt(3) * off
+    assert dist.max() < box + reach + 2 * np.sqrt(3) * h, (dist.max(), box)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1000.0])
+@pytest.mark.parametrize("off", [0.0, 0.1, 0.4])
+def test_world_bounds_hold_the_offset_shell_and_little_more(off, scale):
+    """``bounds_world(offset)`` holds every point the offset shell can reach (its
+    vertices move out at most ``OFFSET_MAX_STRETCH`` offsets) and is no looser than
+    that reach by more than a few per cent (curves are candidates by these bounds)."""
+    from core import tolerances
+
+    V, F = scenes.box([-0.3, -0.2, 0.1], [0.5, 0.2, 0.4])
+    M = scenes.affine(scenes.rotation_matrix([0, 0, 1], 0.3), t=(1.0, 2.0, -0.5), s=scale)
+    col = Collider(V, F, matrix=M)
+    lo, hi = col.bounds_world(off)
+    Vw = V @ M[:3, :3].T + M[:3, 3]
+    reach = off * tolerances.OFFSET_MAX_STRETCH
+    assert (lo <= Vw.min(0) - off).all() and (hi >= Vw.max(0) + off).all()
+    assert (lo >= Vw.min(0) - 1.05 * reach - 1e-4 * scale).all()
+    assert (hi <= Vw.max(0) + 1.05 * reach + 1e-4 * scale).all()
+    rng = np.random.default_rng(1)
+    o = rng.uniform(lo - scale, hi + scale, size=(300, 3))
+    hit, t, _ = col.segment_hit_details(o, (Vw.mean(0) - o) * 2.0, off)
+    p = o[hit] + t[hit, None] * (Vw.mean(0) - o[hit]) * 2.0
+    assert hit.sum() > 100 and (p >= lo).all() and (p <= hi).all()
+
+
+def test_a_turning_collider_with_an_offset_never_rebuilds_its_shell():
+    """A rigid collider turning and moving (its matrix read from Blender in float32,
+    so its rotation part is orthonormal only to float32 rounding) keeps its offset
+    shell: the shell depends on the matrix's stretch, and rounding is no stretch."""
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 0.5, 24, 12)
+    col = Collider(V, F)
+    rng = np.random.default_rng(12)
+    o, d = rng.normal(size=(100, 3)), rng.normal(size=(100, 3))
+    for k in range(24):
+        R = scenes.rotation_matrix([1.0, 2.0, 3.0 + k], 0.37 * k)
+        M = scenes.affine(R, t=(0.1 * k, -0.2, 0.05 * k)).astype(np.float32)
+        col.matrix = M
+        col.segment_hits(o, d, 0.05)
+    assert col.build_count == 1
