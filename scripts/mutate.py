@@ -86,6 +86,16 @@ def all_mutants(files) -> dict[str, list[str]]:
     return out
 
 
+def _stale(files) -> bool:
+    """Was a file changed since mutmut last generated its mutants? (Their names are
+    then those of the old code: a sample drawn from them would test the wrong mutants.)"""
+    for f in files:
+        meta = MUTANTS / (f + ".meta")
+        if not meta.exists() or (ROOT / f).stat().st_mtime > meta.stat().st_mtime:
+            return True
+    return False
+
+
 def drawn(files, sample, seed) -> list[str]:
     """The ``sample`` mutants per file that ``--sample``/``--seed`` stand for."""
     picked = []
@@ -109,9 +119,10 @@ def run(files, jobs, fresh, sample, seed):
     if not sample:
         _mutmut_run([module_of(f) + ".*" for f in files], jobs)
         return
-    if not all(all_mutants(files).values()):
+    if not all(all_mutants(files).values()) or _stale(files):
         # mutmut generates the mutants (and records which tests reach which function)
-        # on its first run: prepare with one mutant of the cheapest file, the cache
+        # when a run starts: prepare with one mutant of the cheapest file, the cache,
+        # so that the sample is drawn from the mutants of the code as it is now
         print("mutate: generating the mutants", flush=True)
         _mutmut_run(["core.framecache.x_frame_path__mutmut_1"], jobs)
     _mutmut_run(drawn(files, sample, seed), jobs, log_mode="a")
