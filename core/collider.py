@@ -805,7 +805,57 @@ class Collider:
         n_wo = np.zeros((k, 3))
         if hit.any():
             n_wo[hit] = self._normals_world(prim[hit], faces)
+            if len(faces.real) == len(self._F):  # the mesh itself (no offset shell)
+                self._vertex_pushes(n_wo, hit, prim, o_lo, d_lo, t)
         return hit, np.minimum(t, 1.0), n_wo
+
+    def _vertex_pushes(self, n_wo, hit, prim, o_lo, d_lo, t):
+        """Hits that land on a vertex (``tol.VERTEX_HIT_BARY``) push along the vertex's
+        angle-weighted normal: the faces around a vertex all contain the hit, and which
+        one the tracer reports is decided by rounding (a curve through a UV sphere's
+        pole would take its rotation axis from it). ``n_wo`` is updated in place."""
+        w = np.flatnonzero(hit)
+        tri = self._local_vertices()[self._F[prim[w]]]  # (h, 3, 3)
+        p = o_lo[w] + np.minimum(t[w], 1.0)[:, None] * d_lo[w]
+        e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        q = p - tri[:, 0]
+        d11, d12, d22 = rot_dot(e1, e1), rot_dot(e1, e2), rot_dot(e2, e2)
+        q1, q2 = rot_dot(q, e1), rot_dot(q, e2)
+        den = d11 * d22 - d12 * d12
+        ok = den > 0
+        den = np.where(ok, den, 1.0)
+        b1 = (d22 * q1 - d12 * q2) / den
+        b2 = (d11 * q2 - d12 * q1) / den
+        bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+        corner = np.argmax(bary, axis=1)
+        at = ok & (bary[np.arange(len(w)), corner] > 1.0 - tol.VERTEX_HIT_BARY)
+        if not at.any():
+            return
+        v = self._F[prim[w[at]], corner[at]]
+        vn = self._vertex_normals()[v]
+        vn = apply(self._Minv[:3, :3].T, vn)
+        length = np.linalg.norm(vn, axis=1, keepdims=True)
+        good = length[:, 0] > 0
+        n_wo[w[at][good]] = (vn / np.where(length > 0, length, 1.0))[good]
+
+    def _vertex_normals(self):
+        """Angle-weighted unit vertex normals (local space, the winding's side), per shape."""
+        if getattr(self, "_vnormals_key", None) == self._version:
+            return self._vnormals
+        V = self._local_vertices()
+        F = self._F
+        fn = self._face_normals(np.arange(len(F)))
+        n = len(V)
+        vn = np.zeros((n, 3))
+        for k in range(3):
+            e1 = V[F[:, (k + 1) % 3]] - V[F[:, k]]
+            e2 = V[F[:, (k + 2) % 3]] - V[F[:, k]]
+            angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1), rot_dot(e1, e2))
+            for i in range(3):
+                vn[:, i] += np.bincount(F[:, k], weights=fn[:, i] * angle, minlength=n)
+        self._vnormals = _unit(vn, np.linalg.norm(vn, axis=1, keepdims=True))
+        self._vnormals_key = self._version
+        return self._vnormals
 
     @property
     def detects_pinch(self) -> bool:

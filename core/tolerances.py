@@ -37,6 +37,11 @@ SNAP_FRACTION = 0.5
 RESTART_MIN_STEPS = 2
 RESTART_GAIN = 0.9
 
+#: A hit whose largest barycentric coordinate is within this of 1 lands on that
+#: vertex: it pushes along the vertex's angle-weighted normal, not the normal of
+#: whichever of the faces around it the rounding picked (``Collider.segment_hit_details``).
+VERTEX_HIT_BARY = 1e-5
+
 #: Below this |cross| (unit vectors) two directions count as parallel and a
 #: fallback rotation axis is used.
 PARALLEL_EPS = 1e-6
