@@ -43,6 +43,22 @@ def _unit(x, length):
     return np.divide(x, length, out=np.zeros_like(x), where=length > 0)
 
 
+def _angle_weighted(V, F, fn):
+    """Unit vertex normals (n, 3): each face's unit normal ``fn`` (m, 3) weighted by
+    its corner angle at the vertex (the same direction however the faces around a
+    vertex are triangulated); zero for a vertex whose normals cancel or that no face
+    uses."""
+    n = len(V)
+    vn = np.zeros((n, 3))
+    for k in range(3):
+        e1 = V[F[:, (k + 1) % 3]] - V[F[:, k]]
+        e2 = V[F[:, (k + 2) % 3]] - V[F[:, k]]
+        angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1), rot_dot(e1, e2))
+        for i in range(3):
+            vn[:, i] += np.bincount(F[:, k], weights=fn[:, i] * angle, minlength=n)
+    return _unit(vn, np.linalg.norm(vn, axis=1, keepdims=True))
+
+
 def _cell_index(x, n):
     """Integer cell index ``floor(x)`` of an axis of ``n`` cells, clipped in float
     first to [-1, n + 1] (far-away points must not overflow the int cast)."""
@@ -425,14 +441,7 @@ class Collider:
             fa = -fa
         fn = _unit(fa, np.linalg.norm(fa, axis=1, keepdims=True))
         n = len(self._V)
-        vn = np.zeros((n, 3))
-        for k in range(3):
-            e1 = Vw[F[:, (k + 1) % 3]] - Vw[F[:, k]]
-            e2 = Vw[F[:, (k + 2) % 3]] - Vw[F[:, k]]
-            angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1), rot_dot(e1, e2))
-            for i in range(3):
-                vn[:, i] += np.bincount(F[:, k], weights=fn[:, i] * angle, minlength=n)
-        vn = _unit(vn, np.linalg.norm(vn, axis=1, keepdims=True))
+        vn = _angle_weighted(Vw, F, fn)
         # smallest cos(vertex normal, face normal) over the faces around each vertex
         cos = np.concatenate([rot_dot(vn[F[:, k]], fn) for k in range(3)])
         order, _, first, verts = self._corners()
@@ -842,18 +851,9 @@ class Collider:
         """Angle-weighted unit vertex normals (local space, the winding's side), per shape."""
         if getattr(self, "_vnormals_key", None) == self._version:
             return self._vnormals
-        V = self._local_vertices()
         F = self._F
-        fn = self._face_normals(np.arange(len(F)))
-        n = len(V)
-        vn = np.zeros((n, 3))
-        for k in range(3):
-            e1 = V[F[:, (k + 1) % 3]] - V[F[:, k]]
-            e2 = V[F[:, (k + 2) % 3]] - V[F[:, k]]
-            angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=1), rot_dot(e1, e2))
-            for i in range(3):
-                vn[:, i] += np.bincount(F[:, k], weights=fn[:, i] * angle, minlength=n)
-        self._vnormals = _unit(vn, np.linalg.norm(vn, axis=1, keepdims=True))
+        self._vnormals = _angle_weighted(self._local_vertices(), F,
+                                         self._face_normals(np.arange(len(F))))
         self._vnormals_key = self._version
         return self._vnormals
 
