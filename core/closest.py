@@ -13,6 +13,24 @@ import numpy as np
 from .proximity import TriangleGrid
 
 
+def barycentric(p, a, b, c):
+    """Barycentric coordinates (k, 3) of points ``p`` (k, 3) in the planes of the
+    triangles (a, b, c), unclamped; zero rows for degenerate (zero-area) triangles."""
+    v0, v1, v2 = b - a, c - a, p - a
+    d00 = np.einsum("ij,ij->i", v0, v0)
+    d01 = np.einsum("ij,ij->i", v0, v1)
+    d11 = np.einsum("ij,ij->i", v1, v1)
+    d20 = np.einsum("ij,ij->i", v2, v0)
+    d21 = np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    ok = den > 0
+    v = np.divide(d11 * d20 - d01 * d21, den, out=np.zeros_like(den), where=ok)
+    w = np.divide(d00 * d21 - d01 * d20, den, out=np.zeros_like(den), where=ok)
+    bary = np.stack([1 - v - w, v, w], axis=1)
+    bary[~ok] = 0.0
+    return bary
+
+
 def closest_on_triangles(p, a, b, c):
     """Closest point of triangle (a, b, c) to p, row by row (Ericson 5.1.5).
 

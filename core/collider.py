@@ -18,6 +18,7 @@ from functools import partial
 import numpy as np
 
 from . import tolerances as tol
+from .closest import barycentric, closest_points_on_mesh
 from .errors import ColliderError
 from .meshfix import Tidy, tidy
 from .proximity import mark_boxes
@@ -826,26 +827,15 @@ class Collider:
         w = np.flatnonzero(hit)
         tri = self._local_vertices()[self._F[prim[w]]]  # (h, 3, 3)
         p = o_lo[w] + np.minimum(t[w], 1.0)[:, None] * d_lo[w]
-        e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-        q = p - tri[:, 0]
-        d11, d12, d22 = rot_dot(e1, e1), rot_dot(e1, e2), rot_dot(e2, e2)
-        q1, q2 = rot_dot(q, e1), rot_dot(q, e2)
-        den = d11 * d22 - d12 * d12
-        ok = den > 0
-        den = np.where(ok, den, 1.0)
-        b1 = (d22 * q1 - d12 * q2) / den
-        b2 = (d11 * q2 - d12 * q1) / den
-        bary = np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+        bary = barycentric(p, tri[:, 0], tri[:, 1], tri[:, 2])  # (0 rows: degenerate)
         corner = np.argmax(bary, axis=1)
-        at = ok & (bary[np.arange(len(w)), corner] > 1.0 - tol.VERTEX_HIT_BARY)
+        at = bary[np.arange(len(w)), corner] > 1.0 - tol.VERTEX_HIT_BARY
         if not at.any():
             return
-        v = self._F[prim[w[at]], corner[at]]
-        vn = self._vertex_normals()[v]
-        vn = apply(self._Minv[:3, :3].T, vn)
-        length = np.linalg.norm(vn, axis=1, keepdims=True)
-        good = length[:, 0] > 0
-        n_wo[w[at][good]] = (vn / np.where(length > 0, length, 1.0))[good]
+        vn = apply(self._Minv[:3, :3].T, self._vertex_normals()[self._F[prim[w[at]], corner[at]]])
+        vn = _unit(vn, np.linalg.norm(vn, axis=1, keepdims=True))
+        good = vn.any(axis=1)  # (a vertex whose face normals cancel keeps its face's)
+        n_wo[w[at][good]] = vn[good]
 
     def _vertex_normals(self):
         """Angle-weighted unit vertex normals (local space, the winding's side), per shape."""
@@ -1065,8 +1055,6 @@ class Collider:
         n_wo : (k, 3) float64
             Unit face normal at the closest point.
         """
-        from .closest import closest_points_on_mesh
-
         k = len(q_wo)
         if self.empty or k == 0:
             return np.array(q_wo, np.float64), np.zeros((k, 3))

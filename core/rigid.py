@@ -338,7 +338,15 @@ def restart_contacts(ctx, batch, items, k, status):
     cs = c[sel]
     axis0 = ctx.axis[cs].copy()
     stiff0 = ctx.state.stiff[cs].copy()
-    # the new contact: a fresh solve of the input shape (as Bend, not Stiff)
+    # The current shape, and the one turning further would give (the kept axis).
+    now = _ends(ctx, cs, th0[sel], axis0)
+    ok = np.isfinite(turn[sel])
+    further = _moved(ctx, cs, now,
+                     _ends(ctx, cs, th0[sel] + np.where(ok, turn[sel], 0.0), axis0))
+    further[~ok] = np.inf
+    # The new contact: a fresh solve of the input shape, as Bend (not Stiff); the
+    # curves' flags and axes are those of the new contact until restored below.
+    ctx.state.stiff[cs] = False
     phi = np.zeros(len(cs))
     axis1 = axis0.copy()
     found = np.ones(len(cs), bool)
@@ -347,7 +355,6 @@ def restart_contacts(ctx, batch, items, k, status):
     if len(hb):
         cb = cs[hb]
         seg_hit = seg_hit[np.repeat(hit0, ctx.layout.nseg[cs])]
-        ctx.state.stiff[cb] = False
         o, d, _, rep, starts = ctx.input_rays(cb)
         axis1[hb] = ctx.new_axes(cb, o, d, rep, starts, seg_hit)
         ctx.axis[cb] = axis1[hb]
@@ -357,17 +364,9 @@ def restart_contacts(ctx, batch, items, k, status):
                               np.ones(n, np.int64), np.ones(n, bool))
         found[hb] = kb >= 0
         phi[hb] = np.where(kb >= 0, np.minimum(kb * p, ctx.max_angle), 0.0)
-    # how far each choice moves the CVs from where they are now
-    ctx.state.stiff[cs] = stiff0
-    ctx.axis[cs] = axis0
-    now = _ends(ctx, cs, th0[sel], axis0)
-    ok = np.isfinite(turn[sel])
-    further = _moved(ctx, cs, now,
-                     _ends(ctx, cs, th0[sel] + np.where(ok, turn[sel], 0.0), axis0))
-    further[~ok] = np.inf
-    ctx.state.stiff[cs] = False
     anew = _moved(ctx, cs, now, _ends(ctx, cs, phi, axis1))
     ctx.state.stiff[cs] = stiff0
+    ctx.axis[cs] = axis0
     take = found & (anew < tol.RESTART_GAIN * further)
     cr = cs[take]
     if len(cr):

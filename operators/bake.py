@@ -41,15 +41,15 @@ def bake_directory(ob) -> str:
     Directory elsewhere (a typo fixed, the farm's share), the next Bake goes there.
     """
     s = ob.furcollide
-    if s.bake_path and s.is_baked:
-        return bpy.path.abspath(s.bake_path)
+    kept = bpy.path.abspath(s.bake_path) if s.bake_path else ""
+    if kept and s.is_baked:
+        return kept
     wanted = directory_from_settings(ob)
-    if s.bake_path and not _same_path(bpy.path.abspath(s.bake_path), wanted):
-        return wanted
-    return bpy.path.abspath(s.bake_path) if s.bake_path else wanted
+    return kept if kept and _same_path(kept, wanted) else wanted
 
 
 def _same_path(a, b) -> bool:
+    """Do the absolute paths ``a`` and ``b`` name the same folder (case as the OS)?"""
     return os.path.normcase(os.path.abspath(a)) == os.path.normcase(os.path.abspath(b))
 
 
@@ -330,12 +330,11 @@ def bake_sharers(ob) -> list:
     path = ob.furcollide.bake_path
     if not path:
         return []
-    d = os.path.normcase(os.path.abspath(bpy.path.abspath(path)))
+    d = bpy.path.abspath(path)
     return [
         o.name for o in bpy.data.objects
         if o != ob and getattr(o, "furcollide", None) is not None and o.furcollide.is_setup
-        and o.furcollide.bake_path
-        and os.path.normcase(os.path.abspath(bpy.path.abspath(o.furcollide.bake_path))) == d
+        and o.furcollide.bake_path and _same_path(bpy.path.abspath(o.furcollide.bake_path), d)
     ]
 
 

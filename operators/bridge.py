@@ -61,6 +61,11 @@ class BridgeError(ValueError):
 
 
 # ----------------------------------------------------------------- matrices
+def is_render(depsgraph) -> bool:
+    """Is ``depsgraph`` a render's (F12, an animation render) rather than the viewport's?"""
+    return getattr(depsgraph, "mode", "VIEWPORT") == "RENDER"
+
+
 def matrix(ob, inverted=False) -> np.ndarray:
     """World matrix of ``ob`` (or its inverse) as a float64 (4, 4) array."""
     m = ob.matrix_world

@@ -354,9 +354,7 @@ def renders_otherwise(o) -> bool:
     for m in getattr(o, "modifiers", ()):
         if m.show_render != m.show_viewport:
             return True
-        if m.type == "SUBSURF" and m.show_render and m.render_levels != m.levels:
-            return True
-        if m.type == "MULTIRES" and m.show_render and m.render_levels != m.levels:
+        if m.type in ("SUBSURF", "MULTIRES") and m.show_render and m.render_levels != m.levels:
             return True
     return False
 

@@ -169,7 +169,7 @@ RENDER_PART = "render"
 
 
 def _tagged(setup, record) -> dict:
-    if getattr(setup.depsgraph, "mode", "VIEWPORT") == "RENDER":
+    if bridge.is_render(setup.depsgraph):
         record[RENDER_PART] = 1
     return record
 

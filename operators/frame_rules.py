@@ -333,7 +333,7 @@ def _check_topology(setup, inp) -> bool:
         return True
     old, new = rt.topology, inp.key
     what = "bake" if s.is_baked else "cached frames"
-    if getattr(setup.depsgraph, "mode", "VIEWPORT") == "RENDER":
+    if bridge.is_render(setup.depsgraph):
         # The viewport still has the curves the frames were solved for: a modifier
         # evaluates the source otherwise for renders. Reset would change nothing.
         setup.set_status(

@@ -25,7 +25,7 @@ import os
 import bpy
 from bpy.app.handlers import persistent
 
-from . import frame_rules, invalidation, registry
+from . import bridge, frame_rules, invalidation, registry
 from .colliders import collider_objects
 from .dependencies import dependencies_stale, update_dependencies
 from .setup import Setup, signature, signature_change
@@ -58,7 +58,7 @@ def on_depsgraph_update_post(scene, depsgraph=None):
     compares the scene with the record of what the frame handler saw at this frame,
     and only a real change drops the playback cache.
     """
-    if registry.busy() or depsgraph is None or getattr(depsgraph, "mode", "VIEWPORT") == "RENDER":
+    if registry.busy() or depsgraph is None or bridge.is_render(depsgraph):
         return
     try:
         registry.prune()  # a source deleted in the UI: its runtime and cache go

@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import rotations as rot
 from .. import tolerances as tol
-from ..closest import closest_faces
+from ..closest import barycentric, closest_faces
 from ..errors import ColliderError, InputError
 from ._curves import check_curves, check_surface, degenerate_faces, uniform_size
 
@@ -62,17 +62,8 @@ def _frames_of(T, rows=False):
 
 
 def _barycentric(p, a, b, c):
-    """Barycentric coordinates (k, 3) of points p in triangles (a, b, c)."""
-    v0, v1, v2 = b - a, c - a, p - a
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
-    den = d00 * d11 - d01 * d01
-    v = (d11 * d20 - d01 * d21) / den
-    w = (d00 * d21 - d01 * d20) / den
-    bary = np.stack([1 - v - w, v, w], axis=1)
+    """Barycentric coordinates (k, 3) of points p (closest points) in triangles (a, b, c)."""
+    bary = barycentric(p, a, b, c)
     # the closest point is on the triangle: clamp rounding and renormalize
     bary = np.clip(bary, 0.0, 1.0)
     return bary / bary.sum(1, keepdims=True)

@@ -879,6 +879,16 @@ def segments_in_box(P, offsets, center, half=HALF, shrink=1e-4):
     return np.unique(curve[hit])
 
 
+def move_skin(surf, to, last):
+    """Key ``surf`` from the origin at frame 1 to location ``to`` at frame ``last``
+    (the skin moving under the hair), and go to frame 1."""
+    surf.location = (0, 0, 0)
+    surf.keyframe_insert("location", frame=1)
+    surf.location = to
+    surf.keyframe_insert("location", frame=last)
+    bpy.context.scene.frame_set(1)
+
+
 def groom_scene(fc):
     """Guides (5 x 5) and a dense groom (12 x 12) on one Surface, a box collider."""
     scene = bpy.context.scene

@@ -12,6 +12,7 @@ from helpers import (
     activate,
     draw_enabled,
     groom_scene,
+    move_skin,
     play,
     reopen,
     save_in,
@@ -31,11 +32,7 @@ def _baked_pipeline(fc, tmp_path):
     scene = bpy.context.scene
     guides, groom, box, out = groom_scene(fc)
     surf = guides.data.surface
-    surf.location = (0, 0, 0)
-    surf.keyframe_insert("location", frame=1)
-    surf.location = (0.1, 0.0, 0.05)
-    surf.keyframe_insert("location", frame=6)
-    scene.frame_set(1)
+    move_skin(surf, (0.1, 0.0, 0.05), 6)
     s = guides.furcollide
     s.frame_end = 6
     scene.frame_end = 6

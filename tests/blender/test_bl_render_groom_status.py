@@ -12,6 +12,7 @@ from helpers import (
     draw_enabled,
     groom_scene,
     mesh_object,
+    move_skin,
     offsets_of,
     oracle,
     play,
@@ -276,11 +277,7 @@ def test_error_state_groom_follows_the_last_guides_on_the_current_skin(fc):
     scene = bpy.context.scene
     guides, groom, box, out = groom_scene(fc)
     surf = guides.data.surface
-    surf.location = (0, 0, 0)
-    surf.keyframe_insert("location", frame=1)
-    surf.location = (0.3, 0.0, 0.25)
-    surf.keyframe_insert("location", frame=8)
-    scene.frame_set(1)  # (bind at the animated pose of frame 1)
+    move_skin(surf, (0.3, 0.0, 0.25), 8)  # (bind at the animated pose of frame 1)
     activate(guides)
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
@@ -312,11 +309,7 @@ def test_reopened_held_frame_groom_follows_the_guides_shown_on_the_current_skin(
     scene = bpy.context.scene
     guides, groom, box, out = groom_scene(fc)
     surf = guides.data.surface
-    surf.location = (0, 0, 0)
-    surf.keyframe_insert("location", frame=1)
-    surf.location = (0.3, 0.0, 0.25)
-    surf.keyframe_insert("location", frame=8)
-    scene.frame_set(1)
+    move_skin(surf, (0.3, 0.0, 0.25), 8)
     activate(guides)
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     gout = guides.furcollide.groom.output

@@ -17,6 +17,12 @@ import scenes
 from core import Collider, Settings, Solver
 
 
+def _sweep(f, x0):
+    """The ball's matrix at frame ``f``: turning and sweeping through the fur from ``x0``."""
+    return scenes.affine(scenes.rotation_matrix([0, 1, 0.3], 0.15 * f),
+                         t=[x0 + 0.25 * f, 0.05 * f, 0.55 - 0.04 * f])
+
+
 @pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_removing_earlier_curves_leaves_the_others_bit_for_bit(mode, seed):
@@ -31,8 +37,7 @@ def test_removing_earlier_curves_leaves_the_others_bit_for_bit(mode, seed):
     b_sol = Solver(offs2, Settings(mode=mode))
     col = Collider(V, F)
     for f in range(6):
-        col.matrix = scenes.affine(scenes.rotation_matrix([0, 1, 0.3], 0.15 * f),
-                                   t=[-0.6 + 0.25 * f, 0.05 * f, 0.55 - 0.04 * f])
+        col.matrix = _sweep(f, -0.6)
         a = a_sol.step(pts, [col])
         b = b_sol.step(pts2, [col])
         np.testing.assert_array_equal(a.status[drop:], b.status)
@@ -59,8 +64,7 @@ def test_a_uniform_groom_equals_the_same_curves_in_a_ragged_one(mode, shrink):
     a_sol, b_sol = Solver(offs, s), Solver(offs2, s)
     col = Collider(V, F)
     for f in range(5):
-        col.matrix = scenes.affine(scenes.rotation_matrix([0, 1, 0.3], 0.15 * f),
-                                   t=[-0.5 + 0.25 * f, 0.05 * f, 0.55 - 0.04 * f])
+        col.matrix = _sweep(f, -0.5)
         a = a_sol.step(pts, [col])
         b = b_sol.step(pts2, [col])
         np.testing.assert_array_equal(a.status, b.status[:-1])
