@@ -377,11 +377,11 @@ class Collider:
     def _used_components(self):
         """The used vertices as three contiguous float32 component arrays
         (cached per vertices): per-axis passes over (n, 3) rows are slow."""
-        if getattr(self, "_components_key", None) != self._version:
+        def build():
             Vt = self._V.T if self._all_used else self._V[self._used].T
-            self._components = [np.ascontiguousarray(c) for c in Vt]
-            self._components_key = self._version
-        return self._components
+            return [np.ascontiguousarray(c) for c in Vt]
+
+        return self.derived("_components", self._version, build)
 
     def _corners(self):
         """The face corners (``F.T.ravel()``: corner k of every face, k = 0, 1, 2)
@@ -839,13 +839,9 @@ class Collider:
 
     def _vertex_normals(self):
         """Angle-weighted unit vertex normals (local space, the winding's side), per shape."""
-        if getattr(self, "_vnormals_key", None) == self._version:
-            return self._vnormals
         F = self._F
-        self._vnormals = _angle_weighted(self._local_vertices(), F,
-                                         self._face_normals(np.arange(len(F))))
-        self._vnormals_key = self._version
-        return self._vnormals
+        return self.derived("_vertex_normals", self._version, lambda: _angle_weighted(
+            self._local_vertices(), F, self._face_normals(np.arange(len(F)))))
 
     @property
     def detects_pinch(self) -> bool:
@@ -1059,12 +1055,9 @@ class Collider:
         if self.empty or k == 0:
             return np.array(q_wo, np.float64), np.zeros((k, 3))
         q_lo = self._to_local(np.asarray(q_wo, np.float64), np.zeros((k, 3)))[0]
-        if getattr(self, "_closest_key", None) != self._version:
-            self._closest = None
-            self._closest_key = self._version
-        p_lo, face, self._closest = closest_points_on_mesh(
-            self._local_vertices(), self._F, q_lo, self._closest
-        )
+        index = self.derived("_closest", self._version, lambda: [None])  # built on first use
+        p_lo, face, index[0] = closest_points_on_mesh(self._local_vertices(), self._F, q_lo,
+                                                      index[0])
         p_wo = apply(self._M[:3, :3], p_lo + self._center) + self._M[:3, 3]
         m = len(self._F)
         return p_wo, self._normals_world(face, ShellFaces(np.arange(m), np.zeros(m, bool)))

@@ -218,6 +218,25 @@ def points_inside_closed_mesh(P, V, F):
     return votes >= 2
 
 
+def winding_number(P, T):
+    """(n,) generalized winding number of points ``P`` (n, 3) for triangles ``T``
+    (m, 3, 3): the solid angle each triangle subtends from the point (Van Oosterom
+    and Strackee), summed, over 4 pi. 1 inside a closed outward-wound surface, 0
+    outside, k where k sheets of a self-overlapping surface enclose the point."""
+    P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
+    T = np.asarray(T, dtype=np.float64)
+    out = np.zeros(len(P))
+    step = max(1, _CHUNK // max(len(T), 1))
+    for s in range(0, len(P), step):
+        a, b, c = (T[None, :, k] - P[s:s + step, None] for k in range(3))
+        la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+        det = np.einsum("pki,pki->pk", a, np.cross(b, c))
+        den = (la * lb * lc + np.einsum("pki,pki->pk", a, b) * lc
+               + np.einsum("pki,pki->pk", b, c) * la + np.einsum("pki,pki->pk", c, a) * lb)
+        out[s:s + step] = (2.0 * np.arctan2(det, den)).sum(axis=1) / (4.0 * np.pi)
+    return out
+
+
 def point_segment_distance(c, A, B):
     """(S,) distance from point c to segments A[i]->B[i]."""
     A = np.asarray(A, dtype=np.float64)

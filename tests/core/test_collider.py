@@ -439,20 +439,20 @@ def test_a_deforming_collider_queried_twice_a_frame_builds_no_fine_grid(monkeypa
     surface_cells = Collider._surface_cells
 
     def spy(self, *a, **k):
-        built.append(self.deforming)
+        built.append(self)
         return surface_cells(self, *a, **k)
 
     monkeypatch.setattr(Collider, "_surface_cells", spy)
-    answers = {}
+    answers, cols = {}, {}
     for flag in (True, None):
-        col = Collider(V, F, deforming=flag)
+        col = cols[flag] = Collider(V, F, deforming=flag)
         got = []
         for f in range(3):
             col.vertices = V * np.float32(1.0 + 0.02 * f)
             got.append([col.contains(p), col.contains(p)])  # two queries per frame
         answers[flag] = got
-    assert True not in built  # the hinted collider never built it
-    assert None in built  # (the heuristic alone does, on the second query)
+    assert not any(c is cols[True] for c in built)  # the hinted collider never built it
+    assert any(c is cols[None] for c in built)  # (the heuristic alone does, on the second query)
     for f in range(3):
         r = np.linalg.norm(p, axis=1)
         scale = 1.0 + 0.02 * f

@@ -6,6 +6,7 @@ at the corners of the collider's grid."""
 from __future__ import annotations
 
 import numpy as np
+import oracle
 import pytest
 import scenes
 
@@ -197,3 +198,119 @@ def test_a_turning_collider_with_an_offset_never_rebuilds_its_shell():
         col.matrix = M
         col.segment_hits(o, d, 0.05)
     assert col.build_count == 1
+
+
+def test_derived_data_is_kept_per_key():
+    """``derived`` builds once per key and again for a new one (the collider's own
+    per-shape caches go through it too)."""
+    col = Collider(*scenes.box())
+    calls = []
+
+    def build():
+        calls.append(len(calls))
+        return len(calls)
+
+    assert col.derived("x", (col.version, 1), build) == 1
+    assert col.derived("x", (col.version, 1), build) == 1
+    assert col.derived("y", (col.version, 1), build) == 2  # another name
+    assert col.derived("x", (col.version, 2), build) == 3
+    col.vertices = col.vertices * np.float32(2.0)
+    assert col.derived("x", (col.version, 2), build) == 4  # a new shape: a new key
+    assert len(calls) == 4
+
+
+@pytest.mark.parametrize("deform", [False, True])
+def test_far_away_points_are_far_without_a_warning(deform):
+    """Points far beyond the collider (a stray CV at 1e30) are outside and far from
+    it, and no float-to-int overflow warning reaches the console (the grid indices
+    are clipped before the integer cast), on the fine grid and on the coarse one."""
+    import warnings
+
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 1.0, 16, 8)
+    col = Collider(V, F)
+    far = np.array([[1e30, 0, 0], [-1e30, 0, 0], [0, 1e25, -1e25], [3e19, 3e19, 3e19],
+                    [0.0, 0.0, 0.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for _ in range(2):  # the first call of a shape, then the fine grid's
+            if deform:
+                col.vertices = col.vertices * np.float32(1.001)
+            assert not col.near_surface(far[:4], 0.1).any()
+            np.testing.assert_array_equal(col.contains(far), [False] * 4 + [True])
+
+
+@pytest.mark.parametrize("s", [1e-6, 1e4])
+def test_a_uniform_scale_is_never_singular(s):
+    """The singular-matrix check is relative to the matrix's own scale: a collider
+    scaled to micrometres (or up by 1e4) is accepted and tests inside as scaled."""
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 1.0, 16, 8)
+    M = np.diag([s, s, s, 1.0])
+    col = Collider(V, F, matrix=M)
+    np.testing.assert_array_equal(col.contains(np.array([[0.0, 0, 0], [2.0 * s, 0, 0]])),
+                                  [True, False])
+    col.matrix = M  # the setter too
+
+
+def test_near_surface_is_tight_to_a_few_grid_cells():
+    """``near_surface`` is conservative (a ball holding a vertex is near) and tight:
+    a ball farther (per axis) than its radius times the matrix's Frobenius bound plus
+    the longest edge plus two grid cells from every vertex is far (the summed-area
+    table counts exactly the cells the ball's box covers)."""
+    from core import tolerances
+
+    rng = np.random.default_rng(3)
+    centres = np.vstack([[0, 0, 0], [1, 1, 1], rng.uniform(0, 1, (40, 3))])
+    V = (np.repeat(centres, 3, axis=0) + rng.normal(scale=0.004, size=(3 * len(centres), 3)))
+    F = np.arange(len(V)).reshape(-1, 3)
+    col = Collider(V, F)
+    Vf = col.vertices.astype(np.float64)
+    h = float((Vf.max(0) - Vf.min(0)).max()) / tolerances.OCCUPANCY_CELLS
+    edge = max(float(np.linalg.norm(Vf[F[:, k]] - Vf[F[:, (k + 1) % 3]], axis=1).max())
+               for k in range(3))
+    P = np.vstack([rng.uniform(-0.1, 1.1, (20000, 3)),
+                   rng.uniform(-0.05, 0.05, (4000, 3)) + rng.integers(0, 2, (4000, 3))])
+    r = rng.uniform(0.0, 0.03, len(P))
+    near = col.near_surface(P, r)
+    cheb = np.abs(P[:, None] - Vf[None]).max(axis=2).min(axis=1)
+    eucl = np.linalg.norm(P[:, None] - Vf[None], axis=2).min(axis=1)
+    assert near[eucl < r].all()
+    loose = cheb > r * np.sqrt(3.0) + edge + 2.0 * h + 1e-9
+    assert loose.sum() > len(P) // 2
+    assert not (near & loose).any(), np.flatnonzero(near & loose)[:5]
+
+
+def test_prefetch_starts_nothing_on_one_thread_or_an_empty_collider():
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 1.0, 16, 8)
+    assert Collider(V, F).prefetch(0.0, 1) is None
+    assert Collider(np.zeros((0, 3)), []).prefetch(0.0, 2) is None
+    wait = Collider(V, F).prefetch(0.0, 2)
+    assert wait is not None
+    wait()
+
+
+def test_an_empty_query_or_collider_answers_in_bools():
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 1.0, 16, 8)
+    empty = Collider(np.zeros((0, 3)), [])
+    for col, P in ((empty, np.zeros((4, 3))), (Collider(V, F), np.zeros((0, 3)))):
+        q = np.zeros((3, len(P)))
+        for got in (col.near_surface(P, 0.1), col.near_surface_grid(q, 0.1),
+                    col.contains(P), col.segment_hits(P, P)):
+            assert got.dtype == bool and got.shape == (len(P),) and not got.any()
+
+
+@pytest.mark.parametrize("off", [0.5, 1.0])
+def test_inside_an_offset_shell_that_folds_is_its_winding_number(off):
+    """A Collision Offset larger than a collider's dents folds its shell over itself;
+    inside is then where the shell winds round a point a positive number of times
+    (the generalized winding number of the shell's triangles, an independent oracle),
+    not the side of the first crossing, which a folded shell gets wrong."""
+    V, F = scenes.bumpy_sphere(amplitude=0.5, lobes=4)
+    col = Collider(V, F, backend="numpy")
+    assert col.repairs.parts == 1
+    be, _ = col._backend(off)
+    T = np.stack([be._v0, be._v0 + be._e1, be._v0 + be._e2], axis=1) + col._center
+    P = np.random.default_rng(0).uniform(-2.5, 2.5, (3000, 3))
+    w = oracle.winding_number(P, T)
+    clear = np.abs(w - np.round(w)) < 0.01  # not on the shell
+    assert (np.round(w[clear]) > 1).any() or (np.round(w[clear]) < 0).any()  # it folds
+    np.testing.assert_array_equal(col.contains(P, off)[clear], w[clear] > 0.5)
