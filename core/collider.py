@@ -825,7 +825,7 @@ class Collider:
         one the tracer reports is decided by rounding (a curve through a UV sphere's
         pole would take its rotation axis from it). ``n_wo`` is updated in place."""
         w = np.flatnonzero(hit)
-        tri = self._local_vertices()[self._F[prim[w]]]  # (h, 3, 3)
+        tri = self._V[self._F[prim[w]]] - self._center  # (h, 3, 3), as _local_vertices
         p = o_lo[w] + np.minimum(t[w], 1.0)[:, None] * d_lo[w]
         bary = barycentric(p, tri[:, 0], tri[:, 1], tri[:, 2])  # (0 rows: degenerate)
         corner = np.argmax(bary, axis=1)
