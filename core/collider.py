@@ -812,12 +812,13 @@ class Collider:
         o_lo, d_lo = self._to_local(o_wo, d_wo)
         prim, t = be.hit_details(o_lo, d_lo, 1.0 + tol.T_SLACK)
         hit = prim >= 0
+        t = np.where(hit, np.minimum(t, 1.0), np.inf)  # (a hit in the slack: at the end)
         n_wo = np.zeros((k, 3))
         if hit.any():
             n_wo[hit] = self._normals_world(prim[hit], faces)
             if len(faces.real) == len(self._F):  # the mesh itself (no offset shell)
                 self._vertex_pushes(n_wo, hit, prim, o_lo, d_lo, t)
-        return hit, np.minimum(t, 1.0), n_wo
+        return hit, t, n_wo
 
     def _vertex_pushes(self, n_wo, hit, prim, o_lo, d_lo, t):
         """Hits that land on a vertex (``tol.VERTEX_HIT_BARY``) push along the vertex's
@@ -826,7 +827,7 @@ class Collider:
         pole would take its rotation axis from it). ``n_wo`` is updated in place."""
         w = np.flatnonzero(hit)
         tri = self._V[self._F[prim[w]]] - self._center  # (h, 3, 3), as _local_vertices
-        p = o_lo[w] + np.minimum(t[w], 1.0)[:, None] * d_lo[w]
+        p = o_lo[w] + t[w, None] * d_lo[w]
         bary = barycentric(p, tri[:, 0], tri[:, 1], tri[:, 2])  # (0 rows: degenerate)
         corner = np.argmax(bary, axis=1)
         at = bary[np.arange(len(w)), corner] > 1.0 - tol.VERTEX_HIT_BARY
@@ -991,7 +992,7 @@ class Collider:
         """
         k = len(p_wo)
         be, _ = self._backend(offset_wo)
-        p_lo = self._to_local(np.asarray(p_wo, np.float64), np.zeros((k, 3)))[0]
+        p_lo = self._to_local(np.asarray(p_wo), np.zeros((k, 3)))[0]  # (float64)
         lo, hi = self._geometry()
         diag = float(np.linalg.norm(hi - lo)) or 1.0
         step = tol.PARITY_STEP_REL * diag

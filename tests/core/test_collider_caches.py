@@ -95,3 +95,25 @@ def test_the_corner_order_is_sorted_once_per_topology(monkeypatch):
         for off in (0.0, 0.05):
             col.segment_hits(o, d, off)
     assert calls.count(3 * len(col.faces)) == 1, calls
+
+
+def test_face_normals_are_tabled_at_exactly_a_quarter_of_the_faces(monkeypatch):
+    """The table is made as soon as the normals asked add up to a quarter of the
+    faces (not one query later)."""
+    sizes = []
+    of = Collider._face_normals_of
+
+    def counted(self, prim):
+        sizes.append(len(prim))
+        return of(self, prim)
+
+    monkeypatch.setattr(Collider, "_face_normals_of", counted)
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 0.5, 32, 16)
+    col = Collider(V, F)
+    m = len(col.faces)
+    assert m % 4 == 0
+    o = np.random.default_rng(7).normal(size=(m // 4, 3))
+    o *= 2.0 / np.linalg.norm(o, axis=1, keepdims=True)
+    hit, _, _ = col.segment_hit_details(o, -o)
+    assert hit.all()
+    assert m in sizes, sizes

@@ -58,8 +58,9 @@ def test_an_offset_shell_follows_a_new_stretch_of_the_matrix():
     o, d = rng.uniform(-1.2, 1.2, size=(400, 3)), 0.3 * rng.normal(size=(400, 3))
     off = 0.1
     col = Collider(V, F)
-    for M in (np.diag([1.0, 1.0, 1.0, 1.0]), np.diag([2.0, 1.0, 1.0, 1.0]),
-              np.diag([1.0, 1.0, 3.0, 1.0])):
+    b = np.sqrt(2.0 - 1.1**2)  # the same trace as the identity: only the shape of M^T M differs
+    for M in (np.diag([1.0, 1.0, 1.0, 1.0]), np.diag([1.1, b, 1.0, 1.0]),
+              np.diag([2.0, 1.0, 1.0, 1.0]), np.diag([1.0, 1.0, 3.0, 1.0])):
         col.matrix = M
         fresh = Collider(V, F, matrix=M)
         np.testing.assert_array_equal(col.segment_hits(o, d, off), fresh.segment_hits(o, d, off))
@@ -314,3 +315,52 @@ def test_inside_an_offset_shell_that_folds_is_its_winding_number(off):
     clear = np.abs(w - np.round(w)) < 0.01  # not on the shell
     assert (np.round(w[clear]) > 1).any() or (np.round(w[clear]) < 0).any()  # it folds
     np.testing.assert_array_equal(col.contains(P, off)[clear], w[clear] > 0.5)
+
+
+@pytest.mark.parametrize("off", [0.05, 0.3])
+def test_world_bounds_hold_a_needle_tips_offset_shell(off):
+    """A needle's tip moves out the full ``OFFSET_MAX_STRETCH`` offsets (its faces are
+    nearly parallel to its normal): ``bounds_world`` still holds the shell there."""
+    from core import tolerances
+
+    n, length, r = 24, 1.0, 0.03  # a cone along +x, 1.7 degrees half-angle
+    a = 2 * np.pi * np.arange(n) / n
+    V = np.vstack([[[length, 0.0, 0.0]], np.stack([np.zeros(n), r * np.cos(a), r * np.sin(a)], 1),
+                   [[0.0, 0.0, 0.0]]])
+    F = np.array([[0, 1 + i, 1 + (i + 1) % n] for i in range(n)]
+                 + [[n + 1, 1 + (i + 1) % n, 1 + i] for i in range(n)])
+    col = Collider(V, F)
+    assert col.closed
+    lo, hi = col.bounds_world(off)
+    yz = np.random.default_rng(2).uniform(-1e-6, 1e-6, (50, 2))
+    o = np.column_stack([np.full(50, 3.0), yz])
+    hit, t, _ = col.segment_hit_details(o, np.tile([-3.0, 0.0, 0.0], (50, 1)), off)
+    tip = 3.0 - 3.0 * t[hit]
+    assert hit.all() and tip.min() > length + 0.99 * tolerances.OFFSET_MAX_STRETCH * off
+    assert (tip <= hi[0]).all(), (tip.max(), hi[0])
+
+
+@pytest.mark.parametrize("size", [1e-3, 100.0, 1e4])
+def test_inside_at_any_size_of_the_model(size):
+    """The inside test's rays reach the surface however large or small the collider
+    is modelled (its own vertices, not its matrix): its centre is inside, a point
+    beyond it outside, through the fine grid and the traced points alike."""
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], size, 24, 12)
+    col = Collider(V, F)
+    P = np.array([[0.0, 0.0, 0.0], [0.1 * size, 0.2 * size, 0.0], [0.0, 0.0, 0.999 * size],
+                  [1.5 * size, 0.0, 0.0], [0.0, 0.0, 1.01 * size]])
+    for _ in range(2):
+        np.testing.assert_array_equal(col.contains(P), [True, True, True, False, False])
+
+
+def test_hit_details_of_a_miss():
+    """``segment_hit_details``: a miss has t = inf and a zero normal, a hit t in
+    [0, 1] and a unit normal."""
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 1.0, 24, 12)
+    col = Collider(V, F)
+    o = np.array([[3.0, 0.0, 0.0], [0.3, 0.2, 3.0]])
+    d = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -4.0]])
+    hit, t, n = col.segment_hit_details(o, d)
+    np.testing.assert_array_equal(hit, [False, True])
+    assert t[0] == np.inf and not n[0].any()
+    assert 0.45 < t[1] < 0.55 and abs(np.linalg.norm(n[1]) - 1.0) < 1e-12
