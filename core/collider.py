@@ -286,9 +286,8 @@ class Collider:
         V64 = V.astype(np.float64)
         diag = float(np.linalg.norm(V64.max(0) - V64.min(0))) or 1.0
         a = np.cross(V64[F[:, 1]] - V64[F[:, 0]], V64[F[:, 2]] - V64[F[:, 0]])
-        area2 = np.einsum("ij,ij->i", a, a)
-        rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-        return rep | (area2 <= (2 * tol.DEGENERATE_AREA_REL * diag**2) ** 2)
+        area2 = np.einsum("ij,ij->i", a, a)  # (0 for a repeated vertex)
+        return area2 <= (2 * tol.DEGENERATE_AREA_REL * diag**2) ** 2
 
     # ------------------------------------------------------------ properties
     @property

@@ -88,18 +88,20 @@ def test_points_in_the_corner_cells_of_the_grid():
         np.testing.assert_array_equal(col.contains(P), [False] * 8 + [True])
 
 
+@pytest.mark.parametrize("shift", [0.0, 100.0])
 @pytest.mark.parametrize("scale", [0.01, 1.0, 100.0])
-def test_degenerate_faces_are_found_at_any_scale(scale):
+def test_degenerate_faces_are_found_at_any_scale(scale, shift):
     """A face is degenerate when its area is below ``DEGENERATE_AREA_REL`` times
-    the squared diagonal of the collider's bounds: the same faces at any scale. A
-    sliver ten times above that stays, one ten times below it is dropped."""
+    the squared diagonal of the collider's bounds: the same faces at any scale and
+    wherever the collider is modelled. A sliver ten times above that stays, one ten
+    times below it is dropped."""
     from core import tolerances
 
     def mesh(area_rel):
         diag2 = 2.0  # the bounds of (0, 0, 0)..(1, 1, 0)
         h = 2.0 * area_rel * tolerances.DEGENERATE_AREA_REL * diag2  # base 1: area h / 2
         V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.5, h, 0]], float) * scale
-        return V, np.array([[0, 2, 1], [0, 1, 3]])
+        return V + [shift, 0.0, 0.0], np.array([[0, 2, 1], [0, 1, 3]])
 
     V, F = mesh(10.0)
     col = Collider(V, F)  # no error: nothing degenerate
@@ -246,9 +248,10 @@ def test_a_uniform_scale_is_never_singular(s):
     scaled to micrometres (or up by 1e4) is accepted and tests inside as scaled."""
     V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 1.0, 16, 8)
     M = np.diag([s, s, s, 1.0])
+    M[:3, 3] = 1e6 * s, -3e5, 0.0  # (far from the origin: the translation is no scale)
     col = Collider(V, F, matrix=M)
-    np.testing.assert_array_equal(col.contains(np.array([[0.0, 0, 0], [2.0 * s, 0, 0]])),
-                                  [True, False])
+    P = np.array([[0.0, 0, 0], [2.0 * s, 0, 0]]) + M[:3, 3]
+    np.testing.assert_array_equal(col.contains(P), [True, False])
     col.matrix = M  # the setter too
 
 
@@ -364,3 +367,22 @@ def test_hit_details_of_a_miss():
     np.testing.assert_array_equal(hit, [False, True])
     assert t[0] == np.inf and not n[0].any()
     assert 0.45 < t[1] < 0.55 and abs(np.linalg.norm(n[1]) - 1.0) < 1e-12
+
+
+def test_a_repeated_vertex_is_a_degenerate_face():
+    V, F = scenes.box()
+    F = np.vstack([F, [[0, 0, 1], [2, 3, 3], [4, 5, 4]]])
+    with pytest.raises(ColliderError, match=f"face {len(F) - 3} "):
+        Collider(V, F)
+    assert Collider(V, F, drop_degenerate=True).dropped_faces == 3
+
+
+def test_the_clearance_margin_moves_each_vertex_outward():
+    """The clearance margin's directions (area-weighted vertex normals) point out of a
+    sphere along its radius."""
+    V, F = scenes.uv_sphere([0.2, 0.0, -0.1], 1.0, 24, 12)
+    radial = (V - [0.2, 0.0, -0.1]) / np.linalg.norm(V - [0.2, 0.0, -0.1], axis=1,
+                                                      keepdims=True)
+    got = Collider(V, F)._margin_directions()
+    np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-12)
+    assert np.einsum("ij,ij->i", got, radial).min() > 0.99
