@@ -117,3 +117,46 @@ def test_face_normals_are_tabled_at_exactly_a_quarter_of_the_faces(monkeypatch):
     hit, _, _ = col.segment_hit_details(o, -o)
     assert hit.all()
     assert m in sizes, sizes
+
+
+def test_an_open_sheets_rim_faces_are_found_once_per_topology(monkeypatch):
+    """The rim faces (an open sheet's border, kept in its margin shells) depend on
+    the faces alone: found once, whatever the deformations."""
+    V, F = scenes.grid(size=2.0, n=6, z=0.0)
+    col = Collider(V, F)
+    assert not col.closed
+    calls = []
+    keys = collider_mod._edge_keys
+
+    def counted(*a):
+        calls.append(1)
+        return keys(*a)
+
+    monkeypatch.setattr(collider_mod, "_edge_keys", counted)
+    rng = np.random.default_rng(10)
+    o, d = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    for k in range(4):
+        col.vertices = V * np.float32(1.0 + 0.02 * k)
+        col.segment_hits(o, d)
+    assert len(calls) == 1, calls
+
+
+def test_the_thread_count_reaches_the_tracer(monkeypatch):
+    """``segment_hits(..., threads=n)`` splits its rays over ``n`` threads (the answer
+    does not depend on it: only the time)."""
+    from core import rays
+
+    seen = []
+    any_hit = rays.EmbreeBackend.any_hit
+
+    def spy(self, o, d, tmax, threads=1):
+        seen.append(threads)
+        return any_hit(self, o, d, tmax, threads)
+
+    monkeypatch.setattr(rays.EmbreeBackend, "any_hit", spy)
+    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 0.5, 24, 12)
+    o, d = np.random.default_rng(4).normal(size=(2, 5000, 3))
+    col = Collider(V, F)
+    one = col.segment_hits(o, d, threads=1)
+    np.testing.assert_array_equal(col.segment_hits(o, d, threads=2), one)
+    assert seen == [1, 2]

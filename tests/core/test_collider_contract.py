@@ -86,6 +86,14 @@ def test_points_in_the_corner_cells_of_the_grid():
     P = np.vstack([corners, [[0.2, -0.1, 0.3]]])  # and the centre: inside
     for _ in range(3):
         np.testing.assert_array_equal(col.contains(P), [False] * 8 + [True])
+    # a box fills its grid's corner cells: points just inside its corners are inside
+    lo, hi = np.array([-0.3, -0.2, 0.1]), np.array([0.5, 0.2, 0.4])
+    box = Collider(*scenes.box(lo, hi))
+    eps = 1e-3 * (hi - lo)
+    P = np.array([lo + eps, hi - eps, [lo[0] + eps[0], hi[1] - eps[1], lo[2] + eps[2]],
+                  lo - eps])
+    for _ in range(3):
+        np.testing.assert_array_equal(box.contains(P), [True, True, True, False])
 
 
 @pytest.mark.parametrize("shift", [0.0, 100.0])
@@ -386,3 +394,16 @@ def test_the_clearance_margin_moves_each_vertex_outward():
     got = Collider(V, F)._margin_directions()
     np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-12)
     assert np.einsum("ij,ij->i", got, radial).min() > 0.99
+
+
+def test_float_faces_of_whole_numbers_are_faces():
+    """Faces given as floats holding whole numbers (read from a text format) are
+    accepted, and an error names the face with its integer indices."""
+    V, F = scenes.box()
+    col = Collider(V, F.astype(np.float64))
+    np.testing.assert_array_equal(col.faces, Collider(V, F).faces)
+    bad = F.astype(np.float64)
+    bad[1, 2] = 9.0
+    with pytest.raises(ColliderError, match=rf"face 1 \[{int(F[1, 0])}, {int(F[1, 1])}, 9\] "
+                                            "indexes a vertex out of range"):
+        Collider(V, bad)
