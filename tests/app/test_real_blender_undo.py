@@ -1,0 +1,127 @@
+"""Undo and redo after every FurCollide operator, in the real application (app lane).
+
+``undo_driver.py`` runs in one session of Debian's Blender 4.3 with its UI under Xvfb
+(as ``test_real_blender_ui.py``; undo needs a window, the ``bpy`` lanes have none). Each
+scenario opens the same small saved scene again, does what an artist does (an operator
+called as its button calls it, with its undo push; a setting changed then pushed as a
+panel click pushes it), undoes, redoes and plays frames. After every step the driver
+records a *snap*: the setup's settings, bake flags, bake files (name, size, mtime), its
+status, and whether the output is the frame it claims to be (README "Limits": undo
+restores the setup and its output's data, never bake files; the current frame is
+evaluated again after it).
+"""
+
+import pytest
+from app_session import ROOT, run_session
+
+WORK = ROOT / "out" / "app_undo"
+SCENARIOS = ["bake", "free_bake", "reset", "fur_attach", "fur_sampler", "groom", "colliders",
+             "remove", "playing", "baking", "held", "reopen"]
+
+
+@pytest.fixture(scope="module")
+def session():
+    return run_session(WORK, "undo_driver.py", timeout=900)
+
+
+def snaps(session, scenario, prefix=""):
+    return [s for s in session["result"]["snaps"]
+            if s["scenario"] == scenario and s["label"].startswith(prefix)]
+
+
+def one(session, scenario, label):
+    (s,) = [s for s in snaps(session, scenario) if s["label"] == label]
+    return s
+
+
+def solved(frames):
+    """Every snap shows its frame as current, and it is that frame, bit for bit."""
+    assert frames, "no frame played"
+    for s in frames:
+        assert s["level"] == "INFO" and s["claims_current"] and s["matches"], s
+
+
+def test_session_ran_to_the_end_without_a_crash(session):
+    assert session["rc"] == 0, session["log"][-4000:]
+    assert not list((WORK / "tmp").glob("*.crash.txt"))
+    r = session["result"]
+    assert r.get("finished") and not r.get("errors"), r.get("errors") or session["log"][-4000:]
+    assert r["install_return"] == ["FINISHED"]
+    assert r["steps"] == [*SCENARIOS, "done"]
+    # the reference frames tell the modes apart, and the Ball moves the hair
+    assert r["ref_modes_differ"] and min(r["ref_moves"].values()) > 0.1, r["ref_moves"]
+
+
+def test_reset_cache_is_no_undo_step(session):
+    """Reset Cache changes only the session's cache: Ctrl+Z after it undoes the action
+    before it (the Mode change); frames played on from there are not cached and say so;
+    redo brings Stiff back and playing from the start solves it."""
+    assert one(session, "reset", "reset at 5")["level"] == "WARNING"
+    undone = one(session, "reset", "undone")
+    assert undone["mode"] == "bend" and undone["frame"] == 1
+    for s in snaps(session, "reset", "undone, play on"):
+        assert s["level"] == "WARNING" and "is not cached" in s["message"], s
+    assert one(session, "reset", "redone")["mode"] == "stiff"
+    solved(snaps(session, "reset", "redone, play"))
+
+
+def test_fur_attach_bind_undone_and_redone(session):
+    bound = one(session, "fur_attach", "bound at 4")
+    assert bound["use_fur_attach"] and bound["bound"]
+    undone = one(session, "fur_attach", "undone")
+    assert not undone["use_fur_attach"] and not undone["bound"] and not undone["has_binding"]
+    for s in snaps(session, "fur_attach", "undone, play on"):
+        assert s["level"] != "ERROR", s
+    redone = one(session, "fur_attach", "redone")
+    assert redone["use_fur_attach"] and redone["bound"] and redone["has_binding"]
+    solved(snaps(session, "fur_attach", "redone, play"))
+
+
+def test_fur_sampler_undone_and_redone(session):
+    s = one(session, "fur_sampler", "played")
+    assert session["result"]["sampler"] == ["FINISHED"]
+    assert s["guides_made"] > 10 and s["guides_gone"] and s["guides_back"] == s["guides_made"]
+    assert s["level"] == "INFO" and s["matches"]
+
+
+def test_groom_bind_undone_and_redone(session):
+    """Undone: the groom output is gone and the Render Groom shown again; redone: the
+    groom output is back and follows the guides (moved by the Ball)."""
+    bound = one(session, "groom", "bound")
+    assert bound["groom_output"] == "Groom FurCollide" and bound["groom_hidden"]
+    undone = one(session, "groom", "undone")
+    assert undone["groom_output"] is None and not undone["groom_hidden"]
+    assert undone["groom_objects"] == ["Groom"]
+    redone = one(session, "groom", "redone")
+    assert redone["groom_output"] == "Groom FurCollide" and redone["groom_hidden"]
+    assert session["result"]["groom_follows"] > 0.05
+    assert all(s["level"] != "ERROR" for s in snaps(session, "groom")), snaps(session, "groom")
+    solved(snaps(session, "groom", "redone, play"))
+
+
+def test_collider_add_and_remove_undone_and_redone(session):
+    cols = {label: one(session, "colliders", label)["colliders"]
+            for label in ("added at 4", "add undone", "add redone", "removed",
+                          "remove undone", "remove redone")}
+    assert cols == {"added at 4": ["Ball", "Wall"], "add undone": ["Ball"],
+                    "add redone": ["Ball", "Wall"], "removed": ["Ball"],
+                    "remove undone": ["Ball", "Wall"], "remove redone": ["Ball"]}
+    for s in snaps(session, "colliders", "add undone, play on"):
+        assert s["level"] != "ERROR", s
+    solved(snaps(session, "colliders", "remove undone, play"))
+    solved(snaps(session, "colliders", "remove redone, play"))
+
+
+def test_ctrl_z_during_playback(session):
+    """A real Ctrl+Z while playing (the Mode change undone, the frame back to the undo
+    step's): playback goes on, the frames not cached say so, the next pass from the
+    start frame solves them."""
+    r = session["result"]
+    assert r["undo_while_playing_at"] >= 4
+    seen = snaps(session, "playing", "playing ")
+    modes = [s["mode"] for s in seen]
+    assert modes[0] == "stiff" and modes[-1] == "bend", modes
+    assert all(s["level"] != "ERROR" for s in seen)
+    last = one(session, "playing", "stopped")
+    assert last["mode"] == "bend" and last["frame"] == 8
+    solved([last])
