@@ -125,3 +125,12 @@ def test_ctrl_z_during_playback(session):
     last = one(session, "playing", "stopped")
     assert last["mode"] == "bend" and last["frame"] == 8
     solved([last])
+
+
+def test_an_edit_after_opening_a_file_over_a_pending_refresh_refreshes(session):
+    """A setting changed just before a file was opened (a script) left its refresh
+    pending; opening the file dropped that timer and the object was never refreshed
+    again in the session (an edit left the frame unsolved: 0 cached, outdated)."""
+    edited = one(session, "reopen", "edited")
+    assert edited["mode"] == "stiff" and edited["cached"] == [1] and not edited["outdated"]
+    solved([edited])
