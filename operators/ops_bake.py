@@ -130,7 +130,7 @@ class FURCOLLIDE_OT_bake(_BakeBase, SetupOperator, Operator):
 
     bl_idname = "furcollide.bake"
     bl_label = "Bake"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def refusal(cls, context, src):
@@ -149,7 +149,7 @@ class FURCOLLIDE_OT_bake_all(_BakeBase, Operator):
 
     bl_idname = "furcollide.bake_all"
     bl_label = "Bake All"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def poll(cls, context):
@@ -173,7 +173,7 @@ class FURCOLLIDE_OT_free_bake(SetupOperator, Operator):
 
     bl_idname = "furcollide.free_bake"
     bl_label = "Free Bake"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def refusal(cls, context, src):
@@ -195,7 +195,7 @@ class FURCOLLIDE_OT_free_bake_all(Operator):
 
     bl_idname = "furcollide.free_bake_all"
     bl_label = "Free All Bakes"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def poll(cls, context):

@@ -52,6 +52,45 @@ def test_session_ran_to_the_end_without_a_crash(session):
     assert r["ref_modes_differ"] and min(r["ref_moves"].values()) > 0.1, r["ref_moves"]
 
 
+def test_bake_is_undone_alone_and_redone_its_files_untouched(session):
+    """Bake is an undo step: Ctrl+Z takes back the bake only (not the Mode change made
+    before it), its files stay on disk; Ctrl+Shift+Z bakes it again; Bake after another
+    undo resumes from those files and rewrites none. (Bake pushed no undo step: Ctrl+Z
+    also undid the change before it, and redo never brought the bake back.)"""
+    baked = one(session, "bake", "baked")
+    assert baked["is_baked"] and len(baked["files"]) == 8 and baked["mode"] == "stiff"
+    undone = one(session, "bake", "undone")
+    assert undone["is_setup"] and not undone["is_baked"] and undone["bake_path"] == ""
+    assert undone["mode"] == "stiff", "the action before the bake was undone too"
+    assert undone["files"] == baked["files"]  # not one deleted or rewritten
+    solved(snaps(session, "bake", "undone, play"))
+    redone = one(session, "bake", "redone")
+    assert redone["is_baked"] and redone["bake_path"] == baked["bake_path"]
+    assert redone["files"] == baked["files"]
+    solved(snaps(session, "bake", "redone, play"))  # the baked frames, from the files
+    again = one(session, "bake", "baked again")
+    assert session["result"]["bake_again"] == ["RUNNING_MODAL"]
+    assert again["is_baked"] and again["files"] == baked["files"]
+
+
+def test_free_bake_is_undone_alone_and_says_its_files_are_gone(session):
+    """Free Bake is an undo step (Ctrl+Z used to take back the Wall moved before it
+    too). Its files cannot come back: the setup undone to 'baked' says so and what to
+    press, never shows a frame as current; redo frees it again and playing solves."""
+    freed = one(session, "free_bake", "freed")
+    assert not freed["is_baked"] and freed["files"] == {} and freed["wall_x"] == 6.0
+    undone = one(session, "free_bake", "undone")
+    assert undone["wall_x"] == 6.0, "the action before Free Bake was undone too"
+    assert undone["is_baked"] and undone["files"] == {}
+    for s in snaps(session, "free_bake", "undone, play"):
+        assert s["level"] == "ERROR" and not s["claims_current"], s
+        assert "Bake files are missing" in s["message"], s
+        assert "press Free Bake, then Bake" in s["message"], s
+    redone = one(session, "free_bake", "redone")
+    assert not redone["is_baked"] and redone["wall_x"] == 6.0
+    solved(snaps(session, "free_bake", "redone, play"))
+
+
 def test_reset_cache_is_no_undo_step(session):
     """Reset Cache changes only the session's cache: Ctrl+Z after it undoes the action
     before it (the Mode change); frames played on from there are not cached and say so;
@@ -110,6 +149,20 @@ def test_collider_add_and_remove_undone_and_redone(session):
         assert s["level"] != "ERROR", s
     solved(snaps(session, "colliders", "remove undone, play"))
     solved(snaps(session, "colliders", "remove redone, play"))
+
+
+def test_remove_undone_brings_back_the_baked_setup(session):
+    """Remove FurCollide keeps the bake files; Ctrl+Z brings back the setup, its output
+    and its bake (it came back unbaked: the bake had pushed no undo step)."""
+    baked = one(session, "remove", "baked")
+    assert session["result"]["removed"] == {"is_setup": False, "output": False, "files": 8}
+    undone = one(session, "remove", "undone")
+    assert undone["is_setup"] and undone["output"] == "Fur FurCollide"
+    assert undone["is_baked"], "the bake was lost with the undo"
+    assert undone["files"] == baked["files"]
+    solved(snaps(session, "remove", "undone, play"))
+    assert session["result"]["remove_redone"] == {
+        "is_setup": False, "output": False, "source_hidden": False, "files": 8}
 
 
 def test_ctrl_z_during_playback(session):
