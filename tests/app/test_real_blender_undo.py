@@ -52,6 +52,13 @@ def test_session_ran_to_the_end_without_a_crash(session):
     assert r["ref_modes_differ"] and min(r["ref_moves"].values()) > 0.1, r["ref_moves"]
 
 
+def test_no_traceback_from_an_operator_a_handler_or_a_panel(session):
+    """Blender prints an exception raised in a modal operator, a handler, a timer or a
+    draw with its traceback (Ctrl+Z during the modal bake raised two)."""
+    assert session["result"]["draw_errors"] == []
+    assert "Traceback" not in session["log"], session["log"][-6000:]
+
+
 def test_bake_is_undone_alone_and_redone_its_files_untouched(session):
     """Bake is an undo step: Ctrl+Z takes back the bake only (not the Mode change made
     before it), its files stay on disk; Ctrl+Shift+Z bakes it again; Bake after another
@@ -178,6 +185,21 @@ def test_ctrl_z_during_playback(session):
     last = one(session, "playing", "stopped")
     assert last["mode"] == "bend" and last["frame"] == 8
     solved([last])
+
+
+def test_ctrl_z_during_the_modal_bake_stops_it(session):
+    """A real Ctrl+Z while the modal bake runs stops it (its finished frames kept, as
+    after Esc), then undoes. It used to raise in the modal operator (ReferenceError:
+    the undo had replaced the scene and the object it held) and leave the setup
+    'baking': never evaluated again, its output stale under an INFO status."""
+    baking = one(session, "baking", "baking")
+    assert baking["running"] and baking["baking"] and len(baking["files"]) >= 2
+    undone = one(session, "baking", "undone while baking")
+    assert not undone["running"] and not undone["baking"] and not undone["is_baked"]
+    assert undone["mode"] == "bend"
+    kept = session["result"]["baking_files"]
+    assert set(baking["files"]) <= set(kept)  # the finished frames are kept
+    solved(snaps(session, "baking", "after, play"))
 
 
 def test_an_edit_after_opening_a_file_over_a_pending_refresh_refreshes(session):
