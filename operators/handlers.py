@@ -17,7 +17,9 @@
   (:data:`registry.NOT_SAVED`): at once, and on every frame that is not cached until
   the start frame is solved again.
 * ``undo_pre`` / ``redo_pre``: a running modal bake stops first (its objects are about
-  to be replaced: :func:`ops_bake.stop_for_undo`).
+  to be replaced: :func:`ops_bake.stop_for_undo`). ``undo_post`` / ``redo_post``: the
+  current frame is evaluated again soon (the outputs hold the undo step's data, the
+  session's status and cache are from before it).
 """
 
 from __future__ import annotations
@@ -238,6 +240,20 @@ def on_undo_pre(*_args):
         print(f"FurCollide: could not stop the bake before the undo: {exc}", flush=True)
 
 
+@persistent
+def on_undo_post(*_args):
+    """After an undo or redo Blender's data is the undo step's: each output holds what
+    it showed when the step was taken (at the step's frame, or a frame held then),
+    while the session's status and playback cache are from before the undo. Evaluate
+    the current frame of every setup again soon (:func:`invalidation.schedule_refresh`):
+    a cached frame whose inputs hold is shown, anything else says why."""
+    try:
+        for ob in registry.setups(bpy.context.scene):
+            invalidation.schedule_refresh(ob.name)
+    except Exception as exc:  # noqa: BLE001 - a handler must never raise
+        print(f"FurCollide: could not refresh the setups after the undo: {exc}", flush=True)
+
+
 _HANDLERS = (
     ("frame_change_post", on_frame_change_post),
     ("depsgraph_update_post", on_depsgraph_update_post),
@@ -246,6 +262,8 @@ _HANDLERS = (
     ("save_post", on_save_post),
     ("undo_pre", on_undo_pre),
     ("redo_pre", on_undo_pre),
+    ("undo_post", on_undo_post),
+    ("redo_post", on_undo_post),
 )
 
 

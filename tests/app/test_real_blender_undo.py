@@ -59,6 +59,17 @@ def test_no_traceback_from_an_operator_a_handler_or_a_panel(session):
     assert "Traceback" not in session["log"], session["log"][-6000:]
 
 
+def test_no_frame_is_shown_as_current_unless_it_is(session):
+    """An INFO status (not outdated, in the frame range) says the output is the frame:
+    then it is, bit for bit, the frame played from the start in its mode (or the baked
+    frame). After an undo the output holds the undo step's data: it used to keep it
+    with the status of the frame shown before the undo."""
+    claims = [s for s in session["result"]["snaps"] if s.get("claims_current")]
+    assert len(claims) > 100
+    wrong = [s for s in claims if s["matches"] is False]
+    assert not wrong, wrong[:3]
+
+
 def test_bake_is_undone_alone_and_redone_its_files_untouched(session):
     """Bake is an undo step: Ctrl+Z takes back the bake only (not the Mode change made
     before it), its files stay on disk; Ctrl+Shift+Z bakes it again; Bake after another
@@ -200,6 +211,18 @@ def test_ctrl_z_during_the_modal_bake_stops_it(session):
     kept = session["result"]["baking_files"]
     assert set(baking["files"]) <= set(kept)  # the finished frames are kept
     solved(snaps(session, "baking", "after, play"))
+
+
+def test_undo_back_to_a_held_frame_shows_the_cached_frame(session):
+    """The undo step was taken while frame 5 held frame 1 (a jump ahead); every frame
+    was played since. Undo (back to frame 5) and redo show frame 5 from the playback
+    cache, not the held frame 1 the undo step's output data holds."""
+    jumped = one(session, "held", "jumped to 5")
+    assert jumped["level"] == "WARNING" and jumped["matches"] is False
+    for label in ("undone", "redone"):
+        s = one(session, "held", label)
+        assert s["frame"] == 5, s
+        solved([s])
 
 
 def test_an_edit_after_opening_a_file_over_a_pending_refresh_refreshes(session):

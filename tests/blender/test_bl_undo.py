@@ -49,5 +49,6 @@ def test_undo_pre_stops_a_running_bake_and_keeps_its_frames(fc, tmp_path):
 def test_undo_pre_without_a_bake_does_nothing(fc):
     hair, _box, _out = build_setup(fc, "")
     handlers().on_undo_pre(bpy.context.scene)
+    handlers().on_undo_post(bpy.context.scene)  # (headless: no refresh timer)
     bpy.context.scene.frame_set(1)
     assert fc.registry.status_for(hair) == ("INFO", "")
