@@ -21,7 +21,8 @@ panel would be. Undo and redo are ``ed.undo`` / ``ed.redo``, or a real Ctrl+Z ke
 3. one scenario per operator (Bake, Free Bake, Reset Cache, Fur Attach Bind, Fur
    Sampler, Bind Groom, Add / Remove Collider, Remove FurCollide, Ctrl+Z during
    playback, Ctrl+Z during the modal bake, undo back to a frame that showed a held
-   frame), each from ``base.blend`` opened again: do it, undo, redo, play frames;
+   frame, an edit after a file opened over a pending refresh), each from ``base.blend``
+   opened again: do it, undo, redo, play frames;
 4. after every step a *snap* of the setup (frame, settings, bake flags, files, status,
    and whether the output is the frame it claims to be: with an INFO status it must be
    bit for bit the reference frame of its mode, or the baked frame); ``result.json``.
