@@ -210,6 +210,11 @@ class BakeJob:
         self.errors = []
         self.frames_done = 0
         self.skipped = []
+        #: Why the bake was stopped from outside (:meth:`stop`: an undo), '' while not.
+        self.stopped = ""
+        #: The setups' runtimes (session objects, valid when Blender's data is not:
+        #: :meth:`finish` clears their ``baking`` flag through them).
+        self.runtimes = []
         for ob in sources:
             s = ob.furcollide
             if s.output is None:
@@ -251,7 +256,9 @@ class BakeJob:
                 s.bake_path = directory
             if nxt > s.frame_start and self.verbose:
                 print(f"FurCollide bake '{ob.name}': resuming after frame {nxt - 1}", flush=True)
-            registry.get_runtime(ob).baking = True
+            rt = registry.get_runtime(ob)
+            rt.baking = True
+            self.runtimes.append(rt)
 
     @property
     def total(self) -> int:
@@ -305,12 +312,14 @@ class BakeJob:
             raise
         return self.finish()
 
-    def finish(self, cancelled=False) -> list:
-        """Mark finished setups baked, restore the frame; returns the baked sources."""
+    def finish(self, cancelled=False, restore_frame=True) -> list:
+        """Mark finished setups baked, restore the frame (``restore_frame``); returns the
+        baked sources."""
+        for rt in self.runtimes:  # first, and without Blender's data: never left baking
+            rt.baking = False
         baked = []
         for ob, directory, _nxt, _last in self.jobs:
             rt = registry.get_runtime(ob)
-            rt.baking = False
             s = ob.furcollide
             have = set(framecache.list_frames(directory))
             complete = all(f in have for f in range(s.frame_start, s.frame_end + 1))
@@ -319,9 +328,19 @@ class BakeJob:
                 rt.memory.clear()
                 rt.hold = None
                 baked.append(ob)
-        f, sub = self.orig_frame
-        self.scene.frame_set(f, subframe=sub)
+        if restore_frame:
+            f, sub = self.orig_frame
+            self.scene.frame_set(f, subframe=sub)
         return baked
+
+    def stop(self, why: str) -> None:
+        """Stop the bake now, as Esc does (the finished frames are kept, nothing is
+        marked baked), because of ``why``; the frame is left as it is. An undo calls it
+        before it replaces Blender's data (:func:`ops_bake.stop_for_undo`): the frame
+        it goes back to is the undo step's."""
+        if not self.stopped:
+            self.stopped = why
+            self.finish(cancelled=True, restore_frame=False)
 
 
 def bake_sharers(ob) -> list:

@@ -475,7 +475,8 @@ def _show_baked(setup, inp, note):
         if frames:
             fe = frames[-1]
         else:
-            setup.set_status("ERROR", f"Bake files are missing in {directory}")
+            setup.set_status("ERROR", f"Bake files are missing in {directory} (undo does not "
+                             "bring back files Free Bake deleted): press Free Bake, then Bake")
             return Outcome.OUTDATED, None
     points, status, offsets, _state = framecache.read_frame(directory, fe)
     if not np.array_equal(offsets, inp.offsets):

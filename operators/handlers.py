@@ -16,6 +16,10 @@
   each setup had cached, and ``load_post`` has such a setup say that they are gone
   (:data:`registry.NOT_SAVED`): at once, and on every frame that is not cached until
   the start frame is solved again.
+* ``undo_pre`` / ``redo_pre``: a running modal bake stops first (its objects are about
+  to be replaced: :func:`ops_bake.stop_for_undo`). ``undo_post`` / ``redo_post``: the
+  current frame is evaluated again soon (the outputs hold the undo step's data, the
+  session's status and cache are from before it).
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import os
 import bpy
 from bpy.app.handlers import persistent
 
-from . import bridge, frame_rules, invalidation, registry
+from . import bridge, frame_rules, invalidation, ops_bake, registry
 from .colliders import collider_objects
 from .dependencies import dependencies_stale, update_dependencies
 from .setup import Setup, signature, signature_change
@@ -226,12 +230,40 @@ def on_save_post(filepath="", *_args):
         _save_remap.clear()
 
 
+@persistent
+def on_undo_pre(*_args):
+    """An undo or redo is about to replace Blender's data: stop the running modal
+    bakes while their objects are valid (:func:`ops_bake.stop_for_undo`)."""
+    try:
+        ops_bake.stop_for_undo()
+    except Exception as exc:  # noqa: BLE001 - a handler must never raise
+        print(f"FurCollide: could not stop the bake before the undo: {exc}", flush=True)
+
+
+@persistent
+def on_undo_post(*_args):
+    """After an undo or redo Blender's data is the undo step's: each output holds what
+    it showed when the step was taken (at the step's frame, or a frame held then),
+    while the session's status and playback cache are from before the undo. Evaluate
+    the current frame of every setup again soon (:func:`invalidation.schedule_refresh`):
+    a cached frame whose inputs hold is shown, anything else says why."""
+    try:
+        for ob in registry.setups(bpy.context.scene):
+            invalidation.schedule_refresh(ob.name)
+    except Exception as exc:  # noqa: BLE001 - a handler must never raise
+        print(f"FurCollide: could not refresh the setups after the undo: {exc}", flush=True)
+
+
 _HANDLERS = (
     ("frame_change_post", on_frame_change_post),
     ("depsgraph_update_post", on_depsgraph_update_post),
     ("load_post", on_load_post),
     ("save_pre", on_save_pre),
     ("save_post", on_save_post),
+    ("undo_pre", on_undo_pre),
+    ("redo_pre", on_undo_pre),
+    ("undo_post", on_undo_post),
+    ("redo_post", on_undo_post),
 )
 
 

@@ -100,8 +100,13 @@ _pending_refresh: dict = {}  # object name -> timer function
 
 def schedule_refresh(name: str) -> None:
     """Re-evaluate the current frame soon (UI only: timers need an event loop)."""
-    if bpy.app.background or name in _pending_refresh:
+    if bpy.app.background:
         return
+    pending = _pending_refresh.get(name)
+    if pending is not None and bpy.app.timers.is_registered(pending):
+        return
+    # (Opening a file removes the timers registered before: one pending then never
+    # runs, and must not keep this object from being refreshed for the session.)
 
     def refresh():
         if registry.busy():

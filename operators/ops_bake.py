@@ -23,6 +23,22 @@ from .ops_common import (
 
 #: Running interactive bakes: scene name -> (frames done, total). Drawn by the panel.
 PROGRESS: dict = {}
+#: The jobs of the running interactive bakes (:func:`stop_for_undo` stops them).
+RUNNING: set = set()
+#: Why a bake stopped by an undo says so.
+STOPPED_BY_UNDO = "Undo stopped the bake"
+
+
+def stop_for_undo() -> None:
+    """Undo or redo is about to replace Blender's data: stop every running modal bake
+    now, while its objects are still valid, as Blender stops its own jobs (the finished
+    frames are kept, as after Esc). The operator ends on its next event
+    (:meth:`_BakeBase.modal`). Left running, its next step met the replaced objects
+    (ReferenceError) and the setup stayed 'baking': never evaluated again."""
+    for job in list(RUNNING):
+        RUNNING.discard(job)
+        job.stop(STOPPED_BY_UNDO)
+        PROGRESS.pop(job.scene.name, None)  # (the panel drawn after the undo)
 
 
 def _bakeable(context):
@@ -81,10 +97,16 @@ class _BakeBase:
         self._timer = wm.event_timer_add(0.0, window=context.window)
         wm.modal_handler_add(self)
         wm.progress_begin(0, max(1, self._job.total))
+        RUNNING.add(self._job)
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
         job = self._job
+        if job.stopped:  # by an undo: its objects may be gone, touch none of them
+            self._end(context, cancelled=True)
+            self.report({"WARNING"}, f"FurCollide: {job.stopped} at frame {job.frame}: "
+                        "finished frames kept")
+            return {"CANCELLED"}
         if event.type == "ESC":
             self._end(context, cancelled=True)
             self.report({"WARNING"}, f"Bake cancelled at frame {job.frame}: finished frames kept")
@@ -119,8 +141,11 @@ class _BakeBase:
             self._timer = None
         wm.progress_end()
         PROGRESS.pop(context.scene.name, None)
+        RUNNING.discard(self._job)
         if context.workspace is not None:
             context.workspace.status_text_set(None)
+        if self._job.stopped:  # finished already, before the undo
+            return []
         return self._job.finish(cancelled=cancelled)
 
 
@@ -130,7 +155,7 @@ class FURCOLLIDE_OT_bake(_BakeBase, SetupOperator, Operator):
 
     bl_idname = "furcollide.bake"
     bl_label = "Bake"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def refusal(cls, context, src):
@@ -149,7 +174,7 @@ class FURCOLLIDE_OT_bake_all(_BakeBase, Operator):
 
     bl_idname = "furcollide.bake_all"
     bl_label = "Bake All"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def poll(cls, context):
@@ -173,7 +198,7 @@ class FURCOLLIDE_OT_free_bake(SetupOperator, Operator):
 
     bl_idname = "furcollide.free_bake"
     bl_label = "Free Bake"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def refusal(cls, context, src):
@@ -195,7 +220,7 @@ class FURCOLLIDE_OT_free_bake_all(Operator):
 
     bl_idname = "furcollide.free_bake_all"
     bl_label = "Free All Bakes"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def poll(cls, context):
