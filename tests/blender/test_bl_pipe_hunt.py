@@ -142,15 +142,26 @@ def check_pipeline_frame(guides, groom, box, colliders=None, what="", guides_cle
                                err_msg=what)
 
 
+def distance_attribute(ob):
+    """The output's ``furcollide_collider_distance`` (P,) float32, or None."""
+    a = ob.data.attributes.get("furcollide_collider_distance")
+    if a is None:
+        return None
+    d = np.empty(len(a.data), np.float32)
+    a.data.foreach_get("value", d)
+    return d
+
+
 def frame_state(guides):
     s = guides.furcollide
     return (world(s.output).copy(), status_of(s.output).copy(),
-            world(s.groom.output).copy(), status_of(s.groom.output).copy())
+            world(s.groom.output).copy(), status_of(s.groom.output).copy(),
+            distance_attribute(s.output))
 
 
 def same_state(a, b, what=""):
-    for x, y, name in zip(a, b, ("guides", "guide status", "groom", "groom status"),
-                          strict=True):
+    for x, y, name in zip(a, b, ("guides", "guide status", "groom", "groom status",
+                                 "collider distance"), strict=True):
         np.testing.assert_array_equal(x, y, err_msg=f"{what} {name}")
 
 
@@ -296,3 +307,211 @@ def test_a_collider_switched_off_and_on_mid_shot(fc, kind):
     again = play_record(guides, groom, box, colliders=both)
     for f in FRAMES:
         same_state(again[f], first[f], f"{kind} on again, replayed: frame {f}")
+
+
+# ------------------------------------------------------------------ files
+def test_saved_and_reopened_mid_playback(fc, tmp_path):
+    """Saved at frame 3 of a played shot, reopened: the held frames say so and the
+    groom still holds every promise; played from the start frame, the first session's
+    frames bit for bit."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    first = play_record(guides, groom, box)
+    scene.frame_set(3)
+    path = save_in(tmp_path)
+    reopen(path)
+    scene = bpy.context.scene
+    guides, groom, box = (bpy.data.objects[n] for n in ("Guides", "Groom", "Box"))
+    assert scene.frame_current == 3
+    same_state(frame_state(guides), first[3], "reopened at frame 3")
+    for f in (3, 4, 5, 6):
+        scene.frame_set(f)
+        check_pipeline_frame(guides, groom, box, what=f"reopened, frame {f}")
+    again = play_record(guides, groom, box)
+    assert guides.furcollide.status_message == ""
+    for f in FRAMES:
+        same_state(again[f], first[f], f"reopened, replayed: frame {f}")
+
+
+# ------------------------------------------------------------------- bake
+GROOM_CHANGES = [
+    ("groom", "use_clearance", False),
+    ("", "collision_offset", 0.05),
+    ("motion", "wind_strength", 0.6),
+    ("groom", "guides", 2),
+]
+
+
+@pytest.mark.parametrize("part,name,value", GROOM_CHANGES, ids=[c[1] for c in GROOM_CHANGES])
+def test_baked_with_the_render_groom_then_a_setting_changed(fc, tmp_path, part, name, value):
+    """A setting changed after baking with the render groom: outdated at once and on
+    every frame (never a stale frame shown as current); set back, the bake again."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    s = guides.furcollide
+    save_in(tmp_path)
+    played = play_record(guides, groom, box)
+    activate(guides)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert s.groom.is_baked_with
+    baked = play_record(guides, groom, box)
+    for f in FRAMES:
+        same_state(baked[f], played[f], f"baked vs played frame {f}")
+    data = getattr(s, part) if part else s
+    before = getattr(data, name)
+    setattr(data, name, value)
+    for f in (4, 2, 6):
+        scene.frame_set(f)
+        assert s.is_outdated or name == "guides", (name, f)  # (the bound groom: a note)
+        assert s.status_message != "", (name, f)
+        assert "baked with other settings" in s.status_message or "Bind Groom" in (
+            s.status_message), s.status_message
+    setattr(data, name, before)
+    for f in FRAMES:
+        scene.frame_set(f)
+        assert not s.is_outdated and s.status_message == "", (f, s.status_message)
+        same_state(frame_state(guides), baked[f], f"set back, frame {f}")
+
+
+# ------------------------------------------------------------------ render
+@pytest.mark.parametrize("baked", [False, True], ids=["played", "baked"])
+def test_f12_with_motion_blur_of_a_pipeline_frame(fc, tmp_path, baked):
+    """F12 (one frame, motion blur on) in the middle of a played (or baked) pipeline
+    shot: the viewport shows the same frame bit for bit afterwards, nothing is said,
+    and the cache still gives every frame."""
+    from helpers import render_camera
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    s = guides.furcollide
+    save_in(tmp_path)
+    first = play_record(guides, groom, box)
+    if baked:
+        activate(guides)
+        assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    render_camera(scene)
+    scene.render.use_motion_blur = True
+    scene.render.filepath = str(tmp_path / "f12")
+    scene.frame_set(4)
+    assert bpy.ops.render.render(write_still=False) == {"FINISHED"}
+    assert s.status_message == "", s.status_message
+    same_state(frame_state(guides), first[4], "after F12")
+    for f in (6, 2, 5):
+        scene.frame_set(f)
+        same_state(frame_state(guides), first[f], f"after F12, frame {f}")
+        assert s.status_message == "", s.status_message
+
+
+# ------------------------------------------------------ the render groom's source
+def _set_groom_points(groom, edit):
+    P = positions(groom).copy()
+    edit(P, offsets_of(groom))
+    groom.data.position_data.foreach_set("vector", P.ravel())
+    groom.data.update_tag()
+
+
+@pytest.mark.parametrize("bad", ["nan", "zero_length"])
+def test_a_bad_curve_in_the_groom_after_bind(fc, bad):
+    """One render curve of the groom goes bad after Bind Groom (a NaN, a zero-length
+    segment): the status says the groom was edited, the output keeps following the
+    guides with the bound curves: no NaN out, every promise held."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    play_record(guides, groom, box, range(1, 4))
+
+    def edit(P, offs):
+        if bad == "nan":
+            P[offs[7] + 2] = np.nan
+        else:
+            P[offs[7] + 2] = P[offs[7] + 1]
+
+    _set_groom_points(groom, edit)
+    for f in range(3, 7):
+        scene.frame_set(f)
+        level, msg = fc.registry.status_for(guides)
+        assert level == "WARNING" and "'Groom' was edited since Bind Groom" in msg, msg
+        assert np.isfinite(world(gout)).all()
+        # (the bound curves are the reference: the lengths are the bound ones)
+        assert len(crossing_unmarked(gout, [box])) == 0, f
+        assert len(roots_off_surface(gout, guides.data.surface)) == 0, f
+
+
+@pytest.mark.parametrize("bad", ["nan", "zero_length"])
+def test_a_bad_curve_at_bind_follows_the_skin(fc, bad):
+    """A render curve that cannot be solved at Bind Groom is set aside (INVALID, yellow)
+    and moves with its Surface triangle: its root stays on the moving skin, no NaN
+    out, and the other curves hold every promise."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+
+    def edit(P, offs):
+        if bad == "nan":
+            P[offs[7] + 2] = np.nan
+        else:
+            P[offs[7] + 2] = P[offs[7] + 1]
+
+    _set_groom_points(groom, edit)
+    surf = guides.data.surface
+    surf.location = (0, 0, 0)
+    surf.keyframe_insert("location", frame=1)
+    surf.location = (0.1, 0.0, 0.05)
+    surf.keyframe_insert("location", frame=6)
+    scene.frame_set(1)
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    for f in FRAMES:
+        scene.frame_set(f)
+        st = status_of(gout)
+        assert np.flatnonzero(st == INVALID).tolist() == [7], f
+        P = world(gout)
+        offs = offsets_of(gout)
+        good = np.ones(len(P), bool)
+        good[offs[7]:offs[8]] = False
+        assert np.isfinite(P[good]).all()
+        assert len(crossing_unmarked(gout, [box])) == 0, f
+        assert len(roots_off_surface(gout, surf)) == 0, f
+
+
+def _delete_curves_modifier(ob, below):
+    """A Geometry Nodes modifier deleting the curves of index < ``below``."""
+    ng = bpy.data.node_groups.new("Cull", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi = ng.nodes.new("NodeGroupInput")
+    go = ng.nodes.new("NodeGroupOutput")
+    dl = ng.nodes.new("GeometryNodeDeleteGeometry")
+    dl.domain = "CURVE"
+    idx = ng.nodes.new("GeometryNodeInputIndex")
+    cmp = ng.nodes.new("FunctionNodeCompare")
+    cmp.data_type, cmp.operation = "INT", "LESS_THAN"
+    ng.links.new(idx.outputs[0], cmp.inputs[2])
+    cmp.inputs[3].default_value = below
+    ng.links.new(cmp.outputs[0], dl.inputs["Selection"])
+    ng.links.new(gi.outputs[0], dl.inputs["Geometry"])
+    ng.links.new(dl.outputs[0], go.inputs[0])
+    mod = ob.modifiers.new("Cull", "NODES")
+    mod.node_group = ng
+    return mod
+
+
+def test_groom_with_fewer_curves_than_bound_from_a_modifier(fc):
+    """A modifier on the render groom gives fewer curves than when bound (mid-shot):
+    the status names the counts and what to press; the output keeps the bound curves,
+    following the guides; the modifier off again, nothing is said."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    first = play_record(guides, groom, box)
+    scene.frame_set(3)
+    mod = _delete_curves_modifier(groom, 10)
+    for f in range(3, 7):
+        scene.frame_set(f)
+        level, msg = fc.registry.status_for(guides)
+        assert level == "WARNING" and "'Groom' now gives 134 curves" in msg, msg
+        assert "press Bind Groom again" in msg
+        same_state(frame_state(guides), first[f], f"bound curves shown, frame {f}")
+    mod.show_viewport = False
+    scene.frame_set(5)
+    scene.frame_set(6)
+    assert fc.registry.status_for(guides) == ("INFO", "")
+    same_state(frame_state(guides), first[6], "modifier off")
