@@ -124,8 +124,7 @@ class Plan:
         self.K = np.where(
             self.moving, np.maximum(np.ceil((th0 - th1) / p - 1e-9), 1), 0
         ).astype(np.int64)
-        # collision grid th0 + k p, k in [1, kmax]
-        self.kmax = np.maximum(np.ceil((ctx.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
+        self.kmax = collision_steps(ctx, th0)  # collision grid th0 + k p, k in [1, kmax]
         # per curve: regime (0 unknown, 1 collision, 2 recovery) and bracket
         self.regime = np.zeros(n, np.int8)
         self.lo = np.full(n, -1, np.int64)
@@ -202,7 +201,7 @@ class Plan:
         ko = np.where(self.moving[io], 0, self.K[io])  # as the full search
         kc2 = kc - 1  # (probed only where kc > 1: step 0 is th0 itself)
         two = kc > 1
-        kr1 = kr >= 1
+        kr1 = kr >= 2  # (step kr - 1 = 0, the recovery step, is probed for all of mv below)
         # The recovery step too, where it moves: clear there, a curve
         # recovers to it, as in the full search (whatever the rest says).
         mv = np.concatenate([ic, ir])
@@ -473,6 +472,12 @@ def recover(ctx, rec, th0, th1, blocked, status):
     status[rec] = np.maximum(status[rec], st)
 
 
+def collision_steps(ctx, th0):
+    """(n,) int64: the last step ``k`` of the collision grid ``th0 + k p`` of curves at
+    angles ``th0`` (n,), the one that reaches Max Angle (0 for a curve already there)."""
+    return np.maximum(np.ceil((ctx.max_angle - th0) / ctx.prec - 1e-9), 0).astype(np.int64)
+
+
 def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None, guess=None):
     """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
 
@@ -500,7 +505,7 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
     """
     p = ctx.prec
     n = len(items)
-    kmax = np.maximum(np.ceil((ctx.max_angle - th0) / p - 1e-9), 0).astype(np.int64)
+    kmax = collision_steps(ctx, th0)
     base, cap = th0, np.full(n, ctx.max_angle)
     lo = lo.copy()
     hi = hi.copy()

@@ -163,6 +163,20 @@ def test_a_held_contact_is_confirmed_in_one_round():
     np.testing.assert_array_equal(probes, 3)
 
 
+@pytest.mark.parametrize("clear_step", [0, 1])
+def test_a_contact_that_gave_way_to_one_step_above_its_recovery_step(clear_step):
+    """A contact predicted one step above its recovery step (it gave way almost all of
+    the recovery last step): the prediction and the recovery step, each probed once
+    (the step below the prediction is the recovery step: not probed twice)."""
+    n = 5
+    th0 = np.full(n, 0.6)
+    th1 = th0 - 10 * P
+    plan, k, probes = _warm(th0, th1, np.full(n, -9 * P), th1 + clear_step * P)
+    np.testing.assert_array_equal(plan.regime, 2)
+    np.testing.assert_allclose(plan.recovered_angle(np.arange(n)), th1 + clear_step * P)
+    np.testing.assert_array_equal(probes, 2)
+
+
 def test_a_contact_pushed_further_starts_from_the_tangent_plane_estimate(monkeypatch):
     """A curve in contact whose shape the collider moved into (nothing known above
     its angle) starts its search from the tangent-plane estimate at its first hit
