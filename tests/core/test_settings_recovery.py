@@ -272,3 +272,23 @@ def test_soft_lands_on_its_plastic_target():
     np.testing.assert_allclose(ratio[2:], 1 - rate, rtol=0.05)
     assert moves[landed - 1] >= 0.9 * (1 - rate) * moves[landed - 2]
     assert not np.array_equal(prev, pts)  # the imprint: not back at the input
+
+
+def test_half_a_step_from_rest_is_kept_below_it_lands_on_rest():
+    """Recovery lands on exactly zero *below* half a Rotation Precision step
+    (``tol.SNAP_FRACTION``): a curve turned one step recovers at Recovery Rate 0.5 to
+    exactly half a step (still RECOVERING), then to zero (FREE)."""
+
+    V, F = scenes.uv_sphere((0.0, 0.0, 0.0), 1.0, 32, 16)
+    pts, offs = scenes.pack([scenes.straight_curve([0, 0, 0], [0, 0, 1], 1.0, 8)], np.float32)
+    p = np.deg2rad(1.0)
+    s = Solver(offs, Settings(mode="stiff", recovery_rate=0.5, rotation_precision=1.0))
+    col = Collider(V.astype(np.float32), F, matrix=scenes.affine(t=(0.2, 0.0, 1.0), s=0.2))
+    s.step(pts, [col])
+    assert s.state["angle"][0] == p  # one step
+    col.matrix = scenes.affine(t=(5.0, 0.0, 1.0), s=0.2)  # gone
+    res = s.step(pts, [col])
+    assert s.state["angle"][0] == 0.5 * p and res.status[0] == Status.RECOVERING
+    res = s.step(pts, [col])
+    assert s.state["angle"][0] == 0.0 and res.status[0] == Status.FREE
+    np.testing.assert_array_equal(res.points, pts)
