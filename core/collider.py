@@ -337,7 +337,8 @@ class Collider:
         Returns the cached value when it was made for ``key`` (hashable, e.g.
         ``(col.version, ...)``), else ``build()``, which is kept. For callers
         that index a collider their own way (distance fields, closest-point
-        structures) without reaching into its attributes.
+        structures) without reaching into its attributes; the collider's own
+        per-shape caches use it too, under names starting with ``_``.
         """
         hit = self._derived.get(name)
         if hit is not None and hit[0] == key:
