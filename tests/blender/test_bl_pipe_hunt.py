@@ -82,6 +82,12 @@ def pipeline_scene(fc, skin="move"):
         pb.rotation_euler = (0.15, 0, 0.3)
         pb.keyframe_insert("rotation_euler", frame=6)
     scene.frame_set(1)
+    return _wind_and_bind(guides, groom, box, out)
+
+
+def _wind_and_bind(guides, groom, box, out):
+    """Wind and the collider distance on, Fur Attach and the groom bound: the shot's
+    (guides, groom, box, output, groom output)."""
     s = guides.furcollide
     m = s.motion
     m.use_wind, m.wind_strength, m.wind_turbulence = True, 0.3, 1.0
@@ -478,8 +484,11 @@ def _delete_curves_modifier(ob, below):
     idx = ng.nodes.new("GeometryNodeInputIndex")
     cmp = ng.nodes.new("FunctionNodeCompare")
     cmp.data_type, cmp.operation = "INT", "LESS_THAN"
-    ng.links.new(idx.outputs[0], cmp.inputs[2])
-    cmp.inputs[3].default_value = below
+    # (by type: the node's socket list differs across Blender versions; 5.1+ builds it
+    # for the data type)
+    a, b = [sock for sock in cmp.inputs if sock.type == "INT"][:2]
+    ng.links.new(idx.outputs[0], a)
+    b.default_value = below
     ng.links.new(cmp.outputs[0], dl.inputs["Selection"])
     ng.links.new(gi.outputs[0], dl.inputs["Geometry"])
     ng.links.new(dl.outputs[0], go.inputs[0])
@@ -628,13 +637,7 @@ def sampler_pipeline(fc, turned=True):
     s = guides.furcollide
     s.frame_end = 6
     s.groom.groom = groom
-    m = s.motion
-    m.use_wind, m.wind_strength, m.wind_turbulence = True, 0.3, 1.0
-    m.write_collider_distance, m.distance_max = True, 0.3
-    activate(guides)
-    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
-    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
-    return guides, groom, box, out, s.groom.output
+    return _wind_and_bind(guides, groom, box, out)
 
 
 @pytest.mark.parametrize("turned", [False, True], ids=["identity", "turned"])

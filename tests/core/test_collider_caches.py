@@ -47,9 +47,8 @@ def test_the_grids_are_built_once_per_shape(monkeypatch):
     assert calls == {"occupancy": 2, "cells": 2}, calls
 
 
-def test_face_normals_are_tabled_once_a_quarter_of_the_faces_was_asked(monkeypatch):
-    """Hit normals are computed on demand; once the normals asked for one shape add
-    up to a quarter of its faces, all of them are computed once and looked up."""
+def _sphere_counting_normals(monkeypatch):
+    """A UV sphere collider, and the sizes of the normal batches it computes."""
     sizes = []
     of = Collider._face_normals_of
 
@@ -59,7 +58,13 @@ def test_face_normals_are_tabled_once_a_quarter_of_the_faces_was_asked(monkeypat
 
     monkeypatch.setattr(Collider, "_face_normals_of", counted)
     V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 0.5, 32, 16)
-    col = Collider(V, F)
+    return Collider(V, F), sizes
+
+
+def test_face_normals_are_tabled_once_a_quarter_of_the_faces_was_asked(monkeypatch):
+    """Hit normals are computed on demand; once the normals asked for one shape add
+    up to a quarter of its faces, all of them are computed once and looked up."""
+    col, sizes = _sphere_counting_normals(monkeypatch)
     m = len(col.faces)
     rng = np.random.default_rng(6)
     asked = 0
@@ -100,16 +105,7 @@ def test_the_corner_order_is_sorted_once_per_topology(monkeypatch):
 def test_face_normals_are_tabled_at_exactly_a_quarter_of_the_faces(monkeypatch):
     """The table is made as soon as the normals asked add up to a quarter of the
     faces (not one query later)."""
-    sizes = []
-    of = Collider._face_normals_of
-
-    def counted(self, prim):
-        sizes.append(len(prim))
-        return of(self, prim)
-
-    monkeypatch.setattr(Collider, "_face_normals_of", counted)
-    V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 0.5, 32, 16)
-    col = Collider(V, F)
+    col, sizes = _sphere_counting_normals(monkeypatch)
     m = len(col.faces)
     assert m % 4 == 0
     o = np.random.default_rng(7).normal(size=(m // 4, 3))
