@@ -42,7 +42,8 @@ def run_session(work: Path, driver: str, timeout: int, env_vars: str = "") -> di
     except pkg.PackageError as err:
         pytest.fail(f"packaging the cp313 zip failed: {err}")
     zip_path = Path(res["zip"])
-    shutil.copy2(Path(__file__).with_name(driver), work / driver)
+    for name in (driver, "driver_session.py"):  # the driver and what it imports
+        shutil.copy2(Path(__file__).with_name(name), work / name)
     inner = (
         "cd /work && blender -b --factory-startup --python-expr "
         "'import bpy; bpy.ops.wm.save_as_mainfile(filepath=\"/work/start.blend\")' >/dev/null"

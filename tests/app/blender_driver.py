@@ -35,13 +35,15 @@ import os
 import subprocess
 import sys
 import time
-import traceback
 
 import bmesh
 import bpy
 import numpy as np
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from driver_session import override, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -77,20 +79,6 @@ def shot(name):
     proc = subprocess.run(["import", "-window", "root", path], capture_output=True, text=True)
     result.setdefault("screenshots", []).append(path if proc.returncode == 0 else proc.stderr)
     save_result()
-
-
-def ui():
-    """(window, 3D view area, its WINDOW region, its sidebar region)."""
-    win = bpy.context.window_manager.windows[0]
-    area = max((a for a in win.screen.areas if a.type == "VIEW_3D"), key=lambda a: a.width)
-    region = next(r for r in area.regions if r.type == "WINDOW")
-    side = next(r for r in area.regions if r.type == "UI")
-    return win, area, region, side
-
-
-def override():
-    win, area, region, _ = ui()
-    return bpy.context.temp_override(window=win, screen=win.screen, area=area, region=region)
 
 
 # ----------------------------------------------------------------- scene
@@ -399,26 +387,6 @@ def _positions(ob):
     return P.reshape(-1, 3)
 
 
-_GEN = run()
-
-
-def tick():
-    try:
-        return next(_GEN)
-    except StopIteration:
-        result["finished"] = True
-    except Exception:
-        result["errors"].append(traceback.format_exc())
-        log(result["errors"][-1])
-    save_result()
-    bpy.app.timers.register(_quit, first_interval=0.5)
-    return None
-
-
-def _quit():
-    bpy.ops.wm.quit_blender()
-
-
 log(f"Blender {bpy.app.version_string}, Python {sys.version.split()[0]}, numpy {np.__version__}")
 save_result()
-bpy.app.timers.register(tick, first_interval=1.0)
+start(run(), result, save_result, log)

@@ -33,6 +33,9 @@ import traceback
 import bpy
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from driver_session import override, start, ui  # noqa: E402
+
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 ZIP, WORK = ARGS[0], ARGS[1]
@@ -63,19 +66,6 @@ def shot(name):
     os.makedirs(OUT, exist_ok=True)
     subprocess.run(["import", "-window", "root", os.path.join(OUT, name + ".png")],
                    capture_output=True)
-
-
-def ui():
-    win = bpy.context.window_manager.windows[0]
-    area = max((a for a in win.screen.areas if a.type == "VIEW_3D"), key=lambda a: a.width)
-    region = next(r for r in area.regions if r.type == "WINDOW")
-    side = next(r for r in area.regions if r.type == "UI")
-    return win, area, region, side
-
-
-def override():
-    win, area, region, _ = ui()
-    return bpy.context.temp_override(window=win, screen=win.screen, area=area, region=region)
 
 
 def redraw():
@@ -337,26 +327,6 @@ def run():
     step("done")
 
 
-_GEN = run()
-
-
-def tick():
-    try:
-        return next(_GEN)
-    except StopIteration:
-        result["finished"] = True
-    except Exception:
-        result["errors"].append(traceback.format_exc())
-        log(result["errors"][-1])
-    save_result()
-    bpy.app.timers.register(_quit, first_interval=0.5)
-    return None
-
-
-def _quit():
-    bpy.ops.wm.quit_blender()
-
-
 log(f"Blender {bpy.app.version_string}, Python {sys.version.split()[0]}")
 save_result()
-bpy.app.timers.register(tick, first_interval=1.0)
+start(run(), result, save_result, log)
