@@ -27,6 +27,49 @@ def override():
     return bpy.context.temp_override(window=win, screen=win.screen, area=area, region=region)
 
 
+def instrument_ui(classes, key, errors, calls=None):
+    """Re-register the add-on's UI ``classes`` with their panels open and every drawing
+    method wrapped: ``key(cls, method name)`` names each call; an exception raised while
+    drawing is appended to ``errors`` as ``"key: traceback"`` and raised again; ``calls``
+    (a dict), if given, counts the calls per key."""
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
+    for cls in classes:
+        if issubclass(cls, bpy.types.Panel):
+            cls.bl_options = set(getattr(cls, "bl_options", set())) - {"DEFAULT_CLOSED"}
+        for name in ("draw", "draw_header", "draw_header_preset", "draw_item"):
+            _wrap(cls, name, key, errors, calls)
+        bpy.utils.register_class(cls)
+
+
+def _wrap(cls, name, key, errors, calls):
+    fn = cls.__dict__.get(name)
+    if fn is None or getattr(fn, "_wrapped", False):
+        return
+
+    def call(self, *args):
+        k = key(cls, name)
+        if calls is not None:
+            calls[k] = calls.get(k, 0) + 1
+        try:
+            return fn(self, *args)
+        except Exception:
+            errors.append(f"{k}: {traceback.format_exc()}")
+            raise
+
+    # Blender checks a drawing method's argument count: keep the original's
+    if name == "draw_item":
+        def wrapped(self, context, layout, data, item, icon, active_data, active_propname,
+                    index):
+            return call(self, context, layout, data, item, icon, active_data, active_propname,
+                        index)
+    else:
+        def wrapped(self, context):
+            return call(self, context)
+    wrapped._wrapped = True
+    setattr(cls, name, wrapped)
+
+
 def start(gen, result, save_result, log, persistent=False):
     """Drive the generator ``gen`` from a timer until it ends or raises (the traceback
     is kept in ``result["errors"]``), then save ``result`` and quit Blender.

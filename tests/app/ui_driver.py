@@ -28,12 +28,12 @@ import json
 import os
 import subprocess
 import sys
-import traceback
 
 import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from driver_session import instrument_ui as instrument  # noqa: E402
 from driver_session import override, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
@@ -75,45 +75,11 @@ def redraw():
 
 
 # ------------------------------------------------------------- counting draws
-def _wrap(cls, name):
-    fn = cls.__dict__.get(name)
-    if fn is None or getattr(fn, "_counted", False):
-        return
-
-    def call(self, *args):
-        key = f"{_state['name']}|{cls.__name__}.{name}"
-        result["draws"][key] = result["draws"].get(key, 0) + 1
-        try:
-            return fn(self, *args)
-        except Exception:
-            result["draw_errors"].append(f"{key}: {traceback.format_exc()}")
-            raise
-
-    # Blender checks a drawing method's argument count: keep the original's
-    if name == "draw_item":
-        def counted(self, context, layout, data, item, icon, active_data, active_propname,
-                    index):
-            return call(self, context, layout, data, item, icon, active_data, active_propname,
-                        index)
-    else:
-        def counted(self, context):
-            return call(self, context)
-    counted._counted = True
-    setattr(cls, name, counted)
-
-
 def instrument_ui():
     """Re-register the add-on's UI classes open, with counted drawing methods."""
-    ui_mod = sys.modules[ADDON + ".ui"]
-    classes = list(ui_mod.classes)
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
-    for cls in classes:
-        if issubclass(cls, bpy.types.Panel):
-            cls.bl_options = set(getattr(cls, "bl_options", set())) - {"DEFAULT_CLOSED"}
-        for name in ("draw", "draw_header", "draw_header_preset", "draw_item"):
-            _wrap(cls, name)
-        bpy.utils.register_class(cls)
+    classes = list(sys.modules[ADDON + ".ui"].classes)
+    instrument(classes, lambda cls, name: f"{_state['name']}|{cls.__name__}.{name}",
+               result["draw_errors"], result["draws"])
     return [c.__name__ for c in classes]
 
 

@@ -44,6 +44,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from driver_session import instrument_ui as instrument  # noqa: E402
 from driver_session import override, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
@@ -78,43 +79,11 @@ def show_sidebar():
 
 
 # ------------------------------------------------------------- drawing errors
-def _wrap(cls, name):
-    fn = cls.__dict__.get(name)
-    if fn is None or getattr(fn, "_kept", False):
-        return
-
-    def call(self, *args):
-        try:
-            return fn(self, *args)
-        except Exception:
-            result["draw_errors"].append(
-                f"{M['scenario']}: {cls.__name__}.{name}: {traceback.format_exc()}")
-            raise
-
-    # Blender checks a drawing method's argument count: keep the original's
-    if name == "draw_item":
-        def kept(self, context, layout, data, item, icon, active_data, active_propname,
-                 index):
-            return call(self, context, layout, data, item, icon, active_data, active_propname,
-                        index)
-    else:
-        def kept(self, context):
-            return call(self, context)
-    kept._kept = True
-    setattr(cls, name, kept)
-
-
 def instrument_ui():
     """Re-register the add-on's UI classes open, their drawing errors kept."""
-    classes = list(sys.modules[ADDON + ".ui"].classes)
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
-    for cls in classes:
-        if issubclass(cls, bpy.types.Panel):
-            cls.bl_options = set(getattr(cls, "bl_options", set())) - {"DEFAULT_CLOSED"}
-        for name in ("draw", "draw_header", "draw_header_preset", "draw_item"):
-            _wrap(cls, name)
-        bpy.utils.register_class(cls)
+    instrument(list(sys.modules[ADDON + ".ui"].classes),
+               lambda cls, name: f"{M['scenario']}: {cls.__name__}.{name}",
+               result["draw_errors"])
 
 
 # ----------------------------------------------------------------- the scene
