@@ -43,7 +43,7 @@ from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import override, start, ui  # noqa: E402
+from driver_session import override, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -136,14 +136,6 @@ def build_scene():
     scene.collection.objects.link(fur)
     tris = sum(len(p.vertices) - 2 for p in ball.data.polygons)
     return fur, ball, blob, P, tris
-
-
-def select(active, *others):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    for o in (active, *others):
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = active
 
 
 # ----------------------------------------------------------------- oracle

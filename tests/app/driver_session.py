@@ -27,6 +27,15 @@ def override():
     return bpy.context.temp_override(window=win, screen=win.screen, area=area, region=region)
 
 
+def select(active, *others):
+    """Select ``active`` and ``others`` only, ``active`` the active object."""
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    for o in (active, *others):
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = active
+
+
 def instrument_ui(classes, key, errors, calls=None):
     """Re-register the add-on's UI ``classes`` with their panels open and every drawing
     method wrapped: ``key(cls, method name)`` names each call; an exception raised while

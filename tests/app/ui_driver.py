@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from driver_session import instrument_ui as instrument  # noqa: E402
-from driver_session import override, start, ui  # noqa: E402
+from driver_session import override, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -106,14 +106,6 @@ def box(name, x0, x1, frames=(1, 8)):
     ob.location.x = x1
     ob.keyframe_insert("location", frame=frames[1])
     return ob
-
-
-def select(active, *others):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    for o in (active, *others):
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = active
 
 
 def positions(ob):

@@ -45,7 +45,7 @@ from bpy.app.handlers import persistent
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from driver_session import instrument_ui as instrument  # noqa: E402
-from driver_session import override, start, ui  # noqa: E402
+from driver_session import override, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -120,14 +120,6 @@ def cube(name, location, key_x=None):
         ob.location.x = key_x
         ob.keyframe_insert("location", frame=8)
     return ob
-
-
-def select(active, *others):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    for o in (active, *others):
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = active
 
 
 def ob(name):

@@ -7,6 +7,7 @@ no render curve crossing a collider unless its status says so, roots on the Surf
 lengths kept, and a frame shown twice (scrub, cache, bake) is bit-identical."""
 
 import sys
+from functools import partial
 from pathlib import Path
 
 import bpy
@@ -408,6 +409,11 @@ def _set_groom_points(groom, edit):
     groom.data.update_tag()
 
 
+def _break_curve_7(bad, P, offs):
+    """Render curve 7 made bad in place: a NaN CV, or a zero-length segment."""
+    P[offs[7] + 2] = np.nan if bad == "nan" else P[offs[7] + 1]
+
+
 @pytest.mark.parametrize("bad", ["nan", "zero_length"])
 def test_a_bad_curve_in_the_groom_after_bind(fc, bad):
     """One render curve of the groom goes bad after Bind Groom (a NaN, a zero-length
@@ -417,13 +423,7 @@ def test_a_bad_curve_in_the_groom_after_bind(fc, bad):
     guides, groom, box, out, gout = pipeline_scene(fc)
     play_record(guides, groom, box, range(1, 4))
 
-    def edit(P, offs):
-        if bad == "nan":
-            P[offs[7] + 2] = np.nan
-        else:
-            P[offs[7] + 2] = P[offs[7] + 1]
-
-    _set_groom_points(groom, edit)
+    _set_groom_points(groom, partial(_break_curve_7, bad))
     for f in range(3, 7):
         scene.frame_set(f)
         level, msg = fc.registry.status_for(guides)
@@ -442,13 +442,7 @@ def test_a_bad_curve_at_bind_follows_the_skin(fc, bad):
     scene = bpy.context.scene
     guides, groom, box, out = groom_scene(fc)
 
-    def edit(P, offs):
-        if bad == "nan":
-            P[offs[7] + 2] = np.nan
-        else:
-            P[offs[7] + 2] = P[offs[7] + 1]
-
-    _set_groom_points(groom, edit)
+    _set_groom_points(groom, partial(_break_curve_7, bad))
     surf = guides.data.surface
     surf.location = (0, 0, 0)
     surf.keyframe_insert("location", frame=1)
