@@ -291,20 +291,23 @@ def sc_bake():
     yield from wait_bake()
     snap("baked")
     yield from play(range(1, 5), "baked, play")
-    result["bake_undo"] = ed("undo")
-    yield 0.5
-    snap("undone")
-    yield from play(FRAMES, "undone, play")
-    result["bake_redo"] = ed("redo")
-    yield 0.5
-    snap("redone")
-    yield from play(FRAMES, "redone, play")
+    yield from undo_redo("bake")
     # undone again, then Bake: the files left on disk are resumed, none is rewritten
     ed("undo")
     yield 0.5
     result["bake_again"] = op("bake")
     yield from wait_bake()
     snap("baked again")
+
+
+def undo_redo(key, prefix=""):
+    """Undo, then redo (results ``key_undo``, ``key_redo``), each followed by a snap
+    (``prefix`` + "undone" / "redone") and the frames played."""
+    for what, done in (("undo", "undone"), ("redo", "redone")):
+        result[f"{key}_{what}"] = ed(what)
+        yield 0.5
+        snap(f"{prefix}{done}")
+        yield from play(FRAMES, f"{prefix}{done}, play")
 
 
 def sc_free_bake():
@@ -318,14 +321,7 @@ def sc_free_bake():
     result["free"] = op("free_bake")
     yield 0.3
     snap("freed")
-    result["free_undo"] = ed("undo")
-    yield 0.5
-    snap("undone")
-    yield from play(FRAMES, "undone, play")
-    result["free_redo"] = ed("redo")
-    yield 0.5
-    snap("redone")
-    yield from play(FRAMES, "redone, play")
+    yield from undo_redo("free")
 
 
 def sc_reset():
@@ -433,14 +429,7 @@ def sc_colliders():
     push("Select Wall in the list")
     result["collider_remove"] = op("collider_remove")
     snap("removed")
-    result["collider_remove_undo"] = ed("undo")
-    yield 0.5
-    snap("remove undone")
-    yield from play(FRAMES, "remove undone, play")
-    result["collider_remove_redo"] = ed("redo")
-    yield 0.5
-    snap("remove redone")
-    yield from play(FRAMES, "remove redone, play")
+    yield from undo_redo("collider_remove", "remove ")
 
 
 def sc_remove():
