@@ -246,6 +246,22 @@ def _wall(name="Wall"):
     return w
 
 
+def _wall_collider(guides, strength):
+    """:func:`_wall` in its own collection "Props" (so it can be excluded), with a
+    Displace modifier of ``strength`` (so it can be switched off), added as a collider
+    of ``guides``."""
+    scene = bpy.context.scene
+    coll = bpy.data.collections.new("Props")
+    scene.collection.children.link(coll)
+    wall = _wall()
+    coll.objects.link(wall)
+    scene.collection.objects.unlink(wall)
+    wall.modifiers.new("Push", "DISPLACE").strength = strength
+    activate(guides, wall)
+    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    return wall
+
+
 COLLIDER_CHANGES = ["hide_viewport", "hide_set", "exclude", "modifier_off", "disabled"]
 KEEPS_COLLIDING = ("hide_viewport", "hide_set", "exclude")
 
@@ -276,15 +292,7 @@ def test_a_collider_switched_off_and_on_mid_shot(fc, kind):
     on, and on again the frames are those of a shot where it never went off."""
     scene = bpy.context.scene
     guides, groom, box, out, gout = pipeline_scene(fc)
-    coll = bpy.data.collections.new("Props")
-    scene.collection.children.link(coll)
-    wall = _wall()
-    coll.objects.link(wall)
-    scene.collection.objects.unlink(wall)
-    mod = wall.modifiers.new("Push", "DISPLACE")
-    mod.strength = 0.0 if kind != "modifier_off" else 0.02
-    activate(guides, wall)
-    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    wall = _wall_collider(guides, 0.0 if kind != "modifier_off" else 0.02)
     both = [box, wall]
     first = play_record(guides, groom, box, colliders=both)
     assert guides.furcollide.stat_groom_fixed > 0 or any(
@@ -656,15 +664,7 @@ def test_a_collider_switched_off_on_a_baked_pipeline(fc, tmp_path, kind):
     scene = bpy.context.scene
     guides, groom, box, out, gout = pipeline_scene(fc)
     s = guides.furcollide
-    coll = bpy.data.collections.new("Props")
-    scene.collection.children.link(coll)
-    wall = _wall()
-    coll.objects.link(wall)
-    scene.collection.objects.unlink(wall)
-    mod = wall.modifiers.new("Push", "DISPLACE")
-    mod.strength = 0.02
-    activate(guides, wall)
-    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    wall = _wall_collider(guides, 0.02)
     save_in(tmp_path)
     activate(guides)
     assert bpy.ops.furcollide.bake() == {"FINISHED"}
