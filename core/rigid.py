@@ -14,7 +14,7 @@ import numpy as np
 from . import rotations as rot
 from . import tolerances as tol
 from .rays import beside
-from .search import gallop_bisect
+from .search import NONE, gallop_bisect
 from .status import Status
 
 #: Probes per curve per search round. Each probe of a Stiff/Bend curve casts
@@ -63,30 +63,37 @@ def solve(ctx, idx, status):
     # 3. Every search left, collisions (new and old) and blocked recoveries,
     #    in the same rounds (one ray query per round).
     col_items, col_lo, col_hi, col_stride, col_guess = plan.collision_searches()
-    n_act = len(act)
-    items = np.concatenate([col_items, n_act + np.arange(len(cn))])
-    lo = np.concatenate([col_lo, np.zeros(len(cn), np.int64)])
-    hi = np.concatenate([col_hi, np.full(len(cn), -1, np.int64)])
-    stride = np.concatenate([col_stride, np.ones(len(cn), np.int64)])
-    guess = np.concatenate([col_guess, np.ones(len(cn), bool)])
+    new_lo, new_hi, new_stride, new_guess = fresh_searches(len(cn))
+    items = np.concatenate([col_items, len(act) + np.arange(len(cn))])
+    lo = np.concatenate([col_lo, new_lo])
+    hi = np.concatenate([col_hi, new_hi])
+    stride = np.concatenate([col_stride, new_stride])
+    guess = np.concatenate([col_guess, new_guess])
     k_col, k_rec = search_angles(ctx, batch, items, angle[batch.curves[items]], lo, hi, stride,
                                  guess, plan.recovery_searches())
     plan.recovery_found(k_rec)
     # Contacts pushed back the other way: a turn further by more than their
     # whole angle; then, after Bend's fall back to Stiff, those still unresolved.
     again = np.zeros(len(items), bool)
-    turns = k_col >= 0
+    turns = k_col != NONE
     again[turns] = restart_contacts(ctx, batch, items[turns], k_col[turns], status)
     left = items[~again]
     resolve_collisions(ctx, batch, left, k_col[~again], status)
     left = left[status[batch.curves[left]] == Status.UNRESOLVED]
-    restart_contacts(ctx, batch, left, np.full(len(left), -1, np.int64), status)
+    restart_contacts(ctx, batch, left, np.full_like(left, NONE), status)
     rec = plan.recovered_items()
     recover(ctx, act[rec], th0[rec], plan.recovered_angle(rec), plan.blocked(rec), status)
     rec = far[ctx.active[far]]  # far from every collider: nothing to check
     th_far = angle[rec].copy()
     recover(ctx, rec, th_far, recovery_step(ctx, rec), np.zeros(len(rec), bool), status)
     release(ctx, idx)
+
+
+def fresh_searches(n):
+    """(lo, hi, stride, use_guess) of ``n`` collision searches from scratch, as
+    :func:`search_angles` takes them: step 0 (the current angle) blocked, no
+    clearing step known, a first gallop stride of 1, from the tangent-plane guess."""
+    return np.zeros(n, np.int64), np.full(n, NONE, np.int64), np.ones(n, np.int64), np.ones(n, bool)
 
 
 class Plan:
@@ -102,7 +109,7 @@ class Plan:
       contact.
 
     A search keeps per curve a known blocked step ``lo`` and a known
-    clearing step ``hi`` (-1: none yet) on its regime's grid; the answer is
+    clearing step ``hi`` (``search.NONE``: none yet) on its regime's grid; the answer is
     the clearing step right above a blocked one (the first clearing step
     wherever clearance is monotone in the angle).
 
@@ -118,19 +125,19 @@ class Plan:
     def __init__(self, ctx, act, th0, th1):
         self.ctx, self.act, self.th0, self.th1 = ctx, act, th0, th1
         p = ctx.prec
-        n = len(act)
         self.moving = th1 < th0
         # recovery grid th1 + k p, k in [0, K] (K: th0 itself, the cap)
         self.K = np.where(
             self.moving, np.maximum(np.ceil((th0 - th1) / p - 1e-9), 1), 0
         ).astype(np.int64)
         self.kmax = collision_steps(ctx, th0)  # collision grid th0 + k p, k in [1, kmax]
-        # per curve: regime (0 unknown, 1 collision, 2 recovery) and bracket
-        self.regime = np.zeros(n, np.int8)
-        self.lo = np.full(n, -1, np.int64)
-        self.hi = np.full(n, -1, np.int64)
-        self.stride = np.ones(n, np.int64)
-        self.k = np.full(n, -2, np.int64)  # recovery answers (-2: not a recovery)
+        # per curve (the dtype of the curve indices, int64): regime (0 unknown,
+        # 1 collision, 2 recovery) and bracket
+        self.regime = np.zeros_like(act)
+        self.lo = np.full_like(act, NONE)
+        self.hi = np.full_like(act, NONE)
+        self.stride = np.ones_like(act)
+        self.k = np.full_like(act, -2)  # recovery answers (-2: not a recovery)
 
     # ---------------------------------------------------------- probing
     def _theta(self, i, k, collision):
@@ -156,7 +163,7 @@ class Plan:
         clear starts a recovery search, blocked a collision search."""
         if len(i) == 0:
             return
-        (clear,) = self._probe(batch, [(i, np.zeros(len(i), np.int64), True)])
+        (clear,) = self._probe(batch, [(i, 0, True)])
         r, c = i[clear], i[~clear]
         self.regime[r] = 2
         self.lo[r], self.hi[r] = lo_rec[clear], self.K[r]
@@ -176,7 +183,7 @@ class Plan:
         self.k[r] = k[clear]  # clear at the recovery step: recovered (no search)
         b = i[~clear]
         m = self.moving[b]
-        self._regime_test(batch, b[m], np.zeros(int(m.sum()), np.int64))
+        self._regime_test(batch, b[m], np.zeros_like(b[m]))
         c = b[~m]  # not moving and blocked at th0: a collision
         self.regime[c] = 1
         self.lo[c] = 0
@@ -208,12 +215,12 @@ class Plan:
         mv = mv[self.moving[mv]]
         clear = self._probe(batch, [
             (io, ko, False),
-            (ic, np.zeros(len(ic), np.int64), True),
+            (ic, 0, True),
             (ic[two], kc2[two], True),
             (ic, kc, True),
             (ir, kr, False),
             (ir[kr1], kr[kr1] - 1, False),
-            (mv, np.zeros(len(mv), np.int64), False),
+            (mv, 0, False),
         ])
         c_o, c_c0, c_c2, c_c, c_r, c_r1, c_mv = clear
         # the rest: as the full search
@@ -222,19 +229,19 @@ class Plan:
         self.k[r] = ko[c_o]  # recovered (no search)
         b = io[~c_o]
         m = self.moving[b]
-        pend_i, pend_lo = [b[m]], [np.zeros(int(m.sum()), np.int64)]
+        pend_i, pend_lo = [b[m]], [np.zeros_like(b[m])]
         c = b[~m]
         self.regime[c] = 1
         self.lo[c] = 0
         # predicted collisions
         rec = ic[c_c0]  # clear at th0 after all: a recovery, th0 clear
         self.regime[rec] = 2
-        self.lo[rec], self.hi[rec] = -1, self.K[rec]
+        self.lo[rec], self.hi[rec] = NONE, self.K[rec]
         blk = ~c_c0
         col = ic[blk]
         self.regime[col] = 1
-        lo = np.zeros(len(ic), np.int64)
-        hi = np.full(len(ic), -1, np.int64)
+        lo = np.zeros_like(ic)
+        hi = np.full_like(ic, NONE)
         mid = np.full(len(ic), True)  # kc - 1 clear (or untested)
         mid[np.flatnonzero(two)] = c_c2
         lo = np.where(two & ~mid, kc2, lo)
@@ -249,7 +256,7 @@ class Plan:
         r = ir[ok]
         self.regime[r] = 2
         self.hi[r] = kr[ok]
-        self.lo[r] = np.where(below[ok], -1, kr[ok] - 1)
+        self.lo[r] = np.where(below[ok], NONE, kr[ok] - 1)
         self.hi[r] = np.where(below[ok], kr[ok] - 1, kr[ok])
         nb = ~ok  # blocked at step kr: th0 decides the regime
         full = nb & (kr == self.K[ir])  # step K is th0: a collision
@@ -270,16 +277,19 @@ class Plan:
         # gallop_bisect returns a settled bracket's top without a probe)
 
     # --------------------------------------------------------- searches
+    def _nothing_known(self, c):
+        """Which collisions ``c`` know nothing above ``th0`` (they take the guess)."""
+        return (self.hi[c] == NONE) & (self.lo[c] == 0) & (self.stride[c] == 1)
+
     def collisions_to_guess(self):
         """Collisions with nothing known above ``th0``: they get the tangent-plane guess."""
-        return np.flatnonzero((self.regime == 1) & (self.hi < 0) & (self.lo == 0)
-                              & (self.stride == 1))
+        c = np.flatnonzero(self.regime == 1)
+        return c[self._nothing_known(c)]
 
     def collision_searches(self):
         """(items, lo, hi, stride, use the guess) of the collision searches."""
         c = np.flatnonzero(self.regime == 1)
-        guess = (self.hi[c] < 0) & (self.lo[c] == 0) & (self.stride[c] == 1)
-        return c, self.lo[c], self.hi[c], self.stride[c], guess
+        return c, self.lo[c], self.hi[c], self.stride[c], self._nothing_known(c)
 
     def recovery_searches(self):
         """(items, base th1, cap th0, K, lo, hi) of the recoveries still searched."""
@@ -309,7 +319,7 @@ def restart_contacts(ctx, batch, items, k, status):
     arrives from the other side of a curve still turned (recovering, or held
     at its Plasticity imprint) would then whip it the long way round, under
     that collider. Where the search's answer ``k`` turns curve
-    ``batch.curves[items]`` further by more than its whole angle (``k = -1``:
+    ``batch.curves[items]`` further by more than its whole angle (``k = NONE``:
     no angle, e.g. still unresolved after Bend's fall back to Stiff), the
     curve is also solved as a new contact: its input shape, an axis from the
     input's first hit, the smallest clearing angle from zero (or zero itself
@@ -330,7 +340,7 @@ def restart_contacts(ctx, batch, items, k, status):
     p = ctx.prec
     c = batch.curves[items]
     th0 = ctx.angle[c]
-    turn = np.where(k >= 0, k * p, np.inf)
+    turn = np.where(k != NONE, k * p, np.inf)
     sel = np.flatnonzero((th0 > 0) & (turn > th0 + tol.RESTART_MIN_STEPS * p))
     if len(sel) == 0:
         return again
@@ -359,10 +369,9 @@ def restart_contacts(ctx, batch, items, k, status):
         ctx.axis[cb] = axis1[hb]
         n = len(cb)
         kb, _ = search_angles(ctx, RigidBatch(ctx, cb), np.arange(n), np.zeros(n),
-                              np.zeros(n, np.int64), np.full(n, -1, np.int64),
-                              np.ones(n, np.int64), np.ones(n, bool))
-        found[hb] = kb >= 0
-        phi[hb] = np.where(kb >= 0, np.minimum(kb * p, ctx.max_angle), 0.0)
+                              *fresh_searches(n))
+        found[hb] = kb != NONE
+        phi[hb] = np.where(found[hb], np.minimum(kb * p, ctx.max_angle), 0.0)
     anew = _moved(ctx, cs, now, _ends(ctx, cs, phi, axis1))
     ctx.state.stiff[cs] = stiff0
     ctx.axis[cs] = axis0
@@ -406,7 +415,7 @@ def resolve_collisions(ctx, batch, items, k, status):
         # Bending turns the root segment by only 1/n of the angle: curves
         # hit near the root that bending cannot clear turn at the root (as
         # Stiff) instead, until they have recovered.
-        retry = np.flatnonzero((k < 0) & ~ctx.state.stiff[c])
+        retry = np.flatnonzero((k == NONE) & ~ctx.state.stiff[c])
         if len(retry):
             cr = c[retry]
             # seed: the Stiff estimate at the current shape (the tangent plane
@@ -419,18 +428,15 @@ def resolve_collisions(ctx, batch, items, k, status):
             ctx.restyled[cr] = True
             seed = ctx.guess_stiff[cr] + 0.5 * th0[retry]
             n = len(cr)
-            k2, _ = search_angles(
-                ctx, RigidBatch(ctx, cr), np.arange(n), np.zeros(n),
-                np.zeros(n, np.int64), np.full(n, -1, np.int64), np.ones(n, np.int64),
-                np.ones(n, bool), guess=seed,
-            )
+            k2, _ = search_angles(ctx, RigidBatch(ctx, cr), np.arange(n), np.zeros(n),
+                                  *fresh_searches(n), guess=seed)
             # (still restyled: they end UNRESOLVED, which the next step does
             # not remember as a contact either way)
-            ctx.state.stiff[cr[k2 < 0]] = False
-            ok2 = k2 >= 0
+            ok2 = k2 != NONE
+            ctx.state.stiff[cr[~ok2]] = False
             k[retry[ok2]] = k2[ok2]
             th0[retry[ok2]] = 0.0
-    ok = k >= 0
+    ok = k != NONE
     res = c[ok]
     angle[res] = np.minimum(th0[ok] + k[ok] * p, ctx.max_angle)
     ctx.angle_max[res] = np.maximum(ctx.angle_max[res], angle[res])
@@ -482,10 +488,11 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
     """Smallest clearing rotation above ``th0`` of ``batch.curves[items]``.
 
     Steps ``k`` count from ``th0`` (angle ``min(th0 + k p, max_angle)``);
-    ``lo`` is a known blocked step, ``hi`` a known clearing one (-1: none
-    yet), ``stride`` the first gallop stride. Items with ``use_guess`` (and
-    nothing known) start from an estimate of the increment, ``guess``
-    (default ``ctx.guess`` of the curves: the tangent-plane estimate of
+    ``lo`` is a known blocked step, ``hi`` a known clearing one (``NONE``:
+    none yet), ``stride`` the first gallop stride (:func:`fresh_searches`:
+    searches from scratch). Items with ``use_guess`` (and nothing known)
+    start from an estimate of the increment, ``guess`` (default ``ctx.guess``
+    of the curves: the tangent-plane estimate of
     :meth:`StepContext.plane_guess`): one round probes 0.8, 1, 1.25 and 1.6
     times it, and the search continues from the bracket that gives
     (bisection) or from its top (gallop).
@@ -498,7 +505,7 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
     Returns
     -------
     k : (n,) int
-        Steps of the collision searches, -1 where no angle up to
+        Steps of the collision searches, ``NONE`` where no angle up to
         ``max_angle`` clears the curve.
     k_bisect : (m,) int
         The recovery searches' steps (empty without ``bisect``).
@@ -542,7 +549,7 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
         kmax = np.concatenate([kmax, K])
         lo = np.concatenate([lo, blo])
         hi = np.concatenate([hi, bhi])
-        stride = np.concatenate([stride, np.ones(m, np.int64)])
+        stride = np.concatenate([stride, np.ones_like(bi)])
     k = gallop_bisect(len(all_items), test, kmax, lo=lo, hi=hi, stride=stride, width=_WIDTH)
     return k[:n], k[n:n + m]
 
@@ -690,7 +697,7 @@ class RigidBatch:
                 h = c.segment_hits_local(o - back * d, d * grow, off, ctx.threads)
             else:
                 w = np.flatnonzero(rays)
-                h = np.zeros(len(rep), bool)
+                h = np.zeros_like(rays)
                 h[w] = c.segment_hits_local(o[w] - back[w] * d[w], d[w] * grow[w], off, ctx.threads)
             ctx.n_rays += int(rays.sum())
             hit |= np.logical_or.reduceat(h, first)

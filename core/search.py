@@ -8,6 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
+#: A step that is not there: none known (a bracket's ``lo`` or ``hi``) or none
+#: found (an answer). Steps themselves count from 0.
+NONE = -1
+
 
 def _steps(x, name):
     """``x`` as int64 steps; a float array is refused rather than truncated (a step
@@ -51,7 +55,7 @@ def gallop_bisect(n, test, k_max, lo=None, hi=None, width=4, stride=None):
         The good ``k`` found, -1 where none up to ``k_max``.
     """
     lo = np.zeros(n, np.int64) if lo is None else _steps(lo, "lo").copy()
-    hi = np.full(n, -1, np.int64) if hi is None else _steps(hi, "hi").copy()
+    hi = np.full(n, NONE, np.int64) if hi is None else _steps(hi, "hi").copy()
     stride = np.ones(n, np.int64) if stride is None else np.maximum(_steps(stride, "stride"), 1)
     k_max = np.broadcast_to(_steps(k_max, "k_max"), (n,))
     ladder = 2 ** np.arange(width)
@@ -102,7 +106,7 @@ def scan_bisect(n, test, k_max, probes=16, width=4):
         The good ``k`` found, -1 where none of the scan's probes is good.
     """
     k_max = np.broadcast_to(np.asarray(k_max, np.int64), (n,))
-    hi = np.full(n, -1, np.int64)
+    hi = np.full(n, NONE, np.int64)
     lo = np.zeros(n, np.int64)
     it = np.flatnonzero(k_max >= 1)
     if len(it) == 0:
@@ -117,7 +121,7 @@ def scan_bisect(n, test, k_max, probes=16, width=4):
     g = it[anyg]
     hi[g] = ks[rows, first][anyg]
     lo[g] = np.where(first > 0, ks[rows, np.maximum(first - 1, 0)], 0)[anyg]
-    out = np.full(n, -1, np.int64)
+    out = np.full(n, NONE, np.int64)
     if len(g):
         out[g] = gallop_bisect(len(g), lambda i, k: test(g[i], k), k_max[g],
                                lo=lo[g], hi=hi[g], width=width)
