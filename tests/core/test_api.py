@@ -6,6 +6,7 @@ import enum
 import time
 
 import numpy as np
+import pytest
 import scenes
 
 import core
@@ -65,6 +66,33 @@ def test_timings_are_milliseconds_per_phase_and_the_ray_count():
     assert t["setup"] + t["frames"] + t["solve"] + t["output"] <= t["total"]
     assert t["total"] >= 0.5 * wall or wall < 1.0, (t, wall)  # milliseconds, not seconds
     assert t["solve"] > 0.0 and isinstance(t["rays"], int) and t["rays"] > 0
+
+
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+@pytest.mark.parametrize("ragged", [False, True], ids=["uniform", "ragged"])
+def test_the_ray_count_is_the_rays_traced(mode, ragged, monkeypatch):
+    """``timings["rays"]`` counts every ray given to the tracer in the step, for a groom
+    of one CV count (the component-array paths) and of several (the general ones)."""
+    traced = []
+    segment_hits_local = Collider.segment_hits_local
+
+    def spy(self, o, d, offset_wo=0.0, threads=1):
+        traced.append(len(o))
+        return segment_hits_local(self, o, d, offset_wo, threads)
+
+    monkeypatch.setattr(Collider, "segment_hits_local", spy)
+    roots = [(x, y) for x in np.linspace(-0.5, 0.5, 6) for y in np.linspace(-0.5, 0.5, 6)]
+    pts, offs = scenes.pack([scenes.straight_curve([x, y, 0.0], [0, 0, 1], 0.8,
+                                                   5 + i % 3 if ragged else 6)
+                             for i, (x, y) in enumerate(roots)], np.float32)
+    V, F = scenes.uv_sphere([0.0, 0, 0.9], 0.4, 24, 12)
+    solver = Solver(offs, Settings(mode=mode, recovery_rate=0.5))
+    for f in range(4):  # contacts, recoveries and contacts that last
+        traced.clear()
+        res = solver.step(pts, [Collider(V, F, matrix=scenes.translation((0.05 * f, 0,
+                                                                          -0.05 * f)))])
+        assert (np.asarray(res.status) == Status.COLLIDING).sum() >= 10
+        assert res.timings["rays"] == sum(traced) > 0, f
 
 
 def test_collider_properties_roundtrip():

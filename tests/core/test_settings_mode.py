@@ -206,3 +206,44 @@ def test_bend_falls_back_to_stiff_when_bending_cannot_clear():
         if np.array_equal(r.points, pts):
             break
     assert np.array_equal(r.points, pts)
+
+
+def test_a_curve_back_at_its_input_shape_remembers_nothing():
+    """A curve that recovered to exactly its input shape drops its local state
+    (``rigid.release``), Bend's fall back to Stiff included: its next contact is solved
+    bit for bit as a fresh solver solves it."""
+    n = 4
+    pts, offs = scenes.pack([scenes.straight_curve([0.013, 0.021, 0], [0, 0, 1], 1.0, n + 1)])
+    wall = Collider(*scenes.quad([-0.5, -0.5, 0.08], [1.0, 0, 0.04], [0, 1.0, 0]))
+    ball = Collider(*scenes.uv_sphere([0.1, 0, 0.9], 0.3, 32, 16))
+    settings = Settings(mode="bend", recovery_rate=1.0)
+    fresh = Solver(offs, settings).step(pts, [ball])
+    assert np.asarray(fresh.status)[0] == Status.COLLIDING
+    solver = Solver(offs, settings)
+    for cols, stiff in (([ball], False), ([], False), ([wall], True), ([], False)):
+        r = solver.step(pts, cols)
+        assert solver.state["stiff"][0] == stiff, cols  # (bent, released, Stiff, released)
+        assert np.array_equal(r.points, pts) == (not cols)
+    again = solver.step(pts, [ball])
+    assert np.array_equal(again.points, fresh.points)
+    assert not solver.state["stiff"][0]
+
+
+def test_an_unresolved_bend_curve_keeps_its_last_bent_shape():
+    """Bend, then boxed in: neither bending nor the fall back to Stiff finds an angle.
+    The curve is UNRESOLVED in its last collision-free shape, bent as it was (the fall
+    back's Stiff flag is undone), and bends on from there when it can again."""
+    curve = scenes.straight_curve([0, 0, 0], [0, 0, 1], 1.0, 5)
+    pts, offs = scenes.pack([curve])
+    ball = Collider(*scenes.uv_sphere([0.05, 0, 0.8], 0.3, 32, 16))
+    solver = Solver(offs, Settings(mode="bend", recovery_rate=0.0))
+    r1 = solver.step(pts, [ball])
+    assert np.asarray(r1.status)[0] == Status.COLLIDING and not solver.state["stiff"][0]
+    a = geom.angle_between(np.diff(pts, axis=0), np.diff(r1.points, axis=0))
+    assert a[-1] > 2 * a[0] > 0  # bent, not turned rigidly
+    # a double-sided sphere around the root (no pinch) crosses every shape of the curve
+    box = Collider(*scenes.uv_sphere([0, 0, 0], 0.5, 16, 8), double_sided=True)
+    r2 = solver.step(pts, [ball, box])
+    assert np.asarray(r2.status)[0] == Status.UNRESOLVED
+    np.testing.assert_allclose(r2.points, r1.points, atol=1e-12)
+    assert not solver.state["stiff"][0]

@@ -58,3 +58,35 @@ def test_a_large_probe_batch_is_traced_in_two_halves_one_thread_each(monkeypatch
     halves = [t for t, second in seen if second]
     assert halves and set(halves) == {1}, seen  # a second half: on its own thread
     assert (1, False) in seen  # (and its first half)
+
+
+def test_a_batch_of_exactly_two_blocks_is_traced_in_two_halves(monkeypatch):
+    """The split starts at two blocks of probes (``rigid._BLOCK``): a batch of exactly
+    that many is built and traced in two halves of one block each."""
+    from core import rigid
+
+    sizes = []
+    hits_uniform = rigid.RigidBatch._hits_uniform
+
+    def count(self, items, theta, hit):
+        sizes.append(len(items))
+        return hits_uniform(self, items, theta, hit)
+
+    monkeypatch.setattr(rigid.RigidBatch, "_hits_uniform", count)
+    pts, offs, col = _pressed_grid(6)
+    Solver(offs, Settings(mode="bend", threads=2)).step(pts, [col])
+    k = max(s for s in sizes if s % 2 == 0 and s >= 4)
+    monkeypatch.setattr(rigid, "_BLOCK", k // 2)
+    parts = []
+    segment_hits_local = Collider.segment_hits_local
+
+    def spy(self, o, d, offset_wo=0.0, threads=1):
+        caller = sys._getframe(1)
+        if caller.f_code.co_name == "part":
+            parts.append((caller.f_locals["a"], caller.f_locals["b"], threads))
+        return segment_hits_local(self, o, d, offset_wo, threads)
+
+    monkeypatch.setattr(Collider, "segment_hits_local", spy)
+    Solver(offs, Settings(mode="bend", threads=2)).step(pts, [col])
+    assert (k // 2, k, 1) in parts and (0, k // 2, 1) in parts, (k, parts)
+    assert (0, k, 2) not in parts
