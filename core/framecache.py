@@ -448,7 +448,7 @@ def write_frame(directory, f, points, status, offsets, state, sparse=None,
     ``inputs`` is the frame-inputs record the frame was solved from
     (:func:`read_inputs`). ``extra`` (part name -> dict of arrays, or None) stores
     what later stages derived from the frame, e.g. the render groom
-    (:func:`read_extra`).
+    (:func:`read_extra`; a part's name has no ``__``).
     """
     if sparse is not None and state is not None:
         state = {k.replace(":", "__", 1): v for k, v in sparse.encode(state).items()}
@@ -468,6 +468,8 @@ def write_frame(directory, f, points, status, offsets, state, sparse=None,
     if inputs is not None:
         arrays[_INPUTS_KEY] = encode_inputs(inputs)
     for part, items in (extra or {}).items():
+        if "__" in part:
+            raise ValueError(f"write_frame: a part's name has no '__' ({part!r})")
         for k, v in (items or {}).items():
             arrays[f"{_EXTRA_PREFIX}{part}__{k}"] = np.asarray(v)
     with open(tmp, "wb") as fh:
@@ -485,20 +487,53 @@ def decode_state(stored: dict, sparse: SparseState) -> dict:
     return sparse.decode({k.replace("__", ":", 1): v for k, v in stored.items()})
 
 
-def read_frame(directory, f):
+def read_frame(directory, f, state=True):
     """Read frame ``f``: (points, status, offsets, state). Never unpickles.
 
     ``state`` is as stored (sparse keys ``idx__name``/``val__name``/``full__name``
-    when written with ``sparse``; see :func:`decode_state`).
+    when written with ``sparse``; see :func:`decode_state`); with ``state=False`` it
+    is not read (an empty dict): only resuming a bake needs it.
     """
     with np.load(frame_path(directory, f), allow_pickle=False) as z:
-        points = z["points"]
-        status = z["status"]
-        offsets = z["offsets"]
-        state = {
-            k[len(_STATE_PREFIX) :]: z[k] for k in z.files if k.startswith(_STATE_PREFIX)
-        }
-    return points, status, offsets, state
+        stored = _prefixed(z, _STATE_PREFIX) if state else {}
+        return z["points"], z["status"], z["offsets"], stored
+
+
+@dataclass
+class ShownFrame:
+    """What showing a baked frame reads from its file (:func:`read_shown`)."""
+
+    points: np.ndarray  #: (P, 3) float32, the output's points
+    status: np.ndarray  #: (C,) int8
+    offsets: np.ndarray  #: (C + 1,) int32
+    attributes: dict  #: as :func:`read_attributes`
+    inputs: dict | None  #: as :func:`read_inputs`
+    extra: dict  #: part -> {name: array}, as :func:`read_extra` (no key for a part not stored)
+
+
+def read_shown(directory, f) -> ShownFrame:
+    """Frame ``f`` as a baked frame is shown: everything :func:`write_frame` stored but
+    the solver state, in one read of the file (the other ``read_*`` functions each
+    open it: four opens per frame shown cost more than the reading itself)."""
+    with np.load(frame_path(directory, f), allow_pickle=False) as z:
+        extra = {}
+        for k, v in _prefixed(z, _EXTRA_PREFIX).items():
+            part, name = k.split("__", 1)
+            extra.setdefault(part, {})[name] = v
+        return ShownFrame(z["points"], z["status"], z["offsets"],
+                          _prefixed(z, _ATTRIBUTE_PREFIX), _inputs(z), extra)
+
+
+def _prefixed(z, prefix, names=None) -> dict:
+    """{name: array} of the arrays of open bake file ``z`` named ``prefix + name``
+    (only ``names``, when given: the others are not loaded)."""
+    n = len(prefix)
+    return {k[n:]: z[k] for k in z.files
+            if k.startswith(prefix) and (names is None or k[n:] in names)}
+
+
+def _inputs(z) -> dict | None:
+    return decode_inputs(z[_INPUTS_KEY]) if _INPUTS_KEY in z.files else None
 
 
 def read_inputs(directory, f) -> dict | None:
@@ -506,9 +541,7 @@ def read_inputs(directory, f) -> dict | None:
     before FurCollide stored it, or unreadable)."""
     try:
         with np.load(frame_path(directory, f), allow_pickle=False) as z:
-            if _INPUTS_KEY not in z.files:
-                return None
-            return decode_inputs(z[_INPUTS_KEY])
+            return _inputs(z)
     except UNREADABLE:
         return None
 
@@ -517,18 +550,14 @@ def read_extra(directory, f, part, names=None) -> dict | None:
     """The arrays of ``part`` stored with frame ``f`` (:func:`write_frame`'s
     ``extra``), or None when the frame has none. ``names`` (optional) reads only
     those arrays (the others are not loaded)."""
-    prefix = f"{_EXTRA_PREFIX}{part}__"
     with np.load(frame_path(directory, f), allow_pickle=False) as z:
-        got = {k[len(prefix):]: z[k] for k in z.files if k.startswith(prefix)
-               and (names is None or k[len(prefix):] in names)}
-    return got or None
+        return _prefixed(z, f"{_EXTRA_PREFIX}{part}__", names) or None
 
 
 def read_attributes(directory, f) -> dict:
     """Per-point attributes stored with frame ``f`` (name -> array; empty when none)."""
     with np.load(frame_path(directory, f), allow_pickle=False) as z:
-        n = len(_ATTRIBUTE_PREFIX)
-        return {k[n:]: z[k] for k in z.files if k.startswith(_ATTRIBUTE_PREFIX)}
+        return _prefixed(z, _ATTRIBUTE_PREFIX)
 
 
 def remove_frames(directory: str) -> int:

@@ -286,10 +286,10 @@ def cached_frame_change(setup, inp, f) -> str:
     return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""
 
 
-def baked_frame_change(setup, inp, directory, f) -> str:
-    """Why baked frame ``f`` no longer matches the current inputs ('' when it does,
-    or for files baked before FurCollide stored their inputs: not checked)."""
-    old = framecache.read_inputs(directory, f)
+def baked_frame_change(setup, inp, old) -> str:
+    """Why the baked frame whose inputs record is ``old`` (:func:`framecache.read_shown`)
+    no longer matches the current inputs ('' when it does, or for files baked before
+    FurCollide stored their inputs, ``old`` None: not checked)."""
     if old is None:
         return ""
     new = current_inputs(setup, inp)

@@ -478,19 +478,20 @@ def _show_baked(setup, inp, note):
             setup.set_status("ERROR", f"Bake files are missing in {directory} (undo does not "
                              "bring back files Free Bake deleted): press Free Bake, then Bake")
             return Outcome.OUTDATED, None
-    points, status, offsets, _state = framecache.read_frame(directory, fe)
-    if not np.array_equal(offsets, inp.offsets):
+    shown = framecache.read_shown(directory, fe)
+    if not np.array_equal(shown.offsets, inp.offsets):
         setup.set_status(
             "ERROR",
             "The bake was made for other curves (the source changed): output keeps its "
             "last result. Free Bake to simulate the new curves.",
         )
         return Outcome.TOPOLOGY, None
+    setup.baked = shown  # (its render groom too: groom_stage reads it from here)
     frame_outputs.sync_output(setup, inp)
-    written = frame_outputs.write(setup, inp, points, status,
-                                  attributes=framecache.read_attributes(directory, fe))
-    rt.stats = frame_solve.frame_stats(status, fe, source="bake")
-    why = baked_frame_change(setup, inp, directory, fe) if fe == f else ""
+    written = frame_outputs.write(setup, inp, shown.points, shown.status,
+                                  attributes=shown.attributes)
+    rt.stats = frame_solve.frame_stats(shown.status, fe, source="bake")
+    why = baked_frame_change(setup, inp, shown.inputs) if fe == f else ""
     if baked.settings_differ(setup.ob, setup.scene):
         rt.outdated = True
         setup.set_status("WARNING", f"Frame {f} was {baked.MESSAGE} (the baked frame is "
@@ -528,8 +529,8 @@ def _baked_subframe(setup):
         framecache.frame_path(directory, b)
     )):
         return None
-    pa, status, offs, _ = framecache.read_frame(directory, a)
-    pb = framecache.read_frame(directory, b)[0]
+    pa, status, offs, _ = framecache.read_frame(directory, a, state=False)
+    pb = framecache.read_frame(directory, b, state=False)[0]
     data = s.output.data
     if pa.shape != pb.shape or len(data.points) != len(pa):
         return None

@@ -400,11 +400,14 @@ def _baked(setup, state):
     rt = setup.rt
     if rt.stats.get("source") != "bake":
         return None
-    directory = bpy.path.abspath(setup.s.bake_path)
-    try:
-        part = framecache.read_extra(directory, int(rt.stats["frame"]), BAKE_PART)
-    except (OSError, ValueError, KeyError):
-        return None
+    if setup.baked is not None:  # (read with the guides' frame)
+        part = setup.baked.extra.get(BAKE_PART)
+    else:
+        directory = bpy.path.abspath(setup.s.bake_path)
+        try:
+            part = framecache.read_extra(directory, int(rt.stats["frame"]), BAKE_PART)
+        except (OSError, ValueError, KeyError):
+            return None
     if part is None:
         return None
     points = np.asarray(part["points"], np.float64)

@@ -32,15 +32,22 @@ class Setup:
         Its evaluated depsgraph (viewport or render) the inputs are read from.
     rt : registry.Runtime, optional
         The setup's session state (default: the registry's, created on first use).
+
+    Attributes
+    ----------
+    baked : framecache.ShownFrame or None
+        The baked frame this evaluation shows, as read from its file (the render groom
+        stage takes its part from it instead of reading the file again).
     """
 
-    __slots__ = ("ob", "rt", "scene", "depsgraph")
+    __slots__ = ("ob", "rt", "scene", "depsgraph", "baked")
 
     def __init__(self, ob, scene, depsgraph, rt=None):
         self.ob = ob
         self.scene = scene
         self.depsgraph = depsgraph
         self.rt = registry.get_runtime(ob) if rt is None else rt
+        self.baked = None
 
     @classmethod
     def for_script(cls, solver) -> Setup:

@@ -199,3 +199,24 @@ def test_the_baked_render_groom_is_read_not_computed(fc, tmp_path, monkeypatch):
     play(bpy.context.scene, FRAMES)
     assert len(calls) == len(FRAMES)
     np.testing.assert_array_equal(world(gout), baked[6][1])
+
+
+def test_a_baked_frame_shown_reads_its_file_once_and_not_the_state(fc, tmp_path,
+                                                                    monkeypatch):
+    """Issue 11 point 4: a baked frame is shown as fast as its file reads, so the file
+    is opened once (the guides, their attributes, the inputs record and the render
+    groom: ``framecache.read_shown``) and the solver state in it (read only to resume
+    a bake) is never loaded."""
+    guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
+    d = bpy.path.abspath(guides.furcollide.bake_path)
+    opened, names = [], []
+    load, get = np.load, np.lib.npyio.NpzFile.__getitem__
+    monkeypatch.setattr(np, "load", lambda *a, **k: opened.append(str(a[0])) or load(*a, **k))
+    monkeypatch.setattr(np.lib.npyio.NpzFile, "__getitem__",
+                        lambda self, key: names.append(key) or get(self, key))
+    for f in (5, 1, 3, 6):
+        opened.clear()
+        bpy.context.scene.frame_set(f)
+        assert opened == [fc.cache.frame_path(d, f)], (f, opened)
+        np.testing.assert_array_equal(world(gout), baked[f][1], err_msg=f"frame {f}")
+    assert names and not [n for n in names if n.startswith("state__")], names

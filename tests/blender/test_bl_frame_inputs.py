@@ -261,7 +261,8 @@ def test_bake_resumes_only_when_the_inputs_still_hold(fc, tmp_path, monkeypatch)
     assert all(os.stat(fc.cache.frame_path(d, f)).st_mtime_ns != before[f] for f in before)
     setup = fc.Setup(hair, scene, bpy.context.evaluated_depsgraph_get())
     inputs = fc.frame_inputs.read_inputs(setup)
-    assert fc.frame_inputs.baked_frame_change(setup, inputs, d, scene.frame_current) == ""
+    assert fc.frame_inputs.baked_frame_change(
+        setup, inputs, fc.cache.read_inputs(d, scene.frame_current)) == ""
     activate(hair)
     assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
     same(play(scene, hair, out, range(1, 9), [box]), baked)

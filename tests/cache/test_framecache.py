@@ -203,6 +203,86 @@ def test_extra_parts_are_stored_with_the_frame_and_read_alone(tmp_path):
     assert np.array_equal(fcache.read_frame(d, 3)[0], points)
 
 
+def _loaded_names(monkeypatch):
+    """The names of the arrays read from any bake file from now on."""
+    names = []
+    get = np.lib.npyio.NpzFile.__getitem__
+
+    def spy(self, key):
+        names.append(key)
+        return get(self, key)
+
+    monkeypatch.setattr(np.lib.npyio.NpzFile, "__getitem__", spy)
+    return names
+
+
+def test_a_shown_frame_is_everything_but_the_state_in_one_read(tmp_path, monkeypatch):
+    """``read_shown`` (a baked frame shown) gives what the separate readers give, opens
+    the file once, and never loads the solver state (a few MB per frame at scale)."""
+    offsets = np.arange(0, 9 * 4, 4, dtype=np.int32)
+    state = Solver(offsets, Settings(mode="bend")).state
+    sparse = fcache.SparseState(state)
+    state["angle"][[1, 5]] = 0.5
+    points = np.random.default_rng(4).random((32, 3), dtype=np.float32)
+    status = np.array([0, 1, 2, 3, 4, 5, 6, 0], np.int8)
+    groom = {"points": np.arange(30, dtype=np.float32).reshape(10, 3),
+             "status": np.array([0, 6], np.int8)}
+    d = str(tmp_path / "bake")
+    fcache.write_frame(d, 7, points, status, offsets, state, sparse,
+                       attributes={"a": np.ones(32, np.float32), "b": np.zeros(32)},
+                       inputs={"settings": 12}, extra={"groom": groom, "more": {"x": [1]}})
+    fcache.write_frame(d, 8, points, status, offsets, None)  # nothing else stored
+    opens = []
+    load = np.load
+    monkeypatch.setattr(np, "load", lambda *a, **k: opens.append(a[0]) or load(*a, **k))
+    names = _loaded_names(monkeypatch)
+    shown = fcache.read_shown(d, 7)
+    assert opens == [fcache.frame_path(d, 7)]
+    assert not [n for n in names if n.startswith("state__")], names
+    assert np.array_equal(shown.points, points) and shown.points.dtype == np.float32
+    assert np.array_equal(shown.status, status) and np.array_equal(shown.offsets, offsets)
+    assert sorted(shown.attributes) == ["a", "b"]
+    for k, v in fcache.read_attributes(d, 7).items():
+        assert np.array_equal(shown.attributes[k], v) and shown.attributes[k].dtype == v.dtype
+    assert shown.inputs == fcache.read_inputs(d, 7) == {"settings": 12}
+    assert sorted(shown.extra) == ["groom", "more"]
+    for part in shown.extra:
+        got = fcache.read_extra(d, 7, part)
+        assert sorted(shown.extra[part]) == sorted(got)
+        assert all(np.array_equal(shown.extra[part][k], got[k]) for k in got)
+    bare = fcache.read_shown(d, 8)
+    assert (bare.attributes, bare.inputs, bare.extra) == ({}, None, {})
+    assert np.array_equal(bare.points, points)
+
+
+def test_the_state_is_read_only_when_asked_for(tmp_path, monkeypatch):
+    """A subframe blends two baked frames' points: ``read_frame(state=False)`` leaves the
+    solver state unread; by default it is read (resuming a bake)."""
+    offsets = np.arange(0, 9 * 4, 4, dtype=np.int32)
+    state = Solver(offsets, Settings(mode="bend")).state
+    state["angle"][2] = 0.25
+    points = np.zeros((32, 3), np.float32)
+    d = str(tmp_path / "bake")
+    fcache.write_frame(d, 1, points, np.zeros(8, np.int8), offsets, state)
+    names = _loaded_names(monkeypatch)
+    p, st, offs, stored = fcache.read_frame(d, 1, state=False)
+    assert stored == {} and not [n for n in names if n.startswith("state__")]
+    assert np.array_equal(offs, offsets) and p.shape == (32, 3) and len(st) == 8
+    stored = fcache.read_frame(d, 1)[3]
+    assert stored["angle"][2] == 0.25
+
+
+def test_a_part_name_with_a_double_underscore_is_refused(tmp_path):
+    """Parts are stored as ``extra__<part>__<name>``: a ``__`` in a part's name would
+    read back as another part."""
+    offsets = np.arange(0, 9 * 4, 4, dtype=np.int32)
+    d = str(tmp_path / "bake")
+    with pytest.raises(ValueError, match="a__b"):
+        fcache.write_frame(d, 1, np.zeros((32, 3)), np.zeros(8, np.int8), offsets, None,
+                           extra={"a__b": {"x": [1]}})
+    assert fcache.list_frames(d) == []
+
+
 def test_free_removes_only_the_bake_files(tmp_path):
     d = tmp_path / "bake"
     offsets = np.array([0, 2], np.int32)
