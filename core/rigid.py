@@ -147,8 +147,9 @@ class Plan:
         return np.minimum(self.th1[i] + k * self.ctx.prec, self.th0[i])
 
     def _probe(self, batch, probes):
-        """One ray query for ``probes``: a list of (curves i, steps k, collision
-        grid?) groups. Returns the clear flags, one array per group."""
+        """One ray query for ``probes``: a list of (curves i, steps k (one per curve,
+        or one for all), collision grid?) groups. Returns the clear flags, one array
+        per group."""
         items = [i for i, _, _ in probes]
         theta = [self._theta(i, k, c) for i, k, c in probes]
         clear = ~batch.hits(np.concatenate(items), np.concatenate(theta)) if items else []

@@ -230,7 +230,8 @@ def test_a_shown_frame_is_everything_but_the_state_in_one_read(tmp_path, monkeyp
     d = str(tmp_path / "bake")
     fcache.write_frame(d, 7, points, status, offsets, state, sparse,
                        attributes={"a": np.ones(32, np.float32), "b": np.zeros(32)},
-                       inputs={"settings": 12}, extra={"groom": groom, "more": {"x": [1]}})
+                       inputs={"settings": 12},
+                       extra={"groom": groom, "more": {"x__y__z": [1]}})  # (a name may have __)
     fcache.write_frame(d, 8, points, status, offsets, None)  # nothing else stored
     opens = []
     load = np.load
@@ -246,6 +247,7 @@ def test_a_shown_frame_is_everything_but_the_state_in_one_read(tmp_path, monkeyp
         assert np.array_equal(shown.attributes[k], v) and shown.attributes[k].dtype == v.dtype
     assert shown.inputs == fcache.read_inputs(d, 7) == {"settings": 12}
     assert sorted(shown.extra) == ["groom", "more"]
+    assert list(shown.extra["more"]) == ["x__y__z"]
     for part in shown.extra:
         got = fcache.read_extra(d, 7, part)
         assert sorted(shown.extra[part]) == sorted(got)

@@ -327,11 +327,11 @@ def test_bake_files_are_never_unpickled(tmp_path):
     with open(fc.frame_path(d, 1), "wb") as fh:
         np.savez(fh, format=np.array([1, 1]), points=np.zeros((2, 3), np.float32),
                  status=np.zeros(1, np.int8), offsets=offsets, state__angle=evil,
-                 attr__d=evil, inputs=evil)
-    with pytest.raises(ValueError, match="allow_pickle"):
-        fc.read_frame(d, 1)
-    with pytest.raises(ValueError, match="allow_pickle"):
-        fc.read_attributes(d, 1)
+                 attr__d=evil, inputs=evil, extra__groom__points=evil)
+    for read in (fc.read_frame, fc.read_attributes, fc.read_shown,
+                 lambda d, f: fc.read_extra(d, f, "groom")):
+        with pytest.raises(ValueError, match="allow_pickle"):
+            read(d, 1)
     assert fc.read_inputs(d, 1) is None
     assert _UNPICKLED == []
 
