@@ -513,8 +513,8 @@ class ShownFrame:
 
 def read_shown(directory, f) -> ShownFrame:
     """Frame ``f`` as a baked frame is shown: everything :func:`write_frame` stored but
-    the solver state, in one read of the file (the other ``read_*`` functions each
-    open it: four opens per frame shown cost more than the reading itself)."""
+    the solver state (only resuming a bake needs it), in one open of the file (the other
+    ``read_*`` functions each open it again)."""
     with np.load(frame_path(directory, f), allow_pickle=False) as z:
         extra = {}
         for k, v in _prefixed(z, _EXTRA_PREFIX).items():
