@@ -19,14 +19,15 @@ from core import Collider, Settings, Solver
 
 
 def _probe_tracing(monkeypatch):
-    """Record the thread count of every ray query made by a probe batch."""
+    """Record (first probe a, stop b, thread count) of every ray query made by a
+    probe batch (a > 0: a second half)."""
     seen = []
     segment_hits_local = Collider.segment_hits_local
 
     def spy(self, o, d, offset_wo=0.0, threads=1):
         caller = sys._getframe(1)
         if caller.f_code.co_name == "part":  # rigid.RigidBatch's probe batches
-            seen.append((threads, caller.f_locals["a"] > 0))  # (a > 0: a second half)
+            seen.append((caller.f_locals["a"], caller.f_locals["b"], threads))
         return segment_hits_local(self, o, d, offset_wo, threads)
 
     monkeypatch.setattr(Collider, "segment_hits_local", spy)
@@ -47,7 +48,7 @@ def test_a_few_probes_are_traced_on_all_threads(monkeypatch):
     seen = _probe_tracing(monkeypatch)
     pts, offs, col = _pressed_grid(4)
     Solver(offs, Settings(mode="bend", threads=2)).step(pts, [col])
-    assert seen and set(seen) == {(2, False)}, seen
+    assert seen and {(t, a > 0) for a, _, t in seen} == {(2, False)}, seen
 
 
 def test_a_large_probe_batch_is_traced_in_two_halves_one_thread_each(monkeypatch):
@@ -55,9 +56,9 @@ def test_a_large_probe_batch_is_traced_in_two_halves_one_thread_each(monkeypatch
     pts, offs, col = _pressed_grid(50)  # 2,500 curves under a sheet: rounds of > 2,048
     res = Solver(offs, Settings(mode="bend", threads=2)).step(pts, [col])
     assert (res.status > 0).sum() > 2048
-    halves = [t for t, second in seen if second]
+    halves = [t for a, _, t in seen if a > 0]
     assert halves and set(halves) == {1}, seen  # a second half: on its own thread
-    assert (1, False) in seen  # (and its first half)
+    assert any(a == 0 and t == 1 for a, _, t in seen)  # (and its first half)
 
 
 def test_a_batch_of_exactly_two_blocks_is_traced_in_two_halves(monkeypatch):
@@ -77,16 +78,7 @@ def test_a_batch_of_exactly_two_blocks_is_traced_in_two_halves(monkeypatch):
     Solver(offs, Settings(mode="bend", threads=2)).step(pts, [col])
     k = max(s for s in sizes if s % 2 == 0 and s >= 4)
     monkeypatch.setattr(rigid, "_BLOCK", k // 2)
-    parts = []
-    segment_hits_local = Collider.segment_hits_local
-
-    def spy(self, o, d, offset_wo=0.0, threads=1):
-        caller = sys._getframe(1)
-        if caller.f_code.co_name == "part":
-            parts.append((caller.f_locals["a"], caller.f_locals["b"], threads))
-        return segment_hits_local(self, o, d, offset_wo, threads)
-
-    monkeypatch.setattr(Collider, "segment_hits_local", spy)
+    parts = _probe_tracing(monkeypatch)
     Solver(offs, Settings(mode="bend", threads=2)).step(pts, [col])
     assert (k // 2, k, 1) in parts and (0, k // 2, 1) in parts, (k, parts)
     assert (0, k, 2) not in parts
