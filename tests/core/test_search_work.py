@@ -180,8 +180,9 @@ def test_a_contact_that_gave_way_to_one_step_above_its_recovery_step(clear_step)
 def test_a_contact_pushed_further_starts_from_the_tangent_plane_estimate(monkeypatch):
     """A curve in contact whose shape the collider moved into (nothing known above
     its angle) starts its search from the tangent-plane estimate at its first hit
-    (``StepContext.plane_guess``): one round around the estimate, then a bisection of
-    that round's bracket, instead of a gallop from one step."""
+    (``StepContext.plane_guess``): one round at the estimate, then a bisection of the
+    bracket it leaves or a gallop with a stride of a fraction of the estimate, instead
+    of a gallop from one step."""
     import scenes
 
     from core import Collider, Settings, Solver
@@ -207,14 +208,15 @@ def test_a_contact_pushed_further_starts_from_the_tangent_plane_estimate(monkeyp
     solver.step(pts, [col])
     a2 = solver.state["angle"][0]
     assert a2 > a1 + np.radians(5.0)  # a search of more than 20 steps
-    # th1, th0, the estimate's round (4) and a bisection of its bracket (<= 6)
+    # th1, th0, the estimate's round and a short search from it (9 here; a gallop
+    # from one step: about 12)
     assert sum(probes) <= 2 + 4 + 6
 
 
 def test_each_curve_spreads_its_first_round_around_its_own_estimate():
-    """The estimate round (``use_guess``) probes 0.8, 1, 1.25 and 1.6 times each
-    curve's own estimate: a curve with a small estimate next to one with a large one
-    is bracketed near its own answer, not at the other's probes."""
+    """The estimate round (``use_guess``) probes ``rigid._GUESS_SPREAD`` (1.3) times
+    each curve's own estimate: a curve with a small estimate next to one with a large
+    one is bracketed near its own answer, not at the other's probes."""
     n = 8
     th0 = np.zeros(n)
     kmax_angle = 3.0
@@ -227,8 +229,8 @@ def test_each_curve_spreads_its_first_round_around_its_own_estimate():
                                np.ones(n, bool), guess=guess)
     np.testing.assert_array_equal(k, answer)
     small = answer == 4
-    # 4 probes, then the bracket (3, 4] of the spread: closed at once
-    assert batch.probes[small].max() <= 4 + 1
+    # the estimate's probe (step 5, clear), then a bisection of (0, 5]: 3 and 4
+    assert batch.probes[small].max() <= 3
 
 
 def test_probe_stages_trace_every_segment_once_tip_first():
