@@ -28,8 +28,8 @@ _WIDTH = 1
 #: The estimate is low: the answers measured 1.0-1.6 times it (median 1.1 under
 #: the orbiting ball of ``make bench``, 1.3-1.4 under the hat and in the render
 #: groom's clearance pass). One probe at 1.3 times it takes fewer probes there than
-#: four spread around it (0.8, 1, 1.25, 1.6, before): the clearance pass 6.8 -> about
-#: 5 per curve, 8 % less CPU; the same answers wherever clearance is monotone.
+#: four spread around it (0.8, 1, 1.25, 1.6, before): the clearance pass 6.8 -> 4.7 probes
+#: per curve, 8 % less CPU; the same answers wherever clearance is monotone.
 _GUESS_SPREAD = (1.3,)
 _GUESS_STRIDE = 4
 

@@ -208,12 +208,11 @@ def test_a_contact_pushed_further_starts_from_the_tangent_plane_estimate(monkeyp
     solver.step(pts, [col])
     a2 = solver.state["angle"][0]
     assert a2 > a1 + np.radians(5.0)  # a search of more than 20 steps
-    # th1, th0, the estimate's round and a short search from it (9 here; a gallop
-    # from one step: about 12)
+    # th1, th0, the estimate's round and a short search from it (9 here)
     assert sum(probes) <= 2 + 4 + 6
 
 
-def test_each_curve_spreads_its_first_round_around_its_own_estimate():
+def test_each_curve_starts_from_its_own_estimate():
     """The estimate round (``use_guess``) probes ``rigid._GUESS_SPREAD`` (1.3) times
     each curve's own estimate: a curve with a small estimate next to one with a large
     one is bracketed near its own answer, not at the other's probes."""
