@@ -159,7 +159,7 @@ def resume_inputs_match(ob, directory, f, scene) -> bool:
         old = framecache.read_inputs(directory, f)
         if old is None:  # baked before FurCollide stored the record: start over
             return False
-        now = current_inputs(setup, read_inputs(setup))
+        now = current_inputs(setup, read_inputs(setup, attach=False), like=old)
         return first_change(setup, old, now) is None
 
 

@@ -24,7 +24,7 @@ import numpy as np
 from ..core import framecache
 from . import bridge, motion
 from .colliders import collider_objects, read_collider_inputs, renders_otherwise
-from .fur_attach import attached_points
+from .fur_attach import attach_input
 from .setup import signature
 
 
@@ -52,6 +52,9 @@ class FrameInputs:
     #: The source's own local positions when the output has the same world matrix
     #: (the usual case): unchanged points are written back from here, untouched.
     local: np.ndarray | None = None
+    #: Fur Attach's input (``fur_attach.AttachInput``) when it is on: ``points`` are
+    #: its attached points (None when read with ``attach=False``: a baked frame shown).
+    attached: object = None
 
     def __post_init__(self):
         if self.raw is None:
@@ -60,8 +63,14 @@ class FrameInputs:
             self.key = framecache.topology_key(self.offsets)
 
 
-def read_inputs(setup) -> FrameInputs:
-    """Evaluated source positions (world), offsets, enable mask."""
+def read_inputs(setup, attach=True) -> FrameInputs:
+    """Evaluated source positions (world), offsets, enable mask.
+
+    With Fur Attach on, ``attach=False`` checks the binding and reads the Surface
+    (``FrameInputs.attached``) but leaves ``points`` None: the frame-inputs record
+    needs only the Surface (:func:`frame_inputs`), so a baked frame shown, or an edit
+    check, never moves the curves.
+    """
     ob, depsgraph = setup.ob, setup.depsgraph
     s = ob.furcollide
     src = ob.evaluated_get(depsgraph)
@@ -79,8 +88,9 @@ def read_inputs(setup) -> FrameInputs:
     common = dict(offsets=offs, enabled=mask, frame=setup.frame, key=key, m_out_inv=M_out_inv,
                   warning=warning)
     if s.use_fur_attach:  # the input stage: curves follow the evaluated growth surface
-        world = np.asarray(attached_points(ob, depsgraph, offs), np.float32)
-        return FrameInputs(world, **common)
+        att = attach_input(ob, depsgraph, offs)
+        world = np.asarray(att.points(), np.float32) if attach else None
+        return FrameInputs(world, attached=att, **common)
     # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
     local = P if np.allclose(M, M_out, rtol=1e-6, atol=1e-7) else None
     return FrameInputs(bridge.transform(P, M), local=local, **common)
@@ -122,7 +132,10 @@ def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
     ----------
     inp : FrameInputs
         The frame's input: world positions before motion (``raw``), offsets and
-        the per-curve enable mask.
+        the per-curve enable mask. With Fur Attach, the part ``attached`` digests
+        the Surface's world vertices and the offsets instead of the positions: the
+        attached positions are a function of them and of the binding (its
+        ``attach_id`` is in the settings), so checking a record never attaches.
     sig : str
         The settings: :func:`signature` without the objects' identities (their
         geometry is digested; renaming an object or a new session never counts).
@@ -137,12 +150,16 @@ def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
     -------
     dict
         Ordered as :func:`describe_change` reports the first difference: the
-        colliders' number and options, the settings, the source, the enable mask,
+        colliders' number and options, the settings, the source (or ``attached``), the
+        enable mask,
         each collider's matrix and shape, the surface's.
     """
     rec = {"colliders": framecache.text_digest(repr(list(flags))),
-           "settings": framecache.text_digest(sig),
-           "source": framecache.digest(inp.raw, inp.offsets)}
+           "settings": framecache.text_digest(sig)}
+    if inp.attached is not None:
+        rec[ATTACHED_PART] = inp.attached.digest
+    else:
+        rec["source"] = framecache.digest(inp.raw, inp.offsets)
     if inp.enabled is not None:
         rec["enabled"] = framecache.digest(inp.enabled)
     for i, (matrix, shape) in enumerate(colliders):
@@ -166,6 +183,10 @@ def solved_inputs(setup, inp) -> dict:
 
 #: Part of a frame-inputs record made from a render's depsgraph (see :func:`first_change`).
 RENDER_PART = "render"
+#: Part of a frame-inputs record standing for the source when Fur Attach is on
+#: (:func:`frame_inputs`). Bakes made before it have ``source``, the digest of the
+#: attached points: :func:`current_inputs` makes that part for them (``like``).
+ATTACHED_PART = "attached"
 
 
 def _tagged(setup, record) -> dict:
@@ -174,9 +195,14 @@ def _tagged(setup, record) -> dict:
     return record
 
 
-def current_inputs(setup, inp) -> dict:
+def current_inputs(setup, inp, like=None) -> dict:
     """The record of the frame the setup's depsgraph shows now, read afresh (no solver
-    needed): what a cached frame's record must equal to be shown."""
+    needed): what a cached frame's record must equal to be shown.
+
+    ``like``: the record it will be compared with. One of a bake made before the
+    ``attached`` part existed has ``source``, the digest of the attached points,
+    instead: the record made then has it too (the curves attached once, here).
+    """
     ob, depsgraph = setup.ob, setup.depsgraph
     scene = depsgraph.scene
     refs = collider_objects(ob, scene)
@@ -185,9 +211,15 @@ def current_inputs(setup, inp) -> dict:
     surface = None
     if uses_growth(ob.furcollide) and surf is not None and surf.type == "MESH":
         surface = read_collider_inputs(surf, depsgraph)
-    return _tagged(setup, frame_inputs(inp, signature(ob, scene=scene, identities=False),
-                                       cols, [(r.double_sided, r.offset) for r in refs],
-                                       surface))
+    rec = _tagged(setup, frame_inputs(inp, signature(ob, scene=scene, identities=False),
+                                      cols, [(r.double_sided, r.offset) for r in refs],
+                                      surface))
+    if like is not None and "source" in like and ATTACHED_PART in rec:
+        raw = np.asarray(inp.attached.points(), np.float32)  # (as read_inputs makes it)
+        rec = {("source" if k == ATTACHED_PART else k):
+               (framecache.digest(raw, inp.offsets) if k == ATTACHED_PART else v)
+               for k, v in rec.items()}
+    return rec
 
 
 def seen_inputs(setup, inp) -> dict:
@@ -241,6 +273,8 @@ def changed_objects(setup, old, new) -> set | None:
         what = part.rpartition(" ")[0]
         if part in ("source", "enabled"):
             names.add(ob.name)
+        elif part == ATTACHED_PART and ob.data.surface is not None:
+            names.add(ob.data.surface.name)
         elif what == "surface" and ob.data.surface is not None:
             names.add(ob.data.surface.name)
         elif what.startswith("collider ") and int(what.split()[-1]) < len(refs):
@@ -265,6 +299,10 @@ def describe_change(ob, part, scene, old=None, new=None) -> str:
         return f"the source hair '{ob.name}' changed (groom, modifiers or placement)"
     if part == "enabled":
         return f"the enable attribute '{ob.furcollide.enable_attribute}' of '{ob.name}' changed"
+    if part == ATTACHED_PART:
+        surf = ob.data.surface
+        return (f"the Surface '{surf.name if surf is not None else '?'}' the curves are "
+                "attached to (Fur Attach) moved or changed shape")
     what, _, kind = part.rpartition(" ")
     change = "moved" if kind == "matrix" else "changed shape"
     if what == "surface":
@@ -292,7 +330,7 @@ def baked_frame_change(setup, inp, old) -> str:
     FurCollide stored their inputs, ``old`` None: not checked)."""
     if old is None:
         return ""
-    new = current_inputs(setup, inp)
+    new = current_inputs(setup, inp, like=old)
     part = first_change(setup, old, new)
     return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""
 

@@ -168,10 +168,14 @@ def _read_frame(setup):
     without an update callback invalidate."""
     s, rt = setup.s, setup.rt
     _changes_without_callbacks(setup)  # before the input is read: see there
-    inp = read_inputs(setup)
+    # A baked frame shown writes the bake: Fur Attach's points are not needed (the
+    # record it is checked against digests the Surface instead, frame_inputs).
+    inp = read_inputs(setup, attach=not (s.is_baked and s.enabled
+                                          and setup.frame >= s.frame_start))
     if not _check_topology(setup, inp):
         return None
-    prepare_input(setup, inp)
+    if inp.points is not None:  # (the jiggle's history and the motion feed a solve)
+        prepare_input(setup, inp)
     if not s.is_baked:  # a bake checks its own curve layout first
         frame_outputs.sync_output(setup, inp)
     sig = setup.signature()

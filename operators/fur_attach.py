@@ -3,8 +3,9 @@
 ``furcollide.fur_attach_bind`` (:mod:`.ops_attach`) ties every curve of the source to the
 Surface triangle under its root at the reference frame (:func:`core.pipeline.bind`). The
 binding is saved on the source object (:data:`ATTACH_PROPERTY`) and cached in the setup's
-runtime; each frame :func:`attached_points` moves the curves rigidly with the evaluated
-Surface.
+runtime; each frame :func:`attach_input` reads the evaluated Surface and
+:meth:`AttachInput.points` moves the curves rigidly with it (only when the points are
+needed: a baked frame shown checks its record with :attr:`AttachInput.digest`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import io
 
 import numpy as np
 
+from ..core import framecache
 from ..core.pipeline import Binding
 from . import bridge
 from .clock import clock
@@ -90,11 +92,42 @@ def _bind_again(ob) -> str:
 def attached_points(ob, depsgraph, offsets) -> np.ndarray:
     """Fur Attach input stage: the bound curves moved rigidly with the evaluated
     Surface of the source ``ob`` (world space, (P, 3) float64)."""
+    return attach_input(ob, depsgraph, offsets).points()
+
+
+class AttachInput:
+    """One frame's Fur Attach input: the binding and the evaluated Surface's world
+    vertices, checked (:func:`attach_input`). The attached points are a function of
+    these alone (the binding is the settings' ``attach_id``), so :attr:`digest` stands
+    for them in a frame-inputs record and a baked frame shown never attaches."""
+
+    def __init__(self, binding, V_world, offsets):
+        self.binding, self.V_world, self.offsets = binding, V_world, offsets
+        self._points = None
+
+    @property
+    def digest(self) -> int:
+        """Digest of what :meth:`points` depends on besides the binding: the Surface's
+        world vertices and the curve layout."""
+        return framecache.digest(self.V_world, self.offsets)
+
+    def points(self) -> np.ndarray:
+        """The attached curves, world space (P, 3) float64 (computed once)."""
+        if self._points is None:
+            with clock.timing("attach"):
+                self._points = self.binding.apply(self.V_world)
+        return self._points
+
+
+def attach_input(ob, depsgraph, offsets) -> AttachInput:
+    """The Fur Attach input of the source ``ob`` at this frame: the binding checked
+    against the source's curves and the evaluated Surface's topology (ValueError
+    naming what to press otherwise), and that Surface's world vertices."""
     with clock.timing("attach"):
-        return _attached_points(ob, depsgraph, offsets)
+        return _attach_input(ob, depsgraph, offsets)
 
 
-def _attached_points(ob, depsgraph, offsets) -> np.ndarray:
+def _attach_input(ob, depsgraph, offsets) -> AttachInput:
     binding, key = load_binding(ob)
     surf = ob.data.surface
     if surf is None or surf.type != "MESH":
@@ -122,4 +155,4 @@ def _attached_points(ob, depsgraph, offsets) -> np.ndarray:
         )
     V = bridge.mesh_vertices(me).astype(np.float64)
     M = bridge.matrix(se)
-    return binding.apply(V @ M[:3, :3].T + M[:3, 3])
+    return AttachInput(binding, V @ M[:3, :3].T + M[:3, 3], offsets)

@@ -394,8 +394,8 @@ def _show_note(setup, note, guides_ok) -> None:
 
 # ----------------------------------------------------------------- bake
 def _baked(setup, state):
-    """The render groom baked with the frame the output shows: (points, status,
-    stats), else None (the bake holds no groom, or another one: computed live). A
+    """The render groom baked with the frame the output shows: (points (P, 3) world,
+    status, stats), else None (the bake holds no groom, or another one: computed live). A
     groom baked with other settings is shown all the same, the setup outdated."""
     rt = setup.rt
     if rt.stats.get("source") != "bake":
@@ -410,7 +410,7 @@ def _baked(setup, state):
             return None
     if part is None:
         return None
-    points = np.asarray(part["points"], np.float64)
+    points = part["points"]  # (float32 as baked: written as they are, no float64 copy)
     status = np.asarray(part["status"], np.int8)
     if points.shape != state.binding.render_ref.shape:
         return None  # (another groom bound since: computed live)

@@ -77,7 +77,7 @@ def edit_seen(setup) -> str | None:
     key = (setup.scene.name, setup.frame)
     if rt.seen is None or rt.seen[0] != key:
         return None
-    new = current_inputs(setup, read_inputs(setup))
+    new = current_inputs(setup, read_inputs(setup, attach=False))  # (the record only)
     old = rt.seen[1]
     rt.seen = (key, new)
     part = first_change(setup, old, new)

@@ -220,3 +220,79 @@ def test_a_baked_frame_shown_reads_its_file_once_and_not_the_state(fc, tmp_path,
         assert opened == [fc.cache.frame_path(d, f)], (f, opened)
         np.testing.assert_array_equal(world(gout), baked[f][1], err_msg=f"frame {f}")
     assert names and not [n for n in names if n.startswith("state__")], names
+
+
+def _count_attach(fc, monkeypatch):
+    """Calls of Fur Attach's ``Binding.apply`` (the curves moved with the Surface)."""
+    calls = []
+    binding = fc.fur_attach.Binding
+    apply = binding.apply
+    monkeypatch.setattr(binding, "apply",
+                        lambda self, *a, **k: calls.append(1) or apply(self, *a, **k))
+    return calls
+
+
+def test_a_baked_frame_shown_does_not_attach_and_still_sees_the_surface_move(
+        fc, tmp_path, monkeypatch):
+    """Issue 11 point 4: the bake's inputs record digests Fur Attach's input (the
+    Surface's world vertices; the binding is in the settings), so a baked frame is
+    checked without moving the curves; the Surface moved after baking still makes the
+    frame outdated, the status naming it."""
+    guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
+    calls = _count_attach(fc, monkeypatch)
+    _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 3, 6), outdated=False)
+    assert calls == []
+    surf = guides.data.surface
+    z = surf.rotation_euler.z
+    surf.rotation_euler.z = z + 0.2  # (its location is keyed)
+    bpy.context.scene.frame_set(4)
+    np.testing.assert_array_equal(world(out), baked[4][0])  # still shown, outdated
+    s = guides.furcollide
+    assert s.is_outdated, s.status_message
+    assert (f"Frame 4 of the bake is outdated: the Surface '{surf.name}' the curves are "
+            "attached to (Fur Attach) moved or changed shape since it was baked"
+            in s.status_message), s.status_message
+    surf.rotation_euler.z = z
+    _shows_the_bake(fc, guides, out, gout, baked, (2, 4), outdated=False)
+    assert calls == []
+
+
+def _old_style_records(fc, guides, directory, wrong=()):
+    """Rewrite the bake's inputs records as FurCollide wrote them before the
+    ``attached`` part: ``source``, the digest of the attached points (float32) and the
+    offsets, in its place (``wrong``: frames given a wrong digest)."""
+    scene = bpy.context.scene
+    key = fc.cache._INPUTS_KEY
+    for f in FRAMES:
+        scene.frame_set(f)
+        path = fc.cache.frame_path(directory, f)
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        offs = arrays["offsets"]
+        pts = np.asarray(fc.fur_attach.attached_points(
+            guides, bpy.context.evaluated_depsgraph_get(), offs), np.float32)
+        record = fc.cache.decode_inputs(arrays[key])
+        assert "source" not in record
+        d = fc.cache.digest(pts, offs) + (1 if f in wrong else 0)
+        arrays[key] = fc.cache.encode_inputs(
+            {("source" if k == "attached" else k): (d if k == "attached" else v)
+             for k, v in record.items()})
+        np.savez(path, **arrays)
+
+
+def test_a_bake_from_before_the_attached_part_is_checked_as_before(fc, tmp_path,
+                                                                    monkeypatch):
+    """Older bakes' records digest the attached points (``source``): a baked frame of
+    one attaches the curves to check it, and is current exactly when they are the
+    points baked from (a wrong digest: outdated, naming the source)."""
+    guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
+    directory = bpy.path.abspath(guides.furcollide.bake_path)
+    _old_style_records(fc, guides, directory, wrong=(3,))
+    calls = _count_attach(fc, monkeypatch)
+    _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 6), outdated=False)
+    assert len(calls) == 3
+    bpy.context.scene.frame_set(3)
+    np.testing.assert_array_equal(world(out), baked[3][0])
+    s = guides.furcollide
+    assert s.is_outdated and (f"the source hair '{guides.name}' changed"
+                              in s.status_message), s.status_message
