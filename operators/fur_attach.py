@@ -98,7 +98,7 @@ def attached_points(ob, depsgraph, offsets) -> np.ndarray:
 class AttachInput:
     """One frame's Fur Attach input: the binding and the evaluated Surface's world
     vertices, checked (:func:`attach_input`). The attached points are a function of
-    these alone (the binding is the settings' ``attach_id``), so :attr:`digest` stands
+    the binding and the bound triangles' vertices alone (the binding is the settings' ``attach_id``), so :attr:`digest` stands
     for them in a frame-inputs record and a baked frame shown never attaches."""
 
     def __init__(self, binding, V_world, offsets):
@@ -107,9 +107,11 @@ class AttachInput:
 
     @property
     def digest(self) -> int:
-        """Digest of what :meth:`points` depends on besides the binding: the Surface's
-        world vertices and the curve layout."""
-        return framecache.digest(self.V_world, self.offsets)
+        """Digest of what :meth:`points` depends on besides the binding: the world
+        positions of the Surface vertices it reads (``Binding.used_vertices``: an
+        edit elsewhere on the Surface, away from the roots, is not a change) and
+        the curve layout."""
+        return framecache.digest(self.V_world[self.binding.used_vertices], self.offsets)
 
     def points(self) -> np.ndarray:
         """The attached curves, world space (P, 3) float64 (computed once)."""

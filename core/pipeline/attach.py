@@ -11,6 +11,7 @@ shape-keyed surfaces), not the topology.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -162,6 +163,13 @@ class Binding:
             )
         except KeyError as exc:
             raise InputError(f"binding arrays lack {exc}") from None
+
+    @cached_property
+    def used_vertices(self) -> np.ndarray:
+        """(k,) int64, sorted: the surface vertices :meth:`apply` reads (those of the
+        bound triangles). The attached curves are a function of these alone: a
+        change elsewhere on the surface cannot move them."""
+        return np.unique(self.faces[self.face])
 
     def roots(self, V_now) -> np.ndarray:
         """(C, 3) root surface points on the surface ``V_now`` (barycentric)."""

@@ -255,6 +255,19 @@ def test_a_baked_frame_shown_does_not_attach_and_still_sees_the_surface_move(
     surf.rotation_euler.z = z
     _shows_the_bake(fc, guides, out, gout, baked, (2, 4), outdated=False)
     assert calls == []
+    # a vertex no bound triangle uses (away from the roots) cannot move the curves:
+    # not a change; one of a bound triangle is
+    used = fc.fur_attach.load_binding(guides)[0].used_vertices
+    free = np.setdiff1d(np.arange(len(surf.data.vertices)), used)
+    assert len(free)
+    surf.data.vertices[int(free[0])].co.z += 0.3
+    surf.data.update()
+    _shows_the_bake(fc, guides, out, gout, baked, (2, 4), outdated=False)
+    surf.data.vertices[int(used[0])].co.z += 0.3
+    surf.data.update()
+    bpy.context.scene.frame_set(5)
+    assert s.is_outdated and f"the Surface '{surf.name}'" in s.status_message
+    assert calls == []
 
 
 def _old_style_records(fc, guides, directory, wrong=()):

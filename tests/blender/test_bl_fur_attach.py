@@ -545,3 +545,30 @@ def test_attach_surface_edited_on_a_baked_setup_says_free_bake_first(fc, tmp_pat
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(scene, range(1, 4))
     assert fc.registry.status_for(hair) == ("INFO", "")
+
+
+def test_an_edit_away_from_the_roots_keeps_the_playback_cache(fc):
+    """The frame-inputs record digests only the Surface vertices Fur Attach reads
+    (those of the bound triangles): a vertex no curve is bound to, moved while the
+    frames are cached, changes nothing (the cache and the frame stay); a bound one
+    is an edit that names the Surface."""
+    scene, hair, out, surf = _attach_bound(fc)
+    rt = fc.registry.get_runtime(hair)
+    play(scene, range(1, 5))
+    assert sorted(rt.memory.frames) == [1, 2, 3, 4]
+    used = fc.fur_attach.load_binding(hair)[0].used_vertices
+    free = np.setdiff1d(np.arange(len(surf.data.vertices)), used)
+    assert len(free)
+    surf.data.vertices[int(free[0])].co.z += 0.3
+    surf.data.update()
+    bpy.context.view_layer.update()  # (the depsgraph check runs)
+    assert sorted(rt.memory.frames) == [1, 2, 3, 4]
+    scene.frame_set(3)
+    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert rt.stats["source"] == "cache"
+    surf.data.vertices[int(used[0])].co.z += 0.3
+    surf.data.update()
+    bpy.context.view_layer.update()
+    assert len(rt.memory) == 0
+    level, msg = fc.registry.status_for(hair)
+    assert f"the Surface '{surf.name}' the curves are attached to" in msg, msg

@@ -73,6 +73,26 @@ def test_deformation_roots_on_triangles_curves_rigid(seed, amp):
         np.testing.assert_allclose(da, dc, atol=1e-9)
 
 
+@PROP
+@given(seed=st.integers(0, 10_000), amp=st.floats(0.01, 0.3))
+def test_the_curves_depend_only_on_the_used_vertices(seed, amp):
+    """``used_vertices`` (what a frame-inputs record digests for Fur Attach) is
+    exactly what ``apply`` reads: every other vertex moved, the curves stay bit for
+    bit; one used vertex moved, a curve moves."""
+    rng, V, F, pts, off = _scene(seed)
+    b = bind(pts, off, V, F)
+    used = b.used_vertices
+    np.testing.assert_array_equal(used, np.unique(F[b.face]))
+    free = np.setdiff1d(np.arange(len(V)), used)
+    assert len(free)  # (40 curves on a 320-triangle sphere)
+    V2 = V.copy()
+    V2[free] += amp * rng.normal(size=(len(free), 3))
+    np.testing.assert_array_equal(b.apply(V2), b.apply(V))
+    V3 = V.copy()
+    V3[used[rng.integers(len(used))]] += amp
+    assert (b.apply(V3) != b.apply(V)).any()
+
+
 def test_roots_off_the_surface_are_snapped():
     rng, V, F, pts, off = _scene(1)
     lifted = pts + 0.05 * pts[np.repeat(off[:-1], np.diff(off))]  # push outward a bit
