@@ -98,8 +98,9 @@ def attached_points(ob, depsgraph, offsets) -> np.ndarray:
 class AttachInput:
     """One frame's Fur Attach input: the binding and the evaluated Surface's world
     vertices, checked (:func:`attach_input`). The attached points are a function of
-    the binding and the bound triangles' vertices alone (the binding is the settings' ``attach_id``), so :attr:`digest` stands
-    for them in a frame-inputs record and a baked frame shown never attaches."""
+    the binding (the settings' ``attach_id``) and the bound triangles' vertices alone,
+    so :attr:`digest` stands for them in a frame-inputs record and a baked frame
+    shown never attaches."""
 
     def __init__(self, binding, V_world, offsets):
         self.binding, self.V_world, self.offsets = binding, V_world, offsets
