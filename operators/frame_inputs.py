@@ -133,7 +133,8 @@ def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
     inp : FrameInputs
         The frame's input: world positions before motion (``raw``), offsets and
         the per-curve enable mask. With Fur Attach, the part ``attached`` digests
-        the Surface's world vertices and the offsets instead of the positions: the
+        the world positions of the Surface vertices the binding reads and the
+        offsets instead of the positions (``fur_attach.AttachInput.digest``): the
         attached positions are a function of them and of the binding (its
         ``attach_id`` is in the settings), so checking a record never attaches.
     sig : str
@@ -150,9 +151,8 @@ def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
     -------
     dict
         Ordered as :func:`describe_change` reports the first difference: the
-        colliders' number and options, the settings, the source (or ``attached``), the
-        enable mask,
-        each collider's matrix and shape, the surface's.
+        colliders' number and options, the settings, the source (or ``attached``),
+        the enable mask, each collider's matrix and shape, the surface's.
     """
     rec = {"colliders": framecache.text_digest(repr(list(flags))),
            "settings": framecache.text_digest(sig)}
@@ -273,9 +273,7 @@ def changed_objects(setup, old, new) -> set | None:
         what = part.rpartition(" ")[0]
         if part in ("source", "enabled"):
             names.add(ob.name)
-        elif part == ATTACHED_PART and ob.data.surface is not None:
-            names.add(ob.data.surface.name)
-        elif what == "surface" and ob.data.surface is not None:
+        elif (part == ATTACHED_PART or what == "surface") and ob.data.surface is not None:
             names.add(ob.data.surface.name)
         elif what.startswith("collider ") and int(what.split()[-1]) < len(refs):
             names.update(o.name for o in refs[int(what.split()[-1])].objects)
