@@ -111,11 +111,18 @@ def _rules(setup):
     return outcome, written
 
 
+def _passes_through(setup) -> bool:
+    """Does the frame show the source as it is (the setup disabled, or before its
+    Frame Start)? The first of the frame rules: a bake is shown only after it."""
+    s = setup.s
+    return not s.enabled or setup.frame < s.frame_start
+
+
 def _frame_rules(setup, inp):
     """The rules once the frame's inputs are read: (Outcome, the points written)."""
     note = _input_warning(setup, inp)
     s, rt, f = setup.s, setup.rt, setup.frame
-    if not s.enabled or f < s.frame_start:
+    if _passes_through(setup):
         return _pass_through(setup, inp, note)
     if s.is_baked:
         return _show_baked(setup, inp, note)
@@ -170,8 +177,7 @@ def _read_frame(setup):
     _changes_without_callbacks(setup)  # before the input is read: see there
     # A baked frame shown writes the bake: Fur Attach's points are not needed (the
     # record it is checked against digests the Surface instead, frame_inputs).
-    inp = read_inputs(setup, attach=not (s.is_baked and s.enabled
-                                          and setup.frame >= s.frame_start))
+    inp = read_inputs(setup, attach=not (s.is_baked and not _passes_through(setup)))
     if not _check_topology(setup, inp):
         return None
     if inp.points is not None:  # (the jiggle's history and the motion feed a solve)

@@ -25,6 +25,14 @@ pytestmark = pytest.mark.blender
 FRAMES = range(1, 7)
 
 
+def _counted(monkeypatch, cls, name):
+    """The calls of method ``cls.name`` from now on (a list, one entry per call)."""
+    calls = []
+    method = getattr(cls, name)
+    monkeypatch.setattr(cls, name, lambda self, *a, **k: calls.append(1) or method(self, *a, **k))
+    return calls
+
+
 def _baked_pipeline(fc, tmp_path):
     """The groom scene with Fur Attach on an animated Surface, wind and jiggle after
     collision held by the Region of Influence, the collider distance attribute and a
@@ -179,14 +187,7 @@ def test_the_baked_render_groom_is_read_not_computed(fc, tmp_path, monkeypatch):
     frame shows them (bit for bit the frame baked) without deforming or clearing the
     groom; freed, the groom is computed again, the same."""
     guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
-    calls = []
-    deform = fc.groom_stage.GroomBinding.deform
-
-    def counted(self, *a, **kw):
-        calls.append(1)
-        return deform(self, *a, **kw)
-
-    monkeypatch.setattr(fc.groom_stage.GroomBinding, "deform", counted)
+    calls = _counted(monkeypatch, fc.groom_stage.GroomBinding, "deform")
     _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 3, 6), outdated=False)
     assert calls == []
     assert any((baked[f][2] == 1).any() for f in FRAMES)  # the clearance pass was baked
@@ -222,14 +223,6 @@ def test_a_baked_frame_shown_reads_its_file_once_and_not_the_state(fc, tmp_path,
     assert names and not [n for n in names if n.startswith("state__")], names
 
 
-def _count_attach(fc, monkeypatch):
-    """Calls of Fur Attach's ``Binding.apply`` (the curves moved with the Surface)."""
-    calls = []
-    binding = fc.fur_attach.Binding
-    apply = binding.apply
-    monkeypatch.setattr(binding, "apply",
-                        lambda self, *a, **k: calls.append(1) or apply(self, *a, **k))
-    return calls
 
 
 def test_a_baked_frame_shown_does_not_attach_and_still_sees_the_surface_move(
@@ -239,7 +232,7 @@ def test_a_baked_frame_shown_does_not_attach_and_still_sees_the_surface_move(
     checked without moving the curves; the Surface moved after baking still makes the
     frame outdated, the status naming it."""
     guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
-    calls = _count_attach(fc, monkeypatch)
+    calls = _counted(monkeypatch, fc.fur_attach.Binding, "apply")  # (Fur Attach)
     _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 3, 6), outdated=False)
     assert calls == []
     surf = guides.data.surface
@@ -301,7 +294,7 @@ def test_a_bake_from_before_the_attached_part_is_checked_as_before(fc, tmp_path,
     guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
     directory = bpy.path.abspath(guides.furcollide.bake_path)
     _old_style_records(fc, guides, directory, wrong=(3,))
-    calls = _count_attach(fc, monkeypatch)
+    calls = _counted(monkeypatch, fc.fur_attach.Binding, "apply")  # (Fur Attach)
     _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 6), outdated=False)
     assert len(calls) == 3
     bpy.context.scene.frame_set(3)
