@@ -8,7 +8,8 @@ scenes (moving and deforming colliders, closed and open, single and double
 sided, collision offsets, changing ``enabled`` masks) these check that
 
 * a snapshot/restore into a fresh solver continues bit for bit,
-* the thread count never changes a bit,
+* the thread count never changes a bit, nor does a step solved in two halves
+  on two threads (``core.step.SPLIT_MIN_CURVES``, forced down to a few curves),
 * with an explicit ``deforming`` flag a collider's history never matters,
 * float64 input keeps the invariants (oracle-checked), and
 * a collider far from the curves on some frames is never built needlessly.
@@ -19,6 +20,7 @@ Existing tests cover the rigid-only versions of the first two
 
 from __future__ import annotations
 
+import contextlib
 import io
 
 import geom
@@ -29,6 +31,7 @@ from geom import FAST
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+import core.step
 from core import Collider, Settings, Solver, Status
 
 MODES = ("stiff", "bend", "soft")
@@ -262,12 +265,29 @@ def test_restore_into_a_fresh_solver_continues_bit_for_bit(n_frames, data, threa
 
 
 # ---------------------------------------------------------------- 2. thread count
+@contextlib.contextmanager
+def split_from(n):
+    """Steps solve their curves in two halves from ``n`` curves of work (the
+    benchmark's scenes reach the real threshold; these scenes have a few dozen)."""
+    old = core.step.SPLIT_MIN_CURVES
+    core.step.SPLIT_MIN_CURVES = n
+    try:
+        yield
+    finally:
+        core.step.SPLIT_MIN_CURVES = old
+
+
 @FAST
-@given(n_frames=st.integers(2, 5), data=st.data())
-def test_thread_count_never_changes_a_bit(n_frames, data):
+@given(n_frames=st.integers(2, 5), split=st.sampled_from([1, 5, None]), data=st.data())
+def test_thread_count_never_changes_a_bit(n_frames, split, data):
+    """Nor does a step split in two halves (``split``: from that many curves of
+    work; None: the real threshold), which only runs on two threads or more."""
     scene = data.draw(animated_scenes(n_frames), label="scene")
     s = data.draw(solver_settings(), label="settings")
-    runs = {t: run(scene, s.replace(threads=t), range(n_frames))[:2] for t in (1, 2, 3)}
+    runs = {1: run(scene, s.replace(threads=1), range(n_frames))[:2]}
+    with split_from(core.step.SPLIT_MIN_CURVES if split is None else split):
+        for t in (2, 3):
+            runs[t] = run(scene, s.replace(threads=t), range(n_frames))[:2]
     for t in (2, 3):
         for f in range(n_frames):
             assert_same(runs[t][0][f], runs[1][0][f], f"threads={t} frame {f}")
@@ -277,12 +297,14 @@ def test_thread_count_never_changes_a_bit(n_frames, data):
 @settings(FAST, max_examples=max(1, FAST.max_examples // 3))
 @given(mode=modes, offset=st.sampled_from([0.0, 0.01]), dtype=dtypes, masked=st.booleans(),
        phase=st.tuples(strat.floats(0, 6.28), strat.floats(0, 6.28)),
-       double=st.booleans(), lean=strat.floats(0.0, 0.4))
+       double=st.booleans(), lean=strat.floats(0.0, 0.4), split=st.sampled_from([500, None]))
 def test_thread_count_never_changes_a_bit_on_split_batches(mode, offset, dtype, masked, phase,
-                                                          double, lean):
+                                                          double, lean, split):
     """Enough curves (> 2 x 4096 rays per query) that the ray batches are
     really split over the pool, with a deforming sheet built on a ray thread
-    and the state stored beside the output. (The 2,500 curves are a fixed grid
+    and the state stored beside the output; ``split`` 500: the steps also solve
+    their curves in two halves (halves large enough that each half's probe
+    batches are themselves two blocks). (The 2,500 curves are a fixed grid
     leaning by a drawn amount: drawing each would be data, not a scene.)"""
     g = (np.arange(50) + 0.5) / 50 * 2 - 1
     X, Y = np.meshgrid(g, g, indexing="ij")
@@ -304,11 +326,12 @@ def test_thread_count_never_changes_a_bit_on_split_batches(mode, offset, dtype, 
         col = Collider(V, F, double_sided=double)
         solver = Solver(offs, Settings(mode=mode, threads=t, collision_offset=offset))
         out = []
-        for f in range(3):
-            col.vertices = shapes[f]
-            r = solver.step(pts, [col], enabled=masks[f])
-            out.append((r.points.copy(), np.asarray(r.status).copy()))
-            rays.setdefault(t, []).append(r.timings["rays"])
+        with split_from(core.step.SPLIT_MIN_CURVES if split is None else split):
+            for f in range(3):
+                col.vertices = shapes[f]
+                r = solver.step(pts, [col], enabled=masks[f])
+                out.append((r.points.copy(), np.asarray(r.status).copy()))
+                rays.setdefault(t, []).append(r.timings["rays"])
         runs[t] = (out, solver.state)
     assert (runs[1][0][0][1] == Status.COLLIDING).sum() > 500  # in play
     for t in (2, 3):
