@@ -44,14 +44,34 @@ def solve(ctx, idx, status):
     far = idx[~ctx.cand_any[idx]]
     act = near[ctx.active[near]]  # rotated curves near a collider
     new = near[~ctx.active[near]]  # unrotated: their segments are the input's
-    # 1. Unrotated curves near a collider: tested at their input shape.
+    # 1. Unrotated curves near a collider: tested at their input shape; 2. the
+    # searches. Each in two halves on two threads when there are many.
+    ctx.in_halves(_new_contacts, len(new), new)
+    cn = new[ctx.active[new]]
+    ctx.in_halves(_search, len(act) + len(cn), act, cn, status=status)
+    rec = far[ctx.active[far]]  # far from every collider: nothing to check
+    th_far = angle[rec].copy()
+    recover(ctx, rec, th_far, recovery_step(ctx, rec), np.zeros(len(rec), bool), status)
+    release(ctx, idx)
+
+
+def _new_contacts(ctx, new):
+    """Test unrotated curves ``new`` at their input shape; the ones that hit
+    become active with the axis of their first hit (kept until recovered)."""
     hit_new, seg_hit = ctx.input_hits(new)
     cn = new[hit_new]
-    if len(cn):  # first hit: choose the axis (kept until recovered)
+    if len(cn):
         seg_hit = seg_hit[np.repeat(hit_new, ctx.layout.nseg[new])]  # (the same rays)
         o, d, _, rep, starts = ctx.input_rays(cn)
         ctx.axis[cn] = ctx.new_axes(cn, o, d, rep, starts, seg_hit)
         ctx.active[cn] = True
+
+
+def _search(ctx, act, cn, status):
+    """Angles of the rotated curves ``act`` near a collider and of the new
+    contacts ``cn`` (their axes set): collisions, recoveries, restarts and
+    Bend's fall back to Stiff. Each curve's answer is its own."""
+    angle = ctx.angle
     # One batch for the rotated curves (items 0..len(act)-1) and the new
     # colliding ones, so that every search below is one ray query per round.
     batch = RigidBatch(ctx, np.concatenate([act, cn]))
@@ -62,7 +82,7 @@ def solve(ctx, idx, status):
         plan.first_round_warm(batch)
     else:
         plan.first_round_full(batch)
-    # 2. Collisions without a bracket yet: a first probe that lifts the
+    # Collisions without a bracket yet: a first probe that lifts the
     #    current shape above the tangent plane at the first hit.
     cc = plan.collisions_to_guess()
     if len(cc):
@@ -71,7 +91,7 @@ def solve(ctx, idx, status):
         k, point, push = ctx.first_hit_details(c, o, d, rep, starts)
         g = ctx.plane_guess(c, o + d, rep, starts, point, push, ctx.axis[c])
         ctx.guess[c] = np.where(k >= 0, g, ctx.guess[c])
-    # 3. Every search left, collisions (new and old) and blocked recoveries,
+    # Every search left, collisions (new and old) and blocked recoveries,
     #    in the same rounds (one ray query per round).
     col_items, col_lo, col_hi, col_stride, col_guess = plan.collision_searches()
     new_lo, new_hi, new_stride, new_guess = fresh_searches(len(cn))
@@ -94,10 +114,6 @@ def solve(ctx, idx, status):
     restart_contacts(ctx, batch, left, np.full_like(left, NONE), status)
     rec = plan.recovered_items()
     recover(ctx, act[rec], th0[rec], plan.recovered_angle(rec), plan.blocked(rec), status)
-    rec = far[ctx.active[far]]  # far from every collider: nothing to check
-    th_far = angle[rec].copy()
-    recover(ctx, rec, th_far, recovery_step(ctx, rec), np.zeros(len(rec), bool), status)
-    release(ctx, idx)
 
 
 def fresh_searches(n):

@@ -22,14 +22,18 @@ from .soft import SoftSolve
 from .status import Status
 
 #: A step solves its curves in two halves, one per thread, from this many
-#: curves of work: in Soft every curve solved, in Stiff/Bend every rotated
-#: curve near a collider (the ones searched). Curves are independent, so each
-#: half gives the curves what the whole would, bit for bit; the halves'
-#: numpy passes and ray queries overlap (both release the GIL). Below it the
-#: per-call overhead of twice the numpy calls costs more than the overlap
-#: gains (Bend under ``make bench``'s orbiting ellipsoid: about 1,850
-#: searched curves, 39 -> 48 ms a frame split; under the hat: 13,400, 100 ->
-#: 85 ms; Soft gains at both: 90 -> 71 and 221 -> 148 ms).
+#: curves of work (:meth:`StepContext.in_halves`): in Soft every curve solved;
+#: in Stiff/Bend, by phase, the unrotated curves near a collider (tested at
+#: their input shape) and the curves searched (rotated ones near a collider,
+#: new contacts). Curves are independent, so each half gives the curves what
+#: the whole would, bit for bit; the halves' numpy passes and ray queries
+#: overlap (both release the GIL). Below it the per-call overhead of twice the
+#: numpy calls costs more than the overlap gains. Measured A/B in one process
+#: (``make bench``, 24 frames): Bend under the orbiting ellipsoid (7,300
+#: tested, 3,000 searched: only the test split) 39.5 ms, 38-39 split at this
+#: threshold, 46 with every phase split; under the hat (15,000 searched)
+#: 83-89 -> 79-84 ms; Soft 87-93 -> 75-78 and 201-210 -> 140-155 ms; the
+#: render groom's clearance pass (a fresh solver: all new contacts) 72 -> 65 ms.
 SPLIT_MIN_CURVES = 4096
 
 
@@ -596,24 +600,31 @@ class StepContext:
         return np.where(self.state.hold[idx], np.nan, self.s.plasticity)
 
     def solve(self, idx, status):
-        """Solve curves ``idx`` in this step's mode (in two halves on two
-        threads where that pays: :data:`SPLIT_MIN_CURVES`)."""
-        run = _solve_soft if self.soft else rigid.solve
-        work = len(idx) if self.soft else np.count_nonzero(self.active[idx] & self.cand_any[idx])
+        """Solve curves ``idx`` in this step's mode."""
+        if self.soft:
+            self.in_halves(_solve_soft, len(idx), idx, status=status)
+        else:
+            rigid.solve(self, idx, status)
+
+    def in_halves(self, fn, work, *parts, **kw):
+        """``fn(self, *parts, **kw)``; with ``work`` of at least
+        :data:`SPLIT_MIN_CURVES` curves and two threads or more, as two calls on
+        two threads, each with every other curve of each of ``parts`` (curve
+        index arrays) and a shallow copy of this context: the per-curve arrays
+        are shared (the halves write disjoint curves in place), the ray count
+        and the thread count (one each: the halves are the parallelism) their
+        own. ``fn`` must give each curve what it gives it in the whole."""
         if self.threads < 2 or work < SPLIT_MIN_CURVES:
-            run(self, idx, status)
+            fn(self, *parts, **kw)
             return
-        # Each half gets a shallow copy: the per-curve arrays are shared (the
-        # halves write disjoint curves in place), the ray count and the
-        # thread count (one each: the halves are the parallelism) their own.
         halves = [copy.copy(self) for _ in range(2)]
         for h in halves:
             h.threads, h.n_rays = 1, 0
         # Interleaved, so that both halves get as much contact wherever the
         # groom's curve order puts it.
-        done = beside(partial(run, halves[0], idx[0::2], status), self.threads)
+        done = beside(partial(fn, halves[0], *(p[0::2] for p in parts), **kw), self.threads)
         try:
-            run(halves[1], idx[1::2], status)
+            fn(halves[1], *(p[1::2] for p in parts), **kw)
         except BaseException:
             try:
                 done()

@@ -88,22 +88,26 @@ def test_a_batch_of_exactly_two_blocks_is_traced_in_two_halves(monkeypatch):
 
 
 # ------------------------------------------------------------ a step in two halves
-def _solves(monkeypatch, split_from):
-    """Record (thread, curves, ctx.threads) of every mode solve of a step, the
-    split threshold set to ``split_from`` curves of work."""
+#: The phases a step may run in two halves: (module, function).
+_PHASES = (("rigid", "_new_contacts"), ("rigid", "_search"), ("step", "_solve_soft"))
+
+
+def _phases(monkeypatch, split_from):
+    """Record (phase, thread, curve arrays, ctx.threads) of every call of the
+    phases a step may split, the threshold set to ``split_from`` curves of work."""
     from core import rigid, step
 
     monkeypatch.setattr(step, "SPLIT_MIN_CURVES", split_from)
     seen = []
-    for name, fn in (("rigid", rigid.solve), ("soft", step._solve_soft)):
-        def spy(ctx, idx, status, fn=fn):
-            seen.append((threading.get_ident(), np.array(idx), ctx.threads))
-            return fn(ctx, idx, status)
+    for mod_name, name in _PHASES:
+        mod = rigid if mod_name == "rigid" else step
+        fn = getattr(mod, name)
 
-        if name == "rigid":
-            monkeypatch.setattr(rigid, "solve", spy)
-        else:
-            monkeypatch.setattr(step, "_solve_soft", spy)
+        def spy(ctx, *parts, fn=fn, name=name, **kw):
+            seen.append((name, threading.get_ident(), [np.array(p) for p in parts], ctx.threads))
+            return fn(ctx, *parts, **kw)
+
+        monkeypatch.setattr(mod, name, spy)
     return seen
 
 
@@ -115,39 +119,62 @@ def _two_steps(mode, threads):
     return first, second
 
 
+def _assert_halves(calls):
+    """Two calls on two threads, one ray thread each, every other curve of each array."""
+    assert len(calls) == 2, [(n, [len(p) for p in parts]) for n, _, parts, _ in calls]
+    (_, ta, pa, na), (_, tb, pb, nb) = calls
+    assert ta != tb and na == nb == 1
+    # (the steps' curve arrays are sorted; the two halves start in either order)
+    wholes = [np.sort(np.concatenate([a, b])) for a, b in zip(pa, pb, strict=True)]
+
+    def even_odd(x, y):
+        return all(np.array_equal(a, w[0::2]) and np.array_equal(b, w[1::2])
+                   for a, b, w in zip(x, y, wholes, strict=True))
+
+    assert even_odd(pa, pb) or even_odd(pb, pa)
+
+
 @pytest.mark.parametrize("mode", ["bend", "soft"])
 def test_a_step_with_much_work_is_solved_in_two_halves_one_thread_each(monkeypatch, mode):
-    """Stiff/Bend count the rotated curves near a collider (the ones searched: none
-    on the first step of a groom), Soft every curve solved. The halves interleave
-    the curves, each solved on its own thread with one ray thread, and together
-    give what one thread gives, rays counted once."""
+    """Stiff/Bend split the input test of the unrotated curves near a collider and
+    the searches (rotated curves near a collider and new contacts), each by its own
+    count; Soft every curve solved. The halves interleave the curves, each on its own
+    thread with one ray thread, and together give what one thread gives, rays
+    counted once."""
     ref = _two_steps(mode, 1)
-    seen = _solves(monkeypatch, 100)
-    got = _two_steps(mode, 2)
-    per_step = [seen[:1], seen[1:]] if mode == "bend" else [seen[:2], seen[2:]]
-    if mode == "bend":
-        assert len(seen[0][1]) == 400 and seen[0][2] == 2  # nothing rotated yet: whole
-    for calls in per_step[1 if mode == "bend" else 0:]:
-        assert len(calls) == 2, [(len(i), t) for _, i, t in calls]
-        # (in whichever order the two threads started)
-        (ta, ia, na), (tb, ib, nb) = sorted(calls, key=lambda c: c[1][0])
-        assert ta != tb and na == nb == 1
-        whole = np.sort(np.concatenate([ia, ib]))
-        assert len(whole) == len(ia) + len(ib) and abs(len(ia) - len(ib)) <= 1
-        assert np.array_equal(ia, whole[0::2]) and np.array_equal(ib, whole[1::2])
+    seen = _phases(monkeypatch, 100)
+    pts, offs, col = _pressed_grid(20)
+    solver = Solver(offs, Settings(mode=mode, threads=2))
+    names = ["_new_contacts", "_search"] if mode == "bend" else ["_solve_soft"]
+    got, split = [], set()
+    for _ in range(2):
+        seen.clear()
+        got.append(solver.step(pts, [col]))
+        assert {n for n, *_ in seen} == set(names)
+        for name in names:
+            calls = [c for c in seen if c[0] == name]
+            if len(calls) == 1:  # whole: under the threshold (the second step's input test)
+                assert sum(len(p) for p in calls[0][2]) < 100 and calls[0][3] == 2
+            else:
+                _assert_halves(calls)
+                split.add(name)
+    assert split == set(names)
     for a, b in zip(got, ref, strict=True):
         assert np.array_equal(a.points, b.points) and np.array_equal(a.status, b.status)
         assert a.timings["rays"] == b.timings["rays"]
     assert (got[1].status == 1).sum() > 100  # (COLLIDING: the sheet presses the grid)
 
 
+@pytest.mark.parametrize("mode", ["bend", "soft"])
 @pytest.mark.parametrize("threads, split_from", [(2, 10_000), (1, 1)])
-def test_a_step_with_little_work_or_one_thread_is_solved_whole(monkeypatch, threads, split_from):
-    seen = _solves(monkeypatch, split_from)
-    _two_steps("bend", threads)
-    assert [len(i) for _, i, _ in seen] == [400, 400]
-    assert {t for _, _, t in seen} == {threads}
-    assert {tid for tid, _, _ in seen} == {threading.get_ident()}
+def test_a_step_with_little_work_or_one_thread_is_solved_whole(monkeypatch, mode, threads,
+                                                              split_from):
+    seen = _phases(monkeypatch, split_from)
+    _two_steps(mode, threads)
+    assert seen and {t for *_, t in seen} == {threads}
+    assert {tid for _, tid, _, _ in seen} == {threading.get_ident()}
+    if mode == "soft":
+        assert [len(parts[0]) for *_, parts, _ in seen] == [400, 400]
 
 
 def test_an_error_in_the_other_half_reaches_the_caller(monkeypatch):
@@ -160,16 +187,16 @@ def test_an_error_in_the_other_half_reaches_the_caller(monkeypatch):
     solver = Solver(offs, Settings(mode="bend", threads=2))
     solver.step(pts, [col])
     main = threading.get_ident()
-    solve = rigid.solve
+    search = rigid._search
     finished = []
 
-    def spy(ctx, idx, status):
+    def spy(ctx, act, cn, status):
         if threading.get_ident() != main:
             raise MemoryError("the pool thread's half")
-        solve(ctx, idx, status)
-        finished.append(len(idx))
+        search(ctx, act, cn, status)
+        finished.append(len(act))
 
-    monkeypatch.setattr(rigid, "solve", spy)
+    monkeypatch.setattr(rigid, "_search", spy)
     with pytest.raises(MemoryError, match="pool thread"):
         solver.step(pts, [col])
     assert finished  # the caller's half ran to its end before the error was raised
