@@ -191,8 +191,9 @@ class FurCollideSettings(PropertyGroup):
         min=0,
         max=1024,
         # (no update: the result is the same for any count, the cache stays valid)
-        description="Ray-tracing threads (0 = all CPUs). The result is identical for "
-        "any count",
+        description="Threads a frame's solve uses (0 = all CPUs): for its rays, and with "
+        "many curves in contact for two halves of the groom at once. The result is "
+        "identical for any count",
     )
 
     # -------------------------------------------------------------- shrink
