@@ -83,7 +83,7 @@ def _search(ctx, act, cn, status):
     else:
         plan.first_round_full(batch)
     # Collisions without a bracket yet: a first probe that lifts the
-    #    current shape above the tangent plane at the first hit.
+    # current shape above the tangent plane at the first hit.
     cc = plan.collisions_to_guess()
     if len(cc):
         c = act[cc]
@@ -92,7 +92,7 @@ def _search(ctx, act, cn, status):
         g = ctx.plane_guess(c, o + d, rep, starts, point, push, ctx.axis[c])
         ctx.guess[c] = np.where(k >= 0, g, ctx.guess[c])
     # Every search left, collisions (new and old) and blocked recoveries,
-    #    in the same rounds (one ray query per round).
+    # in the same rounds (one ray query per round).
     col_items, col_lo, col_hi, col_stride, col_guess = plan.collision_searches()
     new_lo, new_hi, new_stride, new_guess = fresh_searches(len(cn))
     items = np.concatenate([col_items, len(act) + np.arange(len(cn))])

@@ -834,4 +834,5 @@ class StepContext:
 
 
 def _solve_soft(ctx, idx, status):
+    """Soft (paper 3.2.1) on curves ``idx``: :meth:`StepContext.in_halves`'s ``fn``."""
     SoftSolve(ctx).run(idx, status)
