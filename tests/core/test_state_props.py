@@ -303,8 +303,8 @@ def test_thread_count_never_changes_a_bit_on_split_batches(mode, offset, dtype, 
     """Enough curves (> 2 x 4096 rays per query) that the ray batches are
     really split over the pool, with a deforming sheet built on a ray thread
     and the state stored beside the output; ``split`` 500: the steps also solve
-    their curves in two halves (halves large enough that each half's probe
-    batches are themselves two blocks). (The 2,500 curves are a fixed grid
+    their curves in two halves (each tracing its rays on its own thread alone).
+    (The 2,500 curves are a fixed grid
     leaning by a drawn amount: drawing each would be data, not a scene.)"""
     g = (np.arange(50) + 0.5) / 50 * 2 - 1
     X, Y = np.meshgrid(g, g, indexing="ij")
