@@ -52,27 +52,12 @@ MANIFEST = "blender_manifest.toml"
 WHEELS_DIR = ROOT / "wheels"
 DIST_DIR = ROOT / "dist"
 
-#: Folders and files of the repository that never belong in a zip (on top of
-#: the manifest's own ``[build] paths_exclude_pattern``). Excluding them from
-#: the staging copy also keeps it small and fast.
-STAGE_IGNORE = {
-    ".git",
-    ".venv",
-    ".ci",
-    ".github",
-    ".pytest_cache",
-    ".ruff_cache",
-    ".hypothesis",
-    "__pycache__",
-    "wheels",
-    "dist",
-    "build",
-    "out",
-    "tests",
-    "bench",
-    "scripts",
-    "docs",
-}
+#: What the add-on is: the only top-level names of the repository a zip holds
+#: (the stage adds ``wheels``). An allow-list, so that nothing else a checkout
+#: holds reaches a zip: git-ignored tool output (``make mutate``'s ``mutants/``,
+#: 34 MB of mutated copies of ``core``), ``requirements/``, a test's leftovers,
+#: an artist's .blend.
+ADDON_TOP = ("__init__.py", "blender_manifest.toml", "README.md", "core", "operators", "ui")
 
 #: Top-level names a built zip must never contain.
 FORBIDDEN_TOP = (
@@ -308,18 +293,17 @@ def stage(
 ) -> Path:
     """Copy the add-on into ``dest/furcollide`` with only ``wheels``; return it."""
     src = dest / "furcollide"
+    src.mkdir(parents=True)
 
-    def ignore(d, names):
-        top = Path(d).resolve() == root.resolve()
-        return {
-            n
-            for n in names
-            if n == "__pycache__"
-            or (top and n in STAGE_IGNORE)
-            or n.endswith((".pyc", ".zip", ".blend1"))
-        }
+    def ignore(_d, names):
+        return {n for n in names if n == "__pycache__" or n.endswith((".pyc", ".zip", ".blend1"))}
 
-    shutil.copytree(root, src, ignore=ignore, symlinks=False)
+    for name in ADDON_TOP:
+        path = root / name
+        if path.is_dir():
+            shutil.copytree(path, src / name, ignore=ignore, symlinks=False)
+        elif path.is_file():
+            shutil.copy2(path, src / name)
     text = (root / MANIFEST).read_text(encoding="utf-8")
     text = _replace_array(text, "platforms", platforms)
     text = _replace_array(text, "wheels", [w.manifest_path for w in wheels])
@@ -350,7 +334,8 @@ def check_zip(zip_path: Path, platform: str, wheels: list[Wheel]) -> dict:
             raise PackageError(f"{zip_path.name}: corrupt member {bad}")
         manifest = tomllib.loads(zf.read(MANIFEST).decode("utf-8"))
     tops = {n.split("/", 1)[0] for n in names}
-    for f in FORBIDDEN_TOP:
+    extra = sorted(tops - set(ADDON_TOP) - {"wheels"})
+    for f in [*FORBIDDEN_TOP, *extra]:
         if f in tops:
             raise PackageError(f"{zip_path.name} contains {f!r}, which is not part of the add-on")
     if "__init__.py" not in names:

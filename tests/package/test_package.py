@@ -171,6 +171,43 @@ def test_zip_contents(linux_zip):
     assert manifest["id"] == "furcollide"
 
 
+def test_stage_holds_only_the_addon(tmp_path):
+    """A checkout that has run ``make mutate`` (git-ignored ``mutants/``) or holds
+    other files stages only the add-on: those never reach a zip."""
+    root = tmp_path / "checkout"
+    root.mkdir()
+    for name in pkg.ADDON_TOP:
+        src = ROOT / name
+        if src.is_dir():
+            (root / name).mkdir()
+            (root / name / "__init__.py").write_text("# part of the add-on\n")
+            (root / name / "__pycache__").mkdir()
+            (root / name / "__pycache__" / "x.cpython-311.pyc").write_bytes(b"")
+        else:
+            (root / name).write_bytes(src.read_bytes())
+    junk = ["mutants/core/rigid.py", "mutants.log", "requirements/bpy-4.2.txt", "shot.blend",
+            "tests/test_x.py", "notes.txt"]
+    for rel in junk:
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text("not the add-on\n")
+    src = pkg.stage(root, [], ["linux-x64"], tmp_path / "wheels", tmp_path / "stage")
+    staged = sorted(str(p.relative_to(src)) for p in src.rglob("*"))
+    expected = sorted([*pkg.ADDON_TOP, "wheels", "core/__init__.py", "operators/__init__.py",
+                       "ui/__init__.py"])
+    assert staged == expected
+
+
+def test_check_zip_refuses_a_name_that_is_not_the_addon(linux_zip, tmp_path):
+    bad = tmp_path / linux_zip.name
+    with zipfile.ZipFile(linux_zip) as zf, zipfile.ZipFile(bad, "w") as out:
+        for item in zf.infolist():
+            out.writestr(item, zf.read(item))
+        out.writestr("mutants/core/rigid.py", "# a mutated copy\n")
+    wheels = pkg.select_wheels(pkg.manifest_wheels(pkg.read_manifest(ROOT)), ["linux-x64"], [PY])
+    with pytest.raises(pkg.PackageError, match="'mutants'"):
+        pkg.check_zip(bad, "linux-x64", wheels)
+
+
 def test_zip_validates(linux_zip):
     pkg.validate(linux_zip)
 
