@@ -175,9 +175,10 @@ def _read_frame(setup):
     without an update callback invalidate."""
     s, rt = setup.s, setup.rt
     _changes_without_callbacks(setup)  # before the input is read: see there
-    # A baked frame shown writes the bake: Fur Attach's points are not needed (the
-    # record it is checked against digests the Surface instead, frame_inputs).
-    inp = read_inputs(setup, attach=not (s.is_baked and not _passes_through(setup)))
+    # Fur Attach's points are needed unless the frame shows the bake (baked, and not
+    # passing the source through): that writes the bake, and the record it is checked
+    # against digests the Surface instead (frame_inputs).
+    inp = read_inputs(setup, attach=not s.is_baked or _passes_through(setup))
     if not _check_topology(setup, inp):
         return None
     if inp.points is not None:  # (the jiggle's history and the motion feed a solve)
