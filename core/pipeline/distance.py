@@ -177,7 +177,7 @@ def _world_mesh(col, i):
     return check_surface(V, F, f"colliders[{i}]")
 
 
-class _LowerBoundField:
+class LowerBoundField:
     """Conservative distance field of a mesh: a lower bound of the distance anywhere.
 
     Every cell touched by a triangle's bounding box is *occupied*. A point
@@ -493,9 +493,9 @@ class _MeshIndex:
             if near:
                 # cells about half a triangle: finer is of little use to the search
                 dims = int(np.clip(2 * self.size / self.tri_h, 16, _NEAR_DIMS))
-                f = _LowerBoundField(self.T, 0.0, dims=dims, window=_NEAR_WINDOW)
+                f = LowerBoundField(self.T, 0.0, dims=dims, window=_NEAR_WINDOW)
             else:
-                f = _LowerBoundField(self.T, self.tri_h, box)
+                f = LowerBoundField(self.T, self.tri_h, box)
             if len(self._fields) > 8:  # padded boxes follow the queries: keep a few
                 self._fields.pop(next(k for k in self._fields if k != "near"))
             self._fields[key] = f

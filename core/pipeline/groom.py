@@ -24,7 +24,7 @@ from ..settings import Settings
 from ..solver import Solver
 from ..status import Status
 from ._curves import as_points, check_curves, layout, segmented_cumsum, uniform_size
-from .distance import _LowerBoundField
+from .distance import LowerBoundField
 
 #: Above this share of reaching curves the clearance pass solves them all (no gather).
 _CLEARANCE_ALL = 0.7
@@ -724,7 +724,7 @@ class _ClearanceField:
     """A lower bound of the distance to a collider's mesh (its own space).
 
     The windowed lower-bound distance field of the mesh's cells
-    (``distance._LowerBoundField``: 128 cells along the mesh's box, distances
+    (``distance.LowerBoundField``: 128 cells along the mesh's box, distances
     up to 8 cells): a point in a cell is at least the cell's value from every
     triangle. Built once per collider shape (about 0.1 s for 130,000
     triangles) and kept on the collider (``Collider.derived``).
@@ -736,7 +736,7 @@ class _ClearanceField:
     def __init__(self, c):
         V = np.asarray(c.vertices, np.float64)
         T = V[np.asarray(c.faces, np.int64)]
-        f = _LowerBoundField(T, 0.0, dims=self.DIMS, window=self.WINDOW)
+        f = LowerBoundField(T, 0.0, dims=self.DIMS, window=self.WINDOW)
         self.glo, self.h, self.dims = f.glo, float(f.h), f.dims
         self.D = np.ascontiguousarray(f.D, np.float32).reshape(-1)
 
