@@ -489,7 +489,15 @@ def _show_baked(setup, inp, note):
             setup.set_status("ERROR", f"Bake files are missing in {directory} (undo does not "
                              "bring back files Free Bake deleted): press Free Bake, then Bake")
             return Outcome.OUTDATED, None
-    shown = framecache.read_shown(directory, fe)
+    try:
+        shown = framecache.read_shown(directory, fe)
+    except framecache.UNREADABLE as exc:  # damaged since the bake: say which file, and what to do
+        rt.outdated = True
+        setup.set_status("ERROR", f"Frame {fe} of the bake cannot be read: "
+                         f"{framecache.frame_path(directory, fe)} is damaged "
+                         f"({type(exc).__name__}: {exc}). The output keeps its last "
+                         "result: press Free Bake, then Bake")
+        return Outcome.OUTDATED, None
     if not np.array_equal(shown.offsets, inp.offsets):
         setup.set_status(
             "ERROR",

@@ -5,7 +5,9 @@ that share a bake."""
 
 import contextlib
 import os
+import struct
 import subprocess
+import zipfile
 
 import bpy
 import numpy as np
@@ -284,6 +286,45 @@ def test_resume_does_not_trust_a_partial_frame_file(fc, tmp_path, monkeypatch, c
     for f in range(1, 13):
         np.testing.assert_array_equal(fc.cache.read_frame(d, f)[0], full[f], err_msg=f"{f}")
     no_traceback(capsys)
+
+
+@pytest.mark.parametrize("damage", ["cut", "bytes"])
+def test_a_damaged_baked_frame_says_which_file_and_what_to_do(fc, tmp_path, capsys, damage):
+    """A bake file damaged after the bake (cut short, or bytes changed: a bad copy, a
+    failing disk) is not shown: the setup's status names the frame and the file and
+    says Free Bake, then Bake; no traceback, the output keeps its last result, and
+    the other baked frames are still shown."""
+    hair, box, out = saved_scene(fc, tmp_path)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    baked = frames_of(out, range(1, 13))
+    d = bpy.path.abspath(hair.furcollide.bake_path)
+    path6 = fc.cache.frame_path(d, 6)
+    data = bytearray(open(path6, "rb").read())
+    if damage == "cut":
+        data = data[: len(data) // 2]
+    else:  # inside the points' data: their CRC no longer matches
+        with zipfile.ZipFile(path6) as zf:
+            info = zf.getinfo("points.npy")
+        name_len, extra_len = struct.unpack("<HH", data[info.header_offset + 26:
+                                                         info.header_offset + 30])
+        start = info.header_offset + 30 + name_len + extra_len + 200
+        for i in range(start, start + 40):
+            data[i] ^= 0xFF
+    open(path6, "wb").write(bytes(data))
+    s = hair.furcollide
+    bpy.context.scene.frame_set(5)
+    capsys.readouterr()
+    bpy.context.scene.frame_set(6)
+    level, message = fc.registry.status_for(hair)
+    assert level == "ERROR", message
+    assert message == s.status_message
+    assert "Frame 6 of the bake cannot be read" in s.status_message
+    assert path6 in s.status_message and "Free Bake, then Bake" in s.status_message
+    assert np.array_equal(out_positions(out), baked[5])  # the last result kept
+    no_traceback(capsys)
+    bpy.context.scene.frame_set(7)
+    assert np.array_equal(out_positions(out), baked[7])
+    assert fc.registry.status_for(hair)[0] != "ERROR", s.status_message
 
 
 def test_save_reload_keeps_settings_and_bake(fc, tmp_path):
