@@ -265,8 +265,10 @@ def clearance(s, binding, points, status, colliders):
     Stiff cannot free within Max Angle get a second try in Bend, and those still
     crossing are UNRESOLVED. Returns (points, status, n_fixed).
     """
-    settings = core.Settings(mode="stiff", collision_offset=s.collision_offset)
-    fallback = core.Settings(mode="bend", collision_offset=s.collision_offset)
+    # (the setup's Threads too: a farm running one Blender per core sets 1)
+    common = {"collision_offset": s.collision_offset, "threads": s.threads or None}
+    settings = core.Settings(mode="stiff", **common)
+    fallback = core.Settings(mode="bend", **common)
     valid = status != Status.INVALID
     if valid.all():
         pts, st, n_fixed = pipeline.clearance_pass(points, binding.render_offsets, colliders,

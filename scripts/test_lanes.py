@@ -11,8 +11,9 @@ lane   environment                                what runs
 =====  =========================================  ==========================================
 5.0    .venv: bpy 5.0.1, Python 3.11, numpy 1.26  ``pytest tests`` (the main lane)
 4.2    bpy 4.2.23 LTS, Python 3.11, numpy 1.26    ``pytest tests`` but the bpy-free suites (*)
-4.5    bpy 4.5.15 LTS, Python 3.11, numpy 1.26    ``pytest tests`` but the bpy-free suites (*)
-5.2    bpy 5.2.3 LTS, Python 3.13 (built from     ``pytest tests``
+                                                  and the ``slow`` tests (**)
+4.5    bpy 4.5.15 LTS, Python 3.11, numpy 1.26    the same as 4.2
+5.2    bpy 5.2.3 LTS, Python 3.13 (built from     ``pytest tests`` but the ``slow`` tests
        Debian's source), numpy 2.5
 app    Debian's Blender 4.3.2 in a trixie chroot  ``pytest tests/app`` (``FURCOLLIDE_APP=1``)
        (Python 3.13, numpy 2.2), UI under Xvfb
@@ -22,6 +23,11 @@ app    Debian's Blender 4.3.2 in a trixie chroot  ``pytest tests/app`` (``FURCOL
 lane's Python, numpy and embreex (the pins of ``requirements/``) they would run there
 exactly as in the main lane, so these two lanes leave them out (``BPY_FREE``); the 5.2
 lane runs them on Python 3.13 and numpy 2.
+
+(**) Tests marked ``slow`` (the real-size scenes of ``tests/blender/test_bl_hunt6.py``,
+about two minutes) play the same frames on every Blender: they run in the main lane only,
+which keeps ``make test`` within its 15 minutes; every other Blender-side test runs in
+every ``bpy`` lane.
 
 Each lane is judged by pytest's own JUnit report (counts of passed, failed, errors):
 a lane that cannot be prepared, collects no test, or reports a failure fails the run,
@@ -44,6 +50,8 @@ MATRIX = ("5.0", "4.2", "4.5", "5.2")
 #: The suites that import no bpy, and the lanes whose Python and numpy are the main lane's.
 BPY_FREE = ("tests/core", "tests/cache", "tests/pipeline")
 SAME_CORE_AS_MAIN = ("4.2", "4.5")
+#: The lane that runs the tests marked ``slow`` (the others deselect them).
+SLOW_LANE = "5.0"
 
 
 def log(msg: str) -> None:
@@ -97,6 +105,8 @@ def run_lane(lane: str, extra: list[str]) -> dict:
         env.pop("FURCOLLIDE_APP", None)
     if lane in SAME_CORE_AS_MAIN:
         target += [f"--ignore={d}" for d in BPY_FREE]
+    if lane != SLOW_LANE and lane != "app":
+        target += ["-m", "not slow"]
     with tempfile.TemporaryDirectory(prefix=f"furcollide_lane_{lane}_") as tmp:
         xml = Path(tmp) / "junit.xml"
         cmd = [py, "-m", "pytest", "-q", *target, "-p", "no:cacheprovider",
