@@ -491,12 +491,12 @@ def _show_baked(setup, inp, note):
             return Outcome.OUTDATED, None
     try:
         shown = framecache.read_shown(directory, fe)
-    except framecache.UNREADABLE as exc:  # damaged since the bake: say which file, and what to do
+    except framecache.UNREADABLE as exc:  # damaged (or not readable) since the bake
         rt.outdated = True
         setup.set_status("ERROR", f"Frame {fe} of the bake cannot be read: "
-                         f"{framecache.frame_path(directory, fe)} is damaged "
-                         f"({type(exc).__name__}: {exc}). The output keeps its last "
-                         "result: press Free Bake, then Bake")
+                         f"{framecache.frame_path(directory, fe)} ({type(exc).__name__}: "
+                         f"{exc}). The output keeps its last result. A damaged file: "
+                         "press Free Bake, then Bake")
         return Outcome.OUTDATED, None
     if not np.array_equal(shown.offsets, inp.offsets):
         setup.set_status(
