@@ -125,7 +125,7 @@ def uses_growth(settings) -> bool:
                 or settings.pinch_resolution == "growth_surface")
 
 
-def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
+def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False) -> dict:
     """The frame-inputs record of one frame: part name -> 64-bit digest.
 
     Parameters
@@ -146,6 +146,9 @@ def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
         Each collider's Double Sided and Collision Offset, in the same order.
     surface : (int, int) or None
         The growth surface's, when the solve reads it.
+    attached_as_source : bool
+        With Fur Attach, the part ``source`` (the digest of the attached points)
+        instead of ``attached``: the record of a bake made before ``attached`` existed.
 
     Returns
     -------
@@ -156,10 +159,13 @@ def frame_inputs(inp, sig, colliders, flags, surface) -> dict:
     """
     rec = {"colliders": framecache.text_digest(repr(list(flags))),
            "settings": framecache.text_digest(sig)}
-    if inp.attached is not None:
-        rec[ATTACHED_PART] = inp.attached.digest
-    else:
+    if inp.attached is None:
         rec["source"] = framecache.digest(inp.raw, inp.offsets)
+    elif attached_as_source:  # (as read_inputs makes the points: float32)
+        rec["source"] = framecache.digest(np.asarray(inp.attached.points(), np.float32),
+                                          inp.offsets)
+    else:
+        rec[ATTACHED_PART] = inp.attached.digest
     if inp.enabled is not None:
         rec["enabled"] = framecache.digest(inp.enabled)
     for i, (matrix, shape) in enumerate(colliders):
@@ -185,7 +191,8 @@ def solved_inputs(setup, inp) -> dict:
 RENDER_PART = "render"
 #: Part of a frame-inputs record standing for the source when Fur Attach is on
 #: (:func:`frame_inputs`). Bakes made before it have ``source``, the digest of the
-#: attached points: :func:`current_inputs` makes that part for them (``like``).
+#: attached points: :func:`current_inputs` makes that part for them (``like``,
+#: ``frame_inputs(attached_as_source=True)``).
 ATTACHED_PART = "attached"
 
 
@@ -211,15 +218,10 @@ def current_inputs(setup, inp, like=None) -> dict:
     surface = None
     if uses_growth(ob.furcollide) and surf is not None and surf.type == "MESH":
         surface = read_collider_inputs(surf, depsgraph)
-    rec = _tagged(setup, frame_inputs(inp, signature(ob, scene=scene, identities=False),
-                                      cols, [(r.double_sided, r.offset) for r in refs],
-                                      surface))
-    if like is not None and "source" in like and ATTACHED_PART in rec:
-        raw = np.asarray(inp.attached.points(), np.float32)  # (as read_inputs makes it)
-        rec = {("source" if k == ATTACHED_PART else k):
-               (framecache.digest(raw, inp.offsets) if k == ATTACHED_PART else v)
-               for k, v in rec.items()}
-    return rec
+    return _tagged(setup, frame_inputs(inp, signature(ob, scene=scene, identities=False),
+                                       cols, [(r.double_sided, r.offset) for r in refs],
+                                       surface,
+                                       attached_as_source=like is not None and "source" in like))
 
 
 def seen_inputs(setup, inp) -> dict:

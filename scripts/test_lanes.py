@@ -105,7 +105,7 @@ def run_lane(lane: str, extra: list[str]) -> dict:
         env.pop("FURCOLLIDE_APP", None)
     if lane in SAME_CORE_AS_MAIN:
         target += [f"--ignore={d}" for d in BPY_FREE]
-    if lane != SLOW_LANE and lane != "app":
+    if lane not in (SLOW_LANE, "app"):
         target += ["-m", "not slow"]
     with tempfile.TemporaryDirectory(prefix=f"furcollide_lane_{lane}_") as tmp:
         xml = Path(tmp) / "junit.xml"
