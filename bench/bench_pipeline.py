@@ -212,8 +212,9 @@ class Scene:
     """The whole pipeline's bound inputs for ``curves`` render curves."""
 
     def __init__(self, curves, cvs=8, tris=130_000, head_tris=20_000, fraction=0.15,
-                 frames=48, log=print):
+                 frames=48, log=print, threads=2):
         self.frames = frames
+        self.threads = threads  # every stage's (the floor's pool has 2 as well)
         t0 = time.perf_counter()
         self.V, self.F = head_surface(head_tris)
         self.render, self.roff = scalp_curves(self.V, self.F, curves, cvs)
@@ -232,7 +233,7 @@ class Scene:
         self.weights = bind_groom(rroots, self.guides[self.goff[:-1]], 4)
         self.SV, self.SF = shell(tris)
         self.col = Collider(self.SV, self.SF, matrix=shell_matrix(0, frames), name="shell")
-        self.solver = Solver(self.goff, Settings(mode="bend", threads=2))
+        self.solver = Solver(self.goff, Settings(mode="bend", threads=threads))
         self.frame = -1
         log(f"  scene  : {curves:,} render curves x {cvs} CVs, {len(self.goff) - 1:,} guides "
             f"(sample_guides {self.t_sample:.1f} s, bind x2 {self.t_bind:.1f} s), head "
@@ -245,7 +246,7 @@ class Scene:
             self.frame += 1
             Vn = head_vertices(self.V, self.frame, self.frames)
             self.col.matrix = shell_matrix(self.frame, self.frames)
-            g_in = self.gbind.apply(Vn)
+            g_in = self.gbind.apply(Vn, threads=self.threads)
             self.res = self.solver.step(g_in, [self.col])
             self.Vn, self.g_in = Vn, g_in
         return self.Vn
@@ -254,7 +255,7 @@ class Scene:
 # ------------------------------------------------------------------ stages
 def stage_attach(sc, Vn):
     """Fur Attach of the render groom (the guides' is timed with collide)."""
-    return sc.rbind.apply(Vn)
+    return sc.rbind.apply(Vn, threads=sc.threads)
 
 
 def stage_motion(sc, guides_out, frame):
@@ -269,7 +270,7 @@ def stage_motion(sc, guides_out, frame):
 
 def stage_groom(sc, guides_final, render_attached):
     return deform_groom(sc.render, sc.roff, sc.guides, guides_final, sc.goff, sc.weights,
-                        render_roots_now=render_attached[sc.roff[:-1]])
+                        render_roots_now=render_attached[sc.roff[:-1]], threads=sc.threads)
 
 
 def stage_clearance(sc, render_now):
@@ -316,7 +317,7 @@ def run_frames(sc, args, pool):
             out["attach"] = stage_attach(sc, Vn)
         t = {"attach": c}
         with Clock() as c:
-            g_in = sc.gbind.apply(Vn)
+            g_in = sc.gbind.apply(Vn, threads=sc.threads)
             res = sc.solver.step(g_in, [sc.col])
         sc.frame, sc.res, sc.Vn = f, res, Vn
         t["collide"] = c
@@ -404,7 +405,7 @@ def stage_calls(sc, f):
     g_fin = stage_motion(sc, g_out, f)
     r_now = stage_groom(sc, g_fin, r_att)
     return {
-        "attach": lambda: sc.rbind.apply(Vn),
+        "attach": lambda: stage_attach(sc, Vn),
         "motion": lambda: stage_motion(sc, g_out, f),
         "groom": lambda: stage_groom(sc, g_fin, r_att),
         "clearance": lambda: stage_clearance(sc, r_now),
@@ -415,7 +416,7 @@ def scaling(args):
     sizes = [int(s) for s in args.sizes.split(",")]
     rows = {}
     for n in sizes:
-        sc = Scene(n, tris=args.tris, frames=48, log=lambda m: print("  " + m.strip()))
+        sc = Scene(n, tris=args.tris, frames=48, threads=args.threads, log=lambda m: print("  " + m.strip()))
         calls = stage_calls(sc, args.scaling_frame)
         rows[n] = {}
         for k, fn in calls.items():
@@ -473,7 +474,7 @@ def main(argv=None):
           f"{BLAS.get() if BLAS.available else 'n/a'}")
     pool = floor.PinnedPool(args.threads)
     if not args.no_frames:
-        sc = Scene(args.curves, tris=args.tris)
+        sc = Scene(args.curves, tris=args.tris, threads=args.threads)
         rec, info, first = run_frames(sc, args, pool)
         print_frames(rec, info, first, args.curves)
         del sc

@@ -97,6 +97,42 @@ def beside(fn, threads: int):
     return _executor(threads).submit(fn).result
 
 
+def both(first, second, threads: int):
+    """``(first(), second())``; with ``threads > 1`` the first on a ray-pool
+    thread while the caller runs the second (:func:`beside`).
+
+    Both have ended when this returns or raises. An error of the caller's
+    own call is the one raised (the other call's is then dropped), else the
+    other call's.
+    """
+    done = beside(first, threads)
+    try:
+        b = second()
+    except BaseException:
+        try:
+            done()
+        except BaseException:  # the first error is the one to report
+            pass
+        raise
+    return done(), b
+
+
+def in_two(fn, n: int, threads: int, min_n: int) -> None:
+    """``fn(0, n)``; with ``threads > 1`` and ``n >= min_n``, ``fn(0, h)`` and
+    ``fn(h, n)`` (``h = n // 2``) on two threads (:func:`both`).
+
+    For per-item work whose items are independent (curves, guides, segments)
+    and which writes disjoint slices of its outputs: each half computes what
+    the whole would, bit for bit, and numpy's long loops release the GIL, so
+    the halves overlap.
+    """
+    if threads <= 1 or n < min_n:
+        fn(0, n)
+        return
+    h = n // 2
+    both(lambda: fn(0, h), lambda: fn(h, n), threads)
+
+
 def triangle_rows(F) -> np.ndarray:
     """Triangles prepared for a fast :class:`EmbreeBackend` build, (m,) object.
 

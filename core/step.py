@@ -17,7 +17,7 @@ import numpy as np
 from . import rigid
 from . import rotations as rot
 from . import tolerances as tol
-from .rays import beside, default_threads
+from .rays import both, default_threads
 from .soft import SoftSolve
 from .status import Status
 
@@ -622,16 +622,8 @@ class StepContext:
             h.threads, h.n_rays = 1, 0
         # Interleaved, so that both halves get as much contact wherever the
         # groom's curve order puts it.
-        done = beside(partial(fn, halves[0], *(p[0::2] for p in parts), **kw), self.threads)
-        try:
-            fn(halves[1], *(p[1::2] for p in parts), **kw)
-        except BaseException:
-            try:
-                done()
-            except BaseException:  # the first error is the one to report
-                pass
-            raise
-        done()
+        both(partial(fn, halves[0], *(p[0::2] for p in parts), **kw),
+             partial(fn, halves[1], *(p[1::2] for p in parts), **kw), self.threads)
         self.n_rays += halves[0].n_rays + halves[1].n_rays
 
     def new_axes(self, idx, o, d, rep, starts, hit=None):

@@ -88,7 +88,7 @@ def read_inputs(setup, attach=True) -> FrameInputs:
     common = dict(offsets=offs, enabled=mask, frame=setup.frame, key=key, m_out_inv=M_out_inv,
                   warning=warning)
     if s.use_fur_attach:  # the input stage: curves follow the evaluated growth surface
-        att = attach_input(ob, depsgraph, offs)
+        att = attach_input(ob, depsgraph, offs, s.threads or None)
         world = np.asarray(att.points(), np.float32) if attach else None
         return FrameInputs(world, attached=att, **common)
     # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.

@@ -92,7 +92,7 @@ def _bind_again(ob) -> str:
 def attached_points(ob, depsgraph, offsets) -> np.ndarray:
     """Fur Attach input stage: the bound curves moved rigidly with the evaluated
     Surface of the source ``ob`` (world space, (P, 3) float64)."""
-    return attach_input(ob, depsgraph, offsets).points()
+    return attach_input(ob, depsgraph, offsets, ob.furcollide.threads or None).points()
 
 
 class AttachInput:
@@ -102,8 +102,9 @@ class AttachInput:
     so :attr:`digest` stands for them in a frame-inputs record and a baked frame
     shown never attaches."""
 
-    def __init__(self, binding, V_world, offsets):
+    def __init__(self, binding, V_world, offsets, threads=None):
         self.binding, self.V_world, self.offsets = binding, V_world, offsets
+        self.threads = threads  # (the setup's Threads; None: all CPUs)
         self._points = None
 
     @property
@@ -118,19 +119,20 @@ class AttachInput:
         """The attached curves, world space (P, 3) float64 (computed once)."""
         if self._points is None:
             with clock.timing("attach"):
-                self._points = self.binding.apply(self.V_world)
+                self._points = self.binding.apply(self.V_world, self.threads)
         return self._points
 
 
-def attach_input(ob, depsgraph, offsets) -> AttachInput:
+def attach_input(ob, depsgraph, offsets, threads=None) -> AttachInput:
     """The Fur Attach input of the source ``ob`` at this frame: the binding checked
     against the source's curves and the evaluated Surface's topology (ValueError
-    naming what to press otherwise), and that Surface's world vertices."""
+    naming what to press otherwise), and that Surface's world vertices. ``threads``:
+    the setup's Threads for moving the curves (None: all CPUs)."""
     with clock.timing("attach"):
-        return _attach_input(ob, depsgraph, offsets)
+        return _attach_input(ob, depsgraph, offsets, threads)
 
 
-def _attach_input(ob, depsgraph, offsets) -> AttachInput:
+def _attach_input(ob, depsgraph, offsets, threads) -> AttachInput:
     binding, key = load_binding(ob)
     surf = ob.data.surface
     if surf is None or surf.type != "MESH":
@@ -158,4 +160,4 @@ def _attach_input(ob, depsgraph, offsets) -> AttachInput:
         )
     V = bridge.mesh_vertices(me).astype(np.float64)
     M = bridge.matrix(se)
-    return AttachInput(binding, V @ M[:3, :3].T + M[:3, 3], offsets)
+    return AttachInput(binding, V @ M[:3, :3].T + M[:3, 3], offsets, threads)

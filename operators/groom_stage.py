@@ -247,7 +247,7 @@ def _compute(setup, state, guides_world, remember=True):
     if key == state.key and state.result is not None:
         return state.result  # (nothing it depends on changed: a held or repeated frame)
     with clock.timing("groom"):
-        points, status = binding.deform(guides, V)
+        points, status = binding.deform(guides, V, threads=s.threads or None)
     n_fixed = 0
     if cols:
         with clock.timing("clearance"):
@@ -346,7 +346,7 @@ def _carry(setup, state, guides, V_then, V_now):
         b = pipeline.bind(guides, state.binding.guide_offsets, V_then, F, snap_roots=False,
                           drop_degenerate=True)
         carried = state.carried = (state.last_guides, b)
-    return carried[1].apply(V_now)
+    return carried[1].apply(V_now, threads=setup.s.threads or None)
 
 
 def _write(setup, state, points_world, status) -> None:
@@ -603,8 +603,9 @@ class GroomBinding:
             arrays["note"] = np.array("Render groom: " + "; ".join(notes))
         return arrays, notes
 
-    def deform(self, guides_now, surface_V=None):
-        """The render curves following ``guides_now`` (world).
+    def deform(self, guides_now, surface_V=None, threads=None):
+        """The render curves following ``guides_now`` (world), on ``threads``
+        threads (None: all CPUs; the same result for any count).
 
         Returns
         -------
@@ -621,13 +622,13 @@ class GroomBinding:
                 self.render_ref[self._rows_v], self._off_v, self.guides_ref[self._g_rows],
                 self._g_off, self.weights)
         gn = np.asarray(guides_now, np.float64)[self._g_rows]
-        moved = self._deformer.deform(gn, roots)
+        moved = self._deformer.deform(gn, roots, threads)
         status = np.where(self.invalid, Status.INVALID, Status.FREE).astype(np.int8)
         if len(self._rows_i):
             points = self.render_ref.copy()
             points[self._rows_v] = moved
             if self.fixed is not None and surface_V is not None:
-                points[self._rows_i] = self.fixed.apply(surface_V)
+                points[self._rows_i] = self.fixed.apply(surface_V, threads)
         else:  # (every curve is valid: the deformer's result as it is)
             points = np.asarray(moved, np.float64)
         if not np.isfinite(points.sum()):  # (a guide degenerated this frame: never NaN)

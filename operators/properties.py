@@ -191,9 +191,9 @@ class FurCollideSettings(PropertyGroup):
         min=0,
         max=1024,
         # (no update: the result is the same for any count, the cache stays valid)
-        description="Threads a frame's solve uses (0 = all CPUs): for its rays, and with "
-        "many curves in contact for two halves of the groom at once. The result is "
-        "identical for any count",
+        description="Threads a frame uses (0 = all CPUs): for its rays, and with many "
+        "curves for two halves at once of the solve, of Fur Attach and of the render "
+        "groom. The result is identical for any count",
     )
 
     # -------------------------------------------------------------- shrink

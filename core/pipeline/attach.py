@@ -19,7 +19,9 @@ from .. import rotations as rot
 from .. import tolerances as tol
 from ..closest import barycentric, closest_faces
 from ..errors import ColliderError, InputError
-from ._curves import check_curves, check_surface, degenerate_faces, uniform_size
+from ..rays import in_two
+from . import _curves
+from ._curves import check_curves, check_surface, degenerate_faces, thread_count, uniform_size
 
 
 def _frames(V, F, face):
@@ -36,7 +38,21 @@ def _frames(V, F, face):
 
 def _frames_of(T, rows=False):
     """:func:`_frames` of triangles given by their corners ``T`` (k, 3, 3); with
-    ``rows``, the transposed frames (rows edge, bitangent, normal).
+    ``rows``, the transposed frames (rows edge, bitangent, normal)."""
+    axes, ok = _frame_axes(T)
+    out = np.empty((len(T), 3, 3))
+    for k, v in enumerate(axes):
+        if rows:
+            out[:, k, :] = v.T
+        else:
+            out[:, :, k] = v.T
+    return out, ok
+
+
+def _frame_axes(T):
+    """The frame axes (edge, bitangent, normal) of triangles ``T`` (k, 3, 3) as
+    component arrays, each (3, k), and ``ok`` (k,) (False where the triangle is
+    degenerate: its axes are then garbage).
 
     Computed on component arrays (the products of ``np.cross`` and the sums of
     ``np.linalg.norm``, in long passes).
@@ -53,13 +69,7 @@ def _frames_of(T, rows=False):
     e /= np.where(ok, le, 1.0)
     n /= np.where(ok, ln, 1.0)
     t = rot._cross3(n, e)
-    out = np.empty((len(T), 3, 3))
-    for k, v in enumerate((e, t, n)):
-        if rows:
-            out[:, k, :] = v.T
-        else:
-            out[:, :, k] = v.T
-    return out, ok
+    return (e, t, n), ok
 
 
 def _barycentric(p, a, b, c):
@@ -195,13 +205,17 @@ class Binding:
             raise ColliderError(f"surface vertex {int(used[np.argmax(bad)])} is not finite")
         return V
 
-    def apply(self, V_now) -> np.ndarray:
+    def apply(self, V_now, threads=None) -> np.ndarray:
         """Move every curve rigidly with its triangle's frame on the surface ``V_now``.
 
         Parameters
         ----------
         V_now : (n, 3) array_like of float
             The deformed growth surface (same topology as at bind time).
+        threads : int or None, default None
+            Threads to use (None: every CPU). From ``_curves.SPLIT_MIN_ITEMS``
+            curves of one CV count the curves are moved in two halves on two
+            threads; the result is the same bit for bit.
 
         Returns
         -------
@@ -210,22 +224,50 @@ class Binding:
             triangles. A triangle collapsed to zero area keeps its reference
             orientation (its curves only translate).
         """
+        threads = thread_count(threads)
         V = self._check(V_now)
-        T = V[self.faces[self.face]]  # (C, 3, 3)
-        O = np.einsum("ck,cki->ci", self.bary, T)
-        Rt, ok = _frames_of(T, rows=True)  # R transposed
-        if not ok.all():
-            Rt[~ok] = self.frame_ref[~ok].transpose(0, 2, 1)
         n = uniform_size(self.offsets)
         if not n:
+            T = V[self.faces[self.face]]  # (C, 3, 3)
+            O = np.einsum("ck,cki->ci", self.bary, T)
+            Rt, ok = _frames_of(T, rows=True)  # R transposed
+            if not ok.all():
+                Rt[~ok] = self.frame_ref[~ok].transpose(0, 2, 1)
             sizes = np.diff(self.offsets)
             curve = np.repeat(np.arange(len(sizes)), sizes)
             return O[curve] + np.einsum("pji,pj->pi", Rt[curve], self.local)
-        # every curve n CVs: one (n, 3) x (3, 3) product per curve, no per-CV gathers
-        C = len(O)
-        out = np.matmul(self.local.reshape(C, n, 3), Rt)
-        out += O[:, None, :]
+        # Every curve n CVs: a CV is O + l0 e + l1 t + l2 n (its frame
+        # coordinates l on the triangle's axes), on component arrays (k, n) per
+        # coordinate: long passes, no per-CV gathers. (np.matmul would hand each
+        # small product to BLAS, whose calls from two threads wait on each
+        # other, and whose kernel, and so the last bit, depends on the CPU.)
+        C = len(self.face)
+        out = np.empty((C, n, 3))
+        local = self._local_components  # (3, C, n)
+
+        def move(a, b):  # curves a:b
+            T = V[self.faces[self.face[a:b]]]  # (k, 3, 3)
+            axes, ok = _frame_axes(T)
+            if not ok.all():  # a collapsed triangle keeps its reference frame
+                for k, v in enumerate(axes):
+                    v[:, ~ok] = self.frame_ref[a:b][~ok][:, :, k].T
+            O = np.einsum("ck,cki->ci", self.bary[a:b], T)  # as roots(): the same bits
+            oc = np.empty((3, b - a, n))
+            for i in range(3):
+                o = np.multiply(local[0, a:b], axes[0][i, :, None], out=oc[i])
+                o += local[1, a:b] * axes[1][i, :, None]
+                o += local[2, a:b] * axes[2][i, :, None]
+                o += O[:, i, None]
+            out[a:b] = oc.transpose(1, 2, 0)
+
+        in_two(move, C, threads, _curves.SPLIT_MIN_ITEMS)
         return out.reshape(-1, 3)
+
+    @cached_property
+    def _local_components(self) -> np.ndarray:
+        """(3, C, n) :attr:`local` by coordinate, for curves of one CV count ``n``."""
+        n = uniform_size(self.offsets)
+        return np.ascontiguousarray(self.local.reshape(-1, n, 3).transpose(2, 0, 1))
 
 
 def bind(points, offsets, V_ref, F, snap_roots=True, drop_degenerate=False) -> Binding:

@@ -20,10 +20,19 @@ from .. import tolerances as tol
 from ..collider import Collider
 from ..errors import InputError
 from ..proximity import knn
+from ..rays import in_two
 from ..settings import Settings
 from ..solver import Solver
 from ..status import Status
-from ._curves import as_points, check_curves, layout, segmented_cumsum, uniform_size
+from . import _curves
+from ._curves import (
+    as_points,
+    check_curves,
+    layout,
+    segmented_cumsum,
+    thread_count,
+    uniform_size,
+)
 from .distance import LowerBoundField
 
 #: Above this share of reaching curves the clearance pass solves them all (no gather).
@@ -235,7 +244,7 @@ class GroomDeformer:
             return False
 
     # ----------------------------------------------------------- per frame
-    def _root_rotations(self, gn):
+    def _root_rotations(self, gn, threads=1):
         """Rotation of every guide at its root (G, 4): best fit of its root neighbourhood.
 
         Kabsch fit of the unit vectors to the nearest guide roots, so that it
@@ -249,11 +258,16 @@ class GroomDeformer:
         roots_r, roots_n = ref[off[:-1]], gn[off[:-1]]
         G = len(roots_r)
         H = np.zeros((G, 3, 3))
-        if self.nb is not None:
-            b = rot.normalize(roots_n[self.nb] - roots_n[:, None])
-            H += np.einsum("gki,gkj->gij", self.nb_dir, b)
-        R, S = rot.kabsch(H)
-        q = rot.quat_from_matrix(R)
+        q, S = np.empty((G, 4)), np.empty((G, 3))
+
+        def fit(a, b):  # guides a:b (independent: in two halves on two threads)
+            if self.nb is not None:
+                d = rot.normalize(roots_n[self.nb[a:b]] - roots_n[a:b, None])
+                H[a:b] += np.einsum("gki,gkj->gij", self.nb_dir[a:b], d)
+            R, S[a:b] = rot.kabsch(H[a:b])
+            q[a:b] = rot.quat_from_matrix(R)
+
+        in_two(fit, G, threads, _curves.SPLIT_MIN_ITEMS)
         weak = S[:, 1] <= 1e-9 * np.maximum(S[:, 0], 1e-300)
         if weak.any():
             # add the strand: its direction and the vectors from the root to its CVs
@@ -361,13 +375,14 @@ class GroomDeformer:
         m /= np.sqrt(n)
         out[:, a:b] = rot.quat_rotate_soa(m, self.vT[:, a:b])
 
-    def deform(self, guides_now_points, render_roots_now=None) -> np.ndarray:
+    def deform(self, guides_now_points, render_roots_now=None, threads=None) -> np.ndarray:
         """The render groom following ``guides_now_points`` (see :func:`deform_groom`).
 
         Returns
         -------
         (P, 3) ndarray of float64
         """
+        threads = thread_count(threads)
         gn, _ = check_curves(guides_now_points, self.goff, "guides_now_points")
         roff = self.roff
         Rn = len(roff) - 1
@@ -375,7 +390,7 @@ class GroomDeformer:
             new_roots = as_points(render_roots_now, "render_roots_now")
             if new_roots.shape != (Rn, 3):
                 raise InputError(f"render_roots_now must have shape ({Rn}, 3)")
-        q_root = self._root_rotations(gn)
+        q_root = self._root_rotations(gn, threads)
         Qt = np.ascontiguousarray(self._segment_rotations(gn, q_root).T)  # (4, GS)
         d = Qt[0, :-1] * Qt[0, 1:]
         for c in (1, 2, 3):
@@ -383,32 +398,44 @@ class GroomDeformer:
         flip = np.append(d < 0, False)  # (the next of a guide's last: never used)
         S = len(self.rs0)
         seg = np.empty((3, S))
-        for a in range(0, S, self.BLOCK):
-            self._blend_block(Qt, flip, a, min(S, a + self.BLOCK), seg)
-        if render_roots_now is None:  # blended guide root frames
-            gi = self.index
-            groot_n = gn[self.goff[:-1]]
-            qT = np.ascontiguousarray(q_root.T)[:, gi]  # (4, R, k)
-            cand = rot.quat_rotate_soa(qT, np.moveaxis(self.rel, -1, 0))
-            cand += np.moveaxis(groot_n[gi], -1, 0)
-            new_roots = np.einsum("rk,irk->ri", self.weight, cand)
+
+        def blend(a, b):  # render segments a:b (per segment: any cut gives the same bits)
+            for s in range(a, b, self.BLOCK):
+                self._blend_block(Qt, flip, s, min(b, s + self.BLOCK), seg)
+
+        def roots(c0, c1):  # render curves c0:c1
+            if render_roots_now is not None:
+                return new_roots[c0:c1]
+            gi = self.index[c0:c1]  # blended guide root frames
+            qT = np.ascontiguousarray(q_root.T)[:, gi]  # (4, r, k)
+            cand = rot.quat_rotate_soa(qT, np.moveaxis(self.rel[c0:c1], -1, 0))
+            cand += np.moveaxis(gn[self.goff[:-1]][gi], -1, 0)
+            return np.einsum("rk,irk->ri", self.weight[c0:c1], cand)
+
         if self.uniform:
             n = self.uniform
             out = np.empty((Rn, n, 3))
-            out[:, 0] = new_roots
-            for i in range(3):
-                out[:, 1:, i] = seg[i].reshape(Rn, n - 1)
-            for j in range(1, n):  # the sums of np.cumsum(axis=1), one CV column a pass
-                out[:, j] += out[:, j - 1]
+
+            def chain(c0, c1):  # render curves c0:c1, whole: blend, roots, re-chain
+                blend(c0 * (n - 1), c1 * (n - 1))
+                o = out[c0:c1]
+                o[:, 0] = roots(c0, c1)
+                for i in range(3):
+                    o[:, 1:, i] = seg[i, c0 * (n - 1):c1 * (n - 1)].reshape(c1 - c0, n - 1)
+                for j in range(1, n):  # the sums of np.cumsum(axis=1), one CV column a pass
+                    o[:, j] += o[:, j - 1]
+
+            in_two(chain, Rn, threads, _curves.SPLIT_MIN_ITEMS)
             return out.reshape(-1, 3)
+        in_two(blend, S, threads, _curves.SPLIT_MIN_ITEMS)
         step = np.empty_like(self.rp)
         step[self.rs0 + 1] = seg.T
-        step[roff[:-1]] = new_roots
+        step[roff[:-1]] = roots(0, Rn)
         return segmented_cumsum(step, roff)
 
 
 def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_now_points,
-                 guide_offsets, weights, render_roots_now=None):
+                 guide_offsets, weights, render_roots_now=None, threads=None):
     """Every render curve follows the rotation and bend of its guides.
 
     For each guide, the rotation of every segment from the reference to
@@ -438,6 +465,10 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
     render_roots_now : (R, 3) array_like, optional
         Roots to use instead of the guide-driven ones (e.g. the render
         groom's own Fur Attach roots, which stay exactly on the surface).
+    threads : int or None, default None
+        Threads to use (None: every CPU). From ``_curves.SPLIT_MIN_ITEMS`` guides or
+        render curves the work runs in two halves on two threads; the result
+        is the same bit for bit.
 
     Returns
     -------
@@ -454,7 +485,7 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
         deformer = GroomDeformer(render_ref_points, render_offsets, guides_ref_points,
                                  guide_offsets, weights)
         weights._deformer = deformer
-    return deformer.deform(guides_now_points, render_roots_now)
+    return deformer.deform(guides_now_points, render_roots_now, threads)
 
 
 def clearance_pass(render_points, render_offsets, colliders, settings=None, growth=None,

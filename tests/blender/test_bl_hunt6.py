@@ -524,7 +524,7 @@ def test_pipeline_at_real_size(fc, split_spy, monkeypatch):
 
 
 def test_threads_one_is_one_thread_for_the_whole_frame(fc, split_spy):
-    """The Threads tooltip: "Threads a frame's solve uses (0 = all CPUs)". With
+    """The Threads tooltip: "Threads a frame uses (0 = all CPUs)". With
     Threads 1 (a farm running one Blender per core), no step of the frame, the render
     groom's clearance pass included, runs on more than one thread. (Hunt 6, finding 3:
     the clearance pass took every CPU and two halves whatever Threads said.)"""

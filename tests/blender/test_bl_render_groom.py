@@ -466,3 +466,58 @@ def test_bind_groom_again_after_changing_guides_per_curve(fc):
     assert fc.registry.status_for(guides) == ("INFO", ""), fc.registry.status_for(guides)
     rt = fc.registry.get_runtime(guides)
     assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 1
+
+
+def test_threads_is_honoured_by_fur_attach_and_the_render_groom(fc, monkeypatch):
+    """The Threads tooltip: with many curves a frame runs Fur Attach and the render
+    groom in two halves at once (the threshold is lowered here: the scene is small);
+    Threads 1 (a farm running one Blender per core) keeps them on the caller's thread.
+    The frames are the same bit for bit."""
+    import sys
+    import threading
+
+    from helpers import ADDON
+
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    monkeypatch.setattr(sys.modules[ADDON + ".core.pipeline._curves"], "SPLIT_MIN_ITEMS", 1)
+    seen = []  # (stage module, threads, thread idents of the halves)
+    for stage in ("attach", "groom"):
+        mod = sys.modules[ADDON + ".core.pipeline." + stage]
+
+        def spy(fn, n, threads, min_n, real=mod.in_two, stage=stage):
+            ids = set()
+
+            def half(a, b):
+                ids.add(threading.get_ident())
+                fn(a, b)
+
+            real(half, n, threads, min_n)
+            seen.append((stage, threads, frozenset(ids)))
+
+        monkeypatch.setattr(mod, "in_two", spy)
+    frames = {}
+    for threads in (2, 1):
+        guides.furcollide.threads = threads
+        scene.frame_set(1)
+        activate(guides)
+        assert bpy.ops.furcollide.reset() == {"FINISHED"}
+        seen.clear()
+        frames[threads] = []
+        for f in range(1, 7):
+            scene.frame_set(f)
+            frames[threads].append((world(out), world(gout)))
+        stages = {s for s, *_ in seen}
+        assert stages == {"attach", "groom"}, seen
+        me = frozenset({threading.get_ident()})
+        if threads == 1:
+            assert all(t == 1 and ids == me for _, t, ids in seen), seen
+        else:
+            assert all(t == 2 and len(ids) == 2 for _, t, ids in seen), seen
+    for (a, ga), (b, gb) in zip(frames[2], frames[1], strict=True):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(ga, gb)
