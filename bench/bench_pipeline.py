@@ -416,7 +416,8 @@ def scaling(args):
     sizes = [int(s) for s in args.sizes.split(",")]
     rows = {}
     for n in sizes:
-        sc = Scene(n, tris=args.tris, frames=48, threads=args.threads, log=lambda m: print("  " + m.strip()))
+        sc = Scene(n, tris=args.tris, frames=48, threads=args.threads,
+                   log=lambda m: print("  " + m.strip()))
         calls = stage_calls(sc, args.scaling_frame)
         rows[n] = {}
         for k, fn in calls.items():
