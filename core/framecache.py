@@ -420,6 +420,19 @@ class MemoryCache:
 
 
 # --------------------------------------------------------------------- disk
+def subframe_pair(f: int, start: int, end: int) -> tuple[int, int] | None:
+    """The two baked frames ``(a, b)`` a motion-blur subframe after whole frame ``f``
+    blends (``a + (b - a) * subframe``), or None outside the bake's range ``start``
+    to ``end``. From the end frame on it is ``(end, end)``: the end frame held, as
+    whole frames after it are."""
+    a, b = f, f + 1
+    if a >= end:
+        a = b = end
+    if not (start <= a and b <= end):
+        return None
+    return a, b
+
+
 def frame_path(directory: str, f: int) -> str:
     """Path of frame ``f``'s bake file in ``directory``."""
     return os.path.join(directory, FRAME_FILE.format(f))

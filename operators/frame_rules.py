@@ -537,13 +537,12 @@ def _baked_subframe(setup):
     points, or None (nothing written) when they are not both baked. From Frame End
     on, Frame End itself (held after the end, as whole frames are): the second
     motion step of Frame End's motion blur."""
-    s, f = setup.s, setup.frame
+    s = setup.s
     directory = bpy.path.abspath(s.bake_path)
-    a, b = f, f + 1
-    if a >= s.frame_end:
-        a = b = s.frame_end
-    if not (s.frame_start <= a and b <= s.frame_end):
+    pair = framecache.subframe_pair(setup.frame, s.frame_start, s.frame_end)
+    if pair is None:
         return None
+    a, b = pair
     if not (os.path.exists(framecache.frame_path(directory, a)) and os.path.exists(
         framecache.frame_path(directory, b)
     )):

@@ -85,10 +85,13 @@ def run(setup, guides_world) -> None:
         _follow(setup, state)
         _show_note(setup, note or state.note or binding.note, guides_ok=False)
         return
-    baked = _baked(setup, state) if setup.s.is_baked and setup.subframe == 0.0 else None
+    baked = None
+    if setup.s.is_baked:
+        baked = _baked(setup, state) if setup.subframe == 0.0 else _baked_blend(setup, state)
     if baked is not None:
         points, status, stats = baked
-        state.remember_guides(guides_world, _surface_now(setup, binding)[0])
+        if setup.subframe == 0.0:
+            state.remember_guides(guides_world, _surface_now(setup, binding)[0])
     else:
         points, status, stats = _compute(setup, state, guides_world)
     _write(setup, state, points, status)
@@ -422,6 +425,33 @@ def _baked(setup, state):
         # baked.settings_differ).
         rt.outdated = True
     return points, status, groom_stats(status, int(part["fixed"][0]))
+
+
+def _baked_blend(setup, state):
+    """At a motion-blur subframe of a baked setup, the render groom blended between
+    the two baked frames around it, as the guides are (``frame_rules._baked_subframe``;
+    from Frame End on, Frame End held): (points (P, 3) world, the first frame's status,
+    stats), else None (a frame of the pair without the groom, or another groom bound
+    since: computed live). Nothing is computed, and the groom moves over the shutter
+    with its guides instead of being solved again at each motion step."""
+    s = setup.s
+    pair = framecache.subframe_pair(setup.frame, s.frame_start, s.frame_end)
+    if pair is None:
+        return None
+    directory = bpy.path.abspath(s.bake_path)
+    parts = []
+    for k in pair:
+        try:
+            part = framecache.read_extra(directory, k, BAKE_PART)
+        except (OSError, ValueError, KeyError):
+            return None
+        if part is None or part["points"].shape != state.binding.render_ref.shape:
+            return None
+        parts.append(part)
+    pa, pb = (p["points"] for p in parts)
+    points = pa + (pb - pa) * np.float32(setup.subframe)  # (the guides' arithmetic)
+    status = np.asarray(parts[0]["status"], np.int8)
+    return points, status, groom_stats(status, int(parts[0]["fixed"][0]))
 
 
 # ----------------------------------------------------------------- checks

@@ -473,3 +473,19 @@ def test_budget_stops_dropping_exactly_at_the_limit(what):
     else:
         assert sorted(mem.frames) == [0, 2, 3] and with_state == [0, 3]
     assert mem.nbytes == limit
+
+
+@pytest.mark.parametrize(("f", "want"), [
+    (1, (1, 2)), (5, (5, 6)), (9, (9, 10)),  # between two baked frames
+    (10, (10, 10)), (12, (10, 10)),  # from the end frame on: the end frame held
+    (0, None), (-3, None),  # before the start: nothing baked to blend
+])
+def test_subframe_pair_blends_neighbours_and_holds_the_end(f, want):
+    """The baked frames a motion-blur subframe after frame ``f`` blends (the guides and
+    the render groom alike), for a bake of frames 1-10."""
+    assert fc.subframe_pair(f, 1, 10) == want
+
+
+def test_subframe_pair_of_a_one_frame_bake_holds_it():
+    assert fc.subframe_pair(4, 4, 4) == (4, 4)
+    assert fc.subframe_pair(3, 4, 4) is None
