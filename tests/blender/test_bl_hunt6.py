@@ -92,50 +92,12 @@ def colliders_of(demo):
     return [demo.pusher, demo.cloth]
 
 
-def _leaves(V, F, size=48):
-    """The triangles of (V, F) split by their centroids (median cuts along the longest
-    axis) into groups of at most ``size``: [(triangle indices, lo, hi)]."""
-    T = V[F]
-    lo_t, hi_t, cen = T.min(1), T.max(1), T.mean(1)
-    out, todo = [], [np.arange(len(F))]
-    while todo:
-        idx = todo.pop()
-        if len(idx) <= size:
-            out.append((idx, lo_t[idx].min(0), hi_t[idx].max(0)))
-            continue
-        c = cen[idx]
-        ax = int(np.argmax(c.max(0) - c.min(0)))
-        order = idx[np.argsort(c[:, ax], kind="stable")]
-        todo += [order[: len(order) // 2], order[len(order) // 2:]]
-    return out
-
-
 def crossing(P, offs, colliders, st=None, keep=RESOLVED):
     """Curves whose status is in ``keep`` (all when ``st`` is None) that surely cross one
-    of ``colliders`` (the brute-force oracle, float32 margin). Exact: a segment is
-    tested against every group of triangles whose (padded) bounding box its own meets."""
-    C = len(offs) - 1
-    sel = np.ones(C, bool) if st is None else np.isin(st, keep)
-    P = np.asarray(P, np.float64)
-    sizes = np.diff(offs)
-    curve = np.repeat(np.arange(C), sizes - 1)
-    s0 = np.arange(len(curve)) + curve  # first point of every segment
-    use = sel[curve]
-    s0, curve = s0[use], curve[use]
-    A, B = P[s0], P[s0 + 1]
-    smin, smax = np.minimum(A, B), np.maximum(A, B)
-    bad = np.zeros(C, bool)
-    for ob in colliders:
-        V, F = tris_world(ob)
-        margin = oracle.float32_margin(P, V)
-        pad = 2 * margin + 1e-9 * float(np.abs(V).max())
-        for tri, lo, hi in _leaves(V, F):
-            near = np.flatnonzero(np.all(smin <= hi + pad, 1) & np.all(smax >= lo - pad, 1))
-            if len(near) == 0:
-                continue
-            hit = oracle.segment_hits(A[near], B[near], V, F[tri], abs_eps=margin)
-            bad[curve[near[hit]]] = True
-    return np.flatnonzero(bad)
+    of ``colliders`` (the brute-force oracle, float32 margin: ``oracle.curves_crossing``
+    on their evaluated world meshes)."""
+    meshes = [tris_world(ob) for ob in colliders]
+    return oracle.curves_crossing(P, offs, meshes, None if st is None else np.isin(st, keep))
 
 
 def test_crossing_agrees_with_the_oracle():

@@ -71,46 +71,10 @@ def demo_fur(n_fur, last, mode="bend", grass=50, **settings):
     return demo, demo.fur, s.output
 
 
-def _leaves(V, F, size=48):
-    """The triangles of (V, F) in groups of at most ``size`` (median cuts of their
-    centroids): [(triangle indices, lo, hi)]."""
-    T = V[F]
-    lo_t, hi_t, cen = T.min(1), T.max(1), T.mean(1)
-    out, todo = [], [np.arange(len(F))]
-    while todo:
-        idx = todo.pop()
-        if len(idx) <= size:
-            out.append((idx, lo_t[idx].min(0), hi_t[idx].max(0)))
-            continue
-        c = cen[idx]
-        ax = int(np.argmax(c.max(0) - c.min(0)))
-        order = idx[np.argsort(c[:, ax], kind="stable")]
-        todo += [order[: len(order) // 2], order[len(order) // 2 :]]
-    return out
-
-
 def crossing(P, offs, meshes, st=None, keep=RESOLVED):
     """Curves whose status is in ``keep`` (all when ``st`` is None) that surely cross
-    one of ``meshes`` ((V, F) in world space): the brute-force oracle with its float32
-    margin, each segment tested against the groups of triangles its box meets."""
-    C = len(offs) - 1
-    sel = np.ones(C, bool) if st is None else np.isin(st, keep)
-    P = np.asarray(P, np.float64)
-    curve = np.repeat(np.arange(C), np.diff(offs) - 1)
-    s0 = np.arange(len(curve)) + curve
-    s0, curve = s0[sel[curve]], curve[sel[curve]]
-    A, B = P[s0], P[s0 + 1]
-    smin, smax = np.minimum(A, B), np.maximum(A, B)
-    bad = np.zeros(C, bool)
-    for V, F in meshes:
-        margin = oracle.float32_margin(P, V)
-        pad = 2 * margin + 1e-9 * float(np.abs(V).max())
-        for tri, lo, hi in _leaves(V, F):
-            near = np.flatnonzero(np.all(smin <= hi + pad, 1) & np.all(smax >= lo - pad, 1))
-            if len(near):
-                hit = oracle.segment_hits(A[near], B[near], V, F[tri], abs_eps=margin)
-                bad[curve[near[hit]]] = True
-    return np.flatnonzero(bad)
+    one of ``meshes`` ((V, F) in world space): ``oracle.curves_crossing``."""
+    return oracle.curves_crossing(P, offs, meshes, None if st is None else np.isin(st, keep))
 
 
 def test_crossing_agrees_with_the_oracle():

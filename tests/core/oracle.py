@@ -166,6 +166,53 @@ def segments_hit_mesh(points, offsets, V_world, F, eps=SURE, abs_eps=0.0):
     return out
 
 
+def _leaves(V, F, size=48):
+    """The triangles of (V, F) split by their centroids (median cuts along the longest
+    axis) into groups of at most ``size``: [(triangle indices, lo, hi)]."""
+    T = V[F]
+    lo_t, hi_t, cen = T.min(1), T.max(1), T.mean(1)
+    out, todo = [], [np.arange(len(F))]
+    while todo:
+        idx = todo.pop()
+        if len(idx) <= size:
+            out.append((idx, lo_t[idx].min(0), hi_t[idx].max(0)))
+            continue
+        c = cen[idx]
+        ax = int(np.argmax(c.max(0) - c.min(0)))
+        order = idx[np.argsort(c[:, ax], kind="stable")]
+        todo += [order[: len(order) // 2], order[len(order) // 2:]]
+    return out
+
+
+def curves_crossing(points, offsets, meshes, select=None):
+    """Indices of the curves (of ``select``, a (C,) bool mask; all when None) that
+    surely cross one of ``meshes`` ((V, F) in the points' space): the answer of
+    :func:`segments_hit_mesh` with the float32 margin (:func:`float32_margin`), fast
+    enough for real-size scenes: a segment is tested only against the groups of
+    triangles whose (padded) bounding box its own meets."""
+    offs = np.asarray(offsets)
+    C = len(offs) - 1
+    sel = np.ones(C, bool) if select is None else np.asarray(select, bool)
+    P = np.asarray(points, np.float64)
+    curve = np.repeat(np.arange(C), np.diff(offs) - 1)
+    s0 = np.arange(len(curve)) + curve  # first point of every segment
+    use = sel[curve]
+    s0, curve = s0[use], curve[use]
+    A, B = P[s0], P[s0 + 1]
+    smin, smax = np.minimum(A, B), np.maximum(A, B)
+    bad = np.zeros(C, bool)
+    for V, F in meshes:
+        V = np.asarray(V, np.float64)
+        margin = float32_margin(P, V)
+        pad = 2 * margin + 1e-9 * float(np.abs(V).max())
+        for tri, lo, hi in _leaves(V, np.asarray(F)):
+            near = np.flatnonzero(np.all(smin <= hi + pad, 1) & np.all(smax >= lo - pad, 1))
+            if len(near):
+                hit = segment_hits(A[near], B[near], V, F[tri], abs_eps=margin)
+                bad[curve[near[hit]]] = True
+    return np.flatnonzero(bad)
+
+
 def first_hit_segment(points, offsets, V_world, F, eps=SURE):
     """(C,) int: index of the first (from the root) segment crossing the mesh, -1 if none."""
     A, B, cid, sid = curve_segments(points, offsets)
