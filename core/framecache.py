@@ -433,6 +433,13 @@ def subframe_pair(f: int, start: int, end: int) -> tuple[int, int] | None:
     return a, b
 
 
+def subframe_blend(a: np.ndarray, b: np.ndarray, subframe: float) -> np.ndarray:
+    """``a + (b - a) * subframe`` in the baked points' float32: what a subframe shows
+    between the baked frames :func:`subframe_pair` names (the guides and the render
+    groom alike, so they move over the shutter together)."""
+    return a + (b - a) * np.float32(subframe)
+
+
 def frame_path(directory: str, f: int) -> str:
     """Path of frame ``f``'s bake file in ``directory``."""
     return os.path.join(directory, FRAME_FILE.format(f))

@@ -552,8 +552,7 @@ def _baked_subframe(setup):
     data = s.output.data
     if pa.shape != pb.shape or len(data.points) != len(pa):
         return None
-    w = np.float32(setup.subframe)
-    points = pa + (pb - pa) * w
+    points = framecache.subframe_blend(pa, pb, setup.subframe)
     m_out_inv = bridge.matrix(s.output.evaluated_get(setup.depsgraph), inverted=True)
     inp = FrameInputs(points, offs, m_out_inv=m_out_inv)
     return frame_outputs.write(setup, inp, points, status)

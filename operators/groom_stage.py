@@ -405,20 +405,16 @@ def _baked(setup, state):
     rt = setup.rt
     if rt.stats.get("source") != "bake":
         return None
-    if setup.baked is not None:  # (read with the guides' frame)
-        part = setup.baked.extra.get(BAKE_PART)
-    else:
-        directory = bpy.path.abspath(setup.s.bake_path)
-        try:
-            part = framecache.read_extra(directory, int(rt.stats["frame"]), BAKE_PART)
-        except (OSError, ValueError, KeyError):
+    held = None
+    if setup.baked is not None:  # (read with the guides' frame: no groom in it, none)
+        held = setup.baked.extra.get(BAKE_PART)
+        if held is None:
             return None
+    part = _baked_part(setup, state, int(rt.stats["frame"]), held)
     if part is None:
         return None
     points = part["points"]  # (float32 as baked: written as they are, no float64 copy)
     status = np.asarray(part["status"], np.int8)
-    if points.shape != state.binding.render_ref.shape:
-        return None  # (another groom bound since: computed live)
     if part["key"].tobytes().decode() != settings_key(setup.ob):
         # Baked with other groom settings: still shown, as the guides' baked frame is
         # (it is what renders), never as if current (the frame rules say it:
@@ -438,20 +434,27 @@ def _baked_blend(setup, state):
     pair = framecache.subframe_pair(setup.frame, s.frame_start, s.frame_end)
     if pair is None:
         return None
-    directory = bpy.path.abspath(s.bake_path)
-    parts = []
-    for k in pair:
-        try:
-            part = framecache.read_extra(directory, k, BAKE_PART)
-        except (OSError, ValueError, KeyError):
-            return None
-        if part is None or part["points"].shape != state.binding.render_ref.shape:
-            return None
-        parts.append(part)
+    parts = [_baked_part(setup, state, k) for k in pair]
+    if any(p is None for p in parts):
+        return None
     pa, pb = (p["points"] for p in parts)
-    points = pa + (pb - pa) * np.float32(setup.subframe)  # (the guides' arithmetic)
+    points = framecache.subframe_blend(pa, pb, setup.subframe)
     status = np.asarray(parts[0]["status"], np.int8)
     return points, status, groom_stats(status, int(parts[0]["fixed"][0]))
+
+
+def _baked_part(setup, state, f, part=None):
+    """The render groom part of baked frame ``f`` (``part``: already read with the
+    guides' frame), or None: not in the bake, unreadable, or of another groom bound
+    since (then the groom is computed live)."""
+    if part is None:
+        try:
+            part = framecache.read_extra(bpy.path.abspath(setup.s.bake_path), f, BAKE_PART)
+        except (OSError, ValueError, KeyError):
+            return None
+    if part is None or part["points"].shape != state.binding.render_ref.shape:
+        return None
+    return part
 
 
 # ----------------------------------------------------------------- checks

@@ -25,8 +25,8 @@ exactly as in the main lane, so these two lanes leave them out (``BPY_FREE``); t
 lane runs them on Python 3.13 and numpy 2.
 
 (**) Tests marked ``slow`` (the real-size scenes of ``tests/blender/test_bl_hunt6.py``, and
-the demo-sized searches, grass and Shrink of ``test_bl_hunt7.py``, about two and a half
-minutes) play the same frames on every Blender: they run in the main lane only,
+the demo-sized searches, grass, Shrink and off-centre shutters of ``test_bl_hunt7.py``,
+about two and a half minutes) play the same frames on every Blender: they run in the main lane only,
 which keeps ``make test`` within its 15 minutes; every other Blender-side test runs in
 every ``bpy`` lane.
 

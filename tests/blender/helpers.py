@@ -190,6 +190,14 @@ def status_of(out):
     return st
 
 
+def pipeline_state(guides):
+    """What a pipeline setup on ``guides`` shows: (guides' world points, their status,
+    the render groom's world points, its status), copies."""
+    s = guides.furcollide
+    return (world(s.output).copy(), status_of(s.output).copy(),
+            world(s.groom.output).copy(), status_of(s.groom.output).copy())
+
+
 def seg_lengths(P, offs):
     """Per-curve segment lengths (no segment between two curves)."""
     d = np.linalg.norm(np.diff(P, axis=0), axis=1)

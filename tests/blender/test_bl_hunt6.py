@@ -21,6 +21,7 @@ from helpers import (
     activate,
     offsets_of,
     oracle,
+    pipeline_state,
     positions,
     reopen,
     save_in,
@@ -406,12 +407,6 @@ def pipeline(n_fur=N_FUR, fraction=0.25):
     activate(guides)
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     return demo, guides, s.output, s.groom.output
-
-
-def pipeline_state(guides):
-    s = guides.furcollide
-    return (world(s.output).copy(), status_of(s.output).copy(),
-            world(s.groom.output).copy(), status_of(s.groom.output).copy())
 
 
 def same_pipeline(a, b, what=""):

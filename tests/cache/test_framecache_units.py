@@ -489,3 +489,13 @@ def test_subframe_pair_blends_neighbours_and_holds_the_end(f, want):
 def test_subframe_pair_of_a_one_frame_bake_holds_it():
     assert fc.subframe_pair(4, 4, 4) == (4, 4)
     assert fc.subframe_pair(3, 4, 4) is None
+
+
+def test_subframe_blend_is_float32_and_ends_at_the_baked_frames():
+    a = np.array([[0.0, 1.0, 2.0]], np.float32)
+    b = np.array([[1.0, 1.0, -2.0]], np.float32)
+    got = fc.subframe_blend(a, b, 0.25)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, [[0.25, 1.0, 1.0]])
+    np.testing.assert_array_equal(fc.subframe_blend(a, b, 0.0), a)
+    np.testing.assert_array_equal(fc.subframe_blend(a, b, 1.0), b)
