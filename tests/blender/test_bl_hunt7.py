@@ -372,30 +372,31 @@ def test_soft_warm_start_equals_its_full_search_over_the_whole_shot(fc, monkeypa
         same(got, ref[f], f"Soft, full search, frame {f}")
 
 
-BEND_DIFFERS = (
-    "README 'Warm start' says of the demo's fur '(Bend: none)' differ; played on to frame "
-    "25 (the pusher deep in the fur, the cloth on it), 5 Bend curves differ from the full "
-    "search, by up to 3.9 cm (18 curves and up to 11 cm later in the shot): the full "
-    "search's first probe at 1.3 times the tangent-plane estimate (213 degrees for one "
-    "curve, above Max Angle) lands in a blocked band above a wide clear window "
-    "(core/rigid.py search_angles, core/step.py plane_guess): the known limit of hunt 6, "
-    "finding 1, in Bend too"
-)
-
-
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=BEND_DIFFERS)
-def test_bend_warm_start_equals_the_full_search_to_frame_25(fc, monkeypatch):
-    """The README's "(Bend: none)": the demo's fur in Bend, played 1..25 with the warm
-    start and with the full search."""
-    demo, hair, out = demo_fur(N_FUR, 25)
+def test_bend_warm_start_equals_the_full_search_to_frame_24_and_differs_at_25(fc, monkeypatch):
+    """README "Warm start": the demo's fur in Bend (Threads 2: each phase in two halves),
+    played 1..25 with the warm start and again with the full search
+    (``Solver.warm_start = False``). Frames 1..24 are the same bit for bit; at frame 25
+    (the pusher deep in the fur, the cloth on it) a few curves differ: the full search's
+    first probe at 1.3 times the tangent-plane estimate lands in a blocked band above a
+    wide clear window (core/rigid.py search_angles, core/step.py plane_guess), the known
+    limit of *Known limitations of the core*. Why each differing curve may differ, and
+    that both are collision-free: the next test. (This replaces hunt 6's Bend case to
+    frame 22 and hunt 7's strict xfail to frame 25, which played the same frames.)"""
+    demo, hair, out = demo_fur(N_FUR, 25, threads=2)
     scene = demo.scene
     ref = play(scene, hair, out, range(1, 26))
     solver = sys.modules[ADDON + ".core.solver"]
     monkeypatch.setattr(solver.Solver, "warm_start", False)
     reset(hair)
-    for f, got in play(scene, hair, out, range(1, 26)).items():
-        same(got, ref[f], f"Bend, full search, frame {f}")
+    got = play(scene, hair, out, range(1, 26))
+    for f in range(1, 25):
+        same(got[f], ref[f], f"Bend, full search, frame {f}")
+    pos_w, pos_f = ref[25][0].reshape(-1, 3), got[25][0].reshape(-1, 3)
+    moved = np.abs(pos_w - pos_f).max(1)
+    offs = offsets_of(hair)
+    per_curve = np.maximum.reduceat(moved, offs[:-1])
+    assert 0 < (per_curve > 0).sum() < 50, (per_curve > 0).sum()  # (5 on this machine)
 
 
 @pytest.mark.slow
