@@ -21,9 +21,9 @@ from ..rays import default_threads
 #: whole gives, bit for bit; their long numpy passes release the GIL and
 #: overlap. Below it the halves' own overhead (a hand-over to the ray pool,
 #: twice the numpy calls) is more than they save. Measured (2 cores, 50,000
-#: render curves, 7,500 guides): the groom's blend 35 -> 21 ms, the guides'
-#: root fits 16 -> 9.5 ms (their batched 3x3 SVDs do not overlap), Fur Attach
-#: 9.8 -> 5.7 ms.
+#: render curves, 7,500 guides): the groom's blend 35 -> 21 ms, Fur Attach
+#: 9.8 -> 5.7 ms. (The guides' root fits, 2.3 ms of short passes, stay on one
+#: thread: two only interleave them.)
 SPLIT_MIN_ITEMS = 2048
 
 

@@ -1,7 +1,8 @@
 """Fur Attach and the render groom on two threads (``threads``, issue 11).
 
-From ``core.pipeline._curves.SPLIT_MIN_ITEMS`` curves (guides for the root
-fits) :meth:`Binding.apply` and :func:`deform_groom` run in two halves, one on
+From ``core.pipeline._curves.SPLIT_MIN_ITEMS`` curves :meth:`Binding.apply`
+and :func:`deform_groom` (its blend; the guides' root fits stay on one thread) run
+in two halves, one on
 a ray-pool thread, one on the caller's. Curves are independent, so the result
 must be the same bit for bit as on one thread, and each half must really run
 on its own thread. The tests lower the threshold to 1 so that small grooms
@@ -103,7 +104,7 @@ def test_one_thread_or_few_curves_run_whole_on_the_caller(monkeypatch):
     monkeypatch.setattr(_curves, "SPLIT_MIN_ITEMS", 301)
     b.apply(V, threads=2)
     deform_groom(rp, ro, gp, gp, go, w, threads=2)
-    assert len(halves.calls) == 6  # apply; the root fits and the blend, twice
+    assert len(halves.calls) == 4  # apply and the blend, twice
     assert all(ids == me for *_, ids in halves.calls), halves.calls
 
 
