@@ -103,7 +103,8 @@ def prepare_input(setup, inp) -> None:
         # (before the start frame the hair counts as at rest: frames viewed there
         # must not change a bake, which starts at the start frame)
         rt.history.record(f, inp.points[inp.offsets[:-1]])
-    moved = motion.apply_motion(m, "INPUT", inp.points, inp.offsets, f, setup.fps, rt.history)
+    moved = motion.apply_motion(m, "INPUT", inp.points, inp.offsets, f, setup.fps, rt.history,
+                                setup.s.threads or None)
     if moved is not None:
         inp.points = np.asarray(moved, np.float32)
         inp.local = None

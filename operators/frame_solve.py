@@ -72,7 +72,8 @@ def solve_frame(setup, inputs) -> FrameResult:
         points, attributes = res.points, {}
     else:
         points, attributes = motion.output_stage(m, res.points, inputs.offsets, inputs.frame,
-                                                 setup.fps, setup.history, inputs.colliders)
+                                                 setup.fps, setup.history, inputs.colliders,
+                                                 setup.s.threads or None)
     stats = frame_stats(res.status, inputs.frame, res.timings.get("total", 0.0))
     return FrameResult(points, res.status, attributes,
                        framecache.rows_differ(points, inputs.raw), stats, list(res.problems))

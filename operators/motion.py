@@ -70,11 +70,11 @@ class RootHistory:
 
 
 # -------------------------------------------------------------------- motion
-def _wind(m, points, offsets, f, fps):
+def _wind(m, points, offsets, f, fps, threads):
     return pipeline.wind(
         points, offsets, f, direction=tuple(m.wind_direction), strength=m.wind_strength,
         frequency=m.wind_frequency, turbulence=m.wind_turbulence, falloff=m.wind_falloff,
-        seed=m.wind_seed, scale=m.wind_scale, fps=fps,
+        seed=m.wind_seed, scale=m.wind_scale, fps=fps, threads=threads,
     )
 
 
@@ -86,17 +86,19 @@ def _jiggle(m, points, offsets, f, fps, history):
     )
 
 
-def apply_motion(m, stage, points, offsets, f, fps, history) -> np.ndarray | None:
+def apply_motion(m, stage, points, offsets, f, fps, history,
+                 threads=None) -> np.ndarray | None:
     """Wind then jiggle of the motion settings ``m`` that run at ``stage`` ('INPUT' or
-    'OUTPUT'); None when none does. ``points`` (P, 3) world; returns float64."""
+    'OUTPUT'); None when none does. ``points`` (P, 3) world; returns float64. ``threads``:
+    the setup's Threads (None: all CPUs; the same result for any count)."""
     with clock.timing("motion"):
-        return _apply_motion(m, stage, points, offsets, f, fps, history)
+        return _apply_motion(m, stage, points, offsets, f, fps, history, threads)
 
 
-def _apply_motion(m, stage, points, offsets, f, fps, history):
+def _apply_motion(m, stage, points, offsets, f, fps, history, threads):
     out = None
     if m.use_wind and m.wind_stage == stage and m.wind_strength > 0:
-        out = _wind(m, points if out is None else out, offsets, f, fps)
+        out = _wind(m, points if out is None else out, offsets, f, fps, threads)
     if m.use_jiggle and m.jiggle_stage == stage and m.jiggle_amount > 0 and history.frames:
         out = _jiggle(m, points if out is None else out, offsets, f, fps, history)
     return out
@@ -107,7 +109,7 @@ def needs_history(m) -> bool:
     return bool(m.use_jiggle)
 
 
-def output_stage(m, points, offsets, f, fps, history, colliders):
+def output_stage(m, points, offsets, f, fps, history, colliders, threads=None):
     """Motion after collision with its Region of Influence, and the collider distance.
 
     Parameters
@@ -123,6 +125,8 @@ def output_stage(m, points, offsets, f, fps, history, colliders):
     history : RootHistory
     colliders : list of core.Collider
         This frame's colliders.
+    threads : int or None
+        The setup's Threads (None: all CPUs).
 
     Returns
     -------
@@ -131,7 +135,7 @@ def output_stage(m, points, offsets, f, fps, history, colliders):
     attributes : dict
         ``{DISTANCE_ATTRIBUTE: (P,) float32}`` when the attribute is on.
     """
-    moved = apply_motion(m, "OUTPUT", points, offsets, f, fps, history)
+    moved = apply_motion(m, "OUTPUT", points, offsets, f, fps, history, threads)
     with clock.timing("motion"):
         return _limit(m, points, offsets, moved, colliders)
 

@@ -192,8 +192,8 @@ class FurCollideSettings(PropertyGroup):
         max=1024,
         # (no update: the result is the same for any count, the cache stays valid)
         description="Threads a frame uses (0 = all CPUs): for its rays, and with many "
-        "curves for two halves at once of the solve, of Fur Attach and of the render "
-        "groom. The result is identical for any count",
+        "curves for two halves at once of the solve, of Fur Attach, of the wind and of "
+        "the render groom. The result is identical for any count",
     )
 
     # -------------------------------------------------------------- shrink

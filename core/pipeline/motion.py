@@ -13,7 +13,9 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ._curves import arc_length, check_curves, layout, rechain
+from ..rays import in_two
+from . import _curves
+from ._curves import arc_length, check_curves, layout, rechain, thread_count
 
 #: Sinusoids summed per noise channel.
 _WAVES = 4
@@ -99,7 +101,8 @@ def wind_noise(x, t, seed=0, scale=1.0, frequency=1.0, channels=4):
 
 
 def wind(points, offsets, frame, direction=(1.0, 0.0, 0.0), strength=0.1, frequency=0.5,
-         turbulence=0.5, falloff=1.5, seed=0, scale=1.0, fps=24.0, preserve_length=True):
+         turbulence=0.5, falloff=1.5, seed=0, scale=1.0, fps=24.0, preserve_length=True,
+         threads=None):
     """Procedural wind: gusts and turbulence from coherent noise, growing root to tip.
 
     Each curve is pushed by ``strength * (d * (1 + turbulence * g) +
@@ -135,6 +138,10 @@ def wind(points, offsets, frame, direction=(1.0, 0.0, 0.0), strength=0.1, freque
     preserve_length : bool
         Re-chain the moved curve keeping every segment's length (the curve
         bends instead of stretching).
+    threads : int or None, default None
+        Threads to use (None: every CPU). From ``_curves.SPLIT_MIN_ITEMS``
+        curves the work runs in two halves on two threads; the result is the
+        same bit for bit (every curve's wind is its own).
 
     Returns
     -------
@@ -152,16 +159,24 @@ def wind(points, offsets, frame, direction=(1.0, 0.0, 0.0), strength=0.1, freque
     d = np.asarray(direction, np.float64)
     if d.shape != (3,) or not np.isfinite(d).all():
         raise InputError(f"direction must be 3 finite numbers, got {direction!r}")
+    threads = thread_count(threads)
     if strength == 0:
         return pts.copy()
     nd = np.linalg.norm(d)
     d = d / nd if nd > 0 else d
-    roots = pts[off[:-1]]
-    g = wind_noise(roots, frame / fps, seed, scale, frequency)
-    push = strength * (d[None] * (1 + turbulence * g[:, :1]) + turbulence * g[:, 1:])
-    curve, _, _ = layout(off)
-    disp = _weights(pts, off, falloff)[:, None] * push[curve]
-    return _displace(pts, off, disp, preserve_length)
+    out = np.empty_like(pts)
+
+    def blow(c0, c1):  # curves c0:c1
+        a, b = off[c0], off[c1]
+        p, o = pts[a:b], off[c0:c1 + 1] - a
+        g = wind_noise(p[o[:-1]], frame / fps, seed, scale, frequency)
+        push = strength * (d[None] * (1 + turbulence * g[:, :1]) + turbulence * g[:, 1:])
+        curve, _, _ = layout(o)
+        disp = _weights(p, o, falloff)[:, None] * push[curve]
+        out[a:b] = _displace(p, o, disp, preserve_length)
+
+    in_two(blow, len(off) - 1, threads, _curves.SPLIT_MIN_ITEMS)
+    return out
 
 
 def spring_impulse_response(tau, stiffness, damping):

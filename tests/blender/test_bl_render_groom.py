@@ -469,10 +469,10 @@ def test_bind_groom_again_after_changing_guides_per_curve(fc):
 
 
 def test_threads_is_honoured_by_fur_attach_and_the_render_groom(fc, monkeypatch):
-    """The Threads tooltip: with many curves a frame runs Fur Attach and the render
-    groom in two halves at once (the threshold is lowered here: the scene is small);
-    Threads 1 (a farm running one Blender per core) keeps them on the caller's thread.
-    The frames are the same bit for bit."""
+    """The Threads tooltip: with many curves a frame runs Fur Attach, the wind (after
+    collision here) and the render groom in two halves at once (the threshold is
+    lowered here: the scene is small); Threads 1 (a farm running one Blender per core)
+    keeps them on the caller's thread. The frames are the same bit for bit."""
     import sys
     import threading
 
@@ -484,9 +484,11 @@ def test_threads_is_honoured_by_fur_attach_and_the_render_groom(fc, monkeypatch)
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     gout = guides.furcollide.groom.output
+    m = guides.furcollide.motion
+    m.use_wind, m.wind_stage, m.wind_strength = True, "OUTPUT", 0.2
     monkeypatch.setattr(sys.modules[ADDON + ".core.pipeline._curves"], "SPLIT_MIN_ITEMS", 1)
     seen = []  # (stage module, threads, thread idents of the halves)
-    for stage in ("attach", "groom"):
+    for stage in ("attach", "groom", "motion"):
         mod = sys.modules[ADDON + ".core.pipeline." + stage]
 
         def spy(fn, n, threads, min_n, real=mod.in_two, stage=stage):
@@ -512,7 +514,7 @@ def test_threads_is_honoured_by_fur_attach_and_the_render_groom(fc, monkeypatch)
             scene.frame_set(f)
             frames[threads].append((world(out), world(gout)))
         stages = {s for s, *_ in seen}
-        assert stages == {"attach", "groom"}, seen
+        assert stages == {"attach", "groom", "motion"}, seen
         me = frozenset({threading.get_ident()})
         if threads == 1:
             assert all(t == 1 and ids == me for _, t, ids in seen), seen

@@ -58,7 +58,7 @@ class _Halves:
             real(half, n, threads, min_n)
             self.calls.append((n, threads, idents))
 
-        for mod in ("core.pipeline.groom", "core.pipeline.attach"):
+        for mod in ("core.pipeline.groom", "core.pipeline.attach", "core.pipeline.motion"):
             mp.setattr(f"{mod}.in_two", spy)
 
 
@@ -68,8 +68,8 @@ class _Halves:
        collapse=st.booleans())
 def test_two_threads_give_the_bits_of_one(seed, n_guides, n_render, uniform, own_roots,
                                           collapse):
-    """Binding.apply and deform_groom, split in two halves on two threads, give the
-    same bits as on one thread (a collapsed root triangle and curves of many CV
+    """Binding.apply, deform_groom and wind, split in two halves on two threads, give
+    the same bits as on one thread (a collapsed root triangle and curves of many CV
     counts included), and the halves ran on two threads."""
     rng, V, F, gp, go, rp, ro = _groom(seed, n_guides, n_render, uniform)
     b = bind(rp, ro, V, F)
@@ -80,14 +80,19 @@ def test_two_threads_give_the_bits_of_one(seed, n_guides, n_render, uniform, own
     w = bind_groom(rp[ro[:-1]], gp[go[:-1]], 3)
     gn = wind(gp, go, seed % 97, strength=0.6, turbulence=1.0, seed=seed) + 0.25
     roots = b.apply(V2, threads=1)[ro[:-1]] if own_roots else None
-    one = (b.apply(V2, threads=1), deform_groom(rp, ro, gp, gn, go, w, roots, threads=1))
+    blow = dict(frame=seed % 31 + 0.25, direction=(1.0, 0.2, -0.3), strength=0.3,
+                turbulence=0.8, preserve_length=bool(seed % 2))
+    one = (b.apply(V2, threads=1), deform_groom(rp, ro, gp, gn, go, w, roots, threads=1),
+           wind(rp, ro, threads=1, **blow))
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(_curves, "SPLIT_MIN_ITEMS", 1)
         halves = _Halves(mp)
-        two = (b.apply(V2, threads=2), deform_groom(rp, ro, gp, gn, go, w, roots, threads=2))
-    np.testing.assert_array_equal(two[0], one[0])
-    np.testing.assert_array_equal(two[1], one[1])
-    assert halves.calls and all(len(ids) == 2 for *_, ids in halves.calls), halves.calls
+        two = (b.apply(V2, threads=2), deform_groom(rp, ro, gp, gn, go, w, roots, threads=2),
+               wind(rp, ro, threads=2, **blow))
+    for a, c in zip(two, one, strict=True):
+        np.testing.assert_array_equal(a, c)
+    assert halves.calls[-1][0] == len(ro) - 1  # (wind: its curves)
+    assert all(len(ids) == 2 for *_, ids in halves.calls), halves.calls
 
 
 def test_one_thread_or_few_curves_run_whole_on_the_caller(monkeypatch):
@@ -101,10 +106,12 @@ def test_one_thread_or_few_curves_run_whole_on_the_caller(monkeypatch):
     monkeypatch.setattr(_curves, "SPLIT_MIN_ITEMS", 1)
     b.apply(V, threads=1)
     deform_groom(rp, ro, gp, gp, go, w, threads=1)
+    wind(rp, ro, 3, threads=1)
     monkeypatch.setattr(_curves, "SPLIT_MIN_ITEMS", 301)
     b.apply(V, threads=2)
     deform_groom(rp, ro, gp, gp, go, w, threads=2)
-    assert len(halves.calls) == 4  # apply and the blend, twice
+    wind(rp, ro, 3, threads=2)
+    assert len(halves.calls) == 6  # apply, the blend and wind, twice
     assert all(ids == me for *_, ids in halves.calls), halves.calls
 
 
@@ -117,6 +124,8 @@ def test_threads_must_be_a_positive_count(bad):
         b.apply(V, threads=bad)
     with pytest.raises(InputError, match="threads must be a positive integer or None"):
         deform_groom(rp, ro, gp, gp, go, w, threads=bad)
+    with pytest.raises(InputError, match="threads must be a positive integer or None"):
+        wind(rp, ro, 1, threads=bad)
 
 
 def test_both_waits_for_both_and_reports_the_first_error():
