@@ -421,9 +421,9 @@ def quat_from_matrix(R):
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def _adjugate_sym4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):
-    """Adjugate (4, 4, g) of symmetric 4x4 matrices given by their upper-triangle
-    component arrays (g,): 2x2 minors of the top and bottom row pairs (Laplace)."""
+def _minors_sym4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):
+    """The 2x2 minors of the top (``s``) and bottom (``c``) row pairs of symmetric
+    4x4 matrices given by their upper-triangle component arrays (g,) (Laplace)."""
     s0 = a00 * a11 - a01 * a01
     s1 = a00 * a12 - a01 * a02
     s2 = a00 * a13 - a01 * a03
@@ -436,6 +436,19 @@ def _adjugate_sym4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):
     c3 = a12 * a23 - a13 * a22
     c4 = a12 * a33 - a13 * a23
     c5 = a22 * a33 - a23 * a23
+    return (s0, s1, s2, s3, s4, s5), (c0, c1, c2, c3, c4, c5)
+
+
+def _det_sym4(s, c):
+    """Determinants (g,) from :func:`_minors_sym4`'s minors."""
+    return s[0] * c[5] - s[1] * c[4] + s[2] * c[3] + s[3] * c[2] - s[4] * c[1] + s[5] * c[0]
+
+
+def _adjugate_sym4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):
+    """Adjugate (4, 4, g) of symmetric 4x4 matrices given by their upper-triangle
+    component arrays (g,)."""
+    (s0, s1, s2, s3, s4, s5), (c0, c1, c2, c3, c4, c5) = _minors_sym4(
+        a00, a01, a02, a03, a11, a12, a13, a22, a23, a33)
     B = np.empty((4, 4) + np.shape(a00))
     B[0, 0] = a11 * c5 - a12 * c4 + a13 * c3
     B[0, 1] = -a01 * c5 + a02 * c4 - a03 * c3
@@ -453,7 +466,7 @@ def _adjugate_sym4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):
     B[3, 1] = a00 * c3 - a01 * c1 + a02 * c0
     B[3, 2] = -a03 * s3 + a13 * s1 - a23 * s0
     B[3, 3] = a02 * s3 - a12 * s1 + a22 * s0
-    return B, (s0, s1, s2, s3, s4, s5), (c0, c1, c2, c3, c4, c5)
+    return B
 
 
 def quat_fit(H):
@@ -476,7 +489,7 @@ def quat_fit(H):
     q : (g, 4) ndarray of float64
         Unit quaternions, ``w >= 0``.
     ok : (g,) ndarray of bool
-        Where the fit is trusted (within ~2e-14 of :func:`kabsch`'s): the top
+        Where the fit is trusted (within ~3e-14 of :func:`kabsch`'s): the top
         eigenvalue stands clear of the next (``tol.QUAT_FIT_GAP``), Newton
         converged (``tol.QUAT_FIT_ITERS``) and ``q`` is an eigenvector of that
         eigenvalue (near a double root, rounding can throw Newton off its
@@ -500,9 +513,7 @@ def quat_fit(H):
     c2 = np.full(g, -2.0)
     c1 = -8.0 * (xx * (yy * zz - yz * zy) - xy * (yx * zz - yz * zx)
                  + xz * (yx * zy - yy * zx))
-    _, (s0, s1, s2, s3, s4, s5), (k0, k1, k2, k3, k4, k5) = _adjugate_sym4(
-        n00, n01, n02, n03, n11, n12, n13, n22, n23, n33)
-    c0 = s0 * k5 - s1 * k4 + s2 * k3 + s3 * k2 - s4 * k1 + s5 * k0  # det N
+    c0 = _det_sym4(*_minors_sym4(n00, n01, n02, n03, n11, n12, n13, n22, n23, n33))
     lam = np.full(g, bound)
     tiny = 4.0 * np.finfo(np.float64).eps * bound
     done = np.zeros(g, bool)
@@ -516,7 +527,7 @@ def quat_fit(H):
         done = step <= tiny
         if done.all():
             break
-    B, _, _ = _adjugate_sym4(n00 - lam, n01, n02, n03, n11 - lam, n12, n13, n22 - lam,
+    B = _adjugate_sym4(n00 - lam, n01, n02, n03, n11 - lam, n12, n13, n22 - lam,
                              n23, n33 - lam)
     diag = np.abs(np.stack([B[0, 0], B[1, 1], B[2, 2], B[3, 3]]))
     row = np.argmax(diag, 0)

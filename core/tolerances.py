@@ -121,7 +121,7 @@ ATTACH_FRAME_MIN_SIN = 1e-12
 #: are used where the adjugate's largest diagonal entry is at least
 #: ``QUAT_FIT_GAP`` times the cube of the eigenvalue bound, i.e. where the top
 #: eigenvalue stands clear of the others. There they agree with the SVD
-#: (Kabsch) fit to within ~2e-14 (measured on 100,000 random and near-planar
+#: (Kabsch) fit to within ~3e-14 (measured on 100,000 random and near-planar
 #: neighbourhoods; 1e-12 at a tenth of this gap, 1e-11 at a hundredth); the
 #: other ~1 % of fits (nearly collinear neighbourhoods, fits that do not fix
 #: a rotation) use the SVD.
