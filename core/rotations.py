@@ -527,8 +527,8 @@ def quat_fit(H):
         done = step <= tiny
         if done.all():
             break
-    B = _adjugate_sym4(n00 - lam, n01, n02, n03, n11 - lam, n12, n13, n22 - lam,
-                             n23, n33 - lam)
+    B = _adjugate_sym4(n00 - lam, n01, n02, n03, n11 - lam, n12, n13, n22 - lam, n23,
+                       n33 - lam)
     diag = np.abs(np.stack([B[0, 0], B[1, 1], B[2, 2], B[3, 3]]))
     row = np.argmax(diag, 0)
     q = np.take_along_axis(B, row[None, None], 0)[0].T  # (g, 4): adj is symmetric

@@ -88,7 +88,7 @@ def read_inputs(setup, attach=True) -> FrameInputs:
     common = dict(offsets=offs, enabled=mask, frame=setup.frame, key=key, m_out_inv=M_out_inv,
                   warning=warning)
     if s.use_fur_attach:  # the input stage: curves follow the evaluated growth surface
-        att = attach_input(ob, depsgraph, offs, s.threads or None)
+        att = attach_input(ob, depsgraph, offs, s.core_threads)
         world = np.asarray(att.points(), np.float32) if attach else None
         return FrameInputs(world, attached=att, **common)
     # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
@@ -104,7 +104,7 @@ def prepare_input(setup, inp) -> None:
         # must not change a bake, which starts at the start frame)
         rt.history.record(f, inp.points[inp.offsets[:-1]])
     moved = motion.apply_motion(m, "INPUT", inp.points, inp.offsets, f, setup.fps, rt.history,
-                                setup.s.threads or None)
+                                setup.s.core_threads)
     if moved is not None:
         inp.points = np.asarray(moved, np.float32)
         inp.local = None

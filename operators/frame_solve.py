@@ -73,7 +73,7 @@ def solve_frame(setup, inputs) -> FrameResult:
     else:
         points, attributes = motion.output_stage(m, res.points, inputs.offsets, inputs.frame,
                                                  setup.fps, setup.history, inputs.colliders,
-                                                 setup.s.threads or None)
+                                                 setup.s.core_threads)
     stats = frame_stats(res.status, inputs.frame, res.timings.get("total", 0.0))
     return FrameResult(points, res.status, attributes,
                        framecache.rows_differ(points, inputs.raw), stats, list(res.problems))

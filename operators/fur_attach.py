@@ -92,7 +92,7 @@ def _bind_again(ob) -> str:
 def attached_points(ob, depsgraph, offsets) -> np.ndarray:
     """Fur Attach input stage: the bound curves moved rigidly with the evaluated
     Surface of the source ``ob`` (world space, (P, 3) float64)."""
-    return attach_input(ob, depsgraph, offsets, ob.furcollide.threads or None).points()
+    return attach_input(ob, depsgraph, offsets, ob.furcollide.core_threads).points()
 
 
 class AttachInput:

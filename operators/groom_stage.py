@@ -250,7 +250,7 @@ def _compute(setup, state, guides_world, remember=True):
     if key == state.key and state.result is not None:
         return state.result  # (nothing it depends on changed: a held or repeated frame)
     with clock.timing("groom"):
-        points, status = binding.deform(guides, V, threads=s.threads or None)
+        points, status = binding.deform(guides, V, threads=s.core_threads)
     n_fixed = 0
     if cols:
         with clock.timing("clearance"):
@@ -269,7 +269,7 @@ def clearance(s, binding, points, status, colliders):
     crossing are UNRESOLVED. Returns (points, status, n_fixed).
     """
     # (the setup's Threads too: a farm running one Blender per core sets 1)
-    common = {"collision_offset": s.collision_offset, "threads": s.threads or None}
+    common = {"collision_offset": s.collision_offset, "threads": s.core_threads}
     settings = core.Settings(mode="stiff", **common)
     fallback = core.Settings(mode="bend", **common)
     valid = status != Status.INVALID
@@ -349,7 +349,7 @@ def _carry(setup, state, guides, V_then, V_now):
         b = pipeline.bind(guides, state.binding.guide_offsets, V_then, F, snap_roots=False,
                           drop_degenerate=True)
         carried = state.carried = (state.last_guides, b)
-    return carried[1].apply(V_now, threads=setup.s.threads or None)
+    return carried[1].apply(V_now, threads=setup.s.core_threads)
 
 
 def _write(setup, state, points_world, status) -> None:

@@ -354,10 +354,16 @@ class FurCollideSettings(PropertyGroup):
         "the start frame or bake",
     )
 
+    @property
+    def core_threads(self) -> int | None:
+        """Threads as the core takes them (None: all CPUs, the property's 0), for the
+        solver and every pipeline stage."""
+        return self.threads or None
+
     def to_core_kwargs(self) -> dict:
         """Keyword arguments of :class:`core.Settings` for these properties."""
         kw = {name: getattr(self, name) for name in SOLVER_PROPERTIES}
-        kw["threads"] = self.threads or None
+        kw["threads"] = self.core_threads
         return kw
 
 

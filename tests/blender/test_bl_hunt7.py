@@ -303,6 +303,16 @@ def pipeline(n_fur, last):
     return demo, guides, s.output, s.groom.output
 
 
+def baked_pipeline(tmp_path, last, n_fur=4000):
+    """:func:`pipeline`, saved in ``tmp_path`` and baked with its render groom."""
+    demo, guides, out, gout = pipeline(n_fur, last)
+    save_in(tmp_path)
+    activate(guides)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert guides.furcollide.groom.is_baked_with
+    return demo, guides, out, gout
+
+
 def test_motion_blur_render_of_a_baked_render_groom(fc, tmp_path):
     """The demo's pipeline baked with its render groom, rendered with motion blur, the
     guides and the groom hidden from render (only the groom output renders): every whole
@@ -313,12 +323,8 @@ def test_motion_blur_render_of_a_baked_render_groom(fc, tmp_path):
     motion step, which made single curves jump 10-25 cm in a quarter frame); nothing
     said."""
     last = 14
-    demo, guides, out, gout = pipeline(4000, last)
+    demo, guides, out, gout = baked_pipeline(tmp_path, last)
     scene = demo.scene
-    save_in(tmp_path)
-    activate(guides)
-    assert bpy.ops.furcollide.bake() == {"FINISHED"}
-    assert guides.furcollide.groom.is_baked_with
     first = {}
     for f in range(1, last + 1):
         scene.frame_set(f)
@@ -615,11 +621,8 @@ def test_motion_blur_of_frame_end_holds_the_baked_render_groom(fc, tmp_path):
     Groom": a bake made after Bind Groom holds the render groom. So the motion step after
     Frame End shows Frame End's baked render groom, as its guides."""
     last = 14
-    demo, guides, out, gout = pipeline(4000, last)
+    demo, guides, out, gout = baked_pipeline(tmp_path, last)
     scene = demo.scene
-    save_in(tmp_path)
-    activate(guides)
-    assert bpy.ops.furcollide.bake() == {"FINISHED"}
     scene.frame_set(last)
     end = pipeline_state(guides)
     scene.frame_start = last - 1
