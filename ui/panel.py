@@ -83,7 +83,10 @@ class FURCOLLIDE_PT_main(Panel):
         src = active_setup(context)
         if src is None:
             layout.operator("furcollide.add", icon="MOD_PHYSICS")
-            layout.label(text="Select the hair, then Shift-select colliders", icon="INFO")
+            # Add FurCollide takes the *active* hair: it must be selected last.
+            col = layout.column(align=True)
+            col.label(text="Select the colliders,", icon="INFO")
+            col.label(text="then Shift-click the hair last")
             return
         s = src.furcollide
         layout.use_property_split = True

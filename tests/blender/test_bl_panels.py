@@ -93,7 +93,8 @@ def test_no_setup_offers_add_and_hides_the_sub_panels(fc):
     logs = draw_everything()
     main = logs["FURCOLLIDE_PT_main"]
     assert [e["name"] for e in entries(main, "operator")] == ["furcollide.add"]
-    assert "Select the hair, then Shift-select colliders" in labels(main)
+    assert "Select the colliders," in labels(main)
+    assert "then Shift-click the hair last" in labels(main)
     setup_panels = {"FURCOLLIDE_PT_colliders", "FURCOLLIDE_PT_resolution",
                     "FURCOLLIDE_PT_cache", "FURCOLLIDE_PT_stats", *SETTINGS_PANELS}
     assert not (setup_panels & _drawn(logs)), _drawn(logs)
