@@ -270,15 +270,18 @@ def _tell(setup, uid, col, mesh) -> None:
             print(f"FurCollide '{setup.ob.name}': {what}{text}", flush=True)
 
 
-def collider_note(rt) -> str:
+def collider_note(rt, setup=None) -> str:
     """The status note about a setup's colliders ('' when none): the open meshes that
-    detect no pinch (while they are colliders), and what was repaired in colliders
-    just built (said once)."""
+    detect no pinch (while they are colliders), what was repaired in colliders just
+    built (said once), and, given the ``setup`` (:class:`setup.Setup`), the colliders
+    renders see with other geometry than the viewport (:func:`render_note`)."""
     notes, rt.fresh_notes = list(rt.fresh_notes), []
     for e in rt.colliders.values():
         text = open_mesh(e.collider)
         if text and text not in notes:
             notes.append(text)
+    if setup is not None and setup.ob is not None:
+        notes.extend(render_note(setup.ob, setup.scene))
     return "Colliders: " + "; ".join(notes) if notes else ""
 
 
@@ -345,18 +348,145 @@ def collider_inputs(M, V, key) -> tuple[int, int]:
             framecache.digest(V, np.frombuffer(repr(key).encode(), np.uint8)))
 
 
-def renders_otherwise(o) -> bool:
-    """Does Blender evaluate ``o`` with other modifier settings in renders than in the
-    viewport? (A modifier shown in only one of them, or a Subdivision Surface or
-    Multiresolution modifier whose render levels differ from its viewport levels: a
-    Subdivision Surface at Blender's defaults, 1 and 2.) Geometry-node switches on *Is
-    Viewport* cannot be seen from here."""
+def renders_otherwise(o, scene=None) -> bool:
+    """Does Blender evaluate collider ``o`` to other geometry in renders of ``scene``
+    (default: the context scene) than in its viewport? (:func:`render_difference`)"""
+    return bool(render_difference(o, scene))
+
+
+def render_difference(o, scene=None) -> str:
+    """What makes Blender evaluate collider ``o`` to other geometry in renders of
+    ``scene`` (default: the context scene) than in its viewport, in words ('' when
+    nothing FurCollide can see does).
+
+    Every setting with a viewport and a render side that shapes a mesh: a modifier shown
+    in only one of them; Subdivision Surface and Multiresolution levels as Simplify caps
+    them (Max Subdivision, viewport and render: Blender's ``get_render_subsurf_level``);
+    Screw steps; Ocean resolution; a geometry-nodes group with an *Is Viewport* node; a
+    Particle Instance modifier's particle amounts (display percentage, child amounts,
+    Simplify's Max Child Particles); a Volume to Mesh modifier under Simplify's Volume
+    Resolution (viewport only); a curve's, surface's or text's Render Resolution, a
+    metaball's. What a geometry-nodes group reads from other objects is not followed.
+    """
+    scene = scene or bpy.context.scene
+    r = getattr(scene, "render", None)
+    simplify = bool(r is not None and r.use_simplify)
+    causes = []
     for m in getattr(o, "modifiers", ()):
         if m.show_render != m.show_viewport:
+            where = "renders" if m.show_render else "the viewport"
+            causes.append(f"modifier '{m.name}' is on in {where} only")
+        elif m.show_render:
+            causes.extend(_modifier_difference(m, r, simplify))
+    causes.extend(_data_difference(o))
+    return "; ".join(causes)
+
+
+def _subdivision_level(level, r, render) -> int:
+    """``level`` as Simplify caps it in renders (``render``) or in the viewport."""
+    if r is None or not r.use_simplify:
+        return level
+    return min(level, r.simplify_subdivision_render if render else r.simplify_subdivision)
+
+
+def _modifier_difference(m, r, simplify) -> list[str]:
+    """The render/viewport differences of modifier ``m`` (shown in both), in words."""
+    t = m.type
+    if t in ("SUBSURF", "MULTIRES"):
+        top = m.total_levels if t == "MULTIRES" else max(m.levels, m.render_levels)
+        view = _subdivision_level(min(m.levels, top), r, False)
+        rend = _subdivision_level(min(m.render_levels, top), r, True)
+        if view == rend:
+            return []
+        by = "Simplify caps " if simplify and (view, rend) != (m.levels, m.render_levels) else ""
+        return [f"{by}'{m.name}' at level {view} in the viewport, {rend} in renders"]
+    if t == "SCREW" and m.steps != m.render_steps:
+        return [f"'{m.name}' {m.steps} steps in the viewport, {m.render_steps} in renders"]
+    if t == "OCEAN" and m.viewport_resolution != m.resolution:
+        return [f"'{m.name}' resolution {m.viewport_resolution} in the viewport, "
+                f"{m.resolution} in renders"]
+    if t == "NODES" and _has_is_viewport(m.node_group):
+        return [f"'{m.name}' has an Is Viewport node"]
+    if t == "VOLUME_TO_MESH" and simplify and r.simplify_volumes < 1.0:
+        return [f"Simplify's Volume Resolution ({r.simplify_volumes:.0%}) thins the volume "
+                f"'{m.name}' reads in the viewport"]
+    if t == "PARTICLE_INSTANCE":
+        return _particle_difference(m, r, simplify)
+    return []
+
+
+def _particle_difference(m, r, simplify) -> list[str]:
+    """A Particle Instance modifier's particles: fewer in the viewport than in renders?"""
+    psys = m.particle_system if m.object is not None else None
+    part = getattr(psys, "settings", None)
+    if part is None:
+        return []
+    if part.display_percentage < 100:
+        return [f"'{m.name}' instances {part.display_percentage}% of the particles in the "
+                "viewport (Display Amount)"]
+    if m.use_children and part.child_type != "NONE":
+        view, rend = part.child_percent, part.rendered_child_count
+        if simplify:
+            view = int(view * r.simplify_child_particles)
+            rend = int(rend * r.simplify_child_particles_render)
+        if view != rend:
+            return [f"'{m.name}' instances {view} children per particle in the viewport, "
+                    f"{rend} in renders"]
+    return []
+
+
+def _data_difference(o) -> list[str]:
+    """A curve's, surface's, text's or metaball's own render resolution, in words."""
+    data = getattr(o, "data", None)
+    if o.type in ("CURVE", "FONT", "SURFACE"):
+        out = []
+        for axis in ("u", "v") if o.type == "SURFACE" else ("u",):
+            ren = getattr(data, f"render_resolution_{axis}")
+            view = getattr(data, f"resolution_{axis}")
+            if ren and ren != view:  # (0: renders use the viewport's)
+                out.append(f"Resolution {axis.upper()} {view} in the viewport, {ren} in renders")
+        return out
+    if o.type == "META" and data.render_resolution != data.resolution:
+        return [f"metaball Resolution {data.resolution:g} in the viewport, "
+                f"{data.render_resolution:g} in renders"]
+    return []
+
+
+#: Node groups nested deeper than this are not searched for an *Is Viewport* node.
+_MAX_GROUP_DEPTH = 8
+
+
+def _has_is_viewport(tree, depth=0, seen=None) -> bool:
+    """Does node tree ``tree`` (or a group inside it) hold an *Is Viewport* node?"""
+    seen = set() if seen is None else seen
+    if tree is None or depth > _MAX_GROUP_DEPTH or tree in seen:
+        return False
+    seen.add(tree)
+    for node in tree.nodes:
+        if node.bl_idname == "GeometryNodeIsViewport":
             return True
-        if m.type in ("SUBSURF", "MULTIRES") and m.show_render and m.render_levels != m.levels:
+        inner = getattr(node, "node_tree", None)
+        if inner is not None and _has_is_viewport(inner, depth + 1, seen):
             return True
     return False
+
+
+def render_note(ob, scene) -> list[str]:
+    """For the status: each collider of setup ``ob`` that renders of ``scene`` evaluate
+    to other geometry than its viewport, with the cause (:func:`render_difference`).
+
+    Playback and bakes read the viewport's evaluation; a render shows a cached or baked
+    frame as it is (the collider's other render shape is not an edit,
+    :func:`frame_inputs.first_change`); only a frame first solved in a render is solved
+    against the render shape."""
+    out = []
+    for r in collider_objects(ob, scene):
+        why = render_difference(r.object, scene)
+        if why:
+            out.append(f"'{r.name}' renders with other geometry than the viewport ({why}): "
+                       "the playback cache and the bake are solved against its viewport "
+                       "shape, and renders show them as they are")
+    return out
 
 
 def read_collider_inputs(o, depsgraph, matrix=None) -> tuple[int, int]:

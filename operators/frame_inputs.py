@@ -354,6 +354,6 @@ def _comparable(setup, old, new) -> tuple[dict, dict]:
     if (RENDER_PART in old) != (RENDER_PART in new):
         refs = collider_objects(setup.ob, setup.scene)
         skip |= {f"collider {i} shape" for i, r in enumerate(refs)
-                 if renders_otherwise(r.object)}
+                 if renders_otherwise(r.object, setup.scene)}
     return ({k: v for k, v in old.items() if k not in skip},
             {k: v for k, v in new.items() if k not in skip})

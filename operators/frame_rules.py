@@ -409,7 +409,7 @@ def _note(setup, stats, note):
     if not n:
         if note[1]:
             return note
-        about = collider_note(setup.rt)
+        about = collider_note(setup.rt, setup)
         return ("INFO", about) if about else note
     return setup.rt.invalid_note or (
         "WARNING", f"Source hair: {n} curves have a zero-length segment or a non-finite "

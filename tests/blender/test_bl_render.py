@@ -265,3 +265,150 @@ def test_one_frame_range_plays_bakes_and_renders(fc, tmp_path):
     assert sorted(seen) == [5]
     scene.frame_set(5)
     np.testing.assert_array_equal(seen[5][0], world(out))
+
+
+# ------------------------------------ colliders that renders evaluate otherwise
+#: What the status says of the ball under Simplify (viewport 0, render 3; levels 2/2).
+SIMPLIFIED = ("'Box' renders with other geometry than the viewport (Simplify caps "
+              "'Subdivision' at level 0 in the viewport, 2 in renders)")
+
+
+def _simplified_ball(fc, frames=(1, 6)):
+    """The sweeping box with a Subdivision Surface 2/2 under Simplify (Max Subdivision
+    0 in the viewport, 3 in renders): the viewport collides with the cube, renders see
+    the rounded shape. Hidden from render, a setup on the hair grid."""
+    hair, box = fc.make_scene(frames=frames, nx=5, ny=5)
+    mod = box.modifiers.new("Subdivision", "SUBSURF")
+    mod.levels = mod.render_levels = 2
+    scene = bpy.context.scene
+    r = scene.render
+    r.use_simplify = True
+    r.simplify_subdivision, r.simplify_subdivision_render = 0, 3
+    out = fc.setup(hair, [box])
+    render_camera(scene, px=16)
+    box.hide_render = True
+    return scene, hair, box, out
+
+
+def _counting_solves(fc, monkeypatch):
+    """Count the frames solved from now on (``frame_solve.solve_frame`` calls)."""
+    calls = []
+    real = fc.frame_solve.solve_frame
+
+    def counting(setup, inp):
+        calls.append(setup.frame)
+        return real(setup, inp)
+
+    monkeypatch.setattr(fc.frame_solve, "solve_frame", counting)
+    return calls
+
+
+def test_f12_under_simplify_keeps_the_playback_cache(fc, tmp_path, monkeypatch):
+    """Played 1-6, stopped at 5, F12: the render reads the ball at render level 2, the
+    cache was solved against level 0. That is not an edit: the cache stays (no frame
+    solved again, every frame the same bits), and the status says why renders show the
+    viewport's solve."""
+    scene, hair, box, out = _simplified_ball(fc)
+    played = {}
+    for f in range(1, 7):
+        scene.frame_set(f)
+        played[f] = positions(out).copy()
+    assert any(not np.array_equal(p, played[1]) for p in played.values())
+    scene.frame_set(5)
+    rt = fc.registry.get_runtime(hair, create=False)
+    assert sorted(rt.memory.frames) == list(range(1, 7))
+    msg = hair.furcollide.status_message
+    assert SIMPLIFIED in msg and "renders show them as they are" in msg, msg
+    solves = _counting_solves(fc, monkeypatch)
+    scene.render.filepath = str(tmp_path / "still.png")
+    seen = {}
+
+    def spy(sc, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen[sc.frame_current] = (positions(out).copy(), fc.registry.status_for(hair),
+                                      hair.furcollide.is_outdated)
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    assert solves == [] and sorted(rt.memory.frames) == list(range(1, 7))
+    P, (level, msg), outdated = seen[5]
+    np.testing.assert_array_equal(P, played[5])  # the render showed the cached frame
+    assert level == "INFO" and SIMPLIFIED in msg and not outdated, msg
+    for f in (5, 2, 6, 1, 3):  # the viewport shows the same cached bits again
+        scene.frame_set(f)
+        np.testing.assert_array_equal(positions(out), played[f], err_msg=f"frame {f}")
+        assert not hair.furcollide.is_outdated
+    assert solves == []
+    assert "changed shape" not in hair.furcollide.status_message
+
+
+def test_a_bake_under_simplify_renders_as_current(fc, tmp_path):
+    """Baked in the viewport (the ball at level 0), rendered (level 2): every rendered
+    frame is the baked one, not outdated, and the status names the ball and Simplify."""
+    scene, hair, box, out = _simplified_ball(fc, frames=(1, 4))
+    save_in(tmp_path)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    d = bpy.path.abspath(hair.furcollide.bake_path)
+    scene.frame_set(1)
+    seen = render_spy(fc, tmp_path, hair, out, "simplified")
+    assert sorted(seen) == [1, 2, 3, 4]
+    for f, (P, (level, msg), outdated) in seen.items():
+        np.testing.assert_allclose(P, fc.cache.read_frame(d, f)[0],
+                                   atol=1e-6, err_msg=f"frame {f}")
+        assert level == "INFO" and not outdated, (f, level, msg)
+        assert SIMPLIFIED in msg and "outdated" not in msg, (f, msg)
+
+
+def test_render_difference_names_each_cause(fc):
+    """Each setting with a viewport and a render side that shapes a collider is named;
+    equal sides (Simplify capping both alike included) are not."""
+    scene = bpy.context.scene
+    r = scene.render
+    box = make_box()
+    diff = fc.colliders.render_difference
+    assert diff(box, scene) == ""
+    sub = box.modifiers.new("Subdivision", "SUBSURF")  # Blender's defaults: 1 and 2
+    assert diff(box, scene) == "'Subdivision' at level 1 in the viewport, 2 in renders"
+    r.use_simplify = True
+    r.simplify_subdivision = r.simplify_subdivision_render = 1  # caps both to 1: alike
+    assert diff(box, scene) == ""
+    sub.levels = sub.render_levels = 2
+    r.simplify_subdivision, r.simplify_subdivision_render = 0, 3
+    assert diff(box, scene) == ("Simplify caps 'Subdivision' at level 0 in the viewport, "
+                                "2 in renders")
+    assert fc.colliders.renders_otherwise(box, scene)
+    r.use_simplify = False
+    assert diff(box, scene) == "" and not fc.colliders.renders_otherwise(box, scene)
+    sub.show_viewport = False
+    assert diff(box, scene) == "modifier 'Subdivision' is on in renders only"
+    box.modifiers.remove(sub)
+    screw = box.modifiers.new("Screw", "SCREW")
+    screw.steps, screw.render_steps = 8, 16
+    assert diff(box, scene) == "'Screw' 8 steps in the viewport, 16 in renders"
+    box.modifiers.remove(screw)
+    gn = box.modifiers.new("Detail", "NODES")
+    tree = bpy.data.node_groups.new("Detail", "GeometryNodeTree")
+    inner = bpy.data.node_groups.new("Inner", "GeometryNodeTree")
+    inner.nodes.new("GeometryNodeIsViewport")
+    tree.nodes.new("GeometryNodeGroup").node_tree = inner  # (found inside a group)
+    gn.node_group = tree
+    assert diff(box, scene) == "'Detail' has an Is Viewport node"
+    box.modifiers.remove(gn)
+    assert diff(box, scene) == ""
+    cu = bpy.data.curves.new("Rope", "CURVE")
+    cu.dimensions, cu.bevel_depth = "3D", 0.05
+    cu.splines.new("BEZIER").bezier_points.add(1)
+    rope = bpy.data.objects.new("Rope", cu)
+    scene.collection.objects.link(rope)
+    assert diff(rope, scene) == ""
+    cu.resolution_u, cu.render_resolution_u = 12, 24
+    assert diff(rope, scene) == "Resolution U 12 in the viewport, 24 in renders"
+    mb = bpy.data.metaballs.new("Blob")
+    mb.elements.new()
+    blob = bpy.data.objects.new("Blob", mb)
+    scene.collection.objects.link(blob)
+    mb.resolution, mb.render_resolution = 0.4, 0.1
+    assert diff(blob, scene) == "metaball Resolution 0.4 in the viewport, 0.1 in renders"
