@@ -217,6 +217,9 @@ class BakeJob:
         self.runtimes = []
         for ob in sources:
             s = ob.furcollide
+            if not registry.belongs(ob, scene):  # (its hair is in this scene too)
+                raise BakeError(registry.refusal_in(ob, scene)
+                                or f"'{ob.name}' is not in scene '{scene.name}'")
             if s.output is None:
                 raise BakeError(f"'{ob.name}': the output hair object is missing")
             try:
@@ -256,6 +259,7 @@ class BakeJob:
                 s.bake_path = directory
             if nxt > s.frame_start and self.verbose:
                 print(f"FurCollide bake '{ob.name}': resuming after frame {nxt - 1}", flush=True)
+            registry.adopt(ob, scene)  # (a setup of an older file: baked here, it is ours)
             rt = registry.get_runtime(ob)
             rt.baking = True
             self.runtimes.append(rt)

@@ -94,16 +94,28 @@ def _run(argv) -> int:
         print(f"furcollide: no scene named {args.scene!r}", file=sys.stderr)
         return EXIT_USAGE
     sources = registry.setups(scene)
+    # Setups whose hair is in this scene but that belong to another (registry.owner):
+    # nothing here bakes or frees them, and saying so names the scene they belong to.
+    elsewhere = [o for o in registry.setups(scene, owned=False) if o not in sources]
     if args.object:
         sources = [o for o in sources if o.name == args.object]
-        if not sources:
+        elsewhere = [o for o in elsewhere if o.name == args.object]
+        if not sources and not elsewhere:
             print(f"furcollide: no FurCollide setup on {args.object!r}", file=sys.stderr)
             return EXIT_USAGE
     if not sources:
-        print(f"furcollide: no FurCollide setup in scene {scene.name!r}", file=sys.stderr)
+        for ob in elsewhere:
+            print(f"furcollide: {_set_up_elsewhere(ob, scene)}", file=sys.stderr)
+        if not elsewhere:
+            print(f"furcollide: no FurCollide setup in scene {scene.name!r}", file=sys.stderr)
         return EXIT_USAGE
+    if args.action != "info":
+        for ob in elsewhere:  # (left as they are)
+            print(f"furcollide: {_set_up_elsewhere(ob, scene)}")
 
     if args.action == "info":
+        for ob in elsewhere:
+            print(f"{ob.name}: {_set_up_elsewhere(ob, scene)}")
         for ob in sources:
             s = ob.furcollide
             try:
@@ -145,6 +157,13 @@ def _run(argv) -> int:
     print(f"furcollide: baked {', '.join(o.name for o in baked)}")
     code = _save(args)
     return code if len(baked) == len(todo) else EXIT_FAILED
+
+
+def _set_up_elsewhere(ob, scene) -> str:
+    """Why the CLI leaves the setup on ``ob`` alone in ``scene``: it belongs to another."""
+    own = registry.owner(ob, prefer=scene)
+    return (f"{ob.name!r} is set up in scene {own.name!r}, not {scene.name!r} (a hair can "
+            f"be set up in one scene only): use --scene {own.name!r}")
 
 
 def _save(args) -> int:

@@ -99,6 +99,25 @@ def run(setup, guides_world) -> None:
     _show_note(setup, note or state.note or binding.note, guides_ok=True)
 
 
+def follow_unsolved(setup, guides_world) -> None:
+    """The render groom following guides that no solve moved (the setup shown in a scene
+    it does not belong to, :mod:`.scenes`): deformed with them, no clearance pass, so
+    nothing collides. Writes nothing when the groom no longer fits its binding."""
+    depsgraph = setup.depsgraph
+    out = setup.s.groom.output
+    if depsgraph is None or not in_scene(out, depsgraph.scene) or not has_groom(out):
+        return
+    state = groom_state(setup.ob, setup.rt)
+    binding = state.binding
+    if guides_world.shape != binding.guides_ref.shape:
+        return
+    V, _note = _surface_now(setup, binding)
+    points, status = binding.deform(np.asarray(guides_world, np.float64), V,
+                                    threads=setup.s.core_threads)
+    state.written = None  # (the setup's own scene writes this output too)
+    _write(setup, state, points, status)
+
+
 def error_message(exc, setup=None) -> str:
     """The status of an error of this stage: "Render groom: ...", said once, its
     advice one that works on ``setup`` (:func:`advice`)."""

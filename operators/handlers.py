@@ -1,12 +1,15 @@
 """Blender's handlers: thin loops over the setups that never raise into Blender.
 
 * ``frame_change_post``: every setup of the scene runs the frame rules
-  (:func:`frame_rules.evaluate`); an error becomes the setup's status message.
+  (:func:`frame_rules.evaluate`); an error becomes the setup's status message. A setup
+  whose hair is in the scene but that belongs to another scene shows its source there
+  (:func:`scenes.evaluate`). Showing another scene in a window runs this handler too,
+  so the outputs follow the scene shown.
   Both this and the depsgraph check first prune the registry (:func:`registry.prune`):
   a deleted source's runtime and memory cache go.
-* ``depsgraph_update_post``: an edited source or collider drops the playback cache
-  (:func:`invalidation.invalidate`), an update that changes nothing the current frame
-  was evaluated from (the animation evaluated again) does not
+* ``depsgraph_update_post``: an edited source or collider of a setup of the scene drops
+  its playback cache (:func:`invalidation.invalidate`), an update that changes nothing
+  the current frame was evaluated from (the animation evaluated again) does not
   (:func:`invalidation.edit_seen`); the dependency modifiers follow the setups'
   inputs. It never writes hair data.
 * ``load_post``: a new file forgets every runtime and completes the setups'
@@ -29,7 +32,7 @@ import os
 import bpy
 from bpy.app.handlers import persistent
 
-from . import bridge, frame_rules, invalidation, ops_bake, registry
+from . import bridge, invalidation, ops_bake, registry, scenes
 from .colliders import collider_objects
 from .dependencies import dependencies_stale, update_dependencies
 from .setup import Setup, signature, signature_change
@@ -43,9 +46,9 @@ def on_frame_change_post(scene, depsgraph=None):
     with registry.handlers_held():
         try:
             registry.prune()  # a deleted source's runtime and cache go
-            for ob in registry.setups(scene):
-                try:
-                    frame_rules.evaluate(Setup(ob, scene, depsgraph))
+            for ob in registry.setups(scene, owned=False):
+                try:  # (another scene's setup shows its source here, never raising)
+                    scenes.evaluate(ob, scene, depsgraph)
                 except Exception as exc:  # noqa: BLE001 - the handler must never raise
                     registry.record_error(ob, exc)
         except Exception as exc:  # noqa: BLE001 - not even while listing the setups
@@ -72,7 +75,7 @@ def on_depsgraph_update_post(scene, depsgraph=None):
                 u.id, bpy.types.Object
             ):
                 edited.add(u.id.original.name)
-        setups = registry.setups(scene)
+        setups = registry.setups(scene)  # (another scene's setup is never dropped here)
         if not edited and not setups:
             return
         for ob in setups:
@@ -120,7 +123,7 @@ def on_load_post(*_args):
     complete the setups' dependency modifiers (render groom outputs of older
     files, inputs changed without an update callback): without them a render
     with those inputs hidden would not see them."""
-    registry.registry.clear()
+    registry.forget_all()
     try:
         for ob in bpy.data.objects:
             s = getattr(ob, "furcollide", None)
@@ -248,7 +251,7 @@ def on_undo_post(*_args):
     the current frame of every setup again soon (:func:`invalidation.schedule_refresh`):
     a cached frame whose inputs hold is shown, anything else says why."""
     try:
-        for ob in registry.setups(bpy.context.scene):
+        for ob in registry.setups(bpy.context.scene, owned=False):
             invalidation.schedule_refresh(ob.name)
     except Exception as exc:  # noqa: BLE001 - a handler must never raise
         print(f"FurCollide: could not refresh the setups after the undo: {exc}", flush=True)
@@ -284,4 +287,4 @@ def unregister():
         if fn in lst:
             lst.remove(fn)
     invalidation.cancel_refreshes()
-    registry.registry.clear()
+    registry.forget_all()

@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import bpy
 
-from . import baked, frame_rules, registry
+from . import baked, frame_rules, registry, scenes
 from .dependencies import update_dependencies
 from .frame_inputs import current_inputs, describe_change, first_change, read_inputs
-from .setup import Setup
 
 
 def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=True) -> None:
@@ -118,7 +117,8 @@ def schedule_refresh(name: str) -> None:
                 ob = bpy.data.objects.get(name)
                 scene = bpy.context.scene
                 if ob is not None and scene is not None and ob.furcollide.is_setup:
-                    frame_rules.evaluate(Setup(ob, scene, bpy.context.evaluated_depsgraph_get()))
+                    # (shown as groomed where the setup is not the scene's: scenes)
+                    scenes.evaluate(ob, scene, bpy.context.evaluated_depsgraph_get())
             except Exception as exc:  # noqa: BLE001 - a timer must never raise either
                 registry.record_error(ob, exc)
         return None

@@ -49,6 +49,15 @@ def _bakeable(context):
     ]
 
 
+def _elsewhere(scene) -> str:
+    """' (Fur is set up in scene 'A')' for the setups whose hair is in ``scene`` but
+    that belong to another scene (Bake All and Free All leave them), else ''."""
+    own = set(registry.setups(scene))
+    where = [f"'{ob.name}' is set up in scene '{registry.owner(ob, prefer=scene).name}'"
+             for ob in registry.setups(scene, owned=False) if ob not in own]
+    return f" ({'; '.join(where)})" if where else ""
+
+
 class _BakeBase:
     """Shared modal/synchronous driver of the two bake operators."""
 
@@ -178,8 +187,11 @@ class FURCOLLIDE_OT_bake_all(_BakeBase, Operator):
 
     @classmethod
     def poll(cls, context):
-        if context.scene is None or not _bakeable(context):
+        if context.scene is None:
             return refuse(cls, "No unbaked FurCollide setup in this scene")
+        if not _bakeable(context):
+            return refuse(cls, "No unbaked FurCollide setup in this scene"
+                          + _elsewhere(context.scene))
         msg = backend_message()
         return refuse(cls, msg) if msg else True
 
@@ -224,8 +236,11 @@ class FURCOLLIDE_OT_free_bake_all(Operator):
 
     @classmethod
     def poll(cls, context):
-        if context.scene is None or not any(_has_bake(o) for o in registry.setups(context.scene)):
+        if context.scene is None:
             return refuse(cls, "No baked FurCollide setup in this scene")
+        if not any(_has_bake(o) for o in registry.setups(context.scene)):
+            return refuse(cls, "No baked FurCollide setup in this scene"
+                          + _elsewhere(context.scene))
         return True
 
     @reports_errors

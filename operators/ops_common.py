@@ -7,8 +7,7 @@ import functools
 
 import bpy
 
-from . import frame_rules, registry
-from .setup import Setup
+from . import registry, scenes
 
 NO_SETUP = "Active object has no FurCollide setup"
 
@@ -36,8 +35,10 @@ def refuse(cls, message: str) -> bool:
 class SetupOperator:
     """Mixin of the operators that act on the active object's setup.
 
-    ``poll`` refuses with :data:`NO_SETUP` when there is no setup, or with
-    the reason :meth:`refusal` returns for it.
+    ``poll`` refuses with :data:`NO_SETUP` when there is no setup; in a scene the setup
+    does not belong to (its hair linked into several scenes), saying which scene it
+    belongs to (:func:`registry.refusal_in`): every such operator changes the setup, its
+    cache or its bake; else with the reason :meth:`refusal` returns for it.
     """
 
     @classmethod
@@ -48,7 +49,8 @@ class SetupOperator:
     @classmethod
     def poll(cls, context):
         src = active_setup(context)
-        message = NO_SETUP if src is None else cls.refusal(context, src)
+        message = NO_SETUP if src is None else (
+            registry.refusal_in(src, context.scene) or cls.refusal(context, src))
         return refuse(cls, message) if message else True
 
 
@@ -70,12 +72,13 @@ def evaluate_now(context, src) -> str:
     """Solve the current frame of the setup on ``src``; returns an error or ''.
 
     Does nothing while the frame handler runs (an operator called from a handler
-    or a bake): that run writes the frame itself.
+    or a bake): that run writes the frame itself. In a scene the setup does not belong
+    to, its output shows the source (:func:`scenes.evaluate`).
     """
     if registry.busy():
         return ""
     try:
-        frame_rules.evaluate(Setup(src, context.scene, context.evaluated_depsgraph_get()))
+        scenes.evaluate(src, context.scene, context.evaluated_depsgraph_get())
     except Exception as exc:  # noqa: BLE001 - the caller reports it
         return registry.describe(exc)
     return ""

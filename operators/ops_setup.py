@@ -61,7 +61,8 @@ class FURCOLLIDE_OT_add(Operator):
             return refuse(cls, "Active object must be a hair Curves object")
         s = ob.furcollide
         if s.is_setup and s.output is not None and s.output.furcollide.source == ob:
-            return refuse(cls, "The active hair already has a FurCollide setup")
+            return refuse(cls, registry.refusal_in(ob, context.scene)
+                          or "The active hair already has a FurCollide setup")
         if s.is_output:
             return refuse(cls, "The active hair is a FurCollide output; select its source")
         msg = backend_message()
@@ -91,6 +92,7 @@ class FURCOLLIDE_OT_add(Operator):
         registry.ensure_uid(src)
         s.is_setup = True
         s.output = out
+        registry.adopt(src, scene)  # the setup belongs to this scene (registry.owner)
         s.frame_start = scene.frame_start
         s.frame_end = scene.frame_end
         s.is_baked = False
@@ -164,6 +166,7 @@ class FURCOLLIDE_OT_remove(SetupOperator, Operator):
         s.is_baked = False
         s.bake_path = ""
         s.uid = ""
+        s.owner_scene = ""
         frame_outputs.hide_in_viewport(src, False, render=False)
         msg = f"Removed the FurCollide setup of '{src.name}'"
         if kept:

@@ -316,6 +316,9 @@ class FurCollideSettings(PropertyGroup):
         description="A dense render groom that follows the collided guides",
     )
     bake_path: hidden(StringProperty, "Bake Path", "")
+    #: The scene this setup belongs to (Add FurCollide records it): in any other scene
+    #: the hair is in, the output shows the source as groomed (registry.owner).
+    owner_scene: hidden(StringProperty, "Scene", "")
     #: Frames the playback cache held when the file was last saved (the cache itself is
     #: not saved): after reopening, the frames that are not cached say so (handlers).
     cached_at_save: hidden(IntProperty, "Frames Cached At Save", 0)
@@ -344,7 +347,7 @@ class FurCollideSettings(PropertyGroup):
     )
     status_message: StringProperty(
         name="Status",
-        get=lambda self: registry.status_for(self.id_data)[1],
+        get=lambda self: registry.status_shown(self.id_data)[1],
         description="What FurCollide did on the last frame, or what went wrong",
     )
     is_outdated: BoolProperty(

@@ -7,6 +7,13 @@ panel shows. It is keyed by the setup id plus the source object's session id, so
 duplicated source never shares the original's. :func:`prune` drops the runtimes of
 setups that are gone (a source deleted in the UI), memory cache and all.
 
+A setup belongs to one scene (:func:`owner`): the one Add FurCollide ran in, recorded
+on the source (``owner_scene``). A hair object linked into several scenes (a character
+collection in several shots) is set up in that one only: in the others its output shows
+the source as groomed and nothing of the setup's cache or bake is touched
+(:mod:`.scenes`); :func:`setups` lists a scene's own setups, and :func:`foreign_message`
+says where a setup belongs.
+
 Status messages and errors live here too: :func:`set_status` prints one console line per
 distinct problem, :func:`record_error` turns an exception into the setup's status, and
 :func:`describe` gives an exception's user-facing text.
@@ -136,6 +143,10 @@ class Runtime:
 
 
 registry: dict[str, Runtime] = {}
+#: The runtimes a setup uses in the scenes it does not belong to (what the output was
+#: last written with there, the render groom's binding): (setup key, scene session id)
+#: -> Runtime. Never the setup's own cache: :func:`foreign_runtime`.
+foreign: dict[tuple, Runtime] = {}
 
 #: Why the playback cache is empty after a file saved with one was opened (the reason
 #: the frames that are not cached give, as ``Runtime.dropped``, until the start frame
@@ -174,7 +185,29 @@ def get_runtime(ob, create=True) -> Runtime | None:
 
 def clear_runtime(ob) -> None:
     """Forget everything held in memory for the setup on ``ob``."""
-    registry.pop(_key(ob), None)
+    key = _key(ob)
+    registry.pop(key, None)
+    for k in [k for k in foreign if k[0] == key]:
+        del foreign[k]
+
+
+def forget_all() -> None:
+    """Forget every runtime and what was learnt of the setups' scenes (a new file)."""
+    registry.clear()
+    foreign.clear()
+    _owner_uids.clear()
+    _adopted.clear()
+
+
+def foreign_runtime(ob, scene) -> Runtime:
+    """The runtime the setup on ``ob`` uses in ``scene``, a scene it does not belong to
+    (:mod:`.scenes`): its own, so nothing there touches the setup's cache."""
+    key = (_key(ob), scene.session_uid)
+    rt = foreign.get(key)
+    if rt is None:
+        rt = foreign[key] = Runtime(ob.furcollide.uid)
+    rt.name = ob.name
+    return rt
 
 
 def prune() -> int:
@@ -186,20 +219,24 @@ def prune() -> int:
     Cheap when nothing is gone (one name look-up per runtime); a renamed source
     costs one pass over the file's hair objects.
     """
-    if not registry:
+    if not registry and not foreign:
         return 0
+    runtimes = [*registry.items(), *((k[0], rt) for k, rt in foreign.items())]
+    keys = {key for key, _rt in runtimes}
     alive = set()
-    for key, rt in registry.items():
+    for key, rt in runtimes:
         ob = bpy.data.objects.get(rt.name)
         if ob is not None and _alive(ob) and _key(ob) == key:
             alive.add(key)
-    if len(alive) < len(registry):  # gone, or renamed: look at every hair object
+    if len(alive) < len(keys):  # gone, or renamed: look at every hair object
         for ob in bpy.data.objects:
-            if ob.type == "CURVES" and _alive(ob) and _key(ob) in registry:
+            if ob.type == "CURVES" and _alive(ob) and _key(ob) in keys:
                 alive.add(_key(ob))
     gone = [key for key in registry if key not in alive]
     for key in gone:
         del registry[key]
+    for key in [k for k in foreign if k[0] not in alive]:
+        del foreign[key]
     return len(gone)
 
 
@@ -222,9 +259,103 @@ def source_of(ob):
     return None
 
 
-def setups(scene):
-    """Source objects of every FurCollide setup in ``scene``."""
-    return [ob for ob in scene.objects if ob.type == "CURVES" and ob.furcollide.is_setup]
+def setups(scene, owned=True):
+    """Source objects of the FurCollide setups that belong to ``scene`` (:func:`owner`);
+    ``owned=False``: of every setup whose source is in ``scene``."""
+    obs = [ob for ob in scene.objects if ob.type == "CURVES" and ob.furcollide.is_setup]
+    return [ob for ob in obs if belongs(ob, scene)] if owned else obs
+
+
+# ------------------------------------------------------------- scenes
+#: Setup key -> session id of the scene it belongs to, as last seen: a scene renamed in
+#: this session is still found (its new name is recorded when it is next evaluated).
+_owner_uids: dict = {}
+#: Setup key -> the scene name adopted where ``owner_scene`` cannot be written (a setup
+#: linked from a library).
+_adopted: dict = {}
+
+
+def _holds(scene, ob) -> bool:
+    return scene is not None and scene.objects.get(ob.name) == ob
+
+
+def owner(ob, prefer=None):
+    """The scene the setup on ``ob`` belongs to (None when ``ob`` is in no scene).
+
+    The scene recorded on it (Add FurCollide records the scene it ran in) while that
+    scene still holds ``ob`` (renamed in this session too). Otherwise (a file made
+    before FurCollide recorded it, the recorded scene deleted, a full copy of the
+    scene) the scene that holds ``ob`` and the most of its listed colliders; between
+    equals ``prefer`` (the scene being evaluated or shown) when it is one of them, else
+    the first. The scene that evaluates or bakes it then records it (:func:`adopt`).
+    """
+    s = ob.furcollide
+    key = _key(ob) if s.uid else None
+    name = s.owner_scene or _adopted.get(key, "")
+    holders = list(ob.users_scene)
+    for sc in holders:
+        if sc.name == name:
+            return sc
+    uid = _owner_uids.get(key) if name else None  # (renamed in this session?)
+    for sc in holders:
+        if uid is not None and sc.session_uid == uid:
+            return sc
+    if len(holders) <= 1:
+        return holders[0] if holders else None
+    listed = [c.object for c in s.colliders if c.object is not None and c.enabled]
+    score = {sc.name: sum(_holds(sc, o) for o in listed) for sc in holders}
+    best = max(score.values())
+    top = [sc for sc in holders if score[sc.name] == best]
+    return prefer if prefer in top else top[0]
+
+
+def belongs(ob, scene) -> bool:
+    """Does the setup on ``ob`` belong to ``scene`` (:func:`owner`)?"""
+    if scene is None:
+        return False
+    if ob.furcollide.owner_scene == scene.name and _holds(scene, ob):
+        return True
+    return owner(ob, prefer=scene) == scene
+
+
+def adopt(ob, scene) -> None:
+    """Record ``scene`` as the scene the setup on ``ob`` belongs to (it evaluates or
+    bakes it there); in memory only when ``ob`` cannot be written (linked data)."""
+    s = ob.furcollide
+    key = _key(ob)
+    _owner_uids[key] = scene.session_uid
+    if s.owner_scene == scene.name:
+        return
+    try:
+        s.owner_scene = scene.name
+    except (AttributeError, TypeError, RuntimeError):
+        _adopted[key] = scene.name
+
+
+def foreign_message(ob, scene=None) -> str:
+    """What the setup on ``ob`` says in ``scene`` (default: the context scene) when it
+    belongs to another scene ('' when it belongs there, or ``ob`` is not in it)."""
+    scene = scene or bpy.context.scene
+    if not _holds(scene, ob):
+        return ""
+    own = owner(ob, prefer=scene)
+    if own is None or own == scene:
+        return ""
+    return (f"'{ob.name}' is set up in scene '{own.name}' (a hair can be set up in one "
+            f"scene only): here it shows its source as groomed, without collisions. "
+            f"Switch to scene '{own.name}' to play, bake or change the setup")
+
+
+def refusal_in(ob, scene) -> str:
+    """An operator's refusal for the setup on ``ob`` in ``scene`` ('' = none): it
+    belongs to another scene."""
+    if not _holds(scene, ob):
+        return ""
+    own = owner(ob, prefer=scene)
+    if own is None or own == scene:
+        return ""
+    return (f"'{ob.name}' is set up in scene '{own.name}' (a hair can be set up in one "
+            f"scene only): switch to scene '{own.name}'")
 
 
 # ------------------------------------------------------------ handler guard
@@ -272,9 +403,19 @@ def status_for(ob) -> tuple:
     return rt.status if rt else ("INFO", "")
 
 
-def is_outdated(ob) -> bool:
+def status_shown(ob, scene=None) -> tuple:
+    """The status the panel shows for the setup on ``ob`` in ``scene`` (default: the
+    context scene): where it belongs to another scene, that
+    (:func:`foreign_message`); else :func:`status_for`."""
+    msg = foreign_message(ob, scene)
+    return ("WARNING", msg) if msg else status_for(ob)
+
+
+def is_outdated(ob, scene=None) -> bool:
+    """Is the frame the setup on ``ob`` shows outdated? Never in a scene it does not
+    belong to (its output shows the source there)."""
     rt = get_runtime(ob, create=False)
-    return bool(rt and rt.outdated)
+    return bool(rt and rt.outdated) and not foreign_message(ob, scene)
 
 
 def record_error(ob, exc: Exception) -> None:

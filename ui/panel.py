@@ -48,7 +48,8 @@ class _Sub:
         layout.use_property_split = True
         layout.use_property_decorate = False
         s = self.settings(context)
-        layout.enabled = not s.is_baked
+        # (greyed where the setup belongs to another scene: its settings are that scene's)
+        layout.enabled = not s.is_baked and not registry.foreign_message(s.id_data)
         return layout, s
 
 
@@ -69,7 +70,8 @@ class FURCOLLIDE_PT_main(Panel):
         src = active_setup(context)
         if src is not None:
             # A baked setup only reads (its settings are greyed out): so are presets.
-            self.layout.enabled = not src.furcollide.is_baked
+            self.layout.enabled = not src.furcollide.is_baked and not (
+                registry.foreign_message(src))
             FURCOLLIDE_PT_presets.draw_panel_header(self.layout)
 
     def draw(self, context):
@@ -92,12 +94,13 @@ class FURCOLLIDE_PT_main(Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         col = layout.column()
+        col.enabled = not registry.foreign_message(src)  # (another scene's setup)
         col.prop(s, "enabled")
         col.prop(s, "show_result")
         row = col.row()
         row.enabled = False
         row.prop(s, "output")
-        level, message = registry.status_for(src)
+        level, message = registry.status_shown(src)
         if message:
             icon = {"ERROR": "ERROR", "WARNING": "ERROR"}.get(level, "INFO")
             box = layout.box()
@@ -221,12 +224,15 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         layout.use_property_decorate = False
         src = active_setup(context)
         s = src.furcollide
+        # (a setup of another scene: its settings and cache are that scene's)
+        foreign = (registry.owner(src, prefer=context.scene)
+                   if registry.foreign_message(src, context.scene) else None)
         col = layout.column(align=True)
-        col.enabled = not s.is_baked
+        col.enabled = not s.is_baked and foreign is None
         col.prop(s, "frame_start", text="Frame Start")
         col.prop(s, "frame_end", text="End")
         col = layout.column()
-        col.enabled = not s.is_baked
+        col.enabled = not s.is_baked and foreign is None
         col.prop(s, "cache_directory", text="Directory")
         col.prop(s, "memory_limit", text="Memory (MB)")
         running = ops_bake.PROGRESS.get(context.scene.name)
@@ -235,9 +241,12 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
             layout.progress(factor=done / of, type="BAR", text=f"Baking {done} / {of} (Esc)")
         total = max(0, s.frame_end - s.frame_start + 1)
         n, where = cached_count(src)
+        if foreign is not None:
+            where += f" in scene '{foreign.name}'"
         layout.label(text=f"{n} of {total} frames {where}", icon="FILE_CACHE")
         rt = registry.get_runtime(src, create=False)
-        if not s.is_baked and rt is not None and rt.dropped == registry.NOT_SAVED:
+        if foreign is None and not s.is_baked and rt is not None and (
+                rt.dropped == registry.NOT_SAVED):
             layout.label(text="The playback cache is not saved with the file: bake",
                          icon="ERROR")
         if s.is_outdated:  # (the status above says why)

@@ -4,6 +4,7 @@ add-on disabled and enabled again, an edit seen in a scene the window does not s
 
 import os
 import shutil
+from pathlib import Path
 
 import bpy
 import numpy as np
@@ -18,6 +19,7 @@ from helpers import (
     draw_enabled,
     frames_on_disk,
     make_box,
+    make_hair,
     make_surface,
     no_traceback,
     play_checked,
@@ -29,6 +31,8 @@ from helpers import (
     save_in,
     small_setup,
     snapshot,
+    status_of,
+    sweep_box,
     sweep_setup,
 )
 
@@ -236,7 +240,11 @@ def test_addon_disable_enable_with_operators_registers_handlers_once(fc):
 
 
 @pytest.mark.parametrize("kind", ["FULL_COPY", "LINK_COPY"])
-def test_scene_copy_plays_in_both_scenes(fc, kind, capsys):
+def test_scene_copy_plays_in_both_scenes_or_shows_the_source(fc, kind, capsys):
+    """A full copy has its own setup (its own hair, output and box) and plays in both
+    scenes. A linked copy holds the same objects, so the setup stays the first scene's
+    (a hair can be set up in one scene only): the copy shows the source as groomed and
+    says where the setup is, and the first scene still plays its frames."""
     scene_a = bpy.context.scene
     hair, box, out = sweep_setup(fc)
     groom = snapshot(hair)
@@ -244,14 +252,20 @@ def test_scene_copy_plays_in_both_scenes(fc, kind, capsys):
     assert bpy.ops.scene.new(type=kind) == {"FINISHED"}
     scene_b = bpy.context.scene
     assert scene_b != scene_a
-    (hair_b,) = fc.registry.setups(scene_b)
     if kind == "FULL_COPY":
+        (hair_b,) = fc.registry.setups(scene_b)
         assert hair_b != hair and hair_b.furcollide.output not in (None, out)
         assert hair_b.furcollide.output.furcollide.source == hair_b
         assert [c.object.name for c in hair_b.furcollide.colliders] == ["Box.001"]
+        same_frames(play_checked(scene_b, hair_b), ref)
+        assert hair_b.furcollide.owner_scene == scene_b.name
     else:
-        assert hair_b == hair  # the same objects in both scenes
-    same_frames(play_checked(scene_b, hair_b), ref)
+        assert fc.registry.setups(scene_b) == []
+        assert fc.registry.setups(scene_b, owned=False) == [hair]  # the same objects
+        for f in range(1, 7):
+            scene_b.frame_set(f)
+            np.testing.assert_array_equal(positions(out), positions(hair), err_msg=f"{f}")
+            assert f"is set up in scene '{scene_a.name}'" in hair.furcollide.status_message
     bpy.context.window.scene = scene_a
     same_frames(play_checked(scene_a, hair), ref)
     if kind == "FULL_COPY":  # playing A never touched B's output
@@ -498,3 +512,204 @@ def test_disable_enable_cleans_up_and_keeps_data(fc):
     assert s.is_setup and s.plasticity == pytest.approx(0.7)
     bpy.context.scene.frame_set(1)
     assert s.stat_frame == 1
+
+
+# ------------------------------------------- one hair in several scenes (shots)
+def _two_shots(fc):
+    """A character collection (the hair) linked into shot A, which has a sweeping ball,
+    and into shot B, which has none; the setup made in A, the window showing A.
+    Returns (A, B, hair, ball, out)."""
+    sc_a = bpy.context.scene
+    sc_a.name = "A"
+    sc_a.frame_start, sc_a.frame_end = SHOT_FRAMES
+    char = bpy.data.collections.new("Character")
+    sc_a.collection.children.link(char)
+    hair = make_hair("Fur", nx=4, ny=4)
+    char.objects.link(hair)
+    sc_a.collection.objects.unlink(hair)
+    ball = sweep_box("Ball", -1.2, 1.2, SHOT_FRAMES)
+    sc_b = bpy.data.scenes.new("B")
+    sc_b.frame_start, sc_b.frame_end = SHOT_FRAMES
+    sc_b.collection.children.link(char)
+    sc_a.frame_set(1)
+    out = fc.setup(hair, [ball])
+    assert set(out.users_scene) == {sc_a, sc_b}  # (the output is the character's too)
+    assert hair.furcollide.owner_scene == "A"
+    return sc_a, sc_b, hair, ball, out
+
+
+def _show(scene):
+    """Show ``scene`` in the window (as the scene selector does: Blender evaluates its
+    current frame, running the frame handlers)."""
+    bpy.context.window.scene = scene
+    assert bpy.context.scene == scene
+
+
+def _cache_bits(rt):
+    """Every cached frame of a runtime, as bytes (and its inputs record)."""
+    return {f: (fr.curves.tobytes(), fr.points.tobytes(), fr.status_idx.tobytes(),
+                fr.status_val.tobytes(), repr(fr.inputs))
+            for f, fr in rt.memory.frames.items()}
+
+
+def _file_bits(d):
+    """The bake files of directory ``d``: name -> bytes."""
+    return {n: (d / n).read_bytes() for n in bake_files(str(d))}
+
+
+def _counting_solves(fc, monkeypatch):
+    calls = []
+    real = fc.frame_solve.solve_frame
+
+    def counting(setup, inp):
+        calls.append((setup.scene.name, setup.frame))
+        return real(setup, inp)
+
+    monkeypatch.setattr(fc.frame_solve, "solve_frame", counting)
+    return calls
+
+
+def _refusal(op):
+    """The poll message of operator ``op`` (a ``bpy.ops`` function), '' when it runs."""
+    if op.poll():
+        return ""
+    with pytest.raises(RuntimeError) as err:
+        op()
+    return str(err.value)
+
+
+SETUP_OPERATORS = ("bake", "free_bake", "reset", "remove", "collider_add", "collider_remove",
+                   "fur_attach_bind", "fur_attach_unbind", "groom_bind", "groom_remove",
+                   "collider_distance", "children_from_guides")
+
+
+def test_playing_another_shot_never_touches_the_setup(fc, monkeypatch, capsys):
+    """The hair is also in shot B. Playing B shows the source as groomed there (the ball
+    is not in B), solves nothing and leaves A's playback cache bit for bit; every
+    operator that would touch the setup refuses in B naming A; showing A again shows
+    A's frame at once, from its cache."""
+    sc_a, sc_b, hair, ball, out = _two_shots(fc)
+    played = play_checked(sc_a, hair)
+    assert any(not np.array_equal(p, positions(hair)) for p in played.values())
+    sc_a.frame_set(4)
+    rt = fc.registry.get_runtime(hair)
+    before = _cache_bits(rt)
+    assert sorted(before) == list(range(1, 7))
+    solves = _counting_solves(fc, monkeypatch)
+
+    _show(sc_b)  # at B's frame 1
+    np.testing.assert_array_equal(positions(out), positions(hair))
+    msg = hair.furcollide.status_message
+    assert msg.startswith("'Fur' is set up in scene 'A' (a hair can be set up in one scene "
+                          "only): here it shows its source as groomed, without collisions")
+    assert "Free" not in msg and not hair.furcollide.is_outdated
+    assert fc.registry.setups(sc_b) == [] and fc.registry.setups(sc_b, owned=False) == [hair]
+    activate(hair)
+    for name in SETUP_OPERATORS:
+        why = _refusal(getattr(bpy.ops.furcollide, name))
+        assert "'Fur' is set up in scene 'A'" in why and "switch to scene 'A'" in why, (name, why)
+    assert "set up in scene 'A'" in _refusal(bpy.ops.furcollide.add)
+    for name in ("bake_all", "free_bake_all"):
+        assert "('Fur' is set up in scene 'A')" in _refusal(getattr(bpy.ops.furcollide, name))
+    for f in (2, 3, 6, 5, 1):
+        sc_b.frame_set(f)
+        np.testing.assert_array_equal(positions(out), positions(hair), err_msg=f"B {f}")
+        assert status_of(out).max() == 0  # (every curve FREE: nothing collided)
+    for dx in (0.1, -0.1):  # updates seen by B's depsgraph are not B's to judge
+        ball.location.x += dx
+        hair.data.update_tag()
+        bpy.context.view_layer.update()
+    assert solves == [] and _cache_bits(rt) == before
+
+    _show(sc_a)  # back at A's frame 4: A's cached frame, at once
+    np.testing.assert_array_equal(positions(out), played[4])
+    assert hair.furcollide.status_message == ""
+    same_frames(play_checked(sc_a, hair), played)
+    assert solves == [] and _cache_bits(rt) == before
+    no_traceback(capsys)
+
+
+def test_a_bake_of_one_shot_is_neither_shown_nor_freed_in_another(fc, tmp_path, capsys):
+    """Baked in A. Shown in B, the output is the source (no dent of a ball B does not
+    have), nothing is outdated and no advice deletes A's bake: every operator the panels
+    draw that runs in B, and the command line on B, leave A's bake files as they were.
+    Shown again, A shows its bake."""
+    sc_a, sc_b, hair, ball, out = _two_shots(fc)
+    path = save_as(tmp_path / "shots.blend")
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    d = Path(bpy.path.abspath(hair.furcollide.bake_path))
+    files = _file_bits(d)
+    assert len(files) == 6
+    baked = {f: fc.cache.read_frame(str(d), f)[0] for f in range(1, 7)}
+    sc_a.frame_set(3)
+    np.testing.assert_array_equal(positions(out), baked[3])
+
+    _show(sc_b)
+    for f in range(1, 7):
+        sc_b.frame_set(f)
+        np.testing.assert_array_equal(positions(out), positions(hair), err_msg=f"B {f}")
+        assert not hair.furcollide.is_outdated
+        assert "Free" not in hair.furcollide.status_message
+    activate(hair)
+    ran = []
+    for panel in [c for c in bpy.types.Panel.__subclasses__()
+                  if c.__name__.startswith("FURCOLLIDE_PT")]:
+        for kind, name, enabled in draw_enabled(panel):
+            if kind == "label" and name:
+                assert "Free Bake" not in name, (panel.__name__, name)
+            if kind != "operator" or not enabled or not name.startswith("furcollide."):
+                continue
+            op = getattr(bpy.ops.furcollide, name.partition(".")[2])
+            if op.poll():  # (what B lets anyone press)
+                ran.append(name)
+                op()
+    assert "furcollide.free_bake" not in ran and "furcollide.bake" not in ran, ran
+    assert _file_bits(d) == files and hair.furcollide.is_baked
+    bpy.ops.wm.save_mainfile()  # saved showing B: the command line's default scene
+    for args in (["bake", path], ["bake", path, "--scene", "B", "--force"],
+                 ["free", path, "--scene", "B"], ["free", path, "--object", "Fur"]):
+        capsys.readouterr()
+        assert fc.cli.run(args) == 2, args
+        err = capsys.readouterr().err
+        assert "'Fur' is set up in scene 'A', not 'B'" in err and "--scene 'A'" in err, err
+        assert _file_bits(d) == files, args
+    reopen(path)
+    sc_a, sc_b = bpy.data.scenes["A"], bpy.data.scenes["B"]
+    hair = bpy.data.objects["Fur"]
+    out = hair.furcollide.output
+    assert bpy.context.scene == sc_b and hair.furcollide.is_baked
+    sc_b.frame_set(2)
+    np.testing.assert_array_equal(positions(out), positions(hair))
+
+    _show(sc_a)  # at A's frame 3
+    np.testing.assert_array_equal(positions(out), baked[3])
+    assert hair.furcollide.status_message == ""
+    for f in (5, 1):
+        sc_a.frame_set(f)
+        np.testing.assert_array_equal(positions(out), baked[f], err_msg=f"A {f}")
+    assert _file_bits(d) == files
+    no_traceback(capsys)
+
+
+def test_a_setup_of_an_older_file_belongs_to_the_scene_of_its_colliders(fc):
+    """A setup made before FurCollide recorded its scene (``owner_scene`` empty): it
+    belongs to the scene that holds its hair and the most of its colliders, even when
+    another scene is evaluated first, and records it there; between equals, to the
+    first scene that evaluates it."""
+    sc_a, sc_b, hair, ball, out = _two_shots(fc)
+    s = hair.furcollide
+    s.owner_scene = ""
+    _show(sc_b)  # B first: the ball is only in A
+    np.testing.assert_array_equal(positions(out), positions(hair))
+    assert "set up in scene 'A'" in s.status_message and s.owner_scene == ""
+    _show(sc_a)
+    assert s.owner_scene == "A"
+    sc_b.collection.objects.link(ball)  # now both shots hold the ball: equals
+    s.owner_scene = ""
+    _show(sc_b)
+    assert s.owner_scene == "B" and s.status_message == ""
+    _show(sc_a)
+    assert "set up in scene 'B'" in s.status_message
+    sc_b.name = "Shot B"  # renamed: still the one
+    _show(sc_b)
+    assert s.owner_scene == "Shot B" and s.status_message == ""
