@@ -336,11 +336,9 @@ def foreign_message(ob, scene=None) -> str:
     """What the setup on ``ob`` says in ``scene`` (default: the context scene) when it
     belongs to another scene ('' when it belongs there, or ``ob`` is not in it)."""
     scene = scene or bpy.context.scene
-    if not _holds(scene, ob):
+    if not _holds(scene, ob) or belongs(ob, scene):
         return ""
     own = owner(ob, prefer=scene)
-    if own is None or own == scene:
-        return ""
     return (f"'{ob.name}' is set up in scene '{own.name}' (a hair can be set up in one "
             f"scene only): here it shows its source as groomed, without collisions. "
             f"Switch to scene '{own.name}' to play, bake or change the setup")
@@ -349,11 +347,9 @@ def foreign_message(ob, scene=None) -> str:
 def refusal_in(ob, scene) -> str:
     """An operator's refusal for the setup on ``ob`` in ``scene`` ('' = none): it
     belongs to another scene."""
-    if not _holds(scene, ob):
+    if not _holds(scene, ob) or belongs(ob, scene):
         return ""
     own = owner(ob, prefer=scene)
-    if own is None or own == scene:
-        return ""
     return (f"'{ob.name}' is set up in scene '{own.name}' (a hair can be set up in one "
             f"scene only): switch to scene '{own.name}'")
 

@@ -18,6 +18,7 @@ from helpers import (
     build_setup,
     draw_enabled,
     frames_on_disk,
+    groom_scene,
     make_box,
     make_hair,
     make_surface,
@@ -25,6 +26,7 @@ from helpers import (
     play_checked,
     positions,
     reference_frames,
+    render_camera,
     reopen,
     same_frames,
     save_as,
@@ -34,6 +36,7 @@ from helpers import (
     status_of,
     sweep_box,
     sweep_setup,
+    world,
 )
 
 pytestmark = pytest.mark.blender
@@ -713,3 +716,48 @@ def test_a_setup_of_an_older_file_belongs_to_the_scene_of_its_colliders(fc):
     sc_b.name = "Shot B"  # renamed: still the one
     _show(sc_b)
     assert s.owner_scene == "Shot B" and s.status_message == ""
+
+
+def test_another_shot_renders_the_source_and_its_render_groom_unsolved(fc, tmp_path):
+    """The guides, their render groom and its Surface in shot A with the box, and in
+    shot B without it. In B both outputs follow the source as groomed (the render groom
+    deformed by the uncollided guides, no clearance pass: every curve FREE), in the
+    viewport and in B's render; A's outputs show A's solve again when A is shown."""
+    guides, groom, box, out = groom_scene(fc)
+    sc_a = bpy.context.scene
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    played = {}
+    for f in range(1, 7):
+        sc_a.frame_set(f)
+        played[f] = (world(out).copy(), world(gout).copy(), status_of(gout).copy())
+    assert played[6][2].any() and not np.array_equal(played[6][0], world(guides))
+    sc_b = bpy.data.scenes.new("B")
+    sc_b.frame_start, sc_b.frame_end = 1, 8
+    for o in (guides, groom, guides.data.surface, out, gout):
+        sc_b.collection.objects.link(o)
+    sc_b.frame_current = 6
+    _show(sc_b)
+    np.testing.assert_array_equal(world(out), world(guides))
+    np.testing.assert_allclose(world(gout), world(groom), atol=1e-5)  # at rest: as groomed
+    assert not status_of(gout).any() and not status_of(out).any()
+    render_camera(sc_b, px=16)
+    seen = {}
+
+    def spy(sc, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen[sc.frame_current] = (world(out).copy(), world(gout).copy())
+
+    sc_b.render.filepath = str(tmp_path / "b.png")
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    np.testing.assert_array_equal(seen[6][0], world(guides))
+    np.testing.assert_allclose(seen[6][1], world(groom), atol=1e-5)
+    _show(sc_a)  # A at frame 6: its cached guides and the groom solved with them
+    np.testing.assert_array_equal(world(out), played[6][0])
+    np.testing.assert_array_equal(world(gout), played[6][1])
+    np.testing.assert_array_equal(status_of(gout), played[6][2])

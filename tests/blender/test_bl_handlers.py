@@ -162,7 +162,7 @@ def test_refresh_timer_never_raises(fc, capfd, monkeypatch, timers, fault):
     if fault == "evaluate":
         monkeypatch.setattr(inv.frame_rules, "evaluate", _raiser)
     elif fault == "Setup":
-        monkeypatch.setattr(inv, "Setup", _raiser)
+        monkeypatch.setattr(inv.scenes, "Setup", _raiser)  # (the refresh goes through it)
     elif fault == "deleted":
         bpy.data.objects.remove(hair)
     else:
