@@ -425,7 +425,8 @@ def _particle_difference(m, r, simplify) -> list[str]:
         return [f"'{m.name}' instances {part.display_percentage}% of the particles in the "
                 "viewport (Display Amount)"]
     if m.use_children and part.child_type != "NONE":
-        view, rend = part.child_percent, part.rendered_child_count
+        view = getattr(part, "child_percent", getattr(part, "child_nbr", 0))
+        rend = part.rendered_child_count
         if simplify:
             view = int(view * r.simplify_child_particles)
             rend = int(rend * r.simplify_child_particles_render)

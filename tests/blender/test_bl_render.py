@@ -398,6 +398,15 @@ def test_render_difference_names_each_cause(fc):
     assert diff(box, scene) == "'Detail' has an Is Viewport node"
     box.modifiers.remove(gn)
     assert diff(box, scene) == ""
+    emitter = make_box("Emitter", location=(3, 0, 0))
+    emitter.modifiers.new("Particles", "PARTICLE_SYSTEM")
+    inst = box.modifiers.new("Instances", "PARTICLE_INSTANCE")
+    inst.object = emitter
+    assert diff(box, scene) == ""
+    emitter.particle_systems[0].settings.display_percentage = 50
+    assert diff(box, scene) == ("'Instances' instances 50% of the particles in the viewport "
+                                "(Display Amount)")
+    box.modifiers.remove(inst)
     cu = bpy.data.curves.new("Rope", "CURVE")
     cu.dimensions, cu.bevel_depth = "3D", 0.05
     cu.splines.new("BEZIER").bezier_points.add(1)
