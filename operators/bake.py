@@ -94,14 +94,14 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     dict
         The frame's stats (curve counts per status, ``solve_ms``).
     """
-    s, rt, f = setup.s, setup.rt, setup.frame
+    rt, f = setup.rt, setup.frame
     clock.start()
     inp = read_inputs(setup)
     rt.adopt_topology(inp.key)
     prepare_input(setup, inp)
     frame_outputs.sync_output(setup, inp)
     solver = setup.ensure_solver(inp)
-    if f == s.frame_start:
+    if frame_rules.starts_here(setup):  # (the start frame, or enabled again)
         solver.reset()
     elif not trust_solver:
         _p, _st, offsets, stored = framecache.read_frame(directory, f - 1)

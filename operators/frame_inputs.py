@@ -276,8 +276,11 @@ def fixed_change(setup, old, frame=None, animation=None) -> str:
         if old[STRUCTURE_PART] != now:
             return structure_change(old[STRUCTURE_PART], now)
         at = None if frame is None or frame == setup.frame else frame
+        animation = keyed.Animation(ob) if animation is None else animation
         path = keyed.first_difference(old[VALUES_PART], keyed.values(ob, at, animation))
-        return "" if path is None else value_change(ob, path, frame)
+        if path is None:
+            return ""
+        return value_change(ob, path, frame if animation.animates(path) else None)
     refs = collider_objects(ob, scene)
     flags = framecache.text_digest(repr([(r.double_sided, r.offset) for r in refs]))
     if old.get("colliders") != flags:
@@ -293,7 +296,7 @@ def fixed_change(setup, old, frame=None, animation=None) -> str:
 
 def value_change(ob, path, frame) -> str:
     """"Recovery Rate changed at frame 12": the keyable setting at ``path`` changed its
-    value at ``frame`` (None: at the frame shown)."""
+    value at ``frame`` ("Recovery Rate changed" for None: one value for every frame)."""
     where = f" at frame {frame}" if frame is not None else ""
     return f"{keyed.label(ob, path)} changed{where}"
 
@@ -352,7 +355,10 @@ def describe_change(ob, part, scene, old=None, new=None) -> str:
         return structure_change((old or {}).get(part, ""), (new or {}).get(part, ""))
     if part == VALUES_PART:
         path = keyed.first_difference((old or {}).get(part), (new or {}).get(part) or {})
-        return value_change(ob, path, scene.frame_current) if path else "the settings changed"
+        if not path:
+            return "the settings changed"
+        at = scene.frame_current if keyed.Animation(ob).animates(path) else None
+        return value_change(ob, path, at)
     if part == "source":
         return f"the source hair '{ob.name}' changed (groom, modifiers or placement)"
     if part == "enabled":

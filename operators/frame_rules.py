@@ -133,7 +133,7 @@ def _frame_rules(setup, inp):
         shown = _show_cached_if_current(setup, inp, note)
         if shown is not None:
             return shown
-    if f != s.frame_start:
+    if not starts_here(setup):
         if (f - 1) not in rt.memory:
             return _hold(setup, inp)
         # Frame f - 1 cannot be evaluated again from here: at least its settings
@@ -146,6 +146,18 @@ def _frame_rules(setup, inp):
     if held is not None:
         return held
     return _solve(setup, inp, note)
+
+
+def starts_here(setup) -> bool:
+    """Does the frame solve from the groomed shape: the start frame, or the first frame
+    after frames where the setup's Enabled (keyed) was off? (Disabled frames show the
+    source; the fur starts again from its groom when it is turned on.)"""
+    f, s = setup.frame, setup.s
+    if f == s.frame_start:
+        return True
+    if f < s.frame_start:
+        return False
+    return keyed.setup_value(setup.ob, "enabled", f - 1) is False
 
 
 def _not_evaluated(setup):
@@ -292,6 +304,9 @@ def _prepare_solver(setup, inp):
         rt.dropped = ""
         rt.memory.start = f
         rt.memory.limit = int(s.memory_limit * 1024 * 1024)
+    elif starts_here(setup):  # enabled again after disabled frames: from the groom
+        solver.reset()
+        rt.drop_frames_after(f - 1, s.frame_start)
     elif rt.solver_frame != f - 1:
         state = rt.memory.state(f - 1)
         if state is None:

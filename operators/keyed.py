@@ -135,6 +135,17 @@ class Animation:
     def __bool__(self):
         return bool(self.keyed or self.shown_only)
 
+    def animates(self, path: str) -> bool:
+        """Is the value at data path ``path`` (:func:`values`' keys) keyed or driven
+        (other at other frames), rather than the same at every frame?"""
+        head, _, index = path.partition("[")
+        if head.startswith("furcollide.colliders"):  # (the entry's index is in the path)
+            head, _, rest = path.rpartition(".")
+            head = f"{head}.{rest.partition('[')[0]}"
+            index = rest.partition("[")[2]
+        key = (head, int(index.rstrip("]")) if index else 0)
+        return "*" in self.shown_only or key in self.keyed or key in self.shown_only
+
     def value(self, owner, path, name, index, frame):
         """The value of ``owner.name`` at ``frame`` (None: the current frame)."""
         if frame is None:
@@ -166,6 +177,12 @@ def values(ob, frame=None, animation=None) -> dict:
     return out
 
 
+def setup_value(ob, name, frame=None):
+    """The value of the setup's own setting ``name`` (``ob.furcollide.<name>``) at
+    ``frame`` (:func:`values` for one setting)."""
+    return Animation(ob).value(ob.furcollide, "furcollide", name, None, frame)
+
+
 def first_difference(old: dict | None, new: dict) -> str | None:
     """The first data path whose value differs between the recorded ``old`` and
     ``new`` (an :data:`UNKNOWN` value of ``new`` is not compared), or None."""
@@ -193,10 +210,10 @@ def label(ob, path: str) -> str:
     if head.startswith("furcollide.colliders["):
         obj = getattr(owner, "object", None)
         text = f"'{obj.name if obj is not None else '?'}' {text}"
-    elif head == "furcollide.motion" and text in ("Strength", "Frequency", "Turbulence",
-                                                  "Falloff", "Gust Size", "Seed",
-                                                  "Direction", "Stage"):
-        text = f"{'Jiggle' if name.startswith('jiggle') else 'Wind'} {text}"
+    elif head == "furcollide.motion" and not name.startswith("use_"):
+        group = {"wind": "Wind", "jiggle": "Jiggle", "roi": "Region of Influence"}.get(
+            name.partition("_")[0])
+        text = f"{group} {text}" if group else text
     if index:
         text += " " + "XYZW"[int(index.rstrip("]"))]
     return text

@@ -14,7 +14,7 @@ import bpy
 
 from .. import core
 from ..core import framecache
-from . import motion, registry
+from . import keyed, motion, registry
 from .colliders import collider_objects, in_scene
 
 
@@ -179,9 +179,9 @@ def structure(ob, stable=False, scene=None, identities=True) -> str:
     if s.collider_collection is not None:
         entries.append(s.collider_collection)
     cols = [
-        None if o is None else (o.name if stable else o.session_uid) if identities else True
+        (o.name if stable else o.session_uid) if identities else True
         for o in entries
-        if o is None or not isinstance(o, bpy.types.Object) or in_scene(o, scene)
+        if o is not None and (not isinstance(o, bpy.types.Object) or in_scene(o, scene))
     ]
     if identities and s.collider_collection is not None:
         cols.append(sorted(
@@ -189,9 +189,13 @@ def structure(ob, stable=False, scene=None, identities=True) -> str:
     surf = ob.data.surface
     surface = "" if surf is None else (surf.name if stable else surf.session_uid) if (
         identities) else True
+    # (wind and jiggle run on seconds: frame / fps; only then does the fps count)
+    anim = keyed.Animation(ob)
+    timed = s.motion.use_wind or s.motion.use_jiggle or any(
+        anim.animates(f"furcollide.motion.{n}") for n in ("use_wind", "use_jiggle"))
     parts = [cols, s.mode, s.enable_attribute, s.frame_start, surface,
              ["fur_attach", s.attach_id] if s.use_fur_attach else None,
-             motion.fps(scene or bpy.context.scene)]
+             motion.fps(scene or bpy.context.scene) if timed else None]
     return json.dumps(parts)
 
 
@@ -226,7 +230,7 @@ def structure_change(old: str, new: str) -> str:
         return "the growth surface changed"
     for i, name in enumerate(names):
         if name and a[i] != b[i]:
-            return f"{name} changed" if name[0].isupper() else f"{name} changed"
+            return f"{name} changed"
     return "the settings changed"
 
 

@@ -46,7 +46,7 @@ class _Sub:
     def prepare(self, context):
         layout = self.layout
         layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout.use_property_decorate = True  # keyframe decorators: settings can be keyed
         s = self.settings(context)
         layout.enabled = not s.is_baked
         return layout, s
@@ -90,7 +90,7 @@ class FURCOLLIDE_PT_main(Panel):
             return
         s = src.furcollide
         layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout.use_property_decorate = True
         col = layout.column()
         col.prop(s, "enabled")
         col.prop(s, "show_result")

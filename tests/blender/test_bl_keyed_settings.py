@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from helpers import (
     activate,
+    bake_crashing_at,
     bake_setup,
     check_frame,
     fcurves,
@@ -255,3 +256,90 @@ def test_the_status_says_which_setting_changed_at_which_frame_of_a_bake(fc, tmp_
     scene.frame_set(1)  # before the changed key (frames 1..2 hold 0.1): current
     assert hair.furcollide.status_message == "", hair.furcollide.status_message
     activate(hair)
+
+
+def test_a_setup_enabled_again_starts_from_the_groom(fc, solves, tmp_path):
+    """Enabled keyed off for frames 5-7: those frames show the source, frame 8 starts
+    again from the groomed shape (as a start frame does); play, scrub and bake agree."""
+    scene, hair, box, out = _shot(fc)
+    s = hair.furcollide
+    s.enabled = True
+    s.keyframe_insert("enabled", frame=1)
+    s.enabled = False
+    s.keyframe_insert("enabled", frame=5)
+    s.enabled = True
+    s.keyframe_insert("enabled", frame=8)
+    solves.clear()
+    frames = range(FRAMES[0], FRAMES[1] + 1)
+    played = {}
+    for f in frames:
+        scene.frame_set(f)
+        assert not s.is_outdated, (f, s.status_message)
+        if s.enabled:
+            check_frame(hair, out, [box], status=None)
+        else:
+            np.testing.assert_array_equal(positions(out), positions(hair))
+        played[f] = (positions(out).copy(), status_of(out).copy())
+    assert sorted(solves) == [1, 2, 3, 4, 8, 9, 10, 11, 12, 13, 14], solves
+    # Frame 8 is frame 1 of a new run: the same as a setup starting there.
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "shot.blend"))
+    bake_setup(hair)
+    for f in frames:
+        scene.frame_set(f)
+        np.testing.assert_array_equal(positions(out), played[f][0], err_msg=f"frame {f}")
+
+
+def test_a_resumed_bake_of_keyed_settings_equals_playback(fc, monkeypatch, tmp_path, capsys):
+    """A bake stopped at frame 7 resumes after frame 6 (each frame's values still hold
+    there), and equals playback; after the ramp's last key is edited (frames 3.. change)
+    a partial bake resumes after frame 2."""
+    scene, hair, box, out = _shot(fc)
+    _keyed_recovery(hair.furcollide, hair)
+    frames = range(FRAMES[0], FRAMES[1] + 1)
+    played = _play(scene, hair, out, box, frames)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "shot.blend"))
+    activate(hair)
+    bake_crashing_at(fc, monkeypatch, 7)
+    capsys.readouterr()
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert "resuming after frame 6" in capsys.readouterr().out
+    for f in frames:
+        scene.frame_set(f)
+        np.testing.assert_array_equal(positions(out), played[f][0], err_msg=f"frame {f}")
+    # A key edited after a partial bake: the frames before its first changed value resume.
+    assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
+    bake_crashing_at(fc, monkeypatch, 9)
+    fcu = next(c for c in fcurves(hair) if c.data_path == "furcollide.recovery_rate")
+    fcu.keyframe_points[-1].co.y = 0.5  # the ramp from frame 2 to 9: frames 3.. change
+    fcu.update()
+    capsys.readouterr()
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert "resuming after frame 2" in capsys.readouterr().out
+
+
+def test_a_render_of_a_keyed_frame_is_the_played_frame(fc, solves):
+    """F12 at a cached frame renders it as played: the render's frame handler finds the
+    frame's values unchanged and solves nothing."""
+    from helpers import render_camera
+
+    scene, hair, box, out = _shot(fc)
+    _keyed_plasticity(hair.furcollide, hair)
+    frames = range(FRAMES[0], FRAMES[1] + 1)
+    played = _play(scene, hair, out, box, frames)
+    solves.clear()
+    render_camera(scene)
+    scene.frame_set(6)
+    seen = []
+
+    def spy(sc, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen.append(positions(out).copy())
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render()
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    assert seen and all(np.array_equal(p, played[6][0]) for p in seen)
+    assert solves == {}, solves
+    assert not hair.furcollide.is_outdated, hair.furcollide.status_message
