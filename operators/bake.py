@@ -25,11 +25,12 @@ from .colliders import read_for_solve
 from .frame_inputs import (
     current_inputs,
     first_change,
+    fixed_change,
     prepare_input,
     read_inputs,
     solved_inputs,
 )
-from .setup import Setup, core_settings, signature
+from .setup import Setup, core_settings, structure
 
 
 def bake_directory(ob) -> str:
@@ -69,8 +70,10 @@ def directory_from_settings(ob) -> str:
 
 
 def settings_fingerprint(ob) -> str:
-    """What a bake file must match to be resumed from."""
-    return signature(ob, stable=True)
+    """What every frame of a bake shares (:func:`setup.structure`, objects by name):
+    with each frame's keyable values (its record), what a bake file must match to be
+    resumed from."""
+    return structure(ob, stable=True)
 
 
 def bake_frame(setup, directory, trust_solver) -> dict:
@@ -91,14 +94,14 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     dict
         The frame's stats (curve counts per status, ``solve_ms``).
     """
-    s, rt, f = setup.s, setup.rt, setup.frame
+    rt, f = setup.rt, setup.frame
     clock.start()
     inp = read_inputs(setup)
     rt.adopt_topology(inp.key)
     prepare_input(setup, inp)
     frame_outputs.sync_output(setup, inp)
     solver = setup.ensure_solver(inp)
-    if f == s.frame_start:
+    if frame_rules.starts_here(setup):  # (the start frame, or enabled again)
         solver.reset()
     elif not trust_solver:
         _p, _st, offsets, stored = framecache.read_frame(directory, f - 1)
@@ -170,6 +173,7 @@ def resume_frame(ob, directory) -> int | None:
         return None  # jiggle needs the roots of every frame since the start: start over
     have = set(framecache.list_frames(directory))
     fp = settings_fingerprint(ob)
+    setup = Setup(ob, bpy.context.scene, None)
     last = None
     f = s.frame_start
     while f in have and f <= s.frame_end:
@@ -177,6 +181,8 @@ def resume_frame(ob, directory) -> int | None:
             with np.load(framecache.frame_path(directory, f), allow_pickle=False) as z:
                 key = next((k for k in z.files if k.endswith("__fingerprint")), None)
                 ok = key is not None and z[key].tobytes().decode() == fp
+            # (the keyable values at f: a key edited since the bake changes them there)
+            ok = ok and not fixed_change(setup, framecache.read_inputs(directory, f), f)
         except framecache.UNREADABLE:
             ok = False
         if not ok:

@@ -20,28 +20,39 @@ import os
 import bpy
 
 from ..core import framecache
-from . import groom_stage, registry
-from .setup import signature
+from . import frame_inputs, groom_stage, registry
+from .setup import Setup, signature
 
-#: What a baked setup whose settings are not the bake's says.
-MESSAGE = "baked with other settings: Free Bake and bake again"
+#: What a baked setup whose settings are not the bake's says (:func:`message`).
+MESSAGE = "baked with other settings"
+_ADVICE = "Free Bake and bake again"
 
-_records: dict = {}  # (file, mtime) -> (settings digest or None, groom key or None)
+
+def message(what="") -> str:
+    """"baked with other settings (Recovery Rate changed at frame 12): Free Bake and
+    bake again"."""
+    return f"{MESSAGE}{f' ({what})' if what else ''}: {_ADVICE}"
 
 
-def _bake_file(ob):
-    """(directory, frame) of the first frame of the setup's bake, or None."""
+_records: dict = {}  # (file, mtime) -> (inputs record or None, groom key or None)
+
+
+def _bake_file(ob, scene):
+    """(directory, frame) of the setup's bake frame for the scene's current frame
+    (Frame Start before it, Frame End after it; the first baked frame when that one
+    is missing), or None."""
     s = ob.furcollide
     directory = bpy.path.abspath(s.bake_path)
-    if os.path.exists(framecache.frame_path(directory, s.frame_start)):
-        return directory, s.frame_start
+    f = min(max(scene.frame_current, s.frame_start), s.frame_end)
+    if os.path.exists(framecache.frame_path(directory, f)):
+        return directory, f
     frames = framecache.list_frames(directory)
     return (directory, frames[0]) if frames else None
 
 
 def _baked_with(directory, f):
-    """(settings digest, render groom key) a bake frame was made with (None: unknown,
-    or no render groom in it)."""
+    """(frame-inputs record, render groom key) a bake frame was made with (None:
+    unknown, or no render groom in it)."""
     path = framecache.frame_path(directory, f)
     try:
         key = (path, os.path.getmtime(path))
@@ -54,52 +65,68 @@ def _baked_with(directory, f):
             groom = framecache.read_extra(directory, f, groom_stage.BAKE_PART, ("key",))
         except (OSError, ValueError, KeyError):
             record, groom = None, None
-        got = (None if record is None else record.get("settings"),
-               None if groom is None else groom["key"].tobytes().decode())
+        got = (record, None if groom is None else groom["key"].tobytes().decode())
         if len(_records) > 64:
             _records.clear()
         _records[key] = got
     return got
 
 
-def settings_differ(ob, scene=None, directory=None, f=None) -> bool:
-    """Are the setup's settings other than those its bake (frame ``f``, default the
-    first) was made with? False when the bake does not say (files of older versions).
+def settings_change(ob, scene=None, directory=None, f=None, record=None) -> str:
+    """What of the setup's settings is other than what its bake's frame ``f`` was made
+    with, in words ('' when nothing, or when the bake does not say: files of older
+    versions). Default: the baked frame the scene's current frame shows.
 
-    Every frame of a bake has the same settings (a bake resumes only with them), so the
-    first frame's record, read once per file version, answers for every frame shown."""
-    if directory is None:
-        where = _bake_file(ob)
-        if where is None:
-            return False
-        directory, f = where
-    settings, groom_key = _baked_with(directory, f)
+    A frame's record holds what every frame shares and the keyable values at that
+    frame (:func:`frame_inputs.fixed_change` compares them, at ``f`` without going
+    there); a bake made before values were recorded holds one digest of the settings,
+    the same for every frame."""
     scene = scene or bpy.context.scene
-    if settings is not None and settings != framecache.text_digest(
-        signature(ob, scene=scene, identities=False)
-    ):
-        return True
+    if directory is None:
+        where = _bake_file(ob, scene)
+        if where is None:
+            return ""
+        directory, f = where
+    record_read, groom_key = _baked_with(directory, f)
+    record = record_read if record is None else record
+    if record is not None:
+        if frame_inputs.VALUES_PART in record:
+            setup = Setup(ob, scene, None, registry.get_runtime(ob, create=False))
+            why = frame_inputs.fixed_change(setup, record, f)
+            if why:
+                return why
+        elif record.get("settings") not in (None, framecache.text_digest(
+                signature(ob, scene=scene, identities=False))):
+            return "the settings changed"
     g = ob.furcollide.groom
-    return (groom_key is not None and g.output is not None and g.bind_id != ""
-            and groom_key != groom_stage.settings_key(ob))
+    if (groom_key is not None and g.output is not None and g.bind_id != ""
+            and groom_key != groom_stage.settings_key(ob)):
+        return "the render groom's settings changed"
+    return ""
+
+
+def settings_differ(ob, scene=None, directory=None, f=None) -> bool:
+    """Are the setup's settings other than those its bake was made with
+    (:func:`settings_change`)?"""
+    return bool(settings_change(ob, scene, directory, f))
 
 
 def check(ob, scene=None) -> bool:
-    """Mark the baked setup on ``ob`` outdated (with :data:`MESSAGE`) when its settings
-    are not the bake's, or clear that mark when they are again; True when they differ.
-    Does nothing for a setup that is not baked."""
+    """Mark the baked setup on ``ob`` outdated (with :func:`message`) when its settings
+    are not those of the baked frame shown, or clear that mark when they are again;
+    True when they differ. Does nothing for a setup that is not baked."""
     if not ob.furcollide.is_baked:
         return False
     # A disabled setup shows its source (nothing baked is shown): nothing to disagree with.
-    differs = ob.furcollide.enabled and settings_differ(ob, scene)
+    what = settings_change(ob, scene) if ob.furcollide.enabled else ""
     rt = registry.get_runtime(ob)
     if rt is None:
-        return differs
-    if differs:
+        return bool(what)
+    if what:
         rt.outdated = True
         registry.set_status(ob, "WARNING",
-                            f"This setup was {MESSAGE} (the frames shown are the bake's)")
+                            f"This setup was {message(what)} (the frames shown are the bake's)")
     elif MESSAGE in rt.status[1]:
         rt.outdated = False
         registry.set_status(ob, "INFO", "")
-    return differs
+    return bool(what)

@@ -101,17 +101,18 @@ def _collider_refs(o, double_sided, offset, out, seen, exclude, instancers=()):
         out.append(ref)
 
 
-def collider_objects(ob, scene=None) -> list[ColliderRef]:
+def collider_objects(ob, scene=None, disabled=False) -> list[ColliderRef]:
     """Enabled colliders of setup ``ob``: the list's, then the collider
     collection's; collection instances (linked assets) are followed. The source
     and its growth Surface never collide (roots lie on the Surface: every curve
-    would be pinched): see :func:`surface_as_collider`."""
+    would be pinched): see :func:`surface_as_collider`. ``disabled``: the list's
+    disabled entries too (an Enabled keyed on at another frame)."""
     s = ob.furcollide
     out, seen = [], set()
     exclude = {ob, ob.data.surface}
     for c in s.colliders:
         o = c.object
-        if o is None or not c.enabled or not in_scene(o, scene):
+        if o is None or not (c.enabled or disabled) or not in_scene(o, scene):
             continue
         offset = float(c.collision_offset) if c.use_offset else None
         _collider_refs(o, bool(c.double_sided), offset, out, seen, exclude)

@@ -47,9 +47,10 @@ def groom_owner(ob):
 
 def _dependency_refs(ob) -> list:
     """The objects the dependency modifier must reference: the source, the
-    colliders (including the collider collection's meshes) and the surface."""
+    colliders (including the collider collection's meshes, and the entries disabled
+    at this frame: their Enabled may be keyed on at another) and the surface."""
     refs = [ob]
-    for r in collider_objects(ob):
+    for r in collider_objects(ob, disabled=True):
         refs.extend(o for o in r.objects if o not in refs)
     if ob.data.surface is not None:
         refs.append(ob.data.surface)

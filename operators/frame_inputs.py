@@ -22,10 +22,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import framecache
-from . import bridge, motion
+from . import bridge, keyed, motion
 from .colliders import collider_objects, read_collider_inputs, renders_otherwise
 from .fur_attach import attach_input
-from .setup import signature
+from .setup import signature, structure, structure_change
 
 
 @dataclass
@@ -126,7 +126,8 @@ def uses_growth(settings) -> bool:
                 or settings.pinch_resolution == "growth_surface")
 
 
-def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False) -> dict:
+def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False,
+                 structure=None, values=None) -> dict:
     """The frame-inputs record of one frame: part name -> 64-bit digest.
 
     Parameters
@@ -150,16 +151,29 @@ def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False) 
     attached_as_source : bool
         With Fur Attach, the part ``source`` (the digest of the attached points)
         instead of ``attached``: the record of a bake made before ``attached`` existed.
+    structure : str, optional
+        :func:`setup.structure` without identities: what every frame of the shot
+        shares (part ``structure``).
+    values : dict, optional
+        :func:`keyed.values` at this frame: every setting that can be keyed or driven
+        (part ``values``, the values themselves, so a change can be named and the
+        record of another frame checked without going there: :func:`fixed_change`).
 
     Returns
     -------
     dict
-        Ordered as :func:`describe_change` reports the first difference: the
-        colliders' number and options, the settings, the source (or ``attached``),
+        Ordered as :func:`describe_change` reports the first difference: what the
+        shot's frames share, the keyable values, the colliders' number and options,
+        the settings, the source (or ``attached``),
         the enable mask, each collider's matrix and shape, the surface's.
     """
-    rec = {"colliders": framecache.text_digest(repr(list(flags))),
-           "settings": framecache.text_digest(sig)}
+    rec = {}
+    if structure is not None:
+        rec[STRUCTURE_PART] = structure
+    if values is not None:
+        rec[VALUES_PART] = values
+    rec["colliders"] = framecache.text_digest(repr(list(flags)))
+    rec["settings"] = framecache.text_digest(sig)
     if inp.attached is None:
         rec["source"] = framecache.digest(inp.raw, inp.offsets)
     elif attached_as_source:  # (as read_inputs makes the points: float32)
@@ -185,11 +199,18 @@ def solved_inputs(setup, inp) -> dict:
     return _tagged(setup, frame_inputs(
         inp, setup.signature(identities=False), [e.inputs for e in entries],
         [(e.double_sided, e.offset) for e in entries],
-        growth.inputs if growth is not None else None))
+        growth.inputs if growth is not None else None,
+        structure=setup.structure(identities=False), values=keyed.values(setup.ob)))
 
 
 #: Part of a frame-inputs record made from a render's depsgraph (see :func:`first_change`).
 RENDER_PART = "render"
+#: Parts of a frame-inputs record with what the shot's frames share
+#: (:func:`setup.structure`) and the keyable values at the frame (:func:`keyed.values`).
+#: Records made before they existed have neither: ``settings`` and ``colliders`` hold
+#: them there (compared as they are).
+STRUCTURE_PART = "structure"
+VALUES_PART = "values"
 #: Part of a frame-inputs record standing for the source when Fur Attach is on
 #: (:func:`frame_inputs`). Bakes made before it have ``source``, the digest of the
 #: attached points: :func:`current_inputs` makes that part for them (``like``,
@@ -222,7 +243,9 @@ def current_inputs(setup, inp, like=None) -> dict:
     return _tagged(setup, frame_inputs(inp, signature(ob, scene=scene, identities=False),
                                        cols, [(r.double_sided, r.offset) for r in refs],
                                        surface,
-                                       attached_as_source=like is not None and "source" in like))
+                                       attached_as_source=like is not None and "source" in like,
+                                       structure=structure(ob, scene=scene, identities=False),
+                                       values=keyed.values(ob)))
 
 
 def seen_inputs(setup, inp) -> dict:
@@ -238,14 +261,26 @@ def saw(setup, record) -> None:
     setup.rt.seen = ((setup.scene.name, setup.frame), record)
 
 
-def fixed_change(setup, old) -> str:
-    """What changed, in words, in the parts of record ``old`` that do not depend on the
-    frame (the settings, the colliders' number and options), '' when nothing did (or
-    ``old`` is None). A step from a cached frame checks them: that frame cannot be
-    evaluated again at this one."""
+def fixed_change(setup, old, frame=None, animation=None) -> str:
+    """What changed, in words, in the settings record ``old`` (of cached ``frame``) was
+    made with: what every frame shares, and the keyable values at ``frame``
+    (:func:`keyed.values` there, without going there); '' when nothing did (or ``old``
+    is None). A step from a cached frame checks them: that frame cannot be evaluated
+    again at this one. A record made before values were recorded compares the
+    settings and the colliders' options of the current frame instead."""
     if old is None:
         return ""
     ob, scene = setup.ob, setup.scene
+    if VALUES_PART in old and STRUCTURE_PART in old:
+        now = structure(ob, scene=scene, identities=False)
+        if old[STRUCTURE_PART] != now:
+            return structure_change(old[STRUCTURE_PART], now)
+        at = None if frame is None or frame == setup.frame else frame
+        animation = keyed.Animation(ob) if animation is None else animation
+        path = keyed.first_difference(old[VALUES_PART], keyed.values(ob, at, animation))
+        if path is None:
+            return ""
+        return value_change(ob, path, frame if animation.animates(path) else None)
     refs = collider_objects(ob, scene)
     flags = framecache.text_digest(repr([(r.double_sided, r.offset) for r in refs]))
     if old.get("colliders") != flags:
@@ -257,6 +292,26 @@ def fixed_change(setup, old) -> str:
             signature(ob, scene=scene, identities=False)):
         return "the settings changed"
     return ""
+
+
+def value_change(ob, path, frame) -> str:
+    """"Recovery Rate changed at frame 12": the keyable setting at ``path`` changed its
+    value at ``frame`` ("Recovery Rate changed" for None: one value for every frame)."""
+    where = f" at frame {frame}" if frame is not None else ""
+    return f"{keyed.label(ob, path)} changed{where}"
+
+
+def first_changed_frame(setup, frames) -> tuple[int, str] | None:
+    """(the first of the cached ``frames`` whose settings record no longer holds, why),
+    or None: the frames before it stay valid, it and every later one must be solved
+    again (:func:`fixed_change`)."""
+    memory = setup.rt.memory
+    animation = keyed.Animation(setup.ob)
+    for f in sorted(frames):
+        why = fixed_change(setup, memory.inputs(f), f, animation)
+        if why:
+            return f, why
+    return None
 
 
 def changed_objects(setup, old, new) -> set | None:
@@ -296,6 +351,14 @@ def describe_change(ob, part, scene, old=None, new=None) -> str:
         return "a collider's Double Sided or Collision Offset changed"
     if part == "settings":
         return "the settings changed"
+    if part == STRUCTURE_PART:
+        return structure_change((old or {}).get(part, ""), (new or {}).get(part, ""))
+    if part == VALUES_PART:
+        path = keyed.first_difference((old or {}).get(part), (new or {}).get(part) or {})
+        if not path:
+            return "the settings changed"
+        at = scene.frame_current if keyed.Animation(ob).animates(path) else None
+        return value_change(ob, path, at)
     if part == "source":
         return f"the source hair '{ob.name}' changed (groom, modifiers or placement)"
     if part == "enabled":
@@ -351,6 +414,8 @@ def first_change(setup, old, new) -> str | None:
 def _comparable(setup, old, new) -> tuple[dict, dict]:
     """``old`` and ``new`` without what :func:`first_change` does not compare."""
     skip = {RENDER_PART}
+    # (records made before the settings were recorded per frame: ``settings`` holds them)
+    skip |= {p for p in (STRUCTURE_PART, VALUES_PART) if p not in old}
     if (RENDER_PART in old) != (RENDER_PART in new):
         refs = collider_objects(setup.ob, setup.scene)
         skip |= {f"collider {i} shape" for i, r in enumerate(refs)

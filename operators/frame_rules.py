@@ -33,7 +33,7 @@ import bpy
 import numpy as np
 
 from ..core import framecache
-from . import baked, bridge, frame_outputs, frame_solve, groom_stage
+from . import baked, bridge, frame_outputs, frame_solve, groom_stage, keyed
 from .clock import clock
 from .colliders import collider_note, read_for_solve, surface_as_collider
 from .frame_inputs import (
@@ -41,6 +41,7 @@ from .frame_inputs import (
     baked_frame_change,
     cached_frame_change,
     changed_objects,
+    first_changed_frame,
     fixed_change,
     prepare_input,
     read_inputs,
@@ -49,7 +50,7 @@ from .frame_inputs import (
     shown,
     solved_inputs,
 )
-from .setup import signature_change
+from .setup import structure_change
 
 
 class Outcome(enum.Enum):
@@ -132,19 +133,31 @@ def _frame_rules(setup, inp):
         shown = _show_cached_if_current(setup, inp, note)
         if shown is not None:
             return shown
-    if f != s.frame_start:
+    if not starts_here(setup):
         if (f - 1) not in rt.memory:
             return _hold(setup, inp)
-        # Frame f - 1 cannot be evaluated again from here: at least what does not
-        # depend on the frame (settings, colliders) must be what it was solved with.
-        why = fixed_change(setup, rt.memory.inputs(f - 1))
-        if why:
-            rt.drop_cache(why, s.frame_start, f)
+        # Frame f - 1 cannot be evaluated again from here: at least its settings
+        # (what every frame shares, and the keyable values at f - 1) must be what it
+        # was solved with.
+        if fixed_change(setup, rt.memory.inputs(f - 1), f - 1):
+            drop_changed(setup)
             return _hold(setup, inp)
     held = _prepare_solver(setup, inp)
     if held is not None:
         return held
     return _solve(setup, inp, note)
+
+
+def starts_here(setup) -> bool:
+    """Does the frame solve from the groomed shape: the start frame, or the first frame
+    after frames where the setup's Enabled (keyed) was off? (Disabled frames show the
+    source; the fur starts again from its groom when it is turned on.)"""
+    f, s = setup.frame, setup.s
+    if f == s.frame_start:
+        return True
+    if f < s.frame_start:
+        return False
+    return keyed.setup_value(setup.ob, "enabled", f - 1) is False
 
 
 def _not_evaluated(setup):
@@ -185,13 +198,15 @@ def _read_frame(setup):
         prepare_input(setup, inp)
     if not s.is_baked:  # a bake checks its own curve layout first
         frame_outputs.sync_output(setup, inp)
-    sig = setup.signature()
+    sig = setup.structure()
     if rt.signature is not None and sig != rt.signature and not s.is_baked:
-        # Changed without an update callback (deleted collider, undo, driver): like
-        # any change, it drops the playback cache.
-        rt.drop_cache(signature_change(rt.signature, sig), s.frame_start, setup.frame)
+        # What every frame shares changed without an update callback (a deleted
+        # collider, undo): like any such change, it drops the playback cache. (The
+        # keyable values are inputs of each frame: their records say when they hold.)
+        rt.drop_cache(structure_change(rt.signature, sig), s.frame_start, setup.frame)
         rt.colliders.clear()
     rt.signature = sig
+    rt.values_seen = keyed.fingerprint(setup.ob)  # (the depsgraph check compares it)
     return inp
 
 
@@ -243,6 +258,13 @@ def _show_cached_if_current(setup, inp, note):
         return Outcome.CACHE, written
     if f == start:
         return None  # solved again (which drops every cached frame)
+    changed = drop_changed(setup)
+    if changed is not None and changed[0] <= f:
+        # A setting's value changed at a cached frame (a key edited): the frames
+        # before it hold; f is solved again from f - 1 when that is one of them.
+        if changed[0] == f and (f - 1) in rt.memory:
+            return None
+        return _hold(setup, inp)
     if _key_moved_ahead(setup, f):
         # Only the frames from f on were solved from other inputs (a key moved after
         # f - 1): solve f again from f - 1.
@@ -263,7 +285,7 @@ def _key_moved_ahead(setup, f) -> bool:
         return False
     if fr.state is None and rt.solver_frame != f - 1:
         return False
-    if fixed_change(setup, fr.inputs):
+    if fixed_change(setup, fr.inputs, f - 1):
         return False
     objects = changed_objects(setup, rt.memory.inputs(f), rt.seen[1] if rt.seen else None)
     return objects is not None and objects <= rt.trusted
@@ -282,6 +304,9 @@ def _prepare_solver(setup, inp):
         rt.dropped = ""
         rt.memory.start = f
         rt.memory.limit = int(s.memory_limit * 1024 * 1024)
+    elif starts_here(setup):  # enabled again after disabled frames: from the groom
+        solver.reset()
+        rt.drop_frames_after(f - 1, s.frame_start)
     elif rt.solver_frame != f - 1:
         state = rt.memory.state(f - 1)
         if state is None:
@@ -459,7 +484,11 @@ def _hold(setup, inp, reason=""):
                          f"to frame {start})")
         return Outcome.OUTDATED, written
     if here:
-        setup.set_status("WARNING", dropped_message(f, rt.dropped_why, start))
+        # Only the frames from the change on were dropped: playing on from the newest
+        # one kept (its state known) solves the rest.
+        resume = k if rt.dropped_from > start and k is not None and (
+            rt.memory.frames[k].state is not None) else None
+        setup.set_status("WARNING", dropped_message(f, rt.dropped_why, start, resume))
         return Outcome.OUTDATED, written
     why = f" ({reason})" if reason else ""
     setup.set_status(
@@ -469,10 +498,26 @@ def _hold(setup, inp, reason=""):
     return Outcome.OUTDATED, written
 
 
-def dropped_message(f, why, start) -> str:
-    """The status of frame ``f`` when ``why`` (a change seen there) dropped the cache."""
-    return (f"Frame {f} is outdated: {why}. The playback cache is dropped: go to frame "
-            f"{start} and play, or press Bake.")
+def drop_changed(setup):
+    """Drop the cached frames from the first one whose settings record no longer holds
+    (:func:`frame_inputs.first_changed_frame`: a key edited, a setting changed); that
+    (frame, why), or None when every cached frame holds."""
+    rt, s = setup.rt, setup.s
+    changed = first_changed_frame(setup, rt.memory.frames)
+    if changed is not None:
+        first, why = changed
+        rt.drop_from(first, why, s.frame_start, setup.frame)
+    return changed
+
+
+def dropped_message(f, why, start, resume=None) -> str:
+    """The status of frame ``f`` when ``why`` (a change seen there) dropped cached
+    frames: every one, or those after ``resume``, the frame to play on from."""
+    if resume is None or resume < start:
+        return (f"Frame {f} is outdated: {why}. The playback cache is dropped: go to frame "
+                f"{start} and play, or press Bake.")
+    return (f"Frame {f} is outdated: {why}. The frames after {resume} are dropped: go to "
+            f"frame {resume} and play, or press Bake.")
 
 
 def _show_baked(setup, inp, note):
@@ -511,10 +556,11 @@ def _show_baked(setup, inp, note):
                                   attributes=shown.attributes)
     rt.stats = frame_solve.frame_stats(shown.status, fe, source="bake")
     why = baked_frame_change(setup, inp, shown.inputs) if fe == f else ""
-    if baked.settings_differ(setup.ob, setup.scene):
+    other = baked.settings_change(setup.ob, setup.scene, directory, fe, shown.inputs)
+    if other:
         rt.outdated = True
-        setup.set_status("WARNING", f"Frame {f} was {baked.MESSAGE} (the baked frame is "
-                         "still shown)")
+        setup.set_status("WARNING", f"Frame {fe} was {baked.message(other)} (the baked "
+                         "frame is still shown)")
     elif why:  # still shown (it is what renders), never as if current
         rt.outdated = True
         setup.set_status("WARNING", f"Frame {f} of the bake is outdated: {why} since it was "

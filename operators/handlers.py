@@ -32,10 +32,10 @@ import os
 import bpy
 from bpy.app.handlers import persistent
 
-from . import bridge, invalidation, ops_bake, registry, scenes
+from . import bridge, invalidation, keyed, ops_bake, registry, scenes
 from .colliders import collider_objects
 from .dependencies import dependencies_stale, update_dependencies
-from .setup import Setup, signature, signature_change
+from .setup import Setup, structure, structure_change
 
 
 @persistent
@@ -98,10 +98,16 @@ def _check_edits(ob, scene, depsgraph, edited) -> None:
         update_dependencies(ob)  # (a no-op next time: no update loop)
     if rt is None or rt.baking or ob.furcollide.is_baked:
         return
-    if rt.signature is not None and signature(ob, scene=scene) != rt.signature:
-        why = signature_change(rt.signature, signature(ob, scene=scene))
+    if rt.signature is not None and structure(ob, scene=scene) != rt.signature:
+        why = structure_change(rt.signature, structure(ob, scene=scene))
         invalidation.invalidate(ob, scene, reason=why, colliders=True)
         return
+    values = keyed.fingerprint(ob)
+    if rt.values_seen is not None and values != rt.values_seen and len(rt.memory):
+        # A key edited (or a setting changed without an update callback): the frames
+        # from the first one whose values changed are dropped, the others hold.
+        invalidation.values_changed(Setup(ob, scene, depsgraph, rt))
+    rt.values_seen = values
     inputs = {ob.name} | {o.name for r in collider_objects(ob, scene) for o in r.objects}
     if ob.data.surface is not None:
         inputs.add(ob.data.surface.name)

@@ -14,17 +14,29 @@ import bpy
 
 from . import baked, frame_rules, registry, scenes
 from .dependencies import update_dependencies
-from .frame_inputs import current_inputs, describe_change, first_change, read_inputs
+from .frame_inputs import (
+    STRUCTURE_PART,
+    VALUES_PART,
+    current_inputs,
+    describe_change,
+    first_change,
+    read_inputs,
+)
+from .setup import Setup
 
 
-def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=True) -> None:
+def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=True,
+               values=False) -> None:
     """Drop the setup's unbaked playback cache after a change, like Blender's point cache.
 
     Every cached frame goes (a change of a setting, of the colliders or of an input
     changes what every frame is solved from): the frames shown next are solved again
     from the start frame on and, until then, the setup is outdated and each frame that is
     not cached says ``reason`` (e.g. "the settings changed"). Only ``from_frame`` at or
-    after the start frame keeps the frames up to it (a shorter frame range).
+    after the start frame keeps the frames up to it (a shorter frame range), and
+    ``values`` (a setting that can be keyed changed) keeps the frames before the first
+    one whose values changed (:func:`values_changed`: with a keyed setting, often all
+    but the current frame and those after it).
 
     A baked setup's bake is not affected (it is read-only until freed; a baked frame
     whose inputs changed is marked outdated when shown); a change of its settings marks
@@ -44,7 +56,10 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
             update_dependencies(ob)
         return
     s = ob.furcollide
-    if from_frame is not None and from_frame >= s.frame_start:
+    if values and from_frame is None:
+        values_changed(Setup(ob, scene, None, rt))
+        rt.values_seen = None
+    elif from_frame is not None and from_frame >= s.frame_start:
         rt.drop_frames_after(from_frame, s.frame_start)
     elif rt.drop_cache(reason, s.frame_start, scene.frame_current) and not s.is_baked:
         f = scene.frame_current
@@ -59,6 +74,26 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
         update_dependencies(ob)
     if refresh:
         schedule_refresh(ob.name)
+
+
+def values_changed(setup) -> None:
+    """The setup's keyable values may have changed (a key edited, a setting changed):
+    drop the cached frames from the first one whose values changed
+    (:func:`frame_rules.drop_changed`), keep the others, and say so when the frame
+    shown is one of the dropped ones; refresh the current frame."""
+    s, rt, f = setup.s, setup.rt, setup.frame
+    changed = frame_rules.drop_changed(setup)
+    if changed is None or s.is_baked:
+        return
+    first, why = changed
+    if s.enabled and first <= f and f > s.frame_start:
+        rt.outdated = True
+        k = rt.memory.newest_before(f)
+        resume = k if first > s.frame_start and k is not None and (
+            rt.memory.frames[k].state is not None) else None
+        registry.set_status(setup.ob, "WARNING",
+                            frame_rules.dropped_message(f, why, s.frame_start, resume))
+    schedule_refresh(setup.ob.name)
 
 
 def edit_seen(setup) -> str | None:
@@ -79,6 +114,11 @@ def edit_seen(setup) -> str | None:
     new = current_inputs(setup, read_inputs(setup, attach=False))  # (the record only)
     old = rt.seen[1]
     rt.seen = (key, new)
+    if VALUES_PART in old:
+        # The settings (their values, and what derives from them) are checked by
+        # values_changed, frame by frame: only the objects are compared here.
+        skip = (STRUCTURE_PART, VALUES_PART, "settings", "colliders")
+        old, new = ({k: v for k, v in r.items() if k not in skip} for r in (old, new))
     part = first_change(setup, old, new)
     return describe_change(setup.ob, part, setup.scene, old, new) if part else ""
 

@@ -24,9 +24,11 @@ from bpy.types import PropertyGroup
 from . import compat, registry
 from .properties_pipeline import FurCollideGroom, FurCollideMotion
 from .property_helpers import (
+    NOT_ANIMATABLE,
     choice,
     degrees,
     factor,
+    fixed,
     hidden,
     offset_property,
     poll_collider,
@@ -149,7 +151,10 @@ class FurCollideSettings(PropertyGroup):
              "next ones along. Hugs tight contacts such as cloth"),
         ],
         "bend",
-        "How a colliding curve is turned out of the mesh",
+        fixed("How a colliding curve is turned out of the mesh",
+              "a curve's state in one mode (its angle, or each segment's turn) means "
+              "nothing in another, so a switch mid-shot would pop. Use two setups"),
+        animatable=False,
     )
     rotation_precision: degrees(
         "Rotation Precision", 0.25,
@@ -263,13 +268,17 @@ class FurCollideSettings(PropertyGroup):
         name="Start",
         default=1,
         update=update_range,
-        description="Frame where the simulation starts from the groomed shape",
+        options=NOT_ANIMATABLE,
+        description=fixed("Frame where the simulation starts from the groomed shape",
+                          "the frame range is the shot's"),
     )
     frame_end: IntProperty(
         name="End",
         default=250,
         update=update_range,
-        description="Last frame that is solved and baked; later frames hold it",
+        options=NOT_ANIMATABLE,
+        description=fixed("Last frame that is solved and baked; later frames hold it",
+                          "the frame range is the shot's"),
     )
     cache_directory: StringProperty(
         name="Cache Directory",
@@ -285,6 +294,7 @@ class FurCollideSettings(PropertyGroup):
         min=16,
         soft_max=8192,
         subtype="NONE",
+        options=NOT_ANIMATABLE,
         update=update_memory_limit,
         description="Megabytes of RAM the playback cache of this setup may use. Past "
         "it, old frames are dropped (bake to keep everything)",
@@ -294,15 +304,18 @@ class FurCollideSettings(PropertyGroup):
     # ------------------------------------------------------------ Fur Attach
     use_fur_attach: toggle(
         "Fur Attach", False,
-        "Move the source's curves rigidly with the evaluated growth surface from the "
-        "reference frame, instead of using the source's own animation (press Bind first)",
-        update=update_attach,
+        fixed("Move the source's curves rigidly with the evaluated growth surface from the "
+              "reference frame, instead of using the source's own animation (press Bind "
+              "first)", "it changes every frame's input curves at once"),
+        update=update_attach, animatable=False,
     )
     attach_reference_frame: IntProperty(
         name="Reference Frame",
         default=1,
-        description="Frame whose surface and curves Bind uses: each curve is tied to the "
-        "surface triangle under its root there. Press Bind again after changing it",
+        options=NOT_ANIMATABLE,
+        description=fixed("Frame whose surface and curves Bind uses: each curve is tied to "
+                          "the surface triangle under its root there. Press Bind again "
+                          "after changing it", "Bind reads it once"),
     )
     attach_id: hidden(StringProperty, "Attach ID", "")
 

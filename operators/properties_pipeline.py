@@ -15,7 +15,15 @@ from bpy.props import (
 )
 from bpy.types import PropertyGroup
 
-from .property_helpers import hidden, poll_hair, stat, update_groom, update_motion
+from .property_helpers import (
+    NOT_ANIMATABLE,
+    fixed,
+    hidden,
+    poll_hair,
+    stat,
+    update_groom,
+    update_motion,
+)
 
 _STAGES = [
     ("INPUT", "Before Collision", "Move the input curves; FurCollide then resolves the "
@@ -162,8 +170,10 @@ class FurCollideGroom(PropertyGroup):
     )
     guides: IntProperty(
         name="Guides per Curve", default=4, min=1, max=32, update=update_groom,
-        description="How many nearest guides (by root, at the reference pose) each render "
-        "curve blends. Press Bind Groom again after changing it",
+        options=NOT_ANIMATABLE,
+        description=fixed("How many nearest guides (by root, at the reference pose) each "
+                          "render curve blends. Press Bind Groom again after changing it",
+                          "Bind Groom reads it once"),
     )
     use_clearance: BoolProperty(
         name="Clearance Pass", default=True, update=update_groom,

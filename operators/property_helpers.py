@@ -33,16 +33,19 @@ def never_raises(update):
 
 @never_raises
 def update_settings(self, context):
-    invalidation.invalidate(self.id_data, context.scene, reason="the settings changed")
+    invalidation.invalidate(self.id_data, context.scene, reason="the settings changed",
+                            values=True)
 
 
 def update_colliders_because(reason):
-    """An update for the colliders' properties: drops the playback cache saying ``reason``
-    and forgets the core Colliders."""
+    """An update for the colliders' properties: drops the cached frames from the first
+    one it changes (every one when the value is the same at every frame) and forgets
+    the core Colliders."""
 
     @never_raises
     def update(self, context):
-        invalidation.invalidate(self.id_data, context.scene, reason=reason, colliders=True)
+        invalidation.invalidate(self.id_data, context.scene, reason=reason, colliders=True,
+                                values=True)
 
     return update
 
@@ -85,7 +88,15 @@ def update_every_frame(reason):
 
 
 update_attach = update_every_frame("Fur Attach changed")
-update_motion = update_every_frame("the motion settings changed")
+
+
+@never_raises
+def update_motion(self, context):
+    """A wind, jiggle, Region of Influence or distance setting changed: the cached frames
+    from the first one it changes go. (The memory cache stores results against the
+    input before motion, so the frames before it still hold.)"""
+    invalidation.invalidate(self.id_data, context.scene,
+                            reason="the motion settings changed", values=True)
 
 
 @never_raises
@@ -118,8 +129,10 @@ def update_groom(self, context):
 # leaves the name, default and the artist-facing tooltip to the call.
 
 
-def toggle(name, default, description, update=update_settings):
-    return BoolProperty(name=name, default=default, update=update, description=description)
+def toggle(name, default, description, update=update_settings, animatable=True):
+    kw = {} if animatable else {"options": NOT_ANIMATABLE}
+    return BoolProperty(name=name, default=default, update=update, description=description,
+                        **kw)
 
 
 def factor(name, default, description):
@@ -146,10 +159,22 @@ def offset_property(description, update):
     )
 
 
-def choice(name, items, default, description):
+#: Options of a setting that cannot change mid-shot: Blender refuses to key or drive it
+#: ("property ... not animatable"); its tooltip says why (:func:`fixed`).
+NOT_ANIMATABLE = set()
+
+
+def fixed(description, why):
+    """The tooltip of a setting that cannot be keyed: ``description`` and ``why``."""
+    return f"{description}. It cannot be keyed or driven: {why}"
+
+
+def choice(name, items, default, description, animatable=True):
     """One of a few named behaviours (``items``: identifier, label, tooltip)."""
+    kw = {} if animatable else {"options": NOT_ANIMATABLE}
     return EnumProperty(
-        name=name, items=items, default=default, update=update_settings, description=description
+        name=name, items=items, default=default, update=update_settings, description=description,
+        **kw,
     )
 
 

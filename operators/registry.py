@@ -51,7 +51,12 @@ class Runtime:
     memory: framecache.MemoryCache = field(default_factory=framecache.MemoryCache)
     solver_frame: int | None = None  # frame whose result the solver state holds
     hold: tuple | None = None  # (frame, world positions, status) of newest frame
-    signature: str | None = None  # colliders + settings seen last
+    #: What every frame of the shot shares, seen last (``setup.structure``: which
+    #: objects collide, Mode, ...); a change drops the playback cache.
+    signature: str | None = None
+    #: ``keyed.fingerprint`` seen last: the depsgraph check looks for changed values
+    #: only when it changed (keys edited, a setting changed without an update).
+    values_seen: int | None = None
     outdated: bool = False
     baking: bool = False
     status: tuple = ("INFO", "")
@@ -72,7 +77,8 @@ class Runtime:
     #: cache was dropped".
     dropped: str = ""
     dropped_why: str = ""  # the change itself ("'Box' moved")...
-    dropped_at: int | None = None  # ...and the frame it was seen at
+    dropped_at: int | None = None  # ...and the frame it was seen at...
+    dropped_from: int = 0  # ...and the first frame dropped
     #: ((scene name, frame), frame-inputs record) the frame handler last evaluated: the
     #: depsgraph check compares the scene with it (an update that changes nothing the
     #: frame was solved or shown from is the animation evaluated again, not an edit).
@@ -126,6 +132,22 @@ class Runtime:
         self.groom_shown = None
         self.signature = None  # accept the new settings without a second drop
 
+    def drop_from(self, first: int, why: str, start: int, frame: int | None = None) -> bool:
+        """Drop the cached frames from ``first`` on (every one when ``first`` is the
+        start frame ``start`` or before it: :meth:`drop_cache`): ``why`` (a change seen
+        at ``frame``) made them other than they were solved. True when frames were
+        dropped."""
+        if first <= start:
+            return self.drop_cache(why, start, frame)
+        had = any(k >= first for k in self.memory.frames) or (
+            self.solver_frame is not None and self.solver_frame >= first)
+        self.drop_frames_after(first - 1, start)
+        self.trusted.clear()
+        if had and why:
+            self.dropped = f"{why}: the frames from {first} on were dropped"
+            self.dropped_why, self.dropped_at, self.dropped_from = why, frame, first
+        return had
+
     def drop_cache(self, why: str, start: int, frame: int | None = None) -> bool:
         """Drop the whole playback cache, as Blender's point cache does on a change:
         the frames shown next are solved again from the start frame ``start`` on, and
@@ -138,7 +160,7 @@ class Runtime:
         self.trusted.clear()
         if had and why:
             self.dropped = f"{why}: the playback cache was dropped"
-            self.dropped_why, self.dropped_at = why, frame
+            self.dropped_why, self.dropped_at, self.dropped_from = why, frame, start
         return had
 
 

@@ -14,8 +14,8 @@ import bpy
 
 from .. import core
 from ..core import framecache
-from . import motion, registry
-from .colliders import collider_objects
+from . import keyed, motion, registry
+from .colliders import collider_objects, in_scene
 
 
 class Setup:
@@ -98,6 +98,10 @@ class Setup:
         """:func:`signature` in the scene being evaluated."""
         return signature(self.ob, scene=self.scene, identities=identities)
 
+    def structure(self, identities=True) -> str:
+        """:func:`structure` in the scene being evaluated."""
+        return structure(self.ob, scene=self.scene, identities=identities)
+
     def time_key(self):
         """:func:`time_key` in the scene being evaluated."""
         return time_key(self.ob, self.scene)
@@ -162,6 +166,39 @@ def signature(ob, stable=False, scene=None, identities=True) -> str:
     return json.dumps(parts)
 
 
+def structure(ob, stable=False, scene=None, identities=True) -> str:
+    """Fingerprint of what a setup's frames share, whatever frame they are: everything
+    :func:`signature` holds but the values that can be keyed or driven (those are
+    inputs of each frame: :func:`keyed.values`). Which objects collide (every entry of
+    the list, enabled or not, and the collider collection's members), the Mode, the
+    growth surface, the Enable Attribute, the frame the shot starts at, Fur Attach's
+    binding and the frame rate. ``stable`` and ``identities`` as in :func:`signature`.
+    """
+    s = ob.furcollide
+    entries = [c.object for c in s.colliders]
+    if s.collider_collection is not None:
+        entries.append(s.collider_collection)
+    cols = [
+        (o.name if stable else o.session_uid) if identities else True
+        for o in entries
+        if o is not None and (not isinstance(o, bpy.types.Object) or in_scene(o, scene))
+    ]
+    if identities and s.collider_collection is not None:
+        cols.append(sorted(
+            (o.name if stable else o.session_uid) for o in s.collider_collection.all_objects))
+    surf = ob.data.surface
+    surface = "" if surf is None else (surf.name if stable else surf.session_uid) if (
+        identities) else True
+    # (wind and jiggle run on seconds: frame / fps; only then does the fps count)
+    anim = keyed.Animation(ob)
+    timed = s.motion.use_wind or s.motion.use_jiggle or any(
+        anim.animates(f"furcollide.motion.{n}") for n in ("use_wind", "use_jiggle"))
+    parts = [cols, s.mode, s.enable_attribute, s.frame_start, surface,
+             ["fur_attach", s.attach_id] if s.use_fur_attach else None,
+             motion.fps(scene or bpy.context.scene) if timed else None]
+    return json.dumps(parts)
+
+
 def signature_change(old: str, new: str) -> str:
     """What differs between two :func:`signature` strings, in words."""
     try:
@@ -174,6 +211,26 @@ def signature_change(old: str, new: str) -> str:
         return "the colliders changed"
     if a[4] != b[4]:
         return "the growth surface changed"
+    return "the settings changed"
+
+
+def structure_change(old: str, new: str) -> str:
+    """What differs between two :func:`structure` strings, in words."""
+    try:
+        a, b = json.loads(old), json.loads(new)
+    except ValueError:
+        return "the settings changed"
+    names = ("", "Mode", "Enable Attribute", "Frame Start", "", "Fur Attach",
+             "the frame rate")
+    if a[0] != b[0]:
+        if len(a[0]) != len(b[0]):
+            return f"a collider was {'added' if len(b[0]) > len(a[0]) else 'removed'}"
+        return "the colliders changed"
+    if a[4] != b[4]:
+        return "the growth surface changed"
+    for i, name in enumerate(names):
+        if name and a[i] != b[i]:
+            return f"{name} changed"
     return "the settings changed"
 
 

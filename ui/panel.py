@@ -46,7 +46,7 @@ class _Sub:
     def prepare(self, context):
         layout = self.layout
         layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout.use_property_decorate = True  # keyframe decorators: settings can be keyed
         s = self.settings(context)
         # (greyed where the setup belongs to another scene: its settings are that scene's)
         layout.enabled = not s.is_baked and not registry.foreign_message(s.id_data)
@@ -92,7 +92,7 @@ class FURCOLLIDE_PT_main(Panel):
             return
         s = src.furcollide
         layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout.use_property_decorate = True
         col = layout.column()
         col.enabled = not registry.foreign_message(src)  # (another scene's setup)
         col.prop(s, "enabled")

@@ -144,7 +144,7 @@ class FURCOLLIDE_PT_pipeline(Panel):
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout.use_property_decorate = True  # keyframe decorators: stages can be keyed
         s = context.scene.furcollide_pipeline
         ob = context.object
 

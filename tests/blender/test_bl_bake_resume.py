@@ -185,8 +185,9 @@ def _fingerprint(fc, d, f):
 
 def test_changed_settings_do_not_resume(fc, tmp_path, monkeypatch, capsys):
     """README: if the settings changed, the bake starts over: frames 1-4 of the
-    interrupted bake are written again with the new settings (new files, the new
-    settings' fingerprint), and the result is a clean bake of the new settings."""
+    interrupted bake are written again with the new settings (new files, each with
+    the new value in its record), and the result is a clean bake of the new settings.
+    (The fingerprint holds what every frame shares; the values are each frame's.)"""
     hair, box, out = saved_scene(fc, tmp_path)
     bake_crashing_at(fc, monkeypatch, 5)
     d = bpy.path.abspath(hair.furcollide.bake_path)
@@ -198,9 +199,11 @@ def test_changed_settings_do_not_resume(fc, tmp_path, monkeypatch, capsys):
     assert bpy.ops.furcollide.bake() == {"FINISHED"}
     assert "resuming" not in capsys.readouterr().out
     new_fp = fc.bake.settings_fingerprint(hair)
-    assert new_fp != old_fp
+    assert new_fp == old_fp  # (Recovery Rate is a value of each frame)
     for f in range(1, 13):
         assert _fingerprint(fc, d, f) == new_fp, f
+        rec = fc.cache.read_inputs(d, f)
+        assert rec["values"]["furcollide.recovery_rate"] == pytest.approx(0.9), f
     for f in range(1, 5):  # rewritten (os.replace: a new file), not kept
         assert os.stat(fc.cache.frame_path(d, f)).st_ino != old[f], f
     resumed = {f: fc.cache.read_frame(d, f) for f in range(1, 13)}

@@ -72,29 +72,29 @@ def _shows_the_bake(fc, guides, out, gout, baked, frames, outdated):
         np.testing.assert_array_equal(status_of(gout), baked[f][2])
         assert s.is_outdated == outdated, (f, s.status_message)
         if outdated:
-            assert "baked with other settings: Free Bake and bake again" in \
-                s.status_message, s.status_message
+            assert "baked with other settings (" in s.status_message, s.status_message
+            assert "changed): Free Bake and bake again" in s.status_message, s.status_message
         else:
             assert s.status_message == "", s.status_message
 
 
-CHANGES = [
-    ("motion", "wind_strength", 0.5),
-    ("motion", "use_wind", False),
-    ("motion", "use_jiggle", False),
-    ("motion", "jiggle_amount", 2.0),
-    ("motion", "use_region_of_influence", False),
-    ("motion", "roi_margin", 0.5),
-    ("motion", "distance_max", 0.0),
-    ("", "use_fur_attach", False),
-    ("", "collision_offset", 0.02),
-    ("groom", "use_clearance", False),
+CHANGES = [  # (group, property, new value, what the status names)
+    ("motion", "wind_strength", 0.5, "Wind Strength"),
+    ("motion", "use_wind", False, "Wind"),
+    ("motion", "use_jiggle", False, "Jiggle"),
+    ("motion", "jiggle_amount", 2.0, "Jiggle Amount"),
+    ("motion", "use_region_of_influence", False, "Region of Influence"),
+    ("motion", "roi_margin", 0.5, "Region of Influence Margin"),
+    ("motion", "distance_max", 0.0, "Max Distance"),
+    ("", "use_fur_attach", False, "Fur Attach"),
+    ("", "collision_offset", 0.02, "Collision Offset"),
+    ("groom", "use_clearance", False, "Clearance Pass"),
 ]
 
 
-@pytest.mark.parametrize("part,name,value", CHANGES, ids=[c[1] for c in CHANGES])
+@pytest.mark.parametrize("part,name,value,label", CHANGES, ids=[c[1] for c in CHANGES])
 def test_a_setting_changed_on_a_baked_setup_marks_it_outdated(fc, tmp_path, part, name,
-                                                               value):
+                                                               value, label):
     """Changed from Python (greyed in the panel): at once outdated, with the status;
     every frame still shows the bake (guides and render groom), marked outdated; set
     back, the setup is current again."""
@@ -104,8 +104,9 @@ def test_a_setting_changed_on_a_baked_setup_marks_it_outdated(fc, tmp_path, part
     before = getattr(data, name)
     setattr(data, name, value)
     assert s.is_outdated  # at once, before any frame change
-    assert s.status_message == ("This setup was baked with other settings: Free Bake and "
-                                "bake again (the frames shown are the bake's)")
+    assert s.status_message == (f"This setup was baked with other settings ({label} "
+                                "changed): Free Bake and bake again (the frames shown are "
+                                "the bake's)")
     _shows_the_bake(fc, guides, out, gout, baked, (3, 6, 1), outdated=True)
     setattr(data, name, before)
     assert not s.is_outdated and s.status_message == ""

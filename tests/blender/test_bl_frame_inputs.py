@@ -289,11 +289,11 @@ def test_a_setting_changed_mid_shot_then_the_advice_works(fc, tmp_path):
     s = hair.furcollide
     before = play(scene, hair, out, range(1, 6), [box])
     s.mode, s.collision_offset = "soft", 0.02
-    outdated(hair, "Frame 5 is outdated", "the settings changed", "go to frame 1")
+    outdated(hair, "Frame 5 is outdated", "Mode changed", "go to frame 1")
     scene.frame_set(6)
     outdated(hair, "Play from frame 1")
     scene.frame_set(3)  # an earlier frame: it was solved with the old settings
-    outdated(hair, "Frame 3 is not cached", "the settings changed", "Play from frame 1")
+    outdated(hair, "Frame 3 is not cached", "Mode changed", "Play from frame 1")
     got = play(scene, hair, out, range(1, 9), [box])
     assert not np.array_equal(got[3], before[3])
     same(got, bake(fc, hair))
@@ -311,5 +311,5 @@ def test_collider_added_or_its_options_changed_on_a_cached_frame(fc, tmp_path):
     play(scene, hair, out, range(1, 6), [box, wall])
     hair.furcollide.colliders[1].double_sided = True
     scene.frame_set(2)
-    outdated(hair, "Frame 2 is not cached", "Double Sided or Collision Offset")
+    outdated(hair, "Frame 2 is not cached", "'Wall' Double Sided changed")
     same(play(scene, hair, out, range(1, 9), [box, wall]), bake(fc, hair))

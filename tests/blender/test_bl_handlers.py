@@ -48,7 +48,7 @@ DEPSGRAPH_CALLS = [
     ("registry", "get_runtime"),
     ("handlers", "dependencies_stale"),
     ("handlers", "collider_objects"),
-    ("handlers", "signature"),
+    ("handlers", "structure"),
     ("invalidation", "invalidate"),
 ]
 
@@ -134,7 +134,7 @@ def test_refresh_timer_refreshes_the_current_frame(fc, timers, monkeypatch):
     hair.furcollide.recovery_rate = 0.9  # a setting: drops frames, schedules a refresh
     assert len(timers) == 1
     # the setting's update already says so (the playback cache was dropped) ...
-    assert fc.registry.status_for(hair)[1].startswith("Frame 3 is outdated: the settings")
+    assert fc.registry.status_for(hair)[1].startswith("Frame 3 is outdated: Recovery Rate")
     fc.registry.set_status(hair, "INFO", "")
     inv = _module("invalidation")
     seen = []
@@ -146,7 +146,7 @@ def test_refresh_timer_refreshes_the_current_frame(fc, timers, monkeypatch):
     # ... and the timer evaluated the current frame again, which says it once more
     assert seen == [(hair.name, 3)], seen
     level, message = fc.registry.status_for(hair)
-    assert level == "WARNING" and message.startswith("Frame 3 is outdated: the settings "
+    assert level == "WARNING" and message.startswith("Frame 3 is outdated: Recovery Rate "
                                                      "changed"), message
 
 

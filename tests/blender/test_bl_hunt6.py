@@ -303,7 +303,7 @@ def test_a_setting_changed_mid_shot_drops_the_playback_cache(fc):
     hair.furcollide.recovery_rate = 0.8
     demo.scene.frame_set(7)
     s = hair.furcollide
-    assert s.is_outdated and "the settings changed" in s.status_message, s.status_message
+    assert s.is_outdated and "Recovery Rate changed" in s.status_message, s.status_message
     same(frame_of(out), first[6], "frame 7 after the change: the output held")
 
 
@@ -325,7 +325,8 @@ def test_a_setting_changed_mid_shot(fc, name, value):
     setattr(s, name, value)
     for f in (15, 16, 8, 3):
         scene.frame_set(f)
-        assert s.is_outdated and "the settings changed" in s.status_message, (
+        said = f"{s.bl_rna.properties[name].name} changed"
+        assert s.is_outdated and said in s.status_message, (
             f, s.status_message)
         same(frame_of(out), first[14], f"frame {f} after the change: the output held")
     new = {}

@@ -75,12 +75,12 @@ def test_setting_change_drops_the_playback_cache(fc):
     assert len(rt.memory) == 0
     assert hair.furcollide.is_outdated
     assert hair.furcollide.status_message == (
-        "Frame 6 is outdated: the settings changed. The playback cache is dropped: go to "
+        "Frame 6 is outdated: Mode changed. The playback cache is dropped: go to "
         "frame 1 and play, or press Bake.")
     for f in (3, 9):  # earlier or later: not shown as current, not stepped
         bpy.context.scene.frame_set(f)
         assert hair.furcollide.is_outdated and len(rt.memory) == 0
-        assert "(the settings changed: the playback cache was dropped)" in (
+        assert "(Mode changed: the playback cache was dropped)" in (
             hair.furcollide.status_message)
         assert np.array_equal(fc.positions(out), rec[6])  # the output is left as it was
     positions_per_frame(out, range(1, 13))  # the advice
@@ -154,7 +154,7 @@ def test_a_change_without_an_update_callback_is_not_stepped_from(fc, monkeypatch
     bpy.context.scene.frame_set(7)
     s = hair.furcollide
     assert s.is_outdated and len(rt.memory) == 0
-    assert "Frame 7 is outdated: the settings changed" in s.status_message, s.status_message
+    assert "Frame 7 is outdated: Mode changed" in s.status_message, s.status_message
     positions_per_frame(out, range(1, 8))
     assert not s.is_outdated and s.status_message == ""
 
