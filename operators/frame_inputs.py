@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import framecache
-from . import bridge, keyed, motion
+from . import bridge, keyed, maps, motion
 from .colliders import collider_objects, read_collider_inputs, renders_otherwise
 from .fur_attach import attach_input
 from .setup import signature, structure, structure_change
@@ -55,6 +55,8 @@ class FrameInputs:
     #: Fur Attach's input (``fur_attach.AttachInput``) when it is on: ``points`` are
     #: its attached points (None when read with ``attach=False``: a baked frame shown).
     attached: object = None
+    #: Parameter maps at this frame: setting name -> (C,) values (:func:`maps.read_maps`).
+    maps: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.raw is None:
@@ -84,9 +86,11 @@ def read_inputs(setup, attach=True) -> FrameInputs:
     out = s.output.evaluated_get(depsgraph)
     M_out = bridge.matrix(out)
     mask, warning = bridge.read_curve_mask(data, s.enable_attribute, len(offs) - 1)
+    mapped, map_warnings = maps.read_maps(data, s, offs)
+    warning = "; ".join(w for w in (warning, *map_warnings) if w)
     M_out_inv = bridge.matrix(out, inverted=True)
     common = dict(offsets=offs, enabled=mask, frame=setup.frame, key=key, m_out_inv=M_out_inv,
-                  warning=warning)
+                  warning=warning, maps=mapped)
     if s.use_fur_attach:  # the input stage: curves follow the evaluated growth surface
         att = attach_input(ob, depsgraph, offs, s.core_threads)
         world = np.asarray(att.points(), np.float32) if attach else None
@@ -183,6 +187,8 @@ def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False,
         rec[ATTACHED_PART] = inp.attached.digest
     if inp.enabled is not None:
         rec["enabled"] = framecache.digest(inp.enabled)
+    if inp.maps:
+        rec[MAPS_PART] = maps.digest(inp.maps)
     for i, (matrix, shape) in enumerate(colliders):
         rec[f"collider {i} matrix"] = matrix
         rec[f"collider {i} shape"] = shape
@@ -211,6 +217,8 @@ RENDER_PART = "render"
 #: them there (compared as they are).
 STRUCTURE_PART = "structure"
 VALUES_PART = "values"
+#: Part of a frame-inputs record with the parameter maps' values (:func:`maps.digest`).
+MAPS_PART = "maps"
 #: Part of a frame-inputs record standing for the source when Fur Attach is on
 #: (:func:`frame_inputs`). Bakes made before it have ``source``, the digest of the
 #: attached points: :func:`current_inputs` makes that part for them (``like``,
@@ -361,6 +369,8 @@ def describe_change(ob, part, scene, old=None, new=None) -> str:
         return value_change(ob, path, at)
     if part == "source":
         return f"the source hair '{ob.name}' changed (groom, modifiers or placement)"
+    if part == MAPS_PART:
+        return f"a parameter map of '{ob.name}' changed (its values on the evaluated hair)"
     if part == "enabled":
         return f"the enable attribute '{ob.furcollide.enable_attribute}' of '{ob.name}' changed"
     if part == ATTACHED_PART:

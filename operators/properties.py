@@ -30,6 +30,7 @@ from .property_helpers import (
     factor,
     fixed,
     hidden,
+    map_property,
     offset_property,
     poll_collider,
     poll_hair,
@@ -233,6 +234,13 @@ class FurCollideSettings(PropertyGroup):
         "How much of the deepest push the hair keeps after contact "
         "(0 = recovers fully, 1 = keeps the imprint, like trampled grass)",
     )
+
+    # ------------------------------------------------------------ parameter maps
+    plasticity_map: map_property("Plasticity")
+    recovery_rate_map: map_property("Recovery Rate")
+    collision_offset_map: map_property("Collision Offset")
+    max_angle_map: map_property("Max Angle")
+    scale_minimum_map: map_property("Scale Minimum")
 
     # ---------------------------------------------------------------- pinch
     pinch_resolution: choice(

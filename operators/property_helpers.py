@@ -10,9 +10,9 @@ toggle, a 0..1 factor, an angle...), leaving the name, default and tooltip to th
 
 import functools
 
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from . import bridge, frame_outputs, invalidation, registry
+from . import bridge, frame_outputs, invalidation, maps, registry
 from .colliders import instanced_collection
 
 # ------------------------------------------------------------------ updates
@@ -175,6 +175,21 @@ def choice(name, items, default, description, animatable=True):
     return EnumProperty(
         name=name, items=items, default=default, update=update_settings, description=description,
         **kw,
+    )
+
+
+def map_property(setting):
+    """The name of a float attribute that maps ``setting`` per curve (:mod:`.maps`)."""
+
+    def search(self, context, edit_text):
+        return maps.suggestions(self.id_data, context, edit_text)
+
+    return StringProperty(
+        name=f"{setting} Map", default="", update=update_settings, search=search,
+        description=f"Float attribute of the evaluated hair (per curve, or per point: read "
+        f"at the root) that scales {setting} curve by curve: each curve uses {setting} "
+        "times its value, clamped to the setting's range. Paint it on the growth surface "
+        "and store it on the hair with Geometry Nodes. Empty: the same for every curve",
     )
 
 

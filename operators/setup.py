@@ -16,6 +16,7 @@ from .. import core
 from ..core import framecache
 from . import keyed, motion, registry
 from .colliders import collider_objects, in_scene
+from .maps import MAPPED
 
 
 class Setup:
@@ -90,9 +91,10 @@ class Setup:
     def fps(self) -> float:
         return motion.fps(self.scene)
 
-    def settings(self):
-        """core.Settings for the setup's properties (raises SettingsError)."""
-        return core_settings(self.ob)
+    def settings(self, maps=None):
+        """core.Settings for the setup's properties (raises SettingsError), with the
+        frame's parameter ``maps`` (setting name -> (C,) values) in."""
+        return core_settings(self.ob, maps)
 
     def signature(self, identities=True) -> str:
         """:func:`signature` in the scene being evaluated."""
@@ -114,7 +116,7 @@ class Setup:
         (a mode change resets it: its state is unknown then).
         """
         rt = self.rt
-        settings = self.settings()
+        settings = self.settings(inputs.maps)
         if rt.solver is None:
             rt.solver = core.Solver(inputs.offsets, settings)
             rt.solver_frame = None
@@ -129,9 +131,11 @@ class Setup:
         registry.set_status(self.ob, level, message)
 
 
-def core_settings(ob):
-    """core.Settings for the setup's properties (raises SettingsError)."""
-    return core.Settings(**ob.furcollide.to_core_kwargs())
+def core_settings(ob, maps=None):
+    """core.Settings for the setup's properties (raises SettingsError), with parameter
+    ``maps`` (:func:`maps.read_maps`) in."""
+    kw = ob.furcollide.to_core_kwargs()
+    return core.Settings(**dict(kw, **maps) if maps else kw)
 
 
 def signature(ob, stable=False, scene=None, identities=True) -> str:
@@ -196,6 +200,9 @@ def structure(ob, stable=False, scene=None, identities=True) -> str:
     parts = [cols, s.mode, s.enable_attribute, s.frame_start, surface,
              ["fur_attach", s.attach_id] if s.use_fur_attach else None,
              motion.fps(scene or bpy.context.scene) if timed else None]
+    mapped = {k: getattr(s, f"{k}_map") for k in MAPPED if getattr(s, f"{k}_map")}
+    if mapped:  # (only when in use: structures without maps are unchanged)
+        parts.append(["maps", mapped])
     return json.dumps(parts)
 
 
@@ -231,6 +238,8 @@ def structure_change(old: str, new: str) -> str:
     for i, name in enumerate(names):
         if name and a[i] != b[i]:
             return f"{name} changed"
+    if a[len(names):] != b[len(names):]:
+        return "a parameter map was chosen or cleared"
     return "the settings changed"
 
 

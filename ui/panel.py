@@ -149,6 +149,11 @@ class FURCOLLIDE_PT_colliders(_Sub, Panel):
         sub.prop(s, "collection_double_sided", text="Double Sided")
 
 
+def _map(col, s, name):
+    """The map field under setting ``name`` (an attribute picked from the hair's)."""
+    col.prop(s, f"{name}_map", text="Map", icon="GROUP_VERTEX")
+
+
 class FURCOLLIDE_PT_resolution(_Sub, Panel):
     bl_label = "Resolution"
     bl_options = set()
@@ -159,12 +164,14 @@ class FURCOLLIDE_PT_resolution(_Sub, Panel):
         col.prop(s, "mode")
         col.prop(s, "rotation_precision")
         col.prop(s, "max_angle")
+        _map(col, s, "max_angle")
         sub = col.column()
         sub.active = s.mode == "soft"
         sub.prop(s, "affected_connected_cvs")
         sub.prop(s, "cv_falloff")
         col.prop(s, "attract_to_growth_surface")
         col.prop(s, "collision_offset")
+        _map(col, s, "collision_offset")
         col.prop(s, "threads")
 
 
@@ -181,6 +188,7 @@ class FURCOLLIDE_PT_shrink(_Sub, Panel):
         col = layout.column()
         col.active = s.shrink and s.mode != "soft"
         col.prop(s, "scale_minimum")
+        _map(col, s, "scale_minimum")
         col.prop(s, "scale_angle")
         if s.mode == "soft":
             layout.label(text="Shrink works in Stiff and Bend modes", icon="INFO")
@@ -193,7 +201,9 @@ class FURCOLLIDE_PT_recovery(_Sub, Panel):
         layout, s = self.prepare(context)
         col = layout.column()
         col.prop(s, "recovery_rate")
+        _map(col, s, "recovery_rate")
         col.prop(s, "plasticity")
+        _map(col, s, "plasticity")
 
 
 class FURCOLLIDE_PT_pinch(_Sub, Panel):
