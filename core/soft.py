@@ -75,7 +75,7 @@ class SoftSolve:
             root_k = k == starts[hit]
 
             turn = _SegmentTurn(ctx, todo, o_k, d_k, axis, root_k)
-            kmax = int(np.ceil(ctx.max_angle / p - 1e-9))  # every curve's
+            kmax = np.ceil(ctx.max_angle_of(todo) / p - 1e-9).astype(np.int64)
             kk = scan_bisect(len(todo), lambda items, ks, t=turn: t.clear(items, ks * p), kmax)
             ok = kk >= 0
             if ok.any():
@@ -124,8 +124,9 @@ class SoftSolve:
         of bisected. Where clearance is monotone in the fraction both give
         the same level.
         """
-        ctx, s, p = self.ctx, self.ctx.s, self.ctx.prec
+        ctx, p = self.ctx, self.ctx.prec
         levels = _LEVELS
+        rate = ctx.s.per_curve("recovery_rate", rec)  # a number, or per curve of rec
         seg, rep, starts = ctx.segments(rec)
         q0 = ctx.quat[seg]
         ident = np.zeros_like(q0)
@@ -136,7 +137,7 @@ class SoftSolve:
         qt = np.where(hold[rep][:, None], q0, qt)
         path = _Slerp(q0, qt)  # the arc every probe of this step samples
 
-        q1 = path(np.full(len(q0), s.recovery_rate))
+        q1 = path(np.full(len(q0), rate) if np.ndim(rate) == 0 else rate[rep])
         # Within half a precision step of the target (every segment): land on it.
         conj = qt * np.array([1.0, -1.0, -1.0, -1.0])
         near_t = rot.quat_angle(rot.quat_mul(q1, conj)) < tol.SNAP_FRACTION * p
@@ -156,7 +157,8 @@ class SoftSolve:
             sseg, srep, _ = ctx.segments(c)
             pos = np.searchsorted(seg, sseg)
             full = (ks == levels)[srep]
-            q = path.soa((ks / levels * s.recovery_rate)[srep], pos)
+            r = rate if np.ndim(rate) == 0 else rate[chk[items]]
+            q = path.soa((ks / levels * r)[srep], pos)
             q = np.where(full, q1_soa.take(pos, axis=1), q)
             if ns:  # component arrays (4, ns, n)
                 return ~ctx.quat_curve_hits(c, q.reshape(4, len(c), ns).transpose(0, 2, 1))
@@ -202,7 +204,8 @@ class SoftSolve:
         if len(b):
             sseg, _, _ = ctx.segments(rec[b])
             pos = np.searchsorted(seg, sseg)
-            lam = np.repeat(level[b] / levels * s.recovery_rate, ctx.layout.nseg[rec[b]])
+            r = rate if np.ndim(rate) == 0 else rate[b]
+            lam = np.repeat(level[b] / levels * r, ctx.layout.nseg[rec[b]])
             q1[pos] = path(lam, pos)
         ctx.quat[seg] = q1
         ctx.soft_level[rec[b]] = level[b] / levels

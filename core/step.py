@@ -40,20 +40,25 @@ SPLIT_MIN_CURVES = 4096
 class StepContext:
     """Everything one step needs; methods are the phases of the step."""
 
-    def __init__(self, layout, state, settings, points, cols, growth, warm_start=True):
+    def __init__(self, layout, state, settings, points, cols, growth, warm_start=True,
+                 groups=None):
         """``layout`` (:class:`core.layout.CurveLayout`) and ``state``
         (:class:`core.state.SolverState`) are the solver's: the step reads the
         state in :meth:`load_state` and writes the next one in
-        :meth:`store_state`."""
+        :meth:`store_state`. ``cols``: ``(collider, offset)`` entries, one per
+        offset shell; ``groups``: per entry, the curves tested against it
+        ((C,) bool, None: all; see ``Solver._clearances``)."""
         self.layout = layout
         self.state = state
         self.s = s = settings
         self.points = points  # the input, its own dtype (never modified)
         out_dtype = points.dtype
         self.cols = cols
+        self.groups = [None] * len(cols) if groups is None else list(groups)
         self.growth = growth
         self.threads = s.threads or default_threads()
         self.prec = np.deg2rad(s.rotation_precision)
+        # Max Angle in radians: a number, or (C,) per curve (max_angle_of)
         self.max_angle = np.deg2rad(s.max_angle)
         self.out_dtype = out_dtype
         self.timings = {}
@@ -133,8 +138,10 @@ class StepContext:
         self._near_roots = []  # per collider: (roots in its box, their grid coords)
         rootsT = np.ascontiguousarray(self.roots.T)
         try:
-            for c, off in cols:
-                self._candidates(c, off, rootsT)
+            seen = set()
+            for (c, off), group in zip(cols, self.groups, strict=True):
+                self._candidates(c, off, rootsT, group, first=id(c) not in seen)
+                seen.add(id(c))
         except BaseException:
             for b in self.builds:  # never leave a build running behind an error
                 try:
@@ -150,8 +157,10 @@ class StepContext:
         self.warm_start = bool(warm_start) and not self.soft
         self.warm_soft = bool(warm_start) and self.soft
 
-    def _candidates(self, c, off, rootsT):
-        """Candidate curves of collider ``c`` (appended to ``self.cand``)."""
+    def _candidates(self, c, off, rootsT, group=None, first=True):
+        """Candidate curves of collider ``c`` at offset ``off`` (appended to
+        ``self.cand``), among the curves ``group`` ((C,) bool, None: all) that
+        this shell is for. ``first``: the first shell of ``c`` this step."""
         lo, hi = c.bounds_world(off)
         in_box = None
         for i in range(3):
@@ -163,6 +172,9 @@ class StepContext:
             else:
                 gg += g * g
         cand = gg <= self.curve_len**2
+        if group is not None:
+            cand &= group
+            in_box &= group
         w = np.flatnonzero(cand)
         # A changed collider (deforming: every frame) that the step will query
         # gets its BVH built on a ray thread while the set-up goes on. Started
@@ -177,7 +189,7 @@ class StepContext:
         q = c.grid_coords(rootsT.take(w, axis=1))  # (take: contiguous rows)
         cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
         needed = bool(cand.any() or (c.detects_pinch and in_box.any()))
-        c.queried = needed
+        c.queried = needed if first else (c.queried or needed)
         if needed and not early:
             self._prefetch(c, off)
         self.cand.append(cand)
@@ -376,7 +388,7 @@ class StepContext:
         else:
             a_seg, ax_seg = self.rigid_rotations(idx, angle, axis, seg, rep)
             v = rot.rotate(v, ax_seg, a_seg)
-            scale = self.shrink_scale(a_seg)
+            scale = self.shrink_scale(a_seg, idx[rep])
             if scale is not None:
                 v = v * scale[:, None]
         cs = rot.cumsum_owned(v, rep, starts)
@@ -414,7 +426,7 @@ class StepContext:
         (3, ns, n) components in the output dtype (as :meth:`deform`)."""
         a = self.bend_weights(idx) * angle
         v = rot.rotate_soa(self.seg_soa(idx), axis, a)
-        scale = self.shrink_scale(a)
+        scale = self.shrink_scale(a, idx)
         if scale is not None:
             v *= scale
         end = rot.cumsum_soa(v)
@@ -441,14 +453,16 @@ class StepContext:
             return np.where(self.state.stiff[idx], 1.0, ((np.arange(ns) + 1.0) / ns)[:, None])
         return np.ones((ns, 1))
 
-    def shrink_scale(self, a):
+    def shrink_scale(self, a, curves):
         """Shrink (paper 3.2.2): segment scale for segment rotation angles ``a``
-        (radians), linear from 1 at 0 to ``scale_minimum`` at ``scale_angle``,
-        clamped beyond; None when Shrink is off."""
+        (radians) of curves ``curves`` (an index array broadcasting with
+        ``a``: one per row, or (n,) for (ns, n) blocks), linear from 1 at 0
+        to ``scale_minimum`` at ``scale_angle``, clamped beyond; None when
+        Shrink is off."""
         if not self.s.shrink:
             return None
         ramp = np.minimum(a / np.deg2rad(self.s.scale_angle), 1.0)
-        return 1.0 - (1.0 - self.s.scale_minimum) * ramp
+        return 1.0 - (1.0 - self.s.per_curve("scale_minimum", curves)) * ramp
 
     def ray_growth(self, length, root):
         """Fractions ``(back, grow)`` by which segments of ``length`` are grown.
@@ -597,7 +611,14 @@ class StepContext:
     # ----------------------------------------------------------- solving
     def target_fraction(self, idx):
         """Recovery target as a fraction of the maximum rotation (plasticity)."""
-        return np.where(self.state.hold[idx], np.nan, self.s.plasticity)
+        return np.where(self.state.hold[idx], np.nan, self.s.per_curve("plasticity", idx))
+
+    def max_angle_of(self, curves):
+        """Max Angle (radians) of ``curves``: the number, or their values of
+        a per-curve map (broadcasts as ``curves`` does)."""
+        if np.ndim(self.max_angle):
+            return self.max_angle[curves]
+        return self.max_angle
 
     def solve(self, idx, status):
         """Solve curves ``idx`` in this step's mode."""
