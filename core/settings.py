@@ -201,7 +201,8 @@ class Settings:
                         f"Settings.{name} must be {op} {lo}: curve {i} has {float(a[i])!r}")
             if hi is not None and (a > hi).any():
                 i = int(np.argmax(a > hi))
-                raise SettingsError(f"Settings.{name} must be <= {hi}: curve {i} has {float(a[i])!r}")
+                raise SettingsError(
+                    f"Settings.{name} must be <= {hi}: curve {i} has {float(a[i])!r}")
             a += 0.0  # -0.0 -> 0.0: equal values, equal bytes (hash)
             a.flags.writeable = False
             object.__setattr__(self, name, a)

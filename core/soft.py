@@ -51,7 +51,11 @@ class SoftSolve:
                 break
             seg, rep, starts = ctx.segments(todo)
             o, d, _, rep, starts = ctx.deform(todo, quat=ctx.quat[seg])
-            k, point, push = ctx.first_hit_details(todo, o, d, rep, starts)
+            follow = ctx.s.follow_collider_motion
+            if follow:
+                k, point, push, vel = ctx.first_hit_details(todo, o, d, rep, starts, motion=True)
+            else:
+                k, point, push = ctx.first_hit_details(todo, o, d, rep, starts)
             hit = k >= 0
             todo, k, push = todo[hit], k[hit], push[hit]
             if len(todo) == 0:
@@ -66,6 +70,10 @@ class SoftSolve:
                 ok = np.linalg.norm(np.cross(rot.normalize(d[k]), pull), axis=1) > tol.PARALLEL_EPS
                 push = np.where(ok[:, None], pull, push)
             axis = rot.rotation_axis(d[k], push)
+            if follow:  # where the collider moves at the hit: the segment follows it
+                way, ok = ctx.follow_directions(todo, d[k], vel[hit], d[k])
+                if ok.any():
+                    axis[ok] = rot.rotation_axis(d[k][ok], way[ok])
             last = ctx.layout.soff[todo + 1]  # one past the curve's last segment
 
             # Only the solved segment needs testing: segments before it do not

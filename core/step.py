@@ -556,7 +556,7 @@ class StepContext:
         m[starts] = True
         return m
 
-    def first_hit_details(self, idx, o, d, rep, starts, hit=None):
+    def first_hit_details(self, idx, o, d, rep, starts, hit=None, motion=False):
         """First hit (root to tip) of each curve: segment, point, push direction.
 
         ``hit``: which segments hit, when already known (:meth:`input_hits`).
@@ -566,6 +566,10 @@ class StepContext:
         k : (n,) int  index into o/d of the first hitting segment (-1: none)
         point : (n, 3)  hit point
         push : (n, 3)  unit direction away from the collider (paper 3.2.1)
+        velocity : (n, 3)
+            Only with ``motion=True``: the hit collider's velocity at the hit
+            point (:meth:`Collider.velocities`, world units per step; zero
+            without a hit).
         """
         n = len(idx)
         root = self.root_mask(len(o), starts)
@@ -578,26 +582,39 @@ class StepContext:
             k[owners] = w[first]
         point = np.zeros((n, 3))
         push = np.zeros((n, 3))
+        vel = np.zeros((n, 3))
         has = np.flatnonzero(k >= 0)
         if len(has) == 0:
-            return k, point, push
+            return (k, point, push, vel) if motion else (k, point, push)
         ks = k[has]
         o, d = self.extend(o[ks], d[ks], root[ks])
         best_t = np.full(len(has), np.inf)
         best_n = np.zeros((len(has), 3))
         double = np.zeros(len(has), bool)
-        for (c, off), cand in zip(self.cols, self.cand, strict=True):
+        best_e = np.full(len(has), -1)  # (motion) entry of self.cols hit, and its face
+        best_f = np.full(len(has), -1, np.int64)
+        for e, ((c, off), cand) in enumerate(zip(self.cols, self.cand, strict=True)):
             m = np.flatnonzero(cand[idx[has]])
             if len(m) == 0:
                 continue
-            h, t, nrm = c.segment_hit_details(o[m], d[m], off)
+            if motion:
+                h, t, nrm, face = c.segment_hit_details(o[m], d[m], off, faces=True)
+            else:
+                h, t, nrm = c.segment_hit_details(o[m], d[m], off)
             better = h & (t < best_t[m])
             mm = m[better]
             best_t[mm] = t[better]
             best_n[mm] = nrm[better]
             double[mm] = c.double_sided
+            if motion:
+                best_e[mm] = e
+                best_f[mm] = face[better]
         best_t = np.where(np.isfinite(best_t), best_t, 0.0)
         pt = o + d * best_t[:, None]
+        if motion:
+            for e in np.unique(best_e[best_e >= 0]):
+                w = np.flatnonzero(best_e == e)
+                vel[has[w]] = self.cols[e][0].velocities(pt[w], faces=best_f[w])
         # Single-sided: along the normal, or its inverse when a back face is
         # crossed. Double-sided: toward the side the root is on.
         side = -np.sign(rot.dot(d, best_n))
@@ -606,7 +623,38 @@ class StepContext:
         side = np.where(side == 0, 1.0, side)
         point[has] = pt
         push[has] = best_n * side[:, None]
-        return k, point, push
+        return (k, point, push, vel) if motion else (k, point, push)
+
+    def follow_directions(self, idx, seg, vel, ref):
+        """Follow Collider Motion (``Settings.follow_collider_motion``): which
+        way curves ``idx`` turn at their first hit, given their hit segments
+        ``seg`` (n, 3), the collider's velocity there ``vel`` (n, 3) and the
+        vector ``ref`` (n, 3) the axis will be made perpendicular to.
+
+        The direction is the velocity made perpendicular to the hit segment,
+        unit. It is used (``ok``) where that velocity exceeds
+        ``tol.FOLLOW_SPEED_REL`` times the curve's length and
+        ``tol.FOLLOW_SPEED_ULPS`` float32 ulps of the curve's coordinates, and
+        is not parallel to ``ref`` (no axis); elsewhere the caller keeps the
+        paper's direction.
+
+        Returns
+        -------
+        direction : (n, 3) float64 (rows where ``ok``; zero elsewhere)
+        ok : (n,) bool
+        """
+        sq = rot.dot(seg, seg)
+        along = rot.dot(vel, seg) / np.where(sq > 0, sq, 1.0)
+        v = vel - along[:, None] * seg
+        speed = np.sqrt(rot.dot(v, v))
+        mag = np.abs(self.roots[idx]).max(axis=1) + self.curve_len[idx]
+        floor = np.maximum(tol.FOLLOW_SPEED_REL * self.curve_len[idx],
+                           tol.FOLLOW_SPEED_ULPS * float(np.finfo(np.float32).eps) * mag)
+        side = np.cross(ref, v)
+        sideways = np.sqrt(rot.dot(side, side))
+        ok = (speed > floor) & (sq > 0)
+        ok &= sideways > tol.PARALLEL_EPS * np.sqrt(rot.dot(ref, ref)) * speed
+        return np.where(ok[:, None], v / np.where(ok, speed, 1.0)[:, None], 0.0), ok
 
     # ----------------------------------------------------------- solving
     def target_fraction(self, idx):
@@ -650,11 +698,19 @@ class StepContext:
     def new_axes(self, idx, o, d, rep, starts, hit=None):
         """Rotation axes for curves starting a contact (paper 3.2.1).
 
+        The paper's: turning the hit point away along the push direction, or
+        toward the growth surface (Attract to Growth Surface); with Follow
+        Collider Motion, where the collider moves at the hit
+        (:meth:`follow_directions`), turning the tip along that motion.
         Also sets ``self.guess`` for them: the rotation that lifts every CV
         above the collider's tangent plane at the hit (a first probe for the
         angle search, nothing more). ``hit``: see :meth:`first_hit_details`.
         """
-        k, point, push = self.first_hit_details(idx, o, d, rep, starts, hit)
+        follow = self.s.follow_collider_motion
+        if follow:
+            k, point, push, vel = self.first_hit_details(idx, o, d, rep, starts, hit, motion=True)
+        else:
+            k, point, push = self.first_hit_details(idx, o, d, rep, starts, hit)
         c = point - self.roots[idx]
         normal = push
         if self.s.attract_to_growth_surface:
@@ -667,6 +723,15 @@ class StepContext:
             )
             push = np.where(ok[:, None], rot.normalize(toward), push)
         axis = rot.rotation_axis(c, push)
+        if follow:
+            # Where the collider moves at the hit: the tip moves along that
+            # motion (made perpendicular to the hit segment), i.e. the axis is
+            # perpendicular to it and to the chord root -> tip.
+            last = starts + self.layout.nseg[idx] - 1
+            chord = o[last] + d[last] - self.roots[idx]
+            way, ok = self.follow_directions(idx, d[np.maximum(k, 0)], vel, chord)
+            if ok.any():
+                axis[ok] = rot.rotation_axis(chord[ok], way[ok])
         self.guess[idx] = self.plane_guess(idx, o + d, rep, starts, point, normal, axis)
         return axis
 
