@@ -112,6 +112,15 @@ def _as_matrix(M) -> tuple[np.ndarray, np.ndarray]:
     return M, inv_affine(M)
 
 
+def _keep_recent(cache, version, most):
+    """Make room in ``cache`` (key -> (shape version, value)) for one more entry:
+    entries of other shapes go, then the oldest beyond ``most - 1``."""
+    for k in [k for k, v in cache.items() if v[0] != version]:
+        del cache[k]
+    while len(cache) >= most:
+        del cache[next(iter(cache))]
+
+
 def clearance_levels(dist):
     """Per-curve distances ``dist`` (C,) grouped into at most
     ``tol.OFFSET_LEVELS`` levels (one offset shell each).
@@ -268,7 +277,8 @@ class Collider:
         self._geometry_cache = None
         self._rows_cache = {}  # shell layout -> prepared triangles (see _rows)
         self._derived = {}  # name -> (key, value), see derived()
-        self._inside_keys = {}  # fine/coarse inside cache -> what it holds (contains_grid)
+        self._inside_answers = {}  # (fine?, offset) -> (shape version, answers): _answers
+        self._touched = {}  # offset -> (shape version, cells): _surface_cells
         self._recenter()
 
     def _recenter(self):
@@ -672,8 +682,6 @@ class Collider:
         # float32 edges: pad by a relative ulp margin to stay conservative
         max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
         self._occ = (lo, h, dims, sat, max_edge)
-        self._coarse_inside = np.full(tuple(dims), -1, np.int8)
-        self._inside_keys.pop(False, None)
         self._occ_key = self._version  # last: readers check it without the lock
 
     def near_surface(self, p_wo, radius_wo, offset_wo=0.0) -> np.ndarray:
@@ -752,7 +760,7 @@ class Collider:
         """This collider's offset in world units (its own, else ``default``)."""
         return self.offset if self.offset is not None else float(default)
 
-    def clearance_groups(self, offset=0.0, margin=0.0) -> list:
+    def clearance_groups(self, offset=0.0, margin=0.0, levels=None) -> list:
         """The offset shells the curves are tested against, and which curves.
 
         Parameters
@@ -762,6 +770,10 @@ class Collider:
             collider's own :attr:`offset`, when it has one, replaces it.
         margin : float or (C,) ndarray
             ``Settings.clearance_margin``, added to the offset that applies.
+        levels : (L,) ndarray, optional
+            Increasing distances to round every curve's distance up to (the
+            levels of a larger set of curves these are taken from, see
+            ``Settings.take``), instead of this set's own.
 
         Returns
         -------
@@ -773,17 +785,30 @@ class Collider:
             ``tol.OFFSET_LEVELS`` groups, never less than a curve's own
             distance).
         """
-        base = self.offset if self.offset is not None else offset
-        if not isinstance(base, np.ndarray) and not isinstance(margin, np.ndarray):
-            return [(float(base) + float(margin), None)]
-        dist = np.asarray(base, np.float64) + margin
+        dist = self.clearance_distances(offset, margin)
+        if not isinstance(dist, np.ndarray):
+            return [(dist, None)]
         if len(dist) == 0:
             return [(0.0, None)]
+        if levels is not None:  # the smallest level at least each distance
+            j = np.searchsorted(levels, dist)
+            used = np.unique(j)
+            if len(used) == 1:
+                return [(float(levels[used[0]]), None)]
+            return [(float(levels[u]), j == u) for u in used]
         lo, hi = dist.min(), dist.max()
         if lo == hi:  # a uniform map: the plain number's shell
             return [(float(dist[0]), None)]
         levels, group = clearance_levels(dist)
         return [(float(levels[j]), group == j) for j in range(len(levels))]
+
+    def clearance_distances(self, offset=0.0, margin=0.0):
+        """The distance each curve asks to be kept from this collider (before
+        any rounding): a float, or (C,) float64 when a map is involved."""
+        base = self.offset if self.offset is not None else offset
+        if not isinstance(base, np.ndarray) and not isinstance(margin, np.ndarray):
+            return float(base) + float(margin)
+        return np.asarray(base, np.float64) + margin
 
     def _shell_key(self, offset_wo):
         """What a shell depends on: the vertices, the offset and, for an offset,
@@ -1104,23 +1129,18 @@ class Collider:
                   and not self.deforming)
         self._contains_version = self._version
         if static:
-            lo, h, dims, inside = self._inside_grid()
+            lo, h, dims = self._inside_grid()
             cells = self._cells(q, h, dims)
             touched = self._surface_cells(offset_wo).reshape(-1)
             trace = cells < 0
             trace[cells >= 0] = touched[cells[cells >= 0]]
         else:
             lo, h, dims, _, _ = self._occupancy()
-            inside = self._coarse_inside
             cells = self._cells(q, h, dims)
             # near_surface pads by h + max_edge: a point it calls far has no
             # vertex within max_edge of its own cell: no triangle crosses it
             trace = self.near_surface_grid(q, 0.0, offset_wo)
-        key = (self._version, offset_wo, static)
-        cache = self._inside_keys
-        if cache.get(static) != key:
-            inside[...] = -1
-            cache[static] = key
+        inside = self._answers(static, offset_wo, dims)
         out = np.zeros(k, bool)
         far = np.flatnonzero(~trace & (cells >= 0))
         if len(far):
@@ -1157,25 +1177,33 @@ class Collider:
         return np.where(ok, flat, -1)
 
     def _inside_grid(self):
-        """``(lo, h, dims, inside)``: the occupancy grid subdivided
-        ``tol.INSIDE_SUBDIV`` times per axis, for the inside test's per-cell
-        answers ``inside`` (int8: -1 unknown, 0 outside, 1 inside)."""
-        occ = self._occupancy()
-        if getattr(self, "_inside_of", None) is not occ:
-            lo, h, dims = occ[0], occ[1] / tol.INSIDE_SUBDIV, occ[2] * tol.INSIDE_SUBDIV
-            self._inside = (lo, h, dims, np.full(tuple(dims), -1, np.int8))
-            self._inside_of = occ
-            self._inside_keys.pop(True, None)
-        return self._inside
+        """``(lo, h, dims)``: the occupancy grid subdivided ``tol.INSIDE_SUBDIV``
+        times per axis, for the inside test's per-cell answers."""
+        lo, h, dims, _, _ = self._occupancy()
+        return lo, h / tol.INSIDE_SUBDIV, dims * tol.INSIDE_SUBDIV
+
+    def _answers(self, fine, offset_wo, dims):
+        """The inside test's per-cell answers (int8 grid of ``dims``: -1 unknown,
+        0 outside, 1 inside) of the shell at ``offset_wo`` on the fine or the
+        coarse grid, kept per shape and offset (several offset levels of
+        per-curve clearances each keep theirs)."""
+        key = (bool(fine), offset_wo)
+        hit = self._inside_answers.get(key)
+        if hit is not None and hit[0] == self._version and hit[1].shape == tuple(dims):
+            return hit[1]
+        _keep_recent(self._inside_answers, self._version, 2 * (tol.OFFSET_LEVELS + 3))
+        inside = np.full(tuple(dims), -1, np.int8)
+        self._inside_answers[key] = (self._version, inside)
+        return inside
 
     def _surface_cells(self, offset_wo):
         """(dims) bool grid: the cells of the occupancy grid that a triangle of
         the shell at ``offset_wo`` may touch (each triangle's bounding box,
         grown by how far the shell moves it; cached per shape and offset)."""
-        key = (self._version, offset_wo)
-        if getattr(self, "_touched_key", None) == key:
-            return self._touched
-        lo, h, dims, _ = self._inside_grid()
+        hit = self._touched.get(offset_wo)
+        if hit is not None and hit[0] == self._version:
+            return hit[1]
+        lo, h, dims = self._inside_grid()
         V = self._local_vertices()
         grow = self.margin * 1.01 + offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 * norm_bound(
             self._Minv[:3, :3]) + 1e-9 * h
@@ -1189,9 +1217,10 @@ class Collider:
             mx = np.maximum(np.maximum(c0, c1), c2)
             ilo[:, i] = np.floor((mn - grow - lo[i]) / h)
             ihi[:, i] = np.floor((mx + grow - lo[i]) / h)
-        self._touched = mark_boxes(ilo, ihi, dims)
-        self._touched_key = key
-        return self._touched
+        touched = mark_boxes(ilo, ihi, dims)
+        _keep_recent(self._touched, self._version, tol.OFFSET_LEVELS + 3)
+        self._touched[offset_wo] = (self._version, touched)
+        return touched
 
     def _parity(self, p_wo, offset_wo):
         """Ray-parity inside test of world points (three votes).

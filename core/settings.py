@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
+from . import tolerances as tol
 from .errors import SettingsError
 
 np_bool = np.bool_  # numpy booleans count as flags, not as numbers
@@ -130,7 +131,10 @@ class Settings:
         ``OFFSET_LEVELS`` equal bins, and every curve of a bin is kept at
         the largest distance asked for in its bin. A curve is never kept
         closer than it asked, and at most one bin width, ``(largest -
-        smallest) / OFFSET_LEVELS``, farther.
+        smallest) / OFFSET_LEVELS``, farther. (So past ``OFFSET_LEVELS``
+        distinct distances, where a curve is kept depends on the range of
+        the others' too, never on their order; :meth:`take` keeps the whole
+        set's levels for a subset.)
     threads : int or None, default None
         Ray-tracing threads (None = all CPUs). Results are bit-identical
         whatever the count.
@@ -299,10 +303,43 @@ class Settings:
 
     def take(self, curves) -> Settings:
         """These settings for the curves ``curves`` (an index or bool array)
-        only: every per-curve array indexed by it (a solver of those curves)."""
+        only: every per-curve array indexed by it (a solver of those curves).
+
+        A solver of the subset keeps each curve exactly where a solver of all
+        curves would: where the whole set's clearances are rounded to levels
+        (more than ``tolerances.OFFSET_LEVELS`` distinct distances, see
+        ``Collision Offset``), the subset remembers those levels
+        (:meth:`clearance_rounding`), not only its own values. (That memory is
+        not part of the value: it does not take part in ``==``.)
+        """
         if not self.mapped:
             return self
-        return replace(self, **{n: getattr(self, n)[curves] for n in self.mapped})
+        out = replace(self, **{n: getattr(self, n)[curves] for n in self.mapped})
+        if "collision_offset" in self.mapped or "clearance_margin" in self.mapped:
+            object.__setattr__(out, "_whole", getattr(self, "_whole", None) or self)
+        return out
+
+    def clearance_rounding(self, collider):
+        """The levels the clearances of ``collider`` are rounded up to when
+        these settings were taken (:meth:`take`) from a larger set whose
+        distances need rounding (levels of that set), else None (a solver
+        rounds the curves' own distances, if need be)."""
+        whole = getattr(self, "_whole", None)
+        if whole is None:
+            return None
+        cache = whole.__dict__.setdefault("_levels", {})
+        key = collider.offset
+        if key not in cache:
+            dist = collider.clearance_distances(whole.collision_offset, whole.clearance_margin)
+            levels = None
+            if isinstance(dist, np.ndarray) and len(np.unique(dist)) > tol.OFFSET_LEVELS:
+                from .collider import clearance_levels  # (collider.py: the rule)
+
+                levels = clearance_levels(dist)[0]
+            if len(cache) >= 16:
+                cache.clear()
+            cache[key] = levels
+        return cache[key]
 
     def replace(self, **changes) -> Settings:
         """Return a copy with ``changes`` applied (validated)."""

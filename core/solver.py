@@ -288,7 +288,8 @@ class Solver:
             key = c.offset
             g = self._groups.get(key)
             if g is None:
-                g = c.clearance_groups(s.collision_offset, s.clearance_margin)
+                g = c.clearance_groups(s.collision_offset, s.clearance_margin,
+                                       s.clearance_rounding(c))
                 if len(self._groups) >= 16:  # (colliders' own offsets keyed over a shot)
                     self._groups.clear()
                 self._groups[key] = g

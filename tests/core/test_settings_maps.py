@@ -302,6 +302,53 @@ def test_per_curve_clearance_is_kept_curve_by_curve(mode, what):
         assert np.median(dist[keep][small]) < np.median(dist[keep][~small]) - 0.05
 
 
+@pytest.mark.parametrize("mode", MODES)
+def test_per_curve_offset_decides_each_pinch(mode):
+    """Roots 0.05 outside a closed ball: inside the offset shell of the curves kept
+    0.1 away (pinched), outside that of the curves kept 0.01 away (solved)."""
+    V, F = scenes.uv_sphere([0, 0, 0], 1.0, 32, 16)
+    c, r = np.array([0.0, 0.0, 0.0]), 0.5
+    curves = []
+    for a in np.linspace(0, 2 * np.pi, 16, endpoint=False):
+        n = np.array([np.cos(a), np.sin(a), 0.3])
+        n /= np.linalg.norm(n)
+        t = np.cross(n, [0.0, 0.0, 1.0])
+        curves.append(scenes.straight_curve(c + (r + 0.05) * n, t + 0.2 * n, 0.4, 5))
+    pts, offs = scenes.pack(curves)
+    C = len(offs) - 1
+    want = np.where(np.arange(C) % 2 == 0, 0.1, 0.01)
+    col = Collider(V, F, matrix=scenes.affine(t=c, s=r))
+    st = np.asarray(Solver(offs, Settings(mode=mode, collision_offset=want)).step(
+        pts, [col]).status)
+    assert np.array_equal(st == Status.PINCHED, want == 0.1), st
+
+
+def test_a_subset_taken_from_the_settings_solves_as_the_whole():
+    """``Settings.take``: a solver of some of the curves, with more distinct
+    distances than OFFSET_LEVELS (rounded to the whole set's levels, not the
+    subset's own), ends them exactly as a solver of all curves does."""
+    pts, offs = _ring()
+    C = len(offs) - 1
+    V, F = scenes.uv_sphere([0, 0, 0], 1.0, 32, 16)
+    rng = np.random.default_rng(4)
+    s = Settings(mode="bend", collision_offset=rng.uniform(0.0, 0.1, C),
+                 clearance_margin=rng.uniform(0.0, 0.05, C), plasticity=rng.uniform(0, 1, C))
+    M = scenes.affine(t=[0.0, 0.0, 0.75], s=0.35)
+    full = Solver(offs, s).step(pts, [Collider(V, F, matrix=M)])
+    assert (np.asarray(full.status) == Status.COLLIDING).sum() >= 20
+    idx = np.arange(3, C, 4)  # (its values span less than the whole set's)
+    sub_pts, sub_offs = scenes.pack([scenes.unpack(pts, offs)[i] for i in idx])
+    t = s.take(idx)
+    assert t == Settings(mode="bend", collision_offset=s.collision_offset[idx],
+                         clearance_margin=s.clearance_margin[idx],
+                         plasticity=s.plasticity[idx])
+    sub = Solver(sub_offs, t).step(sub_pts, [Collider(V, F, matrix=M)])
+    assert np.array_equal(np.asarray(sub.status), np.asarray(full.status)[idx])
+    whole = scenes.unpack(full.points, offs)
+    for j, i in enumerate(scenes.unpack(sub.points, sub_offs)):
+        assert i.tobytes() == whole[idx[j]].tobytes(), f"curve {idx[j]}"
+
+
 def test_clearance_levels_exact_then_rounded_up():
     few = np.array([0.3, 0.1, 0.1, 0.0, 0.25, 0.3])
     levels, group = clearance_levels(few)
