@@ -4,7 +4,9 @@ A :class:`Collider` keeps its triangles in its own (object) space. Rigid
 motion only changes :attr:`Collider.matrix`: rays are moved into the
 collider's space, the BVH is never rebuilt. Deformation sets
 :attr:`Collider.vertices`, which rebuilds the BVH lazily, and only when the
-vertices really changed.
+vertices really changed. :meth:`Collider.place` does both as one update and
+remembers the placement before it (:attr:`Collider.previous`): the surface's
+velocity at a point (:meth:`Collider.velocities`, Follow Collider Motion).
 
 Naming: ``_wo`` is world space, ``_lo`` the collider's local space.
 """
@@ -191,7 +193,8 @@ class Collider:
         Affine world transform (None = identity).
     offset : float, optional
         Collision offset of this collider (world units), overriding
-        ``Settings.collision_offset``.
+        ``Settings.collision_offset`` (a number for every curve;
+        ``Settings.clearance_margin`` is still added).
     drop_degenerate : bool
         Silently drop zero-area triangles instead of raising. The number
         dropped is in :attr:`dropped_faces`.

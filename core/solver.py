@@ -23,7 +23,15 @@ so roots never move and lengths are kept unless Shrink says otherwise.
 The per-curve state (``theta``, its axis, soft quaternions) is stored in a
 *local frame* carried along with the input curve, so it follows the
 animated growth surface; the axis is chosen at the first hit and kept
-until the curve has recovered (no pops when hit normals change).
+until the curve has recovered (no pops when hit normals change). At the
+first hit the curve turns away along the collider's normal (paper 3.2.1),
+toward the growth surface (Attract to Growth Surface) or, with Follow
+Collider Motion, along the collider's motion at the contact.
+
+Parameter maps: Max Angle, Scale Minimum, Recovery Rate, Plasticity,
+Collision Offset and Clearance Margin may be given per curve (``Settings``);
+each curve uses its own values (per-curve clearances test each collider as
+a few offset shells, ``Collider.clearance_groups``).
 
 Where things are
 ----------------
@@ -308,7 +316,11 @@ class Solver:
             This frame's input curves, world space.
         colliders : sequence of Collider
             Meshes the curves must not pass through (world transforms in
-            their ``matrix``). Empty colliders are ignored.
+            their ``matrix``). Empty colliders are ignored. With
+            ``Settings.follow_collider_motion``, a collider's motion since
+            its previous placement (:attr:`Collider.previous`, e.g. updated
+            once per frame with :meth:`Collider.place`) steers the curves it
+            starts to push.
         growth : Collider, optional
             The growth surface (for Attract to Growth Surface and Put to
             Growth Surface). Never collided with.
