@@ -266,6 +266,8 @@ class Collider:
         # vertices], a part None where it is the current one.
         self._prev = None
         self._version = 0
+        self._key_memo = (None, -1, {})  # see _shell_key
+        self._contains_seen = {}  # offset -> shape version of the last inside test
         self._normals_cache = (None, 0, None)  # see _face_normals
         self._built = []  # [(key, backend, ShellFaces)], see _backend
         # Builds may run on a ray thread (see prefetch): one lock for the BVHs,
@@ -602,6 +604,12 @@ class Collider:
         return _unit(n, np.linalg.norm(n, axis=1, keepdims=True))
 
     def _offset_directions(self):
+        """:meth:`_offset_directions_of` the current shape and matrix, kept for
+        the shells of other offsets (per-curve clearance levels) of the same."""
+        key = (self._version, self._M[:3, :3].tobytes())
+        return self.derived("_offset_directions", key, self._offset_directions_of)
+
+    def _offset_directions_of(self):
         """Local displacement of each vertex for a world offset of 1, (n, 3).
 
         Computed in world metric (the matrix's scale and shear included), so
@@ -819,11 +827,19 @@ class Collider:
         jitter of a rigid transform never triggers a rebuild)."""
         if offset_wo <= 0:
             return (self._version, 0.0)
-        S = self._M[:3, :3]
-        G = np.einsum("ki,kj->ij", S, S)
-        g = float(np.trace(G)) / 3.0
-        q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
-        return (self._version, float(f"{offset_wo:.9g}"), q)
+        # Every ray query asks: remembered per matrix (the setter replaces the
+        # array, never writes into it) and shape.
+        memo = self._key_memo
+        if memo[0] is not self._M or memo[1] != self._version:
+            memo = self._key_memo = (self._M, self._version, {})
+        key = memo[2].get(offset_wo)
+        if key is None:
+            S = self._M[:3, :3]
+            G = np.einsum("ki,kj->ij", S, S)
+            g = float(np.trace(G)) / 3.0
+            q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
+            key = memo[2][offset_wo] = (self._version, float(f"{offset_wo:.9g}"), q)
+        return key
 
     def _backend(self, offset_wo: float):
         """The ray backend for the shell at ``offset_wo`` (built lazily).
@@ -1120,17 +1136,21 @@ class Collider:
         the collider; the rest are traced. A collider whose shape stays
         (rigid: any motion) uses a fine grid whose touched cells are found
         from the triangles once per shape, so only roots right next to the
-        surface are traced. A collider deformed since the last call, or made
-        with ``deforming=True``, uses the coarse occupancy grid (no
+        surface are traced. A collider deformed since the last call at that
+        offset, or made with ``deforming=True``, uses the coarse occupancy grid (no
         per-triangle work every frame): points near a vertex are traced. Both
         give the answer of tracing every point.
         """
         k = len(p_wo)
         if not self.detects_pinch or k == 0:
             return np.zeros(k, bool)
-        static = (getattr(self, "_contains_version", None) == self._version
-                  and not self.deforming)
-        self._contains_version = self._version
+        # (per offset: the shells of several per-curve clearance levels, asked
+        # once each per frame, are each a first call for their shape)
+        seen = self._contains_seen
+        static = seen.get(offset_wo) == self._version and not self.deforming
+        if offset_wo not in seen and len(seen) >= 2 * (tol.OFFSET_LEVELS + 3):
+            seen.clear()
+        seen[offset_wo] = self._version
         if static:
             lo, h, dims = self._inside_grid()
             cells = self._cells(q, h, dims)
