@@ -17,6 +17,12 @@ check that no resolved curve still crosses the collider, and the ratio to
 the *floor* measured in the same run (``bench/floor.py``: one embree ray per
 segment on the same threads plus the numpy set-up of those rays).
 
+Every rigid run also steps a twin solver whose settings give each per-curve
+field (Max Angle, Scale Minimum, Recovery Rate, Plasticity, Collision Offset,
+Clearance Margin) as a uniform parameter map, a (C,) array of the plain value:
+the same frames, each stepped right before or after the plain one (alternating),
+timed apart and compared bit for bit (issue 30: maps cost nothing measurable).
+
 It prints the targets of issue 10 with PASS/MISS; it never asserts them.
 
     .venv/bin/python bench/bench_core.py            # everything (~3-5 min)
@@ -115,6 +121,8 @@ def parse_args(argv=None):
         " into the timed frames)",
     )
     ap.add_argument("--no-check", action="store_true", help="skip the untimed crossing check")
+    ap.add_argument("--no-maps", action="store_true",
+                    help="no twin run with uniform parameter maps beside the rigid runs")
     ap.add_argument("--verbose", action="store_true", help="print every run in full too")
     ap.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
     a = ap.parse_args(argv)
@@ -218,8 +226,17 @@ def verdict(ok):
 # ----------------------------------------------------------------------------- runs
 
 
-def run_solver(shot, kind, mode, args, core, pool_idents, profile=False):
-    """Solve all frames of one run. Returns a dict of figures."""
+def uniform_maps(Settings, settings, C):
+    """``settings`` with every per-curve field a (C,) array of its value."""
+    names = ("max_angle", "scale_minimum", "recovery_rate", "plasticity", "collision_offset",
+             "clearance_margin")
+    return settings.replace(**{n: np.full(C, getattr(settings, n), np.float64) for n in names
+                               if hasattr(settings, n)})
+
+
+def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=False):
+    """Solve all frames of one run. Returns a dict of figures. ``twin``: also step
+    a solver with uniform parameter maps on the same frames (timed apart)."""
     fur, V, F = shot.fur, shot.V, shot.F
     Collider, Settings, Solver = core.Collider, core.Settings, core.Solver
     frames = args.frames
@@ -238,8 +255,20 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False):
         setup_ms = 1000 * (time.perf_counter() - t0)
         check_scene = None
 
-    solver = Solver(fur.offsets, Settings(mode=mode, threads=args.threads))
+    plain = Settings(mode=mode, threads=args.threads)
+    solver = Solver(fur.offsets, plain)
     solver.warm_start = not args.full_search
+    maps = None
+    if twin:
+        maps = Solver(fur.offsets, uniform_maps(Settings, plain, fur.curves))
+        maps.warm_start = solver.warm_start
+    maps_ms, maps_same = [], True
+
+    def step_maps(pts):
+        t0 = time.perf_counter()
+        r = maps.step(pts, [col], growth=None)
+        maps_ms.append(1000 * (time.perf_counter() - t0))
+        return r
 
     frame_ms, floor_ms, counts, timings, crossing, pinned_threads = [], [], [], [], [], 0
     offenders = []  # (frame, curve, status) of curves still crossing (first 10)
@@ -258,6 +287,11 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False):
             M = shot.matrix(f, frames)
         else:
             Vw = shot.vertices(V, f, frames)
+        # --- the twin with uniform maps first on odd frames (after on even ones) ---
+        twin_res = None
+        if maps is not None and f % 2 == 1:
+            col.matrix = M
+            twin_res = step_maps(pts)
         # --- the timed frame: update the collider + one step ---
         if prof is not None and f > 0:
             prof.enable()
@@ -284,6 +318,11 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False):
         frame_ms.append(1000 * (t1 - t0))
         cpu_ms.append(1000 * (c1 - c0))
         main_ms.append(1000 * (m1 - m0))
+        if maps is not None:
+            if twin_res is None:
+                twin_res = step_maps(pts)
+            maps_same &= (twin_res.points.tobytes() == res.points.tobytes()
+                          and np.array_equal(twin_res.status, res.status))
 
         if f < 2 and not args.no_pin:
             pinned_threads = max(pinned_threads, pin_foreign_threads(pool_idents))
@@ -345,6 +384,10 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False):
         "crossing_after_solve": crossing,
         "crossing_offenders": offenders,
     }
+    if maps is not None:
+        steady_maps = maps_ms[1:] if len(maps_ms) > 1 else maps_ms
+        out["maps"] = {"frame_ms": ms_stats(steady_maps), "frame_ms_all": maps_ms,
+                       "same_bits": bool(maps_same)}
     if prof is not None:
         out["profile"] = prof
     return out
@@ -450,6 +493,10 @@ def print_side_by_side(results, curves):
     print("\nSide by side (medians over frames 2..N; floor = same run, same frames)")
     row("", cols)
     row("ms / frame", [f"{r['frame_ms']['median']:.1f}" for r in runs])
+    row("  with uniform maps", [f"{r['maps']['frame_ms']['median']:.1f}" if "maps" in r else "-"
+                                for r in runs])
+    row("  maps: same bits", [("yes" if r["maps"]["same_bits"] else "NO") if "maps" in r
+                              else "-" for r in runs])
     row("frames / s", [f"{r['fps']:.1f}" for r in runs])
     row("floor ms", [f"{r['floor_ms']:.1f}" for r in runs])
     row("ratio to floor", [f"{r['frame_ms']['median'] / r['floor_ms']:.2f}" for r in runs])
@@ -585,7 +632,8 @@ def main(argv=None):
                         share = wait_idle(args.wait_idle)
                         if share is not None:
                             print(f"\n  (waited for a quiet machine: {100 * share:.0f}% busy)")
-                    r = run_solver(sh, kind, mode, args, core, pool_idents)
+                    r = run_solver(sh, kind, mode, args, core, pool_idents,
+                                   twin=kind == "rigid" and not args.no_maps)
                     r["curves"] = sh.fur.curves
                     results[(sh.name, kind, mode)] = r
                     fm = r["frame_ms"]
@@ -596,6 +644,12 @@ def main(argv=None):
                           f" {median_phase(r, 'rays'):9,.0f}  crossing"
                           f" {sum(cr) if cr else '-'}",
                           flush=True)
+                    if "maps" in r:
+                        mp = r["maps"]
+                        print(f"  [{run_label(r) + ' maps':<26}] median"
+                              f" {mp['frame_ms']['median']:7.1f} ms  (uniform parameter maps,"
+                              f" same frames; plain {fm['median']:.1f} ms; same bits:"
+                              f" {'yes' if mp['same_bits'] else 'NO'})", flush=True)
                     if args.verbose:
                         how = "moved by col.matrix" if kind == "rigid" else (
                             "deformed via col.vertices")

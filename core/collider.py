@@ -4,7 +4,9 @@ A :class:`Collider` keeps its triangles in its own (object) space. Rigid
 motion only changes :attr:`Collider.matrix`: rays are moved into the
 collider's space, the BVH is never rebuilt. Deformation sets
 :attr:`Collider.vertices`, which rebuilds the BVH lazily, and only when the
-vertices really changed.
+vertices really changed. :meth:`Collider.place` does both as one update and
+remembers the placement before it (:attr:`Collider.previous`): the surface's
+velocity at a point (:meth:`Collider.velocities`, Follow Collider Motion).
 
 Naming: ``_wo`` is world space, ``_lo`` the collider's local space.
 """
@@ -112,6 +114,53 @@ def _as_matrix(M) -> tuple[np.ndarray, np.ndarray]:
     return M, inv_affine(M)
 
 
+def _keep_recent(cache, version, most):
+    """Make room in ``cache`` (key -> (shape version, value)) for one more entry:
+    entries of other shapes go, then the oldest beyond ``most - 1``."""
+    for k in [k for k, v in cache.items() if v[0] != version]:
+        del cache[k]
+    while len(cache) >= most:
+        del cache[next(iter(cache))]
+
+
+def clearance_levels(dist):
+    """Per-curve distances ``dist`` (C,) grouped into at most
+    ``tol.OFFSET_LEVELS`` levels (one offset shell each).
+
+    Up to ``OFFSET_LEVELS`` distinct values are their own levels (exact).
+    More: the range ``[min, max]`` is cut into ``OFFSET_LEVELS`` equal bins
+    and each bin's level is the largest distance in it, so every curve is
+    kept at least as far as it asked, and at most one bin width farther. The
+    levels depend on the set of values only, never on the curves' order.
+
+    Returns
+    -------
+    levels : (L,) float64, increasing
+    group : (C,) int64
+        Each curve's level.
+    """
+    u, inv = np.unique(dist, return_inverse=True)
+    inv = inv.reshape(-1)
+    L = tol.OFFSET_LEVELS
+    if len(u) <= L:
+        return u, inv
+    lo, hi = float(u[0]), float(u[-1])
+    b = np.minimum(np.floor((u - lo) / (hi - lo) * L), L - 1).astype(np.int64)
+    # u is sorted: a bin's largest value is its last; bins only increase
+    last = np.flatnonzero(np.r_[b[1:] != b[:-1], True])
+    bins = np.cumsum(np.r_[0, (b[1:] != b[:-1]).astype(np.int64)])  # value -> level
+    return u[last], bins[inv]
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where a collider was: its world ``matrix`` (4, 4) float64 and its own
+    ``vertices`` (n, 3) float32 (read-only), see :attr:`Collider.previous`."""
+
+    matrix: np.ndarray
+    vertices: np.ndarray
+
+
 @dataclass(frozen=True)
 class ShellFaces:
     """Which face of the collider each triangle of a built shell is.
@@ -144,7 +193,8 @@ class Collider:
         Affine world transform (None = identity).
     offset : float, optional
         Collision offset of this collider (world units), overriding
-        ``Settings.collision_offset``.
+        ``Settings.collision_offset`` (a number for every curve;
+        ``Settings.clearance_margin`` is still added).
     drop_degenerate : bool
         Silently drop zero-area triangles instead of raising. The number
         dropped is in :attr:`dropped_faces`.
@@ -212,7 +262,12 @@ class Collider:
         self._all_used = len(self._used) == len(V)
         self.closed = self.repairs.closed
         self._M, self._Minv = _as_matrix(matrix)
+        # The previous placement (see previous): None unknown, else [matrix,
+        # vertices], a part None where it is the current one.
+        self._prev = None
         self._version = 0
+        self._key_memo = (None, -1, {})  # see _shell_key
+        self._contains_seen = {}  # offset -> shape version of the last inside test
         self._normals_cache = (None, 0, None)  # see _face_normals
         self._built = []  # [(key, backend, ShellFaces)], see _backend
         # Builds may run on a ray thread (see prefetch): one lock for the BVHs,
@@ -227,7 +282,8 @@ class Collider:
         self._geometry_cache = None
         self._rows_cache = {}  # shell layout -> prepared triangles (see _rows)
         self._derived = {}  # name -> (key, value), see derived()
-        self._inside_keys = {}  # fine/coarse inside cache -> what it holds (contains_grid)
+        self._inside_answers = {}  # (fine?, offset) -> (shape version, answers): _answers
+        self._touched = {}  # offset -> (shape version, cells): _surface_cells
         self._recenter()
 
     def _recenter(self):
@@ -309,14 +365,14 @@ class Collider:
 
     @vertices.setter
     def vertices(self, V2):
-        V2 = _as_vertices(V2, f"'{self.name}' vertices")
-        if V2.shape != self._V.shape:
-            raise ColliderError(
-                f"collider '{self.name}': new vertices have shape {V2.shape}, expected "
-                f"{self._V.shape} (same topology); build a new Collider when topology changes"
-            )
+        V2 = self._check_vertices(V2)
+        self._remember(vertices=True)
         if np.array_equal(V2, self._V):
             return
+        self._set_shape(V2)
+
+    def _set_shape(self, V2):
+        """New vertices (checked, changed): a new shape version."""
         # A deformation may collapse a triangle: legal (embree skips it, its
         # normal is zero), so no degenerate check here.
         self._V = V2
@@ -354,7 +410,133 @@ class Collider:
 
     @matrix.setter
     def matrix(self, M):
-        self._M, self._Minv = _as_matrix(M)
+        M = _as_matrix(M)
+        self._remember(matrix=True)
+        self._M, self._Minv = M
+
+    def _check_vertices(self, V2, what="new vertices"):
+        V2 = _as_vertices(V2, f"'{self.name}' vertices")
+        if V2.shape != self._V.shape:
+            raise ColliderError(
+                f"collider '{self.name}': {what} have shape {V2.shape}, expected "
+                f"{self._V.shape} (same topology); build a new Collider when topology changes"
+            )
+        return V2
+
+    # ------------------------------------------------------------ placement
+    def place(self, matrix=None, vertices=None):
+        """Move the collider to this frame's placement: one update.
+
+        The whole placement it had (matrix and vertices) becomes
+        :attr:`previous`, then ``matrix`` and ``vertices`` (None: unchanged)
+        are applied as assigning :attr:`matrix` and :attr:`vertices` would.
+        Call it once per frame (step) with both parts: a part left unchanged
+        then did not move since the previous frame.
+        """
+        M = None if matrix is None else _as_matrix(matrix)
+        V2 = None if vertices is None else self._check_vertices(vertices)
+        self._prev = [self._M, self._V]
+        if M is not None:
+            self._M, self._Minv = M
+        if V2 is not None and not np.array_equal(V2, self._V):
+            self._set_shape(V2)
+
+    def _remember(self, matrix=False, vertices=False):
+        """Assigning one part of the placement: its current value becomes that
+        part of :attr:`previous` (the other part's stays as it was)."""
+        if self._prev is None:
+            self._prev = [None, None]
+        if matrix:
+            self._prev[0] = self._M
+        if vertices:
+            self._prev[1] = self._V
+
+    @property
+    def previous(self) -> Placement | None:
+        """The placement the collider had before its last update, or None when
+        none is known (a new collider, or after :meth:`forget_previous`).
+
+        An update is :meth:`place` (both parts at once), or an assignment of
+        :attr:`matrix` or :attr:`vertices` (that part only: assigning the
+        same value again is an update in which it did not move). Follow
+        Collider Motion takes each contact's velocity from it
+        (:meth:`velocities`): update both parts once per frame, e.g. with
+        :meth:`place`; a glue that resumes from a cached frame sets the
+        previous frame's placement with :meth:`set_previous` to get the bits
+        of playback.
+        """
+        if self._prev is None:
+            return None
+        M, V = self._prev
+        M = self._M if M is None else M
+        V = (self._V if V is None else V).view()
+        V.flags.writeable = False
+        return Placement(M.copy(), V)
+
+    def set_previous(self, matrix=None, vertices=None):
+        """Set :attr:`previous` explicitly: ``matrix`` (4, 4) and ``vertices``
+        (n, 3) (same topology), each None for "where it is now" (that part
+        did not move)."""
+        M = None if matrix is None else _as_matrix(matrix)[0]
+        V2 = None if vertices is None else self._check_vertices(vertices, "previous vertices")
+        if V2 is not None and np.array_equal(V2, self._V):
+            V2 = None  # (the current vertices: no deformation)
+        self._prev = [M, V2]
+
+    def forget_previous(self):
+        """Forget the previous placement: the collider has no known motion
+        (:meth:`velocities` are zero) until its next update."""
+        self._prev = None
+
+    def velocities(self, p_wo, faces=None) -> np.ndarray:
+        """Velocity of the collider's surface at points ``p_wo`` (world units
+        per update: from :attr:`previous` to now).
+
+        Parameters
+        ----------
+        p_wo : (k, 3) array_like
+            Points on (or near: an offset shell) the collider, world space,
+            current placement.
+        faces : (k,) array_like of int, optional
+            The face of each point (indices into :attr:`faces`, e.g. a hit's
+            face). Needed to follow a deformation (the point moves with its
+            face's vertices, barycentric weights of its projection onto the
+            face); without it the nearest face is looked up, only when the
+            vertices moved.
+
+        Returns
+        -------
+        (k, 3) float64
+            Zero where nothing is known (no previous placement) and,
+            exactly, where the collider did not move at all.
+        """
+        p_wo = np.asarray(p_wo, np.float64).reshape(-1, 3)
+        k = len(p_wo)
+        out = np.zeros((k, 3))
+        if self._prev is None or k == 0 or self.empty:
+            return out
+        M0, V0 = self._prev
+        moved_m = M0 is not None and not np.array_equal(M0, self._M)
+        moved_v = V0 is not None and V0 is not self._V
+        if not (moved_m or moved_v):
+            return out
+        M0 = self._M if M0 is None else M0
+        x = apply(self._Minv[:3, :3], p_wo) + self._Minv[:3, 3]  # own space
+        if moved_v:
+            if faces is None:
+                index = self.derived("_closest", self._version, lambda: [None])
+                _, faces, index[0] = closest_points_on_mesh(
+                    self._local_vertices(), self._F, x - self._center, index[0])
+            f = self._F[np.asarray(faces, np.int64)]
+            tri = self._V[f].astype(np.float64)  # (k, 3, 3)
+            w = barycentric(x, tri[:, 0], tri[:, 1], tri[:, 2])
+            w = np.clip(w, 0.0, None)
+            total = w.sum(axis=1, keepdims=True)
+            w = np.where(total > 0, w / np.where(total > 0, total, 1.0), 1.0 / 3.0)
+            move = V0[f].astype(np.float64) - tri  # each corner's motion back in time
+            x = x + np.einsum("ki,kij->kj", w, move)
+        prev = apply(M0[:3, :3], x) + M0[:3, 3]
+        return p_wo - prev
 
     # ------------------------------------------------------------ geometry
     def _geometry(self):
@@ -422,6 +604,12 @@ class Collider:
         return _unit(n, np.linalg.norm(n, axis=1, keepdims=True))
 
     def _offset_directions(self):
+        """:meth:`_offset_directions_of` the current shape and matrix, kept for
+        the shells of other offsets (per-curve clearance levels) of the same."""
+        key = (self._version, self._M[:3, :3].tobytes())
+        return self.derived("_offset_directions", key, self._offset_directions_of)
+
+    def _offset_directions_of(self):
         """Local displacement of each vertex for a world offset of 1, (n, 3).
 
         Computed in world metric (the matrix's scale and shear included), so
@@ -505,8 +693,6 @@ class Collider:
         # float32 edges: pad by a relative ulp margin to stay conservative
         max_edge = float(np.sqrt(max_edge)) * (1 + 1e-5)
         self._occ = (lo, h, dims, sat, max_edge)
-        self._coarse_inside = np.full(tuple(dims), -1, np.int8)
-        self._inside_keys.pop(False, None)
         self._occ_key = self._version  # last: readers check it without the lock
 
     def near_surface(self, p_wo, radius_wo, offset_wo=0.0) -> np.ndarray:
@@ -585,23 +771,82 @@ class Collider:
         """This collider's offset in world units (its own, else ``default``)."""
         return self.offset if self.offset is not None else float(default)
 
+    def clearance_groups(self, offset=0.0, margin=0.0, levels=None) -> list:
+        """The offset shells the curves are tested against, and which curves.
+
+        Parameters
+        ----------
+        offset : float or (C,) ndarray
+            ``Settings.collision_offset`` (a number or one per curve); this
+            collider's own :attr:`offset`, when it has one, replaces it.
+        margin : float or (C,) ndarray
+            ``Settings.clearance_margin``, added to the offset that applies.
+        levels : (L,) ndarray, optional
+            Increasing distances to round every curve's distance up to (the
+            levels of a larger set of curves these are taken from, see
+            ``Settings.take``), instead of this set's own.
+
+        Returns
+        -------
+        list of (float, (C,) bool ndarray or None)
+            ``(distance, curves)``: the curves (None: all of them) kept at
+            ``distance`` from this collider. One distance for every curve is
+            one group of all curves (``distance`` as the plain numbers give
+            it, bit for bit); otherwise see :func:`clearance_levels` (at most
+            ``tol.OFFSET_LEVELS`` groups, never less than a curve's own
+            distance).
+        """
+        dist = self.clearance_distances(offset, margin)
+        if not isinstance(dist, np.ndarray):
+            return [(dist, None)]
+        if len(dist) == 0:
+            return [(0.0, None)]
+        if levels is not None:  # the smallest level at least each distance
+            j = np.searchsorted(levels, dist)
+            used = np.unique(j)
+            if len(used) == 1:
+                return [(float(levels[used[0]]), None)]
+            return [(float(levels[u]), j == u) for u in used]
+        lo, hi = dist.min(), dist.max()
+        if lo == hi:  # a uniform map: the plain number's shell
+            return [(float(dist[0]), None)]
+        levels, group = clearance_levels(dist)
+        return [(float(levels[j]), group == j) for j in range(len(levels))]
+
+    def clearance_distances(self, offset=0.0, margin=0.0):
+        """The distance each curve asks to be kept from this collider (before
+        any rounding): a float, or (C,) float64 when a map is involved."""
+        base = self.offset if self.offset is not None else offset
+        if not isinstance(base, np.ndarray) and not isinstance(margin, np.ndarray):
+            return float(base) + float(margin)
+        return np.asarray(base, np.float64) + margin
+
     def _shell_key(self, offset_wo):
         """What a shell depends on: the vertices, the offset and, for an offset,
         the matrix's rotation-invariant stretch ``M^T M`` (quantized, so float32
         jitter of a rigid transform never triggers a rebuild)."""
         if offset_wo <= 0:
             return (self._version, 0.0)
-        S = self._M[:3, :3]
-        G = np.einsum("ki,kj->ij", S, S)
-        g = float(np.trace(G)) / 3.0
-        q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
-        return (self._version, float(f"{offset_wo:.9g}"), q)
+        # Every ray query asks: remembered per matrix (the setter replaces the
+        # array, never writes into it) and shape.
+        memo = self._key_memo
+        if memo[0] is not self._M or memo[1] != self._version:
+            memo = self._key_memo = (self._M, self._version, {})
+        key = memo[2].get(offset_wo)
+        if key is None:
+            S = self._M[:3, :3]
+            G = np.einsum("ki,kj->ij", S, S)
+            g = float(np.trace(G)) / 3.0
+            q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
+            key = memo[2][offset_wo] = (self._version, float(f"{offset_wo:.9g}"), q)
+        return key
 
     def _backend(self, offset_wo: float):
         """The ray backend for the shell at ``offset_wo`` (built lazily).
 
         A few shells are kept (several solvers may share one collider with
-        different offsets), newest last.
+        different offsets, per-curve clearances use up to
+        ``tol.OFFSET_LEVELS``), newest last.
         """
         with self._build_lock:
             return self._backend_locked(offset_wo)
@@ -661,7 +906,10 @@ class Collider:
         faces = ShellFaces(np.concatenate(real), np.concatenate(flip))
         backend = make_backend(self._backend_name, V, F, rows=self._rows(F))
         self.build_count += 1
-        self._built = [b for b in self._built if b[0][0] == self._version][-3:]
+        # (room for every level of per-curve clearances, tol.OFFSET_LEVELS,
+        # beside a few other offsets: several solvers may share a collider)
+        self._built = [b for b in self._built
+                       if b[0][0] == self._version][-(tol.OFFSET_LEVELS + 3):]
         self._built.append((key, backend, faces))
         return backend, faces
 
@@ -794,7 +1042,7 @@ class Collider:
         be, _ = self._backend(offset_wo)
         return be.any_hit(o_lo, d_lo, 1.0 + tol.T_SLACK, threads)
 
-    def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0):
+    def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0, faces=False):
         """First hit of each segment: parameter, point and unit normal.
 
         Returns
@@ -804,21 +1052,30 @@ class Collider:
             Segment parameter of the hit in [0, 1] (inf for none).
         n_wo : (k, 3) float64
             Unit face normal (world), oriented as the shell that was hit.
+        face : (k,) int64
+            Only with ``faces=True``: the face hit (index into :attr:`faces`;
+            for an offset shell, the face the shell's triangle is made of), -1
+            for none.
         """
         k = len(o_wo)
         if self.empty or k == 0:
-            return np.zeros(k, bool), np.full(k, np.inf), np.zeros((k, 3))
-        be, faces = self._backend(offset_wo)
+            out = np.zeros(k, bool), np.full(k, np.inf), np.zeros((k, 3))
+            return (*out, np.full(k, -1, np.int64)) if faces else out
+        be, shell = self._backend(offset_wo)
         o_lo, d_lo = self._to_local(o_wo, d_wo)
         prim, t = be.hit_details(o_lo, d_lo, 1.0 + tol.T_SLACK)
         hit = prim >= 0
         t = np.where(hit, np.minimum(t, 1.0), np.inf)  # (a hit in the slack: at the end)
         n_wo = np.zeros((k, 3))
         if hit.any():
-            n_wo[hit] = self._normals_world(prim[hit], faces)
-            if len(faces.real) == len(self._F):  # the mesh itself (no offset shell)
+            n_wo[hit] = self._normals_world(prim[hit], shell)
+            if len(shell.real) == len(self._F):  # the mesh itself (no offset shell)
                 self._vertex_pushes(n_wo, hit, prim, o_lo, d_lo, t)
-        return hit, t, n_wo
+        if not faces:
+            return hit, t, n_wo
+        face = np.full(k, -1, np.int64)
+        face[hit] = shell.real[prim[hit]]
+        return hit, t, n_wo, face
 
     def _vertex_pushes(self, n_wo, hit, prim, o_lo, d_lo, t):
         """Hits that land on a vertex (``tol.VERTEX_HIT_BARY``) push along the vertex's
@@ -879,35 +1136,34 @@ class Collider:
         the collider; the rest are traced. A collider whose shape stays
         (rigid: any motion) uses a fine grid whose touched cells are found
         from the triangles once per shape, so only roots right next to the
-        surface are traced. A collider deformed since the last call, or made
-        with ``deforming=True``, uses the coarse occupancy grid (no
+        surface are traced. A collider deformed since the last call at that
+        offset, or made with ``deforming=True``, uses the coarse occupancy grid (no
         per-triangle work every frame): points near a vertex are traced. Both
         give the answer of tracing every point.
         """
         k = len(p_wo)
         if not self.detects_pinch or k == 0:
             return np.zeros(k, bool)
-        static = (getattr(self, "_contains_version", None) == self._version
-                  and not self.deforming)
-        self._contains_version = self._version
+        # (per offset: the shells of several per-curve clearance levels, asked
+        # once each per frame, are each a first call for their shape)
+        seen = self._contains_seen
+        static = seen.get(offset_wo) == self._version and not self.deforming
+        if offset_wo not in seen and len(seen) >= 2 * (tol.OFFSET_LEVELS + 3):
+            seen.clear()
+        seen[offset_wo] = self._version
         if static:
-            lo, h, dims, inside = self._inside_grid()
+            lo, h, dims = self._inside_grid()
             cells = self._cells(q, h, dims)
             touched = self._surface_cells(offset_wo).reshape(-1)
             trace = cells < 0
             trace[cells >= 0] = touched[cells[cells >= 0]]
         else:
             lo, h, dims, _, _ = self._occupancy()
-            inside = self._coarse_inside
             cells = self._cells(q, h, dims)
             # near_surface pads by h + max_edge: a point it calls far has no
             # vertex within max_edge of its own cell: no triangle crosses it
             trace = self.near_surface_grid(q, 0.0, offset_wo)
-        key = (self._version, offset_wo, static)
-        cache = self._inside_keys
-        if cache.get(static) != key:
-            inside[...] = -1
-            cache[static] = key
+        inside = self._answers(static, offset_wo, dims)
         out = np.zeros(k, bool)
         far = np.flatnonzero(~trace & (cells >= 0))
         if len(far):
@@ -944,25 +1200,33 @@ class Collider:
         return np.where(ok, flat, -1)
 
     def _inside_grid(self):
-        """``(lo, h, dims, inside)``: the occupancy grid subdivided
-        ``tol.INSIDE_SUBDIV`` times per axis, for the inside test's per-cell
-        answers ``inside`` (int8: -1 unknown, 0 outside, 1 inside)."""
-        occ = self._occupancy()
-        if getattr(self, "_inside_of", None) is not occ:
-            lo, h, dims = occ[0], occ[1] / tol.INSIDE_SUBDIV, occ[2] * tol.INSIDE_SUBDIV
-            self._inside = (lo, h, dims, np.full(tuple(dims), -1, np.int8))
-            self._inside_of = occ
-            self._inside_keys.pop(True, None)
-        return self._inside
+        """``(lo, h, dims)``: the occupancy grid subdivided ``tol.INSIDE_SUBDIV``
+        times per axis, for the inside test's per-cell answers."""
+        lo, h, dims, _, _ = self._occupancy()
+        return lo, h / tol.INSIDE_SUBDIV, dims * tol.INSIDE_SUBDIV
+
+    def _answers(self, fine, offset_wo, dims):
+        """The inside test's per-cell answers (int8 grid of ``dims``: -1 unknown,
+        0 outside, 1 inside) of the shell at ``offset_wo`` on the fine or the
+        coarse grid, kept per shape and offset (several offset levels of
+        per-curve clearances each keep theirs)."""
+        key = (bool(fine), offset_wo)
+        hit = self._inside_answers.get(key)
+        if hit is not None and hit[0] == self._version and hit[1].shape == tuple(dims):
+            return hit[1]
+        _keep_recent(self._inside_answers, self._version, 2 * (tol.OFFSET_LEVELS + 3))
+        inside = np.full(tuple(dims), -1, np.int8)
+        self._inside_answers[key] = (self._version, inside)
+        return inside
 
     def _surface_cells(self, offset_wo):
         """(dims) bool grid: the cells of the occupancy grid that a triangle of
         the shell at ``offset_wo`` may touch (each triangle's bounding box,
         grown by how far the shell moves it; cached per shape and offset)."""
-        key = (self._version, offset_wo)
-        if getattr(self, "_touched_key", None) == key:
-            return self._touched
-        lo, h, dims, _ = self._inside_grid()
+        hit = self._touched.get(offset_wo)
+        if hit is not None and hit[0] == self._version:
+            return hit[1]
+        lo, h, dims = self._inside_grid()
         V = self._local_vertices()
         grow = self.margin * 1.01 + offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 * norm_bound(
             self._Minv[:3, :3]) + 1e-9 * h
@@ -976,9 +1240,10 @@ class Collider:
             mx = np.maximum(np.maximum(c0, c1), c2)
             ilo[:, i] = np.floor((mn - grow - lo[i]) / h)
             ihi[:, i] = np.floor((mx + grow - lo[i]) / h)
-        self._touched = mark_boxes(ilo, ihi, dims)
-        self._touched_key = key
-        return self._touched
+        touched = mark_boxes(ilo, ihi, dims)
+        _keep_recent(self._touched, self._version, tol.OFFSET_LEVELS + 3)
+        self._touched[offset_wo] = (self._version, touched)
+        return touched
 
     def _parity(self, p_wo, offset_wo):
         """Ray-parity inside test of world points (three votes).

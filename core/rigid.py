@@ -158,7 +158,7 @@ class Plan:
         self.K = np.where(
             self.moving, np.maximum(np.ceil((th0 - th1) / p - 1e-9), 1), 0
         ).astype(np.int64)
-        self.kmax = collision_steps(ctx, th0)  # collision grid th0 + k p, k in [1, kmax]
+        self.kmax = collision_steps(ctx, th0, act)  # collision grid th0 + k p, k in [1, kmax]
         # per curve (the dtype of the curve indices, int64): regime (0 unknown,
         # 1 collision, 2 recovery) and bracket
         self.regime = np.zeros_like(act)
@@ -171,7 +171,8 @@ class Plan:
     def _theta(self, i, k, collision):
         """Angle of step ``k`` of curves ``i`` on the collision or recovery grid."""
         if collision:
-            return np.minimum(self.th0[i] + k * self.ctx.prec, self.ctx.max_angle)
+            return np.minimum(self.th0[i] + k * self.ctx.prec,
+                              self.ctx.max_angle_of(self.act[i]))
         return np.minimum(self.th1[i] + k * self.ctx.prec, self.th0[i])
 
     def _probe(self, batch, probes):
@@ -400,7 +401,7 @@ def restart_contacts(ctx, batch, items, k, status):
         kb, _ = search_angles(ctx, RigidBatch(ctx, cb), np.arange(n), np.zeros(n),
                               *fresh_searches(n))
         found[hb] = kb != NONE
-        phi[hb] = np.where(found[hb], np.minimum(kb * p, ctx.max_angle), 0.0)
+        phi[hb] = np.where(found[hb], np.minimum(kb * p, ctx.max_angle_of(cb)), 0.0)
     anew = _moved(ctx, cs, now, _ends(ctx, cs, phi, axis1))
     ctx.state.stiff[cs] = stiff0
     ctx.axis[cs] = axis0
@@ -467,7 +468,7 @@ def resolve_collisions(ctx, batch, items, k, status):
             th0[retry[ok2]] = 0.0
     ok = k != NONE
     res = c[ok]
-    angle[res] = np.minimum(th0[ok] + k[ok] * p, ctx.max_angle)
+    angle[res] = np.minimum(th0[ok] + k[ok] * p, ctx.max_angle_of(res))
     ctx.angle_max[res] = np.maximum(ctx.angle_max[res], angle[res])
     status[res] = Status.COLLIDING
     bad = c[~ok]
@@ -489,7 +490,7 @@ def recovery_step(ctx, rec):
     frac = ctx.target_fraction(rec)
     target = np.where(np.isnan(frac), th0, np.nan_to_num(frac) * ctx.angle_max[rec])
     target = np.minimum(target, th0)
-    th1 = th0 - ctx.s.recovery_rate * (th0 - target)
+    th1 = th0 - ctx.s.per_curve("recovery_rate", rec) * (th0 - target)
     th1 = np.where(th1 - target < tol.SNAP_FRACTION * p, target, th1)
     return np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
 
@@ -507,10 +508,12 @@ def recover(ctx, rec, th0, th1, blocked, status):
     status[rec] = np.maximum(status[rec], st)
 
 
-def collision_steps(ctx, th0):
-    """(n,) int64: the last step ``k`` of the collision grid ``th0 + k p`` of curves at
-    angles ``th0`` (n,), the one that reaches Max Angle (0 for a curve already there)."""
-    return np.maximum(np.ceil((ctx.max_angle - th0) / ctx.prec - 1e-9), 0).astype(np.int64)
+def collision_steps(ctx, th0, curves):
+    """(n,) int64: the last step ``k`` of the collision grid ``th0 + k p`` of curves
+    ``curves`` (n,) at angles ``th0`` (n,), the one that reaches their Max Angle (0
+    for a curve already there)."""
+    return np.maximum(np.ceil((ctx.max_angle_of(curves) - th0) / ctx.prec - 1e-9),
+                      0).astype(np.int64)
 
 
 def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None, guess=None):
@@ -541,8 +544,11 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
     """
     p = ctx.prec
     n = len(items)
-    kmax = collision_steps(ctx, th0)
-    base, cap = th0, np.full(n, ctx.max_angle)
+    curves = batch.curves[items]
+    kmax = collision_steps(ctx, th0, curves)
+    base = th0
+    cap = np.empty(n)
+    cap[:] = ctx.max_angle_of(curves)
     lo = lo.copy()
     hi = hi.copy()
     stride = stride.copy()
@@ -702,7 +708,7 @@ class RigidBatch:
         sel = self.starts[items][rep] + (np.arange(len(rep)) - first[rep])
         a = theta[rep] * self.w[sel]
         cos, sin = np.cos(a)[:, None], np.sin(a)[:, None]
-        scale = ctx.shrink_scale(a)
+        scale = ctx.shrink_scale(a, self.curves[items][rep])
         length = self.length[sel] if scale is None else self.length[sel] * scale
         back, grow = ctx.ray_growth(length, self.root[sel])
         back, grow = back[:, None], grow[:, None]
@@ -795,7 +801,7 @@ class RigidBatch:
         ctx = self.ctx
         ns = self.ns
         a = self.w.take(it, axis=1) * theta  # (ns, n); take keeps rows contiguous
-        scale = ctx.shrink_scale(a)
+        scale = ctx.shrink_scale(a, self.curves[it])
         if scale is None:
             back, grow = (g.take(it, axis=1) for g in self.growth)
         else:

@@ -51,7 +51,11 @@ class SoftSolve:
                 break
             seg, rep, starts = ctx.segments(todo)
             o, d, _, rep, starts = ctx.deform(todo, quat=ctx.quat[seg])
-            k, point, push = ctx.first_hit_details(todo, o, d, rep, starts)
+            follow = ctx.s.follow_collider_motion
+            if follow:
+                k, point, push, vel = ctx.first_hit_details(todo, o, d, rep, starts, motion=True)
+            else:
+                k, point, push = ctx.first_hit_details(todo, o, d, rep, starts)
             hit = k >= 0
             todo, k, push = todo[hit], k[hit], push[hit]
             if len(todo) == 0:
@@ -66,6 +70,10 @@ class SoftSolve:
                 ok = np.linalg.norm(np.cross(rot.normalize(d[k]), pull), axis=1) > tol.PARALLEL_EPS
                 push = np.where(ok[:, None], pull, push)
             axis = rot.rotation_axis(d[k], push)
+            if follow:  # where the collider moves at the hit: the segment follows it
+                way, ok = ctx.follow_directions(todo, d[k], vel[hit], d[k])
+                if ok.any():
+                    axis[ok] = rot.rotation_axis(d[k][ok], way[ok])
             last = ctx.layout.soff[todo + 1]  # one past the curve's last segment
 
             # Only the solved segment needs testing: segments before it do not
@@ -75,7 +83,7 @@ class SoftSolve:
             root_k = k == starts[hit]
 
             turn = _SegmentTurn(ctx, todo, o_k, d_k, axis, root_k)
-            kmax = int(np.ceil(ctx.max_angle / p - 1e-9))  # every curve's
+            kmax = np.ceil(ctx.max_angle_of(todo) / p - 1e-9).astype(np.int64)
             kk = scan_bisect(len(todo), lambda items, ks, t=turn: t.clear(items, ks * p), kmax)
             ok = kk >= 0
             if ok.any():
@@ -124,8 +132,9 @@ class SoftSolve:
         of bisected. Where clearance is monotone in the fraction both give
         the same level.
         """
-        ctx, s, p = self.ctx, self.ctx.s, self.ctx.prec
+        ctx, p = self.ctx, self.ctx.prec
         levels = _LEVELS
+        rate = ctx.s.per_curve("recovery_rate", rec)  # a number, or per curve of rec
         seg, rep, starts = ctx.segments(rec)
         q0 = ctx.quat[seg]
         ident = np.zeros_like(q0)
@@ -136,7 +145,7 @@ class SoftSolve:
         qt = np.where(hold[rep][:, None], q0, qt)
         path = _Slerp(q0, qt)  # the arc every probe of this step samples
 
-        q1 = path(np.full(len(q0), s.recovery_rate))
+        q1 = path(np.full(len(q0), rate) if np.ndim(rate) == 0 else rate[rep])
         # Within half a precision step of the target (every segment): land on it.
         conj = qt * np.array([1.0, -1.0, -1.0, -1.0])
         near_t = rot.quat_angle(rot.quat_mul(q1, conj)) < tol.SNAP_FRACTION * p
@@ -156,7 +165,8 @@ class SoftSolve:
             sseg, srep, _ = ctx.segments(c)
             pos = np.searchsorted(seg, sseg)
             full = (ks == levels)[srep]
-            q = path.soa((ks / levels * s.recovery_rate)[srep], pos)
+            r = rate if np.ndim(rate) == 0 else rate[chk[items]]
+            q = path.soa((ks / levels * r)[srep], pos)
             q = np.where(full, q1_soa.take(pos, axis=1), q)
             if ns:  # component arrays (4, ns, n)
                 return ~ctx.quat_curve_hits(c, q.reshape(4, len(c), ns).transpose(0, 2, 1))
@@ -202,7 +212,8 @@ class SoftSolve:
         if len(b):
             sseg, _, _ = ctx.segments(rec[b])
             pos = np.searchsorted(seg, sseg)
-            lam = np.repeat(level[b] / levels * s.recovery_rate, ctx.layout.nseg[rec[b]])
+            r = rate if np.ndim(rate) == 0 else rate[b]
+            lam = np.repeat(level[b] / levels * r, ctx.layout.nseg[rec[b]])
             q1[pos] = path(lam, pos)
         ctx.quat[seg] = q1
         ctx.soft_level[rec[b]] = level[b] / levels

@@ -23,7 +23,15 @@ so roots never move and lengths are kept unless Shrink says otherwise.
 The per-curve state (``theta``, its axis, soft quaternions) is stored in a
 *local frame* carried along with the input curve, so it follows the
 animated growth surface; the axis is chosen at the first hit and kept
-until the curve has recovered (no pops when hit normals change).
+until the curve has recovered (no pops when hit normals change). At the
+first hit the curve turns away along the collider's normal (paper 3.2.1),
+toward the growth surface (Attract to Growth Surface) or, with Follow
+Collider Motion, along the collider's motion at the contact.
+
+Parameter maps: Max Angle, Scale Minimum, Recovery Rate, Plasticity,
+Collision Offset and Clearance Margin may be given per curve (``Settings``);
+each curve uses its own values (per-curve clearances test each collider as
+a few offset shells, ``Collider.clearance_groups``).
 
 Where things are
 ----------------
@@ -90,6 +98,7 @@ class Solver:
     def __init__(self, offsets, settings: Settings | None = None):
         self.layout = CurveLayout(offsets)
         self._settings = Settings() if settings is None else self._check_settings(settings)
+        self._groups = {}  # per-curve clearance groups of the settings (see _clearances)
         self.reset()
 
     @property
@@ -101,10 +110,10 @@ class Solver:
         return self.layout.n_points
 
     # ------------------------------------------------------------ settings
-    @staticmethod
-    def _check_settings(s):
+    def _check_settings(self, s):
         if not isinstance(s, Settings):
             raise SettingsError(f"settings must be a core.Settings, got {type(s).__name__}")
+        s.check_curve_count(self.n_curves)
         return s
 
     @property
@@ -118,6 +127,7 @@ class Solver:
         s = self._check_settings(s)
         mode_changed = s.mode != self._settings.mode
         self._settings = s
+        self._groups = {}
         if mode_changed:
             self.reset()
 
@@ -273,6 +283,29 @@ class Solver:
             e = e != 0
         return e
 
+    def _clearances(self, colliders):
+        """``(cols, groups)`` for the step: one ``(collider, distance)`` entry
+        per offset shell the curves are tested against and, per entry, the
+        curves kept at that distance ((C,) bool, None: all). Plain settings
+        give one entry per collider, as ever; per-curve offsets or margins
+        several (:meth:`Collider.clearance_groups`), computed once per
+        settings and collider offset."""
+        s = self._settings
+        cols, groups = [], []
+        for c in colliders:
+            key = c.offset
+            g = self._groups.get(key)
+            if g is None:
+                g = c.clearance_groups(s.collision_offset, s.clearance_margin,
+                                       s.clearance_rounding(c))
+                if len(self._groups) >= 16:  # (colliders' own offsets keyed over a shot)
+                    self._groups.clear()
+                self._groups[key] = g
+            for dist, mask in g:
+                cols.append((c, dist))
+                groups.append(mask)
+        return cols, groups
+
     # ------------------------------------------------------------ the step
     def step(self, points, colliders=(), growth=None, enabled=None) -> StepResult:
         """Solve one frame.
@@ -283,7 +316,11 @@ class Solver:
             This frame's input curves, world space.
         colliders : sequence of Collider
             Meshes the curves must not pass through (world transforms in
-            their ``matrix``). Empty colliders are ignored.
+            their ``matrix``). Empty colliders are ignored. With
+            ``Settings.follow_collider_motion``, a collider's motion since
+            its previous placement (:attr:`Collider.previous`, e.g. updated
+            once per frame with :meth:`Collider.place`) steers the curves it
+            starts to push.
         growth : Collider, optional
             The growth surface (for Attract to Growth Surface and Put to
             Growth Surface). Never collided with.
@@ -301,7 +338,7 @@ class Solver:
             curve or point at fault).
         """
         t_start = time.perf_counter()
-        s = self._settings
+        s = self._check_settings(self._settings)
         points = self._check_points(points)
         enabled = self._check_enabled(enabled)
         # Curves the solver cannot work with (a non-finite point, a zero-length
@@ -321,7 +358,8 @@ class Solver:
             if not isinstance(c, Collider):
                 raise InputError(f"colliders[{i}] is a {type(c).__name__}, not a core.Collider")
             if not c.empty:
-                cols.append((c, c.effective_offset(s.collision_offset)))
+                cols.append(c)
+        cols, groups = self._clearances(cols)
         if growth is not None and not isinstance(growth, Collider):
             raise InputError(f"growth must be a core.Collider, got {type(growth).__name__}")
         if growth is not None and growth.empty:
@@ -339,13 +377,13 @@ class Solver:
         warm = bool(self.warm_start)
         waits = []  # background work of this step: never left running on error
         try:
-            ctx = StepContext(layout, state, s, points, cols, growth, warm)
+            ctx = StepContext(layout, state, s, points, cols, growth, warm, groups)
             waits += ctx.builds
             if ctx.degenerate.any():
                 reasons.append((int(np.argmax(ctx.degenerate)), ctx.degenerate_reason))
                 invalid = invalid | ctx.degenerate
                 points = self._stand_in(given, invalid)
-                ctx = StepContext(layout, state, s, points, cols, growth, warm)
+                ctx = StepContext(layout, state, s, points, cols, growth, warm, groups)
                 waits += ctx.builds
             enabled = enabled & ~invalid
             problems = self._problems(invalid, reasons)

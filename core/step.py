@@ -40,20 +40,25 @@ SPLIT_MIN_CURVES = 4096
 class StepContext:
     """Everything one step needs; methods are the phases of the step."""
 
-    def __init__(self, layout, state, settings, points, cols, growth, warm_start=True):
+    def __init__(self, layout, state, settings, points, cols, growth, warm_start=True,
+                 groups=None):
         """``layout`` (:class:`core.layout.CurveLayout`) and ``state``
         (:class:`core.state.SolverState`) are the solver's: the step reads the
         state in :meth:`load_state` and writes the next one in
-        :meth:`store_state`."""
+        :meth:`store_state`. ``cols``: ``(collider, offset)`` entries, one per
+        offset shell; ``groups``: per entry, the curves tested against it
+        ((C,) bool, None: all; see ``Solver._clearances``)."""
         self.layout = layout
         self.state = state
         self.s = s = settings
         self.points = points  # the input, its own dtype (never modified)
         out_dtype = points.dtype
         self.cols = cols
+        self.groups = [None] * len(cols) if groups is None else list(groups)
         self.growth = growth
         self.threads = s.threads or default_threads()
         self.prec = np.deg2rad(s.rotation_precision)
+        # Max Angle in radians: a number, or (C,) per curve (max_angle_of)
         self.max_angle = np.deg2rad(s.max_angle)
         self.out_dtype = out_dtype
         self.timings = {}
@@ -133,8 +138,10 @@ class StepContext:
         self._near_roots = []  # per collider: (roots in its box, their grid coords)
         rootsT = np.ascontiguousarray(self.roots.T)
         try:
-            for c, off in cols:
-                self._candidates(c, off, rootsT)
+            seen = set()
+            for (c, off), group in zip(cols, self.groups, strict=True):
+                self._candidates(c, off, rootsT, group, first=id(c) not in seen)
+                seen.add(id(c))
         except BaseException:
             for b in self.builds:  # never leave a build running behind an error
                 try:
@@ -150,8 +157,10 @@ class StepContext:
         self.warm_start = bool(warm_start) and not self.soft
         self.warm_soft = bool(warm_start) and self.soft
 
-    def _candidates(self, c, off, rootsT):
-        """Candidate curves of collider ``c`` (appended to ``self.cand``)."""
+    def _candidates(self, c, off, rootsT, group=None, first=True):
+        """Candidate curves of collider ``c`` at offset ``off`` (appended to
+        ``self.cand``), among the curves ``group`` ((C,) bool, None: all) that
+        this shell is for. ``first``: the first shell of ``c`` this step."""
         lo, hi = c.bounds_world(off)
         in_box = None
         for i in range(3):
@@ -163,6 +172,9 @@ class StepContext:
             else:
                 gg += g * g
         cand = gg <= self.curve_len**2
+        if group is not None:
+            cand &= group
+            in_box &= group
         w = np.flatnonzero(cand)
         # A changed collider (deforming: every frame) that the step will query
         # gets its BVH built on a ray thread while the set-up goes on. Started
@@ -177,7 +189,7 @@ class StepContext:
         q = c.grid_coords(rootsT.take(w, axis=1))  # (take: contiguous rows)
         cand[w] = c.near_surface_grid(q, self.curve_len[w], off)
         needed = bool(cand.any() or (c.detects_pinch and in_box.any()))
-        c.queried = needed
+        c.queried = needed if first else (c.queried or needed)
         if needed and not early:
             self._prefetch(c, off)
         self.cand.append(cand)
@@ -376,7 +388,7 @@ class StepContext:
         else:
             a_seg, ax_seg = self.rigid_rotations(idx, angle, axis, seg, rep)
             v = rot.rotate(v, ax_seg, a_seg)
-            scale = self.shrink_scale(a_seg)
+            scale = self.shrink_scale(a_seg, idx[rep])
             if scale is not None:
                 v = v * scale[:, None]
         cs = rot.cumsum_owned(v, rep, starts)
@@ -414,7 +426,7 @@ class StepContext:
         (3, ns, n) components in the output dtype (as :meth:`deform`)."""
         a = self.bend_weights(idx) * angle
         v = rot.rotate_soa(self.seg_soa(idx), axis, a)
-        scale = self.shrink_scale(a)
+        scale = self.shrink_scale(a, idx)
         if scale is not None:
             v *= scale
         end = rot.cumsum_soa(v)
@@ -441,14 +453,16 @@ class StepContext:
             return np.where(self.state.stiff[idx], 1.0, ((np.arange(ns) + 1.0) / ns)[:, None])
         return np.ones((ns, 1))
 
-    def shrink_scale(self, a):
+    def shrink_scale(self, a, curves):
         """Shrink (paper 3.2.2): segment scale for segment rotation angles ``a``
-        (radians), linear from 1 at 0 to ``scale_minimum`` at ``scale_angle``,
-        clamped beyond; None when Shrink is off."""
+        (radians) of curves ``curves`` (an index array broadcasting with
+        ``a``: one per row, or (n,) for (ns, n) blocks), linear from 1 at 0
+        to ``scale_minimum`` at ``scale_angle``, clamped beyond; None when
+        Shrink is off."""
         if not self.s.shrink:
             return None
         ramp = np.minimum(a / np.deg2rad(self.s.scale_angle), 1.0)
-        return 1.0 - (1.0 - self.s.scale_minimum) * ramp
+        return 1.0 - (1.0 - self.s.per_curve("scale_minimum", curves)) * ramp
 
     def ray_growth(self, length, root):
         """Fractions ``(back, grow)`` by which segments of ``length`` are grown.
@@ -542,7 +556,7 @@ class StepContext:
         m[starts] = True
         return m
 
-    def first_hit_details(self, idx, o, d, rep, starts, hit=None):
+    def first_hit_details(self, idx, o, d, rep, starts, hit=None, motion=False):
         """First hit (root to tip) of each curve: segment, point, push direction.
 
         ``hit``: which segments hit, when already known (:meth:`input_hits`).
@@ -552,6 +566,10 @@ class StepContext:
         k : (n,) int  index into o/d of the first hitting segment (-1: none)
         point : (n, 3)  hit point
         push : (n, 3)  unit direction away from the collider (paper 3.2.1)
+        velocity : (n, 3)
+            Only with ``motion=True``: the hit collider's velocity at the hit
+            point (:meth:`Collider.velocities`, world units per step; zero
+            without a hit).
         """
         n = len(idx)
         root = self.root_mask(len(o), starts)
@@ -564,26 +582,39 @@ class StepContext:
             k[owners] = w[first]
         point = np.zeros((n, 3))
         push = np.zeros((n, 3))
+        vel = np.zeros((n, 3))
         has = np.flatnonzero(k >= 0)
         if len(has) == 0:
-            return k, point, push
+            return (k, point, push, vel) if motion else (k, point, push)
         ks = k[has]
         o, d = self.extend(o[ks], d[ks], root[ks])
         best_t = np.full(len(has), np.inf)
         best_n = np.zeros((len(has), 3))
         double = np.zeros(len(has), bool)
-        for (c, off), cand in zip(self.cols, self.cand, strict=True):
+        best_e = np.full(len(has), -1)  # (motion) entry of self.cols hit, and its face
+        best_f = np.full(len(has), -1, np.int64)
+        for e, ((c, off), cand) in enumerate(zip(self.cols, self.cand, strict=True)):
             m = np.flatnonzero(cand[idx[has]])
             if len(m) == 0:
                 continue
-            h, t, nrm = c.segment_hit_details(o[m], d[m], off)
+            if motion:
+                h, t, nrm, face = c.segment_hit_details(o[m], d[m], off, faces=True)
+            else:
+                h, t, nrm = c.segment_hit_details(o[m], d[m], off)
             better = h & (t < best_t[m])
             mm = m[better]
             best_t[mm] = t[better]
             best_n[mm] = nrm[better]
             double[mm] = c.double_sided
+            if motion:
+                best_e[mm] = e
+                best_f[mm] = face[better]
         best_t = np.where(np.isfinite(best_t), best_t, 0.0)
         pt = o + d * best_t[:, None]
+        if motion:
+            for e in np.unique(best_e[best_e >= 0]):
+                w = np.flatnonzero(best_e == e)
+                vel[has[w]] = self.cols[e][0].velocities(pt[w], faces=best_f[w])
         # Single-sided: along the normal, or its inverse when a back face is
         # crossed. Double-sided: toward the side the root is on.
         side = -np.sign(rot.dot(d, best_n))
@@ -592,12 +623,50 @@ class StepContext:
         side = np.where(side == 0, 1.0, side)
         point[has] = pt
         push[has] = best_n * side[:, None]
-        return k, point, push
+        return (k, point, push, vel) if motion else (k, point, push)
+
+    def follow_directions(self, idx, seg, vel, ref):
+        """Follow Collider Motion (``Settings.follow_collider_motion``): which
+        way curves ``idx`` turn at their first hit, given their hit segments
+        ``seg`` (n, 3), the collider's velocity there ``vel`` (n, 3) and the
+        vector ``ref`` (n, 3) the axis will be made perpendicular to.
+
+        The direction is the velocity made perpendicular to the hit segment,
+        unit. It is used (``ok``) where that velocity exceeds
+        ``tol.FOLLOW_SPEED_REL`` times the curve's length and
+        ``tol.FOLLOW_SPEED_ULPS`` float32 ulps of the curve's coordinates, and
+        is not parallel to ``ref`` (no axis); elsewhere the caller keeps the
+        paper's direction.
+
+        Returns
+        -------
+        direction : (n, 3) float64 (rows where ``ok``; zero elsewhere)
+        ok : (n,) bool
+        """
+        sq = rot.dot(seg, seg)
+        along = rot.dot(vel, seg) / np.where(sq > 0, sq, 1.0)
+        v = vel - along[:, None] * seg
+        speed = np.sqrt(rot.dot(v, v))
+        mag = np.abs(self.roots[idx]).max(axis=1) + self.curve_len[idx]
+        floor = np.maximum(tol.FOLLOW_SPEED_REL * self.curve_len[idx],
+                           tol.FOLLOW_SPEED_ULPS * float(np.finfo(np.float32).eps) * mag)
+        side = np.cross(ref, v)
+        sideways = np.sqrt(rot.dot(side, side))
+        ok = (speed > floor) & (sq > 0)
+        ok &= sideways > tol.PARALLEL_EPS * np.sqrt(rot.dot(ref, ref)) * speed
+        return np.where(ok[:, None], v / np.where(ok, speed, 1.0)[:, None], 0.0), ok
 
     # ----------------------------------------------------------- solving
     def target_fraction(self, idx):
         """Recovery target as a fraction of the maximum rotation (plasticity)."""
-        return np.where(self.state.hold[idx], np.nan, self.s.plasticity)
+        return np.where(self.state.hold[idx], np.nan, self.s.per_curve("plasticity", idx))
+
+    def max_angle_of(self, curves):
+        """Max Angle (radians) of ``curves``: the number, or their values of
+        a per-curve map (broadcasts as ``curves`` does)."""
+        if np.ndim(self.max_angle):
+            return self.max_angle[curves]
+        return self.max_angle
 
     def solve(self, idx, status):
         """Solve curves ``idx`` in this step's mode."""
@@ -629,11 +698,19 @@ class StepContext:
     def new_axes(self, idx, o, d, rep, starts, hit=None):
         """Rotation axes for curves starting a contact (paper 3.2.1).
 
+        The paper's: turning the hit point away along the push direction, or
+        toward the growth surface (Attract to Growth Surface); with Follow
+        Collider Motion, where the collider moves at the hit
+        (:meth:`follow_directions`), turning the tip along that motion.
         Also sets ``self.guess`` for them: the rotation that lifts every CV
         above the collider's tangent plane at the hit (a first probe for the
         angle search, nothing more). ``hit``: see :meth:`first_hit_details`.
         """
-        k, point, push = self.first_hit_details(idx, o, d, rep, starts, hit)
+        follow = self.s.follow_collider_motion
+        if follow:
+            k, point, push, vel = self.first_hit_details(idx, o, d, rep, starts, hit, motion=True)
+        else:
+            k, point, push = self.first_hit_details(idx, o, d, rep, starts, hit)
         c = point - self.roots[idx]
         normal = push
         if self.s.attract_to_growth_surface:
@@ -646,6 +723,15 @@ class StepContext:
             )
             push = np.where(ok[:, None], rot.normalize(toward), push)
         axis = rot.rotation_axis(c, push)
+        if follow:
+            # Where the collider moves at the hit: the tip moves along that
+            # motion (made perpendicular to the hit segment), i.e. the axis is
+            # perpendicular to it and to the chord root -> tip.
+            last = starts + self.layout.nseg[idx] - 1
+            chord = o[last] + d[last] - self.roots[idx]
+            way, ok = self.follow_directions(idx, d[np.maximum(k, 0)], vel, chord)
+            if ok.any():
+                axis[ok] = rot.rotation_axis(chord[ok], way[ok])
         self.guess[idx] = self.plane_guess(idx, o + d, rep, starts, point, normal, axis)
         return axis
 

@@ -75,6 +75,33 @@ INSIDE_SUBDIV = 2
 #: farther than the offset), at most this many times the offset.
 OFFSET_MAX_STRETCH = 4.0
 
+#: Per-curve clearances (``Settings.collision_offset`` and
+#: ``Settings.clearance_margin`` as parameter maps): each distinct distance a
+#: collider must keep is one offset shell, i.e. one BVH built (every frame for
+#: a deforming collider) and kept in memory. Up to this many distinct distances
+#: are exact; more are rounded UP to at most this many levels (equal bins from
+#: the smallest to the largest distance, each bin kept at the largest distance
+#: asked in it: never less clearance than asked, at most an eighth of the
+#: spread more). Eight bounds the builds and the BVH memory to what a few
+#: colliders with their own offsets cost already, while a painted map's
+#: gradient still comes out in steps no coarser than 1/8 of its range.
+OFFSET_LEVELS = 8
+
+#: Follow Collider Motion: a collider moves at a contact when its velocity
+#: there, perpendicular to the hit segment, exceeds ``FOLLOW_SPEED_REL`` times
+#: the curve's length per step (scale-free: the same in millimetres and
+#: kilometres). Slower, it would take a thousand steps (40 s at 24 fps) to
+#: move by one curve length: no visible motion to follow, and its direction is
+#: then no more than the rounding of animated float32 transforms; the curve
+#: takes the paper's direction instead.
+FOLLOW_SPEED_REL = 1e-3
+
+#: ... and exceeds this many float32 ulps of the contact point's coordinates:
+#: Blender hands matrices and vertices over in float32, so a collider keyed to
+#: stay put can still move by a few ulps from frame to frame (tiny curves far
+#: from the origin would otherwise follow that noise).
+FOLLOW_SPEED_ULPS = 64
+
 #: Every collider keeps curves at least this many float32 ulps of its own
 #: coordinates away (``Collider.margin``: the tested shell lies that far out
 #: along the vertex normals, plus any Collision Offset). Embree tests in

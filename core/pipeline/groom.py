@@ -535,7 +535,8 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     render_offsets : (R+1,) array_like of int
     colliders : sequence of Collider
     settings : Settings, optional
-        Default ``Settings(mode="stiff")``.
+        Default ``Settings(mode="stiff")``. A parameter map (``Settings.mapped``)
+        has one value per render curve (``R``); so has ``fallback``'s.
     growth : Collider, optional
         Growth surface (for the settings that need it).
     fallback : Settings, optional
@@ -581,14 +582,14 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
         status[_degenerate(pts, off, np.flatnonzero(~solve), n)] = Status.INVALID  # (as the
         idx = np.flatnonzero(solve)  # solver marks them)
         sub, sub_off = _take(pts, off, idx, n)
-        res = Solver(sub_off, settings).step(sub, colliders, growth=growth)
+        res = Solver(sub_off, settings.take(idx)).step(sub, colliders, growth=growth)
         _put(out, off, idx, n, res.points)
         status[idx] = res.status
     if fallback is not None and R:
         again = np.flatnonzero(status == Status.UNRESOLVED)
         if len(again):
             sub, sub_off = _take(pts, off, again, n)
-            res = Solver(sub_off, fallback).step(sub, colliders, growth=growth)
+            res = Solver(sub_off, fallback.take(again)).step(sub, colliders, growth=growth)
             took = res.status != Status.UNRESOLVED
             if took.any():
                 keep = again[took]
@@ -735,7 +736,7 @@ def _to_solve(pts, off, colliders, settings, skip):
     static = all(seen)
     roots = pts[off[:-1]]
     for c, known in zip(cols, seen, strict=True):
-        offset = c.effective_offset(settings.collision_offset)
+        offset = _largest_offset(c, settings)
         blo, bhi = c.bounds_world(offset)
         pad = 1e-4 * (float(np.linalg.norm(bhi - blo)) + float(np.abs(np.r_[blo, bhi]).max()))
         r = ((lo <= bhi + pad) & (hi >= blo - pad)).all(1)
@@ -762,11 +763,18 @@ def _to_solve(pts, off, colliders, settings, skip):
             inside = np.zeros(len(maybe), bool)
             for c in cols:
                 if c.detects_pinch:
-                    inside |= c.contains(roots[maybe], c.effective_offset(
-                        settings.collision_offset))
+                    inside |= c.contains(roots[maybe], _largest_offset(c, settings))
             maybe = maybe[inside]
         clear[maybe] = False
     return reach & ~clear
+
+
+def _largest_offset(c, settings):
+    """The largest distance ``settings`` keep curves from collider ``c`` (its own
+    offset or Collision Offset, plus Clearance Margin; the largest value of a
+    per-curve map): the conservative reach of :func:`_to_solve`'s tests."""
+    return max(d for d, _ in c.clearance_groups(settings.collision_offset,
+                                                 settings.clearance_margin))
 
 
 class _ClearanceField:

@@ -45,7 +45,8 @@ def _ctx(n, max_angle=10.0, contact=None, delta=None):
         contact=np.zeros(n, bool) if contact is None else np.asarray(contact, bool),
         delta=np.zeros(n) if delta is None else np.asarray(delta, np.float64),
     )
-    return SimpleNamespace(prec=P, max_angle=max_angle, guess=np.zeros(n), state=state)
+    return SimpleNamespace(prec=P, max_angle=max_angle, guess=np.zeros(n), state=state,
+                           max_angle_of=lambda curves: max_angle)
 
 
 @pytest.mark.parametrize("width", [2, 3, 5, 8, 13, 32, 64, 100])

@@ -114,6 +114,30 @@ def test_every_frame_equals_solving_every_curve(seed, radius, offset, mode, ragg
         assert want[1][len(off) - 2] == Status.INVALID
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_parameter_maps_equal_solving_every_curve(seed):
+    """Per-render-curve Collision Offset, Clearance Margin and Max Angle maps (and a
+    fallback with its own): the pass still returns exactly what the solver returns
+    on every curve (its culling reaches the largest distance asked; the solvers of
+    subsets take their curves' values). A ball resting on the fur, then a sunk one
+    (pinches)."""
+    rng = np.random.default_rng(seed)
+    pts, off = scene(rng, 200)
+    R = len(off) - 1
+    Vs, Fs = sphere(rng, 0.6)
+    cols = [Collider(Vs, Fs, name="ball")]
+    s = Settings(mode="stiff", collision_offset=rng.choice([0.0, 0.02, 0.06], R),
+                 clearance_margin=rng.uniform(0.0, 0.03, R), max_angle=rng.uniform(20, 180, R))
+    fb = Settings(mode="bend", collision_offset=s.collision_offset, clearance_margin=0.01)
+    for lift in (0.7, 0.0):
+        M = matrix(rng)
+        M[2, 3] += lift
+        cols[0].matrix = M
+        want = solve_all(pts, off, cols, s, fb)
+        assert (want[1] == (Status.COLLIDING if lift else Status.PINCHED)).sum() >= 10
+        assert_same(clearance_pass(pts, off, cols, settings=s, fallback=fb), want)
+
+
 def test_the_fast_path_runs_and_agrees_on_a_dense_groom(monkeypatch):
     """A groom most of whose curves come near the collider without touching it (as a
     hat over a scalp): from the second pass on the distance field leaves out
