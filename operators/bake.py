@@ -19,9 +19,9 @@ import bpy
 import numpy as np
 
 from ..core import framecache
-from . import frame_outputs, frame_rules, frame_solve, groom_stage, motion, registry
+from . import frame_outputs, frame_rules, frame_solve, groom_stage, keyed, motion, registry
 from .clock import clock
-from .colliders import read_for_solve
+from .colliders import collider_list, keep_placements, read_for_solve
 from .frame_inputs import (
     current_inputs,
     first_change,
@@ -108,7 +108,7 @@ def bake_frame(setup, directory, trust_solver) -> dict:
         if not np.array_equal(offsets, inp.offsets):
             raise ValueError(f"bake frame {f - 1} was made for other curves")
         solver.state = framecache.decode_state(stored, rt.memory.sparse)
-    read_for_solve(setup, inp)
+    read_for_solve(setup, inp, continuous=trust_solver, fresh=frame_rules.starts_here(setup))
     rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
     result = frame_solve.solve_frame(setup, inp)
     rt.solver_frame = f
@@ -192,6 +192,12 @@ def resume_frame(ob, directory) -> int | None:
     return last
 
 
+def _follows(ob) -> bool:
+    """Does the setup use Follow Collider Motion at any frame (on, keyed or driven)?"""
+    return bool(ob.furcollide.follow_collider_motion) or keyed.Animation(ob).animates(
+        "furcollide.follow_collider_motion")
+
+
 class BakeError(RuntimeError):
     """A bake could not start or a frame failed (message is user-facing)."""
 
@@ -254,7 +260,8 @@ class BakeJob:
             self.jobs.append([ob, directory, nxt, None])
         if not self.jobs:
             raise BakeError("Nothing to bake")
-        self.first = min(j[2] for j in self.jobs)
+        self.first = min(j[2] - (j[2] > j[0].furcollide.frame_start and _follows(j[0]))
+                         for j in self.jobs)
         self.last = max(j[0].furcollide.frame_end for j in self.jobs)
         self.frame = self.first
         for ob, directory, nxt, _ in self.jobs:
@@ -286,6 +293,13 @@ class BakeJob:
         for job in self.jobs:
             ob, directory, nxt, last = job
             s = ob.furcollide
+            if f == nxt - 1 and _follows(ob):
+                # The frame before a resumed one: only where its colliders are (Follow
+                # Collider Motion takes their motion since this frame, as playback does).
+                setup = Setup(ob, self.scene, depsgraph)
+                collider_list(setup)
+                keep_placements(setup)
+                continue
             if f < nxt or f > s.frame_end:
                 continue
             try:

@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import core
 from ..core import framecache
+from ..core.collider import Placement
 from . import bridge
 
 
@@ -181,9 +182,10 @@ def sync_collider(entry, o, depsgraph, double_sided=False, offset=None, matrix=N
         )
         return ColliderEntry(col, key, double_sided, offset, deforming,
                              collider_inputs(M, V, key))
-    if not np.array_equal(V, entry.collider.vertices):  # deforming: the core refits
-        entry.collider.vertices = V
-    entry.collider.matrix = M
+    # One update a frame (Follow Collider Motion takes the motion since the previous
+    # one); unchanged vertices are not assigned (a rigid collider keeps its BVH).
+    same = np.array_equal(V, entry.collider.vertices)
+    entry.collider.place(matrix=M, vertices=None if same else V)
     entry.inputs = collider_inputs(M, V, key)
     return entry
 
@@ -323,12 +325,41 @@ def growth_collider(setup, settings):
     return rt.growth.collider
 
 
-def read_for_solve(setup, inputs) -> None:
+def read_for_solve(setup, inputs, continuous=True, fresh=False) -> None:
     """Give the frame ``inputs`` (:class:`frame_inputs.FrameInputs`) the core Colliders
     and growth surface this frame is solved against (the solver's settings decide
-    whether the growth surface is read)."""
+    whether the growth surface is read).
+
+    With Follow Collider Motion, each collider's motion is the one since the previous
+    frame, however the frame is reached: ``continuous`` (the colliders were last read
+    for the previous frame), ``fresh`` (a frame solved from the groomed shape: no
+    motion before it), else the previous frame's placements kept for it
+    (:func:`keep_placements`; none kept: no motion known, the paper's direction)."""
     inputs.colliders = collider_list(setup)
     inputs.growth = growth_collider(setup, setup.solver.settings)
+    if not setup.solver.settings.follow_collider_motion:
+        return
+    rt, f = setup.rt, setup.frame
+    if fresh or not continuous:
+        kept = {} if fresh else rt.placements.get(f - 1, {})
+        for uid, e in rt.colliders.items():
+            p = kept.get(uid)
+            if p is None:
+                e.collider.forget_previous()
+            else:
+                e.collider.set_previous(p.matrix, p.vertices)
+    keep_placements(setup)
+
+
+def keep_placements(setup) -> None:
+    """Keep where each collider is at this frame (Follow Collider Motion: a frame solved
+    later from this one's cached state takes its colliders' motion since here), for the
+    cached frames only."""
+    rt = setup.rt
+    rt.placements = {k: v for k, v in rt.placements.items() if k in rt.memory.frames}
+    rt.placements[setup.frame] = {
+        uid: Placement(e.collider.matrix, e.collider.vertices)
+        for uid, e in rt.colliders.items()}
 
 
 # ------------------------------------------------------- frame-inputs record

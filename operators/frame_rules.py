@@ -393,7 +393,7 @@ def _check_topology(setup, inp) -> bool:
 def _solve(setup, inp, note):
     """Solve frame ``f`` (the solver holds ``f - 1``, or was reset), cache it, show it."""
     rt, f = setup.rt, setup.frame
-    read_for_solve(setup, inp)
+    read_for_solve(setup, inp, continuous=rt.solver_frame == f - 1, fresh=starts_here(setup))
     rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
     result = frame_solve.solve_frame(setup, inp)
     rt.solver_frame = f

@@ -33,9 +33,9 @@ UNKNOWN = None
 #: (``ob.furcollide.<name>``), in the order a change is reported.
 SETUP_VALUES = (
     "enabled", "rotation_precision", "max_angle", "affected_connected_cvs", "cv_falloff",
-    "attract_to_growth_surface", "shrink", "scale_minimum", "scale_angle", "recovery_rate",
-    "plasticity", "pinch_resolution", "recover_pinched", "collision_offset",
-    "collection_double_sided",
+    "attract_to_growth_surface", "follow_collider_motion", "shrink", "scale_minimum",
+    "scale_angle", "recovery_rate", "plasticity", "pinch_resolution", "recover_pinched",
+    "collision_offset", "collection_double_sided",
 )
 #: Each collider entry's (``ob.furcollide.colliders[i].<name>``).
 COLLIDER_VALUES = ("enabled", "double_sided", "use_offset", "collision_offset")

@@ -187,6 +187,13 @@ class FurCollideSettings(PropertyGroup):
         "Push colliding hair down toward the skin it grows from (pats fur or grass flat) "
         "instead of away along the collider's surface. Needs the hair's Surface object",
     )
+    follow_collider_motion: toggle(
+        "Follow Collider Motion", False,
+        "Lay colliding hair over in the direction the collider moves where it touches "
+        "(a hand stroking fur, a ball rolling through grass) instead of away from its "
+        "surface; where the collider does not move there, as without it (or toward the "
+        "skin with Attract to Growth Surface)",
+    )
     collision_offset: offset_property(
         "Gap kept between the hair and every collider (a collider may use its own)",
         update_settings,
@@ -400,6 +407,7 @@ SOLVER_PROPERTIES = (
     "affected_connected_cvs",
     "cv_falloff",
     "attract_to_growth_surface",
+    "follow_collider_motion",
     "shrink",
     "scale_minimum",
     "scale_angle",

@@ -47,6 +47,8 @@ class Runtime:
     #: frames and the jiggle history belong to: :meth:`adopt_topology` changes it.
     topology: tuple | None = None
     colliders: dict = field(default_factory=dict)  # collider uid -> colliders.ColliderEntry
+    #: Follow Collider Motion: frame -> {collider uid: core Placement} of cached frames.
+    placements: dict = field(default_factory=dict)
     growth: object = None  # colliders.ColliderEntry of the growth surface
     memory: framecache.MemoryCache = field(default_factory=framecache.MemoryCache)
     solver_frame: int | None = None  # frame whose result the solver state holds

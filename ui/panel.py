@@ -170,6 +170,7 @@ class FURCOLLIDE_PT_resolution(_Sub, Panel):
         sub.prop(s, "affected_connected_cvs")
         sub.prop(s, "cv_falloff")
         col.prop(s, "attract_to_growth_surface")
+        col.prop(s, "follow_collider_motion")
         col.prop(s, "collision_offset")
         _map(col, s, "collision_offset")
         col.prop(s, "threads")
