@@ -223,7 +223,8 @@ def test_preset_round_trip_restores_every_setting_exactly(fc):
     names = fc.package.operators.properties.SOLVER_PROPERTIES
     look = dict(
         mode="soft", rotation_precision=0.7, max_angle=77.7, affected_connected_cvs=4,
-        cv_falloff=0.33, attract_to_growth_surface=True, shrink=True, scale_minimum=0.42,
+        cv_falloff=0.33, attract_to_growth_surface=True, follow_collider_motion=True,
+        shrink=True, scale_minimum=0.42,
         scale_angle=33.3, recovery_rate=0.123, plasticity=0.37,
         pinch_resolution="growth_surface", recover_pinched=False, collision_offset=0.0123,
     )
@@ -242,6 +243,7 @@ def test_preset_round_trip_restores_every_setting_exactly(fc):
         assert _load(os.path.join(_preset_folder(), "Short_Fur_(Stiff).py")) == {"FINISHED"}
         s.cv_falloff, s.attract_to_growth_surface, s.pinch_resolution = 0.9, False, "stop"
         s.recover_pinched, s.affected_connected_cvs, s.shrink = True, 1, False
+        s.follow_collider_motion = False
         assert all(getattr(s, k) != saved[k] for k in names)
         assert _load(path) == {"FINISHED"}
         for k in names:

@@ -9,6 +9,7 @@ settings.max_angle = 120.0
 settings.affected_connected_cvs = 2
 settings.cv_falloff = 0.5
 settings.attract_to_growth_surface = False
+settings.follow_collider_motion = False
 settings.collision_offset = 0.002
 settings.shrink = True
 settings.scale_minimum = 0.6
