@@ -19,7 +19,16 @@ import bpy
 import numpy as np
 
 from ..core import framecache
-from . import frame_outputs, frame_rules, frame_solve, groom_stage, motion, registry
+from . import (
+    children_stage,
+    frame_outputs,
+    frame_rules,
+    frame_solve,
+    groom_stage,
+    motion,
+    registry,
+    rest_position,
+)
 from .clock import clock
 from .colliders import read_for_solve
 from .frame_inputs import (
@@ -94,6 +103,10 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     s, rt, f = setup.s, setup.rt, setup.frame
     clock.start()
     inp = read_inputs(setup)
+    if f != s.frame_start and rt.topology is not None and rt.topology != inp.key:
+        # (frames of other curves: no playback could show them)
+        raise ValueError(rest_position.topology_message(setup.ob, rt.topology, inp.key,
+                                                        "bake", s.frame_start))
     rt.adopt_topology(inp.key)
     prepare_input(setup, inp)
     frame_outputs.sync_output(setup, inp)
@@ -114,12 +127,15 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
     rt.stats = dict(result.stats, source="bake")
     groom = _bake_groom(setup, result.points)  # the render groom is baked with its guides
+    # The children are made from the guides written (their stack evaluates the output).
+    frame_outputs.write(setup, inp, result.points, result.status, result.changed,
+                        result.attributes)
+    children = children_stage.bake_frame(setup)
+    extra = {groom_stage.BAKE_PART: groom, children_stage.BAKE_PART: children}
     framecache.write_frame(directory, f, result.points, result.status, inp.offsets, state,
                            rt.memory.sparse, result.attributes,
                            inputs=solved_inputs(setup, inp),
-                           extra=None if groom is None else {groom_stage.BAKE_PART: groom})
-    frame_outputs.write(setup, inp, result.points, result.status, result.changed,
-                        result.attributes)
+                           extra={k: v for k, v in extra.items() if v is not None})
     rt.stats = dict(rt.stats, **clock.stats())
     rt.invalid_note = frame_rules.invalid_note(result.problems)
     if rt.invalid_note:

@@ -2,6 +2,11 @@
 
 * ``frame_change_post``: every setup of the scene runs the frame rules
   (:func:`frame_rules.evaluate`); an error becomes the setup's status message.
+* ``frame_change_pre``: the setups with children close their output's guides gate
+  (:func:`children_stage.before_frame`); before a rendered frame (between
+  ``render_pre`` and ``render_post``) they give their output the guides the frame will
+  show and open it, so that Blender's first pass evaluates the children stack on them
+  (:func:`children_stage.before_render_frame`).
   Both this and the depsgraph check first prune the registry (:func:`registry.prune`):
   a deleted source's runtime and memory cache go.
 * ``depsgraph_update_post``: an edited source or collider drops the playback cache
@@ -29,7 +34,7 @@ import os
 import bpy
 from bpy.app.handlers import persistent
 
-from . import bridge, frame_rules, invalidation, ops_bake, registry
+from . import bridge, children_stage, frame_rules, invalidation, ops_bake, registry
 from .colliders import collider_objects
 from .dependencies import dependencies_stale, update_dependencies
 from .setup import Setup, signature, signature_change
@@ -50,6 +55,46 @@ def on_frame_change_post(scene, depsgraph=None):
                     registry.record_error(ob, exc)
         except Exception as exc:  # noqa: BLE001 - not even while listing the setups
             print(f"FurCollide: frame handler failed: {registry.describe(exc)}", flush=True)
+
+
+_rendering = False  # between render_pre and render_post: frame changes are a render's
+
+
+@persistent
+def on_render_pre(*_args):
+    global _rendering
+    _rendering = True
+
+
+@persistent
+def on_render_done(*_args):
+    """render_post, render_cancel, render_complete."""
+    global _rendering
+    _rendering = False
+
+
+@persistent
+def on_frame_change_pre(scene, *_args):
+    """The setups with children prepare their output's stack for the frame
+    (:func:`children_stage.before_frame`, :func:`children_stage.before_render_frame`);
+    never raises."""
+    if registry.busy():
+        return
+    try:
+        for ob in registry.setups(scene):
+            if not ob.furcollide.children.output:
+                continue
+            try:
+                if _rendering:
+                    children_stage.before_render_frame(Setup(ob, scene, None))
+                else:
+                    children_stage.before_frame(ob)
+            except Exception as exc:  # noqa: BLE001 - the handler must never raise
+                print(f"FurCollide '{ob.name}': children before the render: "
+                      f"{registry.describe(exc)}", flush=True)
+    except Exception as exc:  # noqa: BLE001
+        print(f"FurCollide: frame change handler failed: {registry.describe(exc)}",
+              flush=True)
 
 
 @persistent
@@ -255,7 +300,12 @@ def on_undo_post(*_args):
 
 
 _HANDLERS = (
+    ("frame_change_pre", on_frame_change_pre),
     ("frame_change_post", on_frame_change_post),
+    ("render_pre", on_render_pre),
+    ("render_post", on_render_done),
+    ("render_cancel", on_render_done),
+    ("render_complete", on_render_done),
     ("depsgraph_update_post", on_depsgraph_update_post),
     ("load_post", on_load_post),
     ("save_pre", on_save_pre),

@@ -22,7 +22,7 @@ from bpy.props import (
 from bpy.types import PropertyGroup
 
 from . import compat, registry
-from .properties_pipeline import FurCollideGroom, FurCollideMotion
+from .properties_pipeline import FurCollideChildren, FurCollideGroom, FurCollideMotion
 from .property_helpers import (
     choice,
     degrees,
@@ -315,6 +315,10 @@ class FurCollideSettings(PropertyGroup):
         type=FurCollideGroom, name="Render Groom",
         description="A dense render groom that follows the collided guides",
     )
+    children: PointerProperty(
+        type=FurCollideChildren, name="Children",
+        description="The output's own children stack, cleared of the colliders every frame",
+    )
     bake_path: hidden(StringProperty, "Bake Path", "")
     #: Frames the playback cache held when the file was last saved (the cache itself is
     #: not saved): after reopening, the frames that are not cached say so (handlers).
@@ -386,7 +390,8 @@ SOLVER_PROPERTIES = (
     "collision_offset",
 )
 
-classes = (FurCollideCollider, FurCollideMotion, FurCollideGroom, FurCollideSettings)
+classes = (FurCollideCollider, FurCollideMotion, FurCollideGroom, FurCollideChildren,
+           FurCollideSettings)
 
 
 def register():
