@@ -20,6 +20,7 @@ import numpy as np
 
 from ..core import framecache
 from . import (
+    bridge,
     children_stage,
     frame_outputs,
     frame_rules,
@@ -103,8 +104,8 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     s, rt, f = setup.s, setup.rt, setup.frame
     clock.start()
     inp = read_inputs(setup)
-    if f != s.frame_start and rt.topology is not None and rt.topology != inp.key:
-        # (frames of other curves: no playback could show them)
+    if trust_solver and rt.topology is not None and rt.topology != inp.key:
+        # (frames of other curves than the frame before: no playback could show them)
         raise ValueError(rest_position.topology_message(setup.ob, rt.topology, inp.key,
                                                         "bake", s.frame_start))
     rt.adopt_topology(inp.key)
@@ -152,6 +153,28 @@ def _bake_groom(setup, guides_world):
         print(f"FurCollide bake '{setup.ob.name}': frame {setup.frame}: render groom not "
               f"baked: {registry.describe(exc)}", flush=True)
         return None
+
+
+def varying_source(ob, scene) -> str:
+    """The status of a source whose curves differ between Frame Start and the next
+    frame (:func:`rest_position.topology_message`), '' when they do not. Looked at only
+    when a modifier of the source scatters its curves without the Surface's rest
+    position: Bake refuses such a source before writing a frame playback cannot show."""
+    s = ob.furcollide
+    f0 = s.frame_start
+    if f0 >= s.frame_end or not rest_position.unrested(ob):
+        return ""
+    back = (scene.frame_current, scene.frame_subframe)
+    keys = []
+    with registry.handlers_held():  # (a look at two frames: nothing solved)
+        for f in (f0, f0 + 1):
+            scene.frame_set(f)
+            oe = ob.evaluated_get(scene_depsgraph(scene))
+            keys.append(framecache.topology_key(bridge.curve_offsets(oe.data)))
+    if keys[0] == keys[1]:
+        return ""
+    scene.frame_set(back[0], subframe=back[1])  # (the frame shown again, as it was)
+    return rest_position.topology_message(ob, keys[0], keys[1], "bake", f0)
 
 
 def scene_depsgraph(scene):
@@ -248,6 +271,9 @@ class BakeJob:
                 print(f"FurCollide bake '{ob.name}': the Cache Directory changed since the "
                       f"partial bake in '{old}': baking into '{directory}' (the old folder "
                       "is left as it is)", flush=True)
+            why = varying_source(ob, scene)
+            if why:
+                raise BakeError(f"'{ob.name}': {why}")
             last = resume_frame(ob, directory)
             if last is not None and not resume_inputs_match(ob, directory, last, scene):
                 if verbose:

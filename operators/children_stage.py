@@ -153,7 +153,11 @@ def set_gate(out, open_: bool) -> bool:
         return False
     if bool(compat.modifier_input(mod, ident)) != open_:
         compat.set_modifier_input(mod, ident, open_)
-        out.update_tag()
+        # Its geometry only: a bare update_tag() also tags the object's base flags,
+        # which Depsgraph.update() in a frame handler, after Blender rebuilt the
+        # relations (a modifier added), evaluates against stale view layer bases and
+        # crashes (Blender 5.0.1).
+        out.update_tag(refresh={"DATA"})
     return True
 
 
@@ -237,7 +241,7 @@ def remove_children_output(src) -> None:
     if out is not None and out.furcollide.source == src:
         remove_gate(out)
         out.hide_render = False
-        out.update_tag()
+        out.update_tag(refresh={"DATA"})
         hide_in_viewport(out, not s.show_result)
     rt = registry.get_runtime(src, create=False)
     if rt is not None:
