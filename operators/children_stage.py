@@ -20,27 +20,17 @@ change in two passes: the scene at the new frame (the output still holds the las
 frame's guides), then, after ``frame_change_post`` wrote the new guides, what that
 changed. So the output carries the **guides gate** (:data:`GATE_MODIFIER`), a modifier
 before the artist's stack that passes the guides on only while it is open. Before a
-played frame (``frame_change_pre``, :func:`before_frame`) it closes, and Blender's first
-pass runs the stack on no guides (it still scatters its children: about a tenth of a
-full evaluation with Interpolate Hair Curves); :func:`run` then writes the guides,
-opens the gate, has the depsgraph evaluate the output (``Depsgraph.update``), reads
-the result, clears and writes the children. The gate stays open, so Blender's second
-pass has nothing of the output to evaluate again, and the output holds the stack's
-real result between frames.
-
-Renders cannot do that (``Depsgraph.update`` on a render depsgraph crashes Blender
-5.0.1): before a rendered frame (:func:`before_render_frame`) the output gets the
-guides that frame will show when FurCollide knows them (its bake, or the frame as
-playback wrote it, while the playback cache holds it) and the gate opens, so Blender's
-first pass evaluates the stack on them; :func:`run` checks that the guides written are
-those, clears the stack's result and closes the gate (the guides written again would
-have the second pass evaluate it once more). A frame rendered before it was played (nor
-baked) is cleared on the stack of the guides the output showed before it, and says so:
-play the shot or bake before rendering.
+frame (``frame_change_pre``, :func:`before_frame`) it closes, and Blender's first pass
+runs the stack on no guides (Interpolate Hair Curves still scatters its children on the
+Surface: 110 ms of a 400 ms evaluation in ``make bench-pipeline``'s children figure);
+:func:`run` then writes the guides, opens the gate, has the depsgraph evaluate the
+output (``Depsgraph.update``, in renders too), reads the result, clears and writes the
+children. The gate stays open, so Blender's second pass has nothing of the output to
+evaluate again, and the output holds the stack's real result between frames.
 
 The bake stores what renders (the children's points, status and layout,
-:data:`BAKE_PART`, with the guides written), so a baked frame shows exactly what was
-baked, in the viewport and in renders.
+:data:`BAKE_PART`), so a baked frame shows exactly what was baked, in the viewport and
+in renders; a baked frame whose stack now gives other children says so.
 
 Children versus Render Groom: the render groom is the artist's own dense groom,
 bound once to the guides (Bind Groom) and deformed by them; the children are made
@@ -74,13 +64,6 @@ CHILDREN_INPUTS = "FurCollide Children Inputs"
 BAKE_PART = "children"
 #: What the children output's name adds to the source's.
 SUFFIX = "Children"
-
-#: The status of a frame rendered before it was played (nor baked).
-RENDERED_UNPLAYED = (
-    "Children: frame {f} was rendered before it was played: its children were cleared "
-    "on the guides the output showed before it. Play the shot from frame {start}, or "
-    "bake, before rendering")
-
 
 # -------------------------------------------------------------------- stack
 def stack_modifiers(out) -> list:
@@ -154,9 +137,9 @@ def set_gate(out, open_: bool) -> bool:
     if bool(compat.modifier_input(mod, ident)) != open_:
         compat.set_modifier_input(mod, ident, open_)
         # Its geometry only: a bare update_tag() also tags the object's base flags,
-        # which Depsgraph.update() in a frame handler, after Blender rebuilt the
-        # relations (a modifier added), evaluates against stale view layer bases and
-        # crashes (Blender 5.0.1).
+        # which Depsgraph.update() in a frame handler (after Blender rebuilt the
+        # relations for a modifier added, or in a render) evaluates against stale
+        # view layer bases and crashes (Blender 5.0.1).
         out.update_tag(refresh={"DATA"})
     return True
 
@@ -276,22 +259,6 @@ class ChildrenState:
     def __init__(self):
         self.key = None  # digests of the inputs of ``result``
         self.result = None  # (points (P, 3) float32 world, status (C,), n_fixed)
-        self.guides = {}  # frame -> the output's local guide points written there
-        self.guides_bytes = 0
-        self.pre = None  # (frame, subframe, digest of the output's points) before a render
-        self.noted = ""
-
-    def remember_guides(self, f, points, limit) -> None:
-        """Keep the guides the output shows at frame ``f`` (what a render of ``f`` gets
-        before Blender evaluates it), within ``limit`` bytes (oldest frames go)."""
-        old = self.guides.pop(f, None)
-        if old is not None:
-            self.guides_bytes -= old.nbytes
-        self.guides[f] = np.array(points, np.float32)
-        self.guides_bytes += self.guides[f].nbytes
-        while self.guides_bytes > limit and len(self.guides) > 1:
-            k = next(iter(self.guides))
-            self.guides_bytes -= self.guides.pop(k).nbytes
 
 
 def children_state(rt) -> ChildrenState:
@@ -329,40 +296,11 @@ def bake_frame(setup) -> dict | None:
 
 
 def before_frame(ob) -> None:
-    """``frame_change_pre`` of a played frame: close the output's guides gate, so that
-    Blender's first pass does not run the children stack on the last frame's guides
-    (:func:`run` opens it)."""
+    """``frame_change_pre``: close the output's guides gate, so that Blender's first
+    pass does not run the children stack on the last frame's guides (:func:`run` opens
+    it)."""
     if owns_children(ob) and ob.furcollide.output is not None:
         set_gate(ob.furcollide.output, False)
-
-
-def before_render_frame(setup) -> None:
-    """``frame_change_pre`` of a rendered frame: give the output the guides the frame
-    will show when they are known (the bake's, or the frame as playback wrote it while
-    the playback cache holds it) and open the gate, so that Blender's first pass
-    evaluates the stack on them (:func:`run` checks they are the ones written)."""
-    s, rt = setup.s, setup.rt
-    out = s.output
-    if not owns_children(setup.ob) or out is None or not s.enabled:
-        return
-    state = children_state(rt)
-    f = setup.frame
-    guides = None
-    if setup.subframe == 0.0 and s.frame_start <= f:
-        if s.is_baked:
-            try:
-                part = framecache.read_extra(bpy.path.abspath(s.bake_path),
-                                             min(f, s.frame_end), BAKE_PART, ("guides",))
-            except (OSError, ValueError, KeyError):
-                part = None
-            guides = None if part is None else part.get("guides")
-        elif min(f, s.frame_end) in rt.memory:
-            guides = state.guides.get(min(f, s.frame_end))
-    data = out.data
-    if guides is not None and guides.shape == (len(data.points), 3):
-        bridge.set_positions(data, guides)
-    set_gate(out, True)
-    state.pre = (f, setup.subframe, framecache.digest(bridge.get_positions(data)))
 
 
 def _run(setup, baking=False):
@@ -372,53 +310,35 @@ def _run(setup, baking=False):
     out = s.output
     state = children_state(rt)
     render = bridge.is_render(dg)
-    if render:
-        pre, state.pre = state.pre, None
-        fresh = pre is not None and pre[:2] == (setup.frame, setup.subframe) and (
-            pre[2] == framecache.digest(bridge.get_positions(out.data)))
-    else:
+    if not render:  # (no modifier is added while Blender renders)
         ensure_gate(out)
-        with clock.timing("children"):
-            set_gate(out, True)
-            dg.update()  # (evaluated objects read before this are stale now)
-        fresh = True
-    try:
-        with clock.timing("children"):
-            stack = _stack_result(setup)
-        if stack is None:
-            return None
-        data, offsets, world = stack
-        baked, outdated = _baked_children(setup, offsets, world, fresh)
-        clear = render or baking or s.children.use_viewport
-        if baked is not None:
-            points, status, n_fixed = baked
-        elif clear:
-            points, status, n_fixed = _clear(setup, state, offsets, world)
-        else:  # (Clear in Viewport off: the stack's result as it is)
-            points, status, n_fixed = world.astype(np.float32), np.zeros(
-                len(offsets) - 1, np.int8), 0
-        with clock.timing("write"):
-            _write(setup, data, offsets, points, status)
-    finally:
-        if render:  # (else the guides written again would have it evaluated once more)
-            set_gate(out, False)
+    with clock.timing("children"):
+        set_gate(out, True)
+        dg.update()  # (evaluated objects read before this are stale now)
+    with clock.timing("children"):
+        stack = _stack_result(setup)
+    if stack is None:
+        return None
+    data, offsets, world = stack
+    baked, outdated = _baked_children(setup, offsets, world)
+    clear = render or baking or s.children.use_viewport
+    if baked is not None:
+        points, status, n_fixed = baked
+    elif clear:
+        points, status, n_fixed = _clear(setup, state, offsets, world)
+    else:  # (Clear in Viewport off: the stack's result as it is)
+        points, status, n_fixed = world.astype(np.float32), np.zeros(
+            len(offsets) - 1, np.int8), 0
+    with clock.timing("write"):
+        _write(setup, data, offsets, points, status)
     rt.stats = dict(rt.stats, **children_stats(status, n_fixed, cleared=clear or (
         baked is not None)))
-    if setup.subframe == 0.0 and not render and not rt.outdated:
-        state.remember_guides(setup.frame, bridge.get_positions(out.data),
-                              int(s.memory_limit * 1024 * 1024) // 4)
-    if render and not fresh and not s.is_baked and setup.subframe == 0.0:
-        rt.outdated = True
-        _note(setup, RENDERED_UNPLAYED.format(f=setup.frame, start=s.frame_start))
-    elif outdated:
+    if outdated:
         _note(setup, outdated)
-    else:
-        state.noted = ""
     if not baking:
         return None
     return {"points": np.asarray(points, np.float32), "status": status,
             "offsets": np.asarray(offsets, np.int32),
-            "guides": np.asarray(bridge.get_positions(out.data), np.float32),
             "stack": _digest_array(world), "key": np.frombuffer(
                 settings_key(setup.ob).encode(), np.uint8),
             "fixed": np.array([n_fixed], np.int64)}
@@ -448,7 +368,7 @@ def _digest_array(points):
         np.int64)
 
 
-def _baked_children(setup, offsets, world, fresh):
+def _baked_children(setup, offsets, world):
     """((points, status, n_fixed) from the bake, or None: computed live; a note when the
     bake is not what the stack gives now, or '')."""
     s = setup.s
@@ -471,7 +391,7 @@ def _baked_children(setup, offsets, world, fresh):
             f"holds {len(part['offsets']) - 1} (its stack was edited since the bake): they "
             "are cleared live. Press Free Bake, then Bake")
     note = ""
-    if fresh and int(part["stack"][0]) != int(_digest_array(world)[0]):
+    if int(part["stack"][0]) != int(_digest_array(world)[0]):
         setup.rt.outdated = True
         note = ("Children: the output's stack gives other children than when they were "
                 "baked (the bake's are shown): press Free Bake, then Bake")
@@ -589,13 +509,9 @@ def _sync_materials(src, dst) -> None:
 
 
 def _note(setup, note) -> None:
-    """Show a children note as a warning, after the guides' own status; never over an
-    error of the guides. One console line per problem."""
-    state = children_state(setup.rt)
+    """Show a children note as a warning, after the guides' own status of this frame;
+    never over an error of the guides."""
     level, msg = registry.status_for(setup.ob)
     if level == "ERROR" or note in msg:
-        state.noted = note
         return
-    text = f"{msg} {note}" if msg and msg != state.noted else note
-    setup.set_status("WARNING", text)
-    state.noted = note
+    setup.set_status("WARNING", f"{msg} {note}" if msg else note)

@@ -2,11 +2,9 @@
 
 * ``frame_change_post``: every setup of the scene runs the frame rules
   (:func:`frame_rules.evaluate`); an error becomes the setup's status message.
-* ``frame_change_pre``: the setups with children close their output's guides gate
-  (:func:`children_stage.before_frame`); before a rendered frame (between
-  ``render_pre`` and ``render_post``) they give their output the guides the frame will
-  show and open it, so that Blender's first pass evaluates the children stack on them
-  (:func:`children_stage.before_render_frame`).
+* ``frame_change_pre``: the setups with children close their output's guides gate, so
+  that Blender's first pass does not run the children stack on the last frame's guides
+  (:func:`children_stage.before_frame`).
   Both this and the depsgraph check first prune the registry (:func:`registry.prune`):
   a deleted source's runtime and memory cache go.
 * ``depsgraph_update_post``: an edited source or collider drops the playback cache
@@ -57,42 +55,17 @@ def on_frame_change_post(scene, depsgraph=None):
             print(f"FurCollide: frame handler failed: {registry.describe(exc)}", flush=True)
 
 
-_rendering = False  # between render_pre and render_post: frame changes are a render's
-
-
-@persistent
-def on_render_pre(*_args):
-    global _rendering
-    _rendering = True
-
-
-@persistent
-def on_render_done(*_args):
-    """render_post, render_cancel, render_complete."""
-    global _rendering
-    _rendering = False
-
-
 @persistent
 def on_frame_change_pre(scene, *_args):
-    """The setups with children prepare their output's stack for the frame
-    (:func:`children_stage.before_frame`, :func:`children_stage.before_render_frame`);
-    never raises."""
+    """The setups with children close their output's guides gate
+    (:func:`children_stage.before_frame`); never raises."""
     if registry.busy():
         return
     try:
         for ob in registry.setups(scene):
-            if not ob.furcollide.children.output:
-                continue
-            try:
-                if _rendering:
-                    children_stage.before_render_frame(Setup(ob, scene, None))
-                else:
-                    children_stage.before_frame(ob)
-            except Exception as exc:  # noqa: BLE001 - the handler must never raise
-                print(f"FurCollide '{ob.name}': children before the render: "
-                      f"{registry.describe(exc)}", flush=True)
-    except Exception as exc:  # noqa: BLE001
+            if ob.furcollide.children.output is not None:
+                children_stage.before_frame(ob)
+    except Exception as exc:  # noqa: BLE001 - the handler must never raise
         print(f"FurCollide: frame change handler failed: {registry.describe(exc)}",
               flush=True)
 
@@ -302,10 +275,6 @@ def on_undo_post(*_args):
 _HANDLERS = (
     ("frame_change_pre", on_frame_change_pre),
     ("frame_change_post", on_frame_change_post),
-    ("render_pre", on_render_pre),
-    ("render_post", on_render_done),
-    ("render_cancel", on_render_done),
-    ("render_complete", on_render_done),
     ("depsgraph_update_post", on_depsgraph_update_post),
     ("load_post", on_load_post),
     ("save_pre", on_save_pre),
