@@ -107,7 +107,7 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     if trust_solver and rt.topology is not None and rt.topology != inp.key:
         # (frames of other curves than the frame before: no playback could show them)
         raise ValueError(rest_position.topology_message(setup.ob, rt.topology, inp.key,
-                                                        "bake", s.frame_start))
+                                                        "baking", s.frame_start))
     rt.adopt_topology(inp.key)
     prepare_input(setup, inp)
     frame_outputs.sync_output(setup, inp)
@@ -174,7 +174,7 @@ def varying_source(ob, scene) -> str:
     if keys[0] == keys[1]:
         return ""
     scene.frame_set(back[0], subframe=back[1])  # (the frame shown again, as it was)
-    return rest_position.topology_message(ob, keys[0], keys[1], "bake", f0)
+    return rest_position.topology_message(ob, keys[0], keys[1], "baking", f0)
 
 
 def scene_depsgraph(scene):

@@ -234,7 +234,7 @@ def remove_children_output(src) -> None:
 
 def apply_visibility(src) -> None:
     """The children output follows Show Result (the output stays hidden while it
-    exists: it shows the stack on no guides)."""
+    exists: the children output shows what its modifiers make, cleared)."""
     s = src.furcollide
     if owns_children(src):
         hide_in_viewport(s.children.output, not s.show_result)
@@ -244,12 +244,11 @@ def apply_visibility(src) -> None:
 
 def wants_children(setup) -> bool:
     """Should the frame make a children output now (the output carries a children
-    stack, Clear Children is on, there is none yet)? Only outside renders and bakes:
-    objects are not made while Blender renders."""
+    stack, Clear Children is on, there is none yet)? Not in renders: objects are not
+    made while Blender renders."""
     s = setup.s
     return (s.children.use_children and not owns_children(setup.ob)
-            and bool(stack_modifiers(s.output)) and not bridge.is_render(setup.depsgraph)
-            and not setup.rt.baking)
+            and bool(stack_modifiers(s.output)) and not bridge.is_render(setup.depsgraph))
 
 
 # -------------------------------------------------------------------- state
@@ -289,7 +288,9 @@ def run(setup) -> None:
 
 def bake_frame(setup) -> dict | None:
     """The children of a frame being baked: cleared (always), written, and returned
-    as the bake file's part (None: the setup has no children output)."""
+    as the bake file's part (None: the setup's output makes no children)."""
+    if wants_children(setup):
+        create_children_output(setup.ob, setup.scene)
     if not owns_children(setup.ob):
         return None
     return _run(setup, baking=True)

@@ -371,10 +371,10 @@ def _check_topology(setup, inp) -> bool:
         return False
     setup.set_status("ERROR", rest_position.topology_message(setup.ob, old, new, what,
                                                              s.frame_start))
-    # Never left frozen while marked current: the output follows the source (its roots
-    # on the skin), not collided, and is outdated.
+    # Never left frozen while marked current: the output is outdated and, playing,
+    # follows the source (its roots on the skin), not collided (a bake's frame stays).
     rt.outdated = True
-    if inp.points is not None:
+    if not s.is_baked and inp.points is not None:
         frame_outputs.sync_output(setup, inp)
         frame_outputs.write(setup, inp, inp.points, np.zeros(len(inp.offsets) - 1, np.int8))
     return False

@@ -82,21 +82,24 @@ def use_rest_position(ob) -> list:
 
 def topology_message(ob, old, new, what="cached frames", start=1) -> str:
     """The one line a setup shows when its source's curves changed from ``old`` to
-    ``new`` (``framecache.topology_key``: curves, points, ...). ``what`` is what is kept
-    (the "cached frames", or the "bake"); ``start`` the setup's Frame Start."""
+    ``new`` (``framecache.topology_key``: curves, points, ...). ``what``: "cached frames"
+    (playback: the output follows the source, and the cached frames are kept), "bake" (a
+    baked setup: the output keeps its last frame) or "baking" (Bake refuses the source);
+    ``start``: the setup's Frame Start."""
     change = (f"'{ob.name}' changed from {old[0]} curves / {old[1]} points to {new[0]} / "
               f"{new[1]}")
+    shown = {"cached frames": " The output shows the source as it is, not collided.",
+             "bake": " The output keeps its last frame."}.get(what, "")
     found = unrested(ob)
     if found:
         names = ", ".join(f"'{m.name}'" for m, _i, _s in found)
         return (f"{change}: {names} scatter{'s' if len(found) == 1 else ''} its curves on "
                 "the deforming Surface, so their number changes every frame. Press "
                 f"{BUTTON} (it turns on the modifier's Surface Rest Position and the "
-                "Surface's Add Rest Position), then play from frame "
-                f"{start}. The output shows the source as it is, not collided.")
-    if what == "bake":
-        return (f"{change}: the bake was made for the old curves (the output shows the "
-                "source as it is, not collided). Press Free Bake, then Bake.")
+                f"Surface's Add Rest Position), then play from frame {start}.{shown}")
+    if what != "cached frames":
+        return f"{change}: the bake was made for the old curves.{shown} Press Free Bake, " \
+            "then Bake."
     return (f"{change}: the output shows the source as it is, not collided, and the "
             f"cached frames are kept. To collide the new curves, press Reset Cache and play "
             f"from frame {start}.")

@@ -396,6 +396,27 @@ def test_clear_children_off_renders_the_output(fc):
     _check_rendered(hair, head, hat, 2)
 
 
+@pytest.mark.parametrize("keep", [False, True], ids=["removed", "kept"])
+def test_remove_furcollide_removes_the_children_output(fc, keep):
+    """Remove FurCollide deletes the children output with the output; with Keep Output
+    the output renders its own modifiers again (no guides gate left on it)."""
+    scene = bpy.context.scene
+    head, hat, hair, out = _groomed_head(fc, rigged=False)
+    scene.frame_set(1)
+    name, out_name = hair.furcollide.children.output.name, out.name
+    activate(hair)
+    assert bpy.ops.furcollide.remove(keep_output=keep) == {"FINISHED"}
+    assert name not in bpy.data.objects
+    if keep:
+        kept = bpy.data.objects[out_name]
+        assert not kept.hide_render
+        assert [m.name for m in kept.modifiers] == [
+            "Interpolate Hair Curves", "Clump Hair Curves", "Frizz Hair Curves"]
+    else:
+        assert out_name not in bpy.data.objects
+    scene.frame_set(2)  # (nothing left to write into)
+
+
 # ------------------------------------------------- a source whose curves change
 def _varying_source(fc):
     """The skinned head with the children on the source: Interpolate between Generate
