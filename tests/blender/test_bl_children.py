@@ -396,6 +396,52 @@ def test_clear_children_off_renders_the_output(fc):
     _check_rendered(hair, head, hat, 2)
 
 
+def test_make_children_output_button(fc):
+    """Modifiers added to the output and no frame shown since: the panel says the
+    children are not cleared yet and offers Make Children Output, which clears them."""
+    scene = bpy.context.scene
+    head, hat = _head(rigged=False)
+    hair = _guides(head, rigged=False)
+    scene.frame_set(1)
+    out = fc.setup(hair, [hat])
+    _children_stack(hair, out, head, rigged=False)
+    assert hair.furcollide.children.output is None
+    activate(hair)
+    drawn = draw_panel(bpy.types.FURCOLLIDE_PT_pipeline)
+    assert ("operator", "furcollide.children_output") in [e[:2] for e in drawn]
+    assert bpy.ops.furcollide.children_output() == {"FINISHED"}
+    _check_rendered(hair, head, hat, 1)
+
+
+def test_resample_on_the_output_sees_the_guides_written(fc):
+    """A Resample Curve modifier on the output: the children output holds the guides
+    written this frame, resampled (its tips are the guides' tips)."""
+    hair, box = fc.make_scene()
+    out = fc.setup(hair, [box])
+    ng = bpy.data.node_groups.new("Resample", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gin, gout = ng.nodes.new("NodeGroupInput"), ng.nodes.new("NodeGroupOutput")
+    resample = ng.nodes.new("GeometryNodeResampleCurve")
+    resample.inputs["Count"].default_value = 9
+    ng.links.new(gin.outputs[0], resample.inputs[0])
+    ng.links.new(resample.outputs[0], gout.inputs[0])
+    out.modifiers.new("Resample", "NODES").node_group = ng
+    hair.furcollide.children.use_viewport = False  # (the stack's result as it is)
+    moved = 0
+    for f in range(1, 9):
+        bpy.context.scene.frame_set(f)
+        P, offs = evaluated_curves(hair.furcollide.children.output)
+        G, goffs = world(out), offsets_of(out)
+        moved += int(np.abs(G - world(hair)).max() > 0.01)
+        if np.abs(P[offs[1:] - 1] - G[goffs[1:] - 1]).max() > 1e-5:
+            # Blender keeps the output's evaluated positions from before the write
+            # (issue 29 item 2, fixed in bridge.py / frame_outputs.py by another branch)
+            pytest.xfail(f"frame {f}: the stack saw positions from before the write "
+                         "(issue 29)")
+    assert moved
+
+
 @pytest.mark.parametrize("keep", [False, True], ids=["removed", "kept"])
 def test_remove_furcollide_removes_the_children_output(fc, keep):
     """Remove FurCollide deletes the children output with the output; with Keep Output
