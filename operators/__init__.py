@@ -3,7 +3,7 @@
 Thin: read evaluated Blender data into numpy (``foreach_get``), call the core, write
 the result into the output hair (``foreach_set``), report errors. A frame reads top to
 bottom: ``handlers`` -> ``frame_rules`` -> ``frame_inputs`` -> ``frame_solve`` ->
-``frame_outputs`` -> ``groom_stage``.
+``frame_outputs`` -> ``groom_stage`` -> ``children_stage``.
 
 Modules
 -------
@@ -13,6 +13,8 @@ frame_inputs         the evaluated source read into FrameInputs; the frame-input
 frame_solve          solve_frame(setup, inputs) -> FrameResult (playback, bake, CLI, demo)
 frame_outputs        writing the output hair: positions, status, colours, attributes
 groom_stage          the render groom follows the collided guides (+ clearance pass)
+children_stage       the output's own children stack, cleared live into the children output
+rest_position        a source whose curves change every frame: the message and the fix
 motion               wind, jiggle, Region of Influence, collider distance (no Blender)
 colliders            which objects collide; their core Colliders kept across frames
 fur_attach           Fur Attach's binding (storage) and the attached input curves
@@ -31,6 +33,7 @@ ops_bake             Bake, Bake All, Free Bake, Free All Bakes
 ops_sampler          Fur Sampler
 ops_attach           Fur Attach Bind / Unbind
 ops_groom            Bind Groom, Remove Groom Output
+ops_children         Make Children Output, Use Rest Position
 pipeline             Collider Distance, Children from Guides, the pipeline scene settings
 cli                  ``blender -b --command furcollide ...``
 """
@@ -40,6 +43,7 @@ from . import (
     handlers,
     ops_attach,
     ops_bake,
+    ops_children,
     ops_groom,
     ops_sampler,
     ops_setup,
@@ -53,6 +57,7 @@ classes = (
     + ops_sampler.classes
     + ops_attach.classes
     + ops_groom.classes
+    + ops_children.classes
     + pipeline.classes
 )
 

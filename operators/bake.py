@@ -19,7 +19,18 @@ import bpy
 import numpy as np
 
 from ..core import framecache
-from . import frame_outputs, frame_rules, frame_solve, groom_stage, keyed, motion, registry
+from . import (
+    bridge,
+    children_stage,
+    frame_outputs,
+    frame_rules,
+    frame_solve,
+    groom_stage,
+    keyed,
+    motion,
+    registry,
+    rest_position,
+)
 from .clock import clock
 from .colliders import collider_list, keep_placements, read_for_solve
 from .frame_inputs import (
@@ -97,6 +108,10 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     rt, f = setup.rt, setup.frame
     clock.start()
     inp = read_inputs(setup)
+    if trust_solver and rt.topology is not None and rt.topology != inp.key:
+        # (frames of other curves than the frame before: no playback could show them)
+        raise ValueError(rest_position.topology_message(setup.ob, rt.topology, inp.key,
+                                                        "baking", setup.s.frame_start))
     rt.adopt_topology(inp.key)
     prepare_input(setup, inp)
     frame_outputs.sync_output(setup, inp)
@@ -117,12 +132,15 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
     rt.stats = dict(result.stats, source="bake")
     groom = _bake_groom(setup, result.points)  # the render groom is baked with its guides
+    # The children are made from the guides written (their stack evaluates the output).
+    frame_outputs.write(setup, inp, result.points, result.status, result.changed,
+                        result.attributes)
+    children = children_stage.bake_frame(setup)
+    extra = {groom_stage.BAKE_PART: groom, children_stage.BAKE_PART: children}
     framecache.write_frame(directory, f, result.points, result.status, inp.offsets, state,
                            rt.memory.sparse, result.attributes,
                            inputs=solved_inputs(setup, inp),
-                           extra=None if groom is None else {groom_stage.BAKE_PART: groom})
-    frame_outputs.write(setup, inp, result.points, result.status, result.changed,
-                        result.attributes)
+                           extra={k: v for k, v in extra.items() if v is not None})
     rt.stats = dict(rt.stats, **clock.stats())
     rt.invalid_note = frame_rules.invalid_note(result.problems)
     if rt.invalid_note:
@@ -139,6 +157,28 @@ def _bake_groom(setup, guides_world):
         print(f"FurCollide bake '{setup.ob.name}': frame {setup.frame}: render groom not "
               f"baked: {registry.describe(exc)}", flush=True)
         return None
+
+
+def varying_source(ob, scene) -> str:
+    """The status of a source whose curves differ between Frame Start and the next
+    frame (:func:`rest_position.topology_message`), '' when they do not. Looked at only
+    when a modifier of the source scatters its curves without the Surface's rest
+    position: Bake refuses such a source before writing a frame playback cannot show."""
+    s = ob.furcollide
+    f0 = s.frame_start
+    if f0 >= s.frame_end or not rest_position.unrested(ob):
+        return ""
+    back = (scene.frame_current, scene.frame_subframe)
+    keys = []
+    with registry.handlers_held():  # (a look at two frames: nothing solved)
+        for f in (f0, f0 + 1):
+            scene.frame_set(f)
+            oe = ob.evaluated_get(scene_depsgraph(scene))
+            keys.append(framecache.topology_key(bridge.curve_offsets(oe.data)))
+    if keys[0] == keys[1]:
+        return ""
+    scene.frame_set(back[0], subframe=back[1])  # (the frame shown again, as it was)
+    return rest_position.topology_message(ob, keys[0], keys[1], "baking", f0)
 
 
 def scene_depsgraph(scene):
@@ -247,6 +287,9 @@ class BakeJob:
                 print(f"FurCollide bake '{ob.name}': the Cache Directory changed since the "
                       f"partial bake in '{old}': baking into '{directory}' (the old folder "
                       "is left as it is)", flush=True)
+            why = varying_source(ob, scene)
+            if why:
+                raise BakeError(f"'{ob.name}': {why}")
             last = resume_frame(ob, directory)
             if last is not None and not resume_inputs_match(ob, directory, last, scene):
                 if verbose:

@@ -1,7 +1,7 @@
 """Milliseconds per pipeline stage of the frame being evaluated.
 
-The stages of a frame (attach, collide, motion, groom, clearance, write) add their
-time to :data:`clock`; the frame rules start it for each setup's frame and put its
+The stages of a frame (attach, collide, motion, groom, children, clearance, write) add
+their time to :data:`clock`; the frame rules start it for each setup's frame and put its
 figures into the setup's statistics (``attach_ms`` ...), which the Fur Pipeline panel
 shows and ``make bench-pipeline`` prints. Frames are evaluated one setup at a time, so
 one clock serves them all.
@@ -13,7 +13,8 @@ import time
 from contextlib import contextmanager
 
 #: The stages, in the order a frame runs them.
-STAGES = ("attach", "collide", "motion", "groom", "clearance", "write")
+#: (children: evaluating the output's children stack and reading its result.)
+STAGES = ("attach", "collide", "motion", "groom", "children", "clearance", "write")
 
 
 class StageClock:

@@ -19,7 +19,8 @@ Frame rules (``frame_change_post``; see README "Using it in Blender"):
 :func:`evaluate` reads one frame top to bottom: the output checks, the inputs
 (:mod:`.frame_inputs`), the rule that applies, the solve (:func:`frame_solve.solve_frame`)
 or the cached frame, the write (:mod:`.frame_outputs`), then the render groom stage
-(:mod:`.groom_stage`). It returns an :class:`Outcome`. It raises on errors; the handler
+(:mod:`.groom_stage`) and the children stage (:mod:`.children_stage`). It returns an
+:class:`Outcome`. It raises on errors; the handler
 (:mod:`.handlers`) turns them into the setup's status message plus one console line,
 and the output keeps its last good result.
 """
@@ -33,7 +34,16 @@ import bpy
 import numpy as np
 
 from ..core import framecache
-from . import baked, bridge, frame_outputs, frame_solve, groom_stage, keyed
+from . import (
+    baked,
+    bridge,
+    children_stage,
+    frame_outputs,
+    frame_solve,
+    groom_stage,
+    keyed,
+    rest_position,
+)
 from .clock import clock
 from .colliders import collider_note, read_for_solve, surface_as_collider
 from .frame_inputs import (
@@ -70,7 +80,8 @@ class Outcome(enum.Enum):
 
 
 def evaluate(setup) -> Outcome:
-    """Run the frame rules (module docstring) for ``setup``, then the render groom stage.
+    """Run the frame rules (module docstring) for ``setup``, then the render groom and
+    children stages.
 
     Raises
     ------
@@ -83,6 +94,7 @@ def evaluate(setup) -> Outcome:
         outcome, written = _rules(setup)
     except Exception:
         groom_stage.follow_last_guides(setup)  # (never raises)
+        children_stage.run(setup)  # (never raises: the children follow the output)
         raise
     if setup.s.groom.output is not None and (
         written is not None or outcome in (Outcome.TOPOLOGY, Outcome.OUTDATED)
@@ -91,6 +103,8 @@ def evaluate(setup) -> Outcome:
             groom_stage.run(setup, written)
         except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
             setup.set_status("WARNING", groom_stage.error_message(exc, setup))
+    if outcome not in (Outcome.HIDDEN, Outcome.BAKING):
+        children_stage.run(setup)  # (never raises)
     setup.rt.stats = dict(setup.rt.stats, **clock.stats())
     return outcome
 
@@ -381,12 +395,14 @@ def _check_topology(setup, inp) -> bool:
             "the source the same in both, or collide the dense hair as a Render Groom.",
         )
         return False
-    setup.set_status(
-        "ERROR",
-        f"Source hair changed from {old[0]} curves / {old[1]} points to {new[0]} / {new[1]}: "
-        f"the output keeps its last result and the {what} are kept. "
-        f"Press {'Free Bake' if what == 'bake' else 'Reset'} to simulate the new curves.",
-    )
+    setup.set_status("ERROR", rest_position.topology_message(setup.ob, old, new, what,
+                                                             s.frame_start))
+    # Never left frozen while marked current: the output is outdated and, playing,
+    # follows the source (its roots on the skin), not collided (a bake's frame stays).
+    rt.outdated = True
+    if not s.is_baked and inp.points is not None:
+        frame_outputs.sync_output(setup, inp)
+        frame_outputs.write(setup, inp, inp.points, np.zeros(len(inp.offsets) - 1, np.int8))
     return False
 
 

@@ -287,10 +287,7 @@ def clearance(s, binding, points, status, colliders):
     Stiff cannot free within Max Angle get a second try in Bend, and those still
     crossing are UNRESOLVED. Returns (points, status, n_fixed).
     """
-    # (the setup's Threads too: a farm running one Blender per core sets 1)
-    common = {"collision_offset": s.collision_offset, "threads": s.core_threads}
-    settings = core.Settings(mode="stiff", **common)
-    fallback = core.Settings(mode="bend", **common)
+    settings, fallback = clearance_settings(s)
     valid = status != Status.INVALID
     if valid.all():
         pts, st, n_fixed = pipeline.clearance_pass(points, binding.render_offsets, colliders,
@@ -304,6 +301,16 @@ def clearance(s, binding, points, status, colliders):
     status = status.copy()
     status[valid] = st
     return out, status, n_fixed
+
+
+def clearance_settings(s):
+    """(settings, fallback) core Settings of the clearance pass of the setup ``s``
+    (``ob.furcollide``): Stiff, then Bend for the curves Stiff cannot free, with the
+    setup's own Collision Offset (render strands keep the guides' gap) and Threads (a
+    farm running one Blender per core sets 1). The render groom and the children
+    (:mod:`.children_stage`) share them."""
+    common = {"collision_offset": s.collision_offset, "threads": s.core_threads}
+    return core.Settings(mode="stiff", **common), core.Settings(mode="bend", **common)
 
 
 def groom_stats(status, n_fixed) -> dict:
@@ -567,12 +574,12 @@ class GroomBinding:
         self.note = str(arrays["note"]) if "note" in arrays else ""
         self._rows_v, self._off_v = self.subset(~self.invalid)
         self._rows_i, _ = self.subset(self.invalid)
-        self._g_rows, self._g_off = _subset(self.guide_offsets, self.guides_used)
+        self._g_rows, self._g_off = curve_subset(self.guide_offsets, self.guides_used)
         self._deformer = None
 
     def subset(self, which):
         """(rows (k,), offsets) of the render curves ``which`` (bool (R,))."""
-        return _subset(self.render_offsets, which)
+        return curve_subset(self.render_offsets, which)
 
     @staticmethod
     def build(render_ref, render_offsets, guides_ref, guide_offsets, k, surface=None,
@@ -615,8 +622,8 @@ class GroomBinding:
             raise ValueError(f"No guide can be followed: {why_g}")
         render_ref = as_given(render_ref, render_offsets, bad_r)
         guides_ref = as_given(guides_ref, guide_offsets, bad_g)
-        rows_v, off_v = _subset(render_offsets, ~bad_r)
-        g_rows, g_off = _subset(guide_offsets, ~bad_g)
+        rows_v, off_v = curve_subset(render_offsets, ~bad_r)
+        g_rows, g_off = curve_subset(guide_offsets, ~bad_g)
         weights = pipeline.bind_groom(render_ref[rows_v][off_v[:-1]],
                                       guides_ref[g_rows][g_off[:-1]],
                                       k=min(int(k), len(g_off) - 1))
@@ -631,7 +638,7 @@ class GroomBinding:
             b = pipeline.bind(render_ref[rows_v], off_v, V, F, drop_degenerate=True)
             arrays.update({"root_" + n: v for n, v in b.arrays().items()})
             if bad_r.any():
-                rows_i, off_i = _subset(render_offsets, bad_r)
+                rows_i, off_i = curve_subset(render_offsets, bad_r)
                 b = pipeline.bind(render_ref[rows_i], off_i, V, F, drop_degenerate=True)
                 arrays.update({"fixed_" + n: v for n, v in b.arrays().items()})
             arrays["surface_key"] = np.asarray(key, np.int64)
@@ -695,8 +702,9 @@ class GroomBinding:
         return points, status
 
 
-def _subset(offsets, which):
-    """(rows, offsets) of the curves ``which`` (bool (C,)) of the layout ``offsets``."""
+def curve_subset(offsets, which):
+    """(rows, offsets) of the curves ``which`` (bool (C,)) of the layout ``offsets``:
+    the points of those curves, and their layout as a curve set of their own."""
     idx = np.flatnonzero(which)
     sizes = np.diff(offsets)[idx]
     rows = np.repeat(offsets[idx] - (np.cumsum(sizes) - sizes), sizes) + np.arange(

@@ -5,6 +5,9 @@
   whose hair is in the scene but that belongs to another scene shows its source there
   (:func:`scenes.evaluate`). Showing another scene in a window runs this handler too,
   so the outputs follow the scene shown.
+* ``frame_change_pre``: the setups with children close their output's guides gate, so
+  that Blender's first pass does not run the children stack on the last frame's guides
+  (:func:`children_stage.before_frame`).
   Both this and the depsgraph check first prune the registry (:func:`registry.prune`):
   a deleted source's runtime and memory cache go.
 * ``depsgraph_update_post``: an edited source or collider of a setup of the scene drops
@@ -32,7 +35,7 @@ import os
 import bpy
 from bpy.app.handlers import persistent
 
-from . import bridge, invalidation, keyed, ops_bake, registry, scenes
+from . import bridge, children_stage, invalidation, keyed, ops_bake, registry, scenes
 from .colliders import collider_objects
 from .dependencies import dependencies_stale, update_dependencies
 from .setup import Setup, structure, structure_change
@@ -53,6 +56,21 @@ def on_frame_change_post(scene, depsgraph=None):
                     registry.record_error(ob, exc)
         except Exception as exc:  # noqa: BLE001 - not even while listing the setups
             print(f"FurCollide: frame handler failed: {registry.describe(exc)}", flush=True)
+
+
+@persistent
+def on_frame_change_pre(scene, *_args):
+    """The setups with children close their output's guides gate
+    (:func:`children_stage.before_frame`); never raises."""
+    if registry.busy():
+        return
+    try:
+        for ob in registry.setups(scene):
+            if ob.furcollide.children.output is not None:
+                children_stage.before_frame(ob)
+    except Exception as exc:  # noqa: BLE001 - the handler must never raise
+        print(f"FurCollide: frame change handler failed: {registry.describe(exc)}",
+              flush=True)
 
 
 @persistent
@@ -264,6 +282,7 @@ def on_undo_post(*_args):
 
 
 _HANDLERS = (
+    ("frame_change_pre", on_frame_change_pre),
     ("frame_change_post", on_frame_change_post),
     ("depsgraph_update_post", on_depsgraph_update_post),
     ("load_post", on_load_post),

@@ -7,7 +7,7 @@ import bpy
 from bpy.props import BoolProperty
 from bpy.types import Operator
 
-from . import bridge, dependencies, frame_outputs, registry
+from . import bridge, children_stage, dependencies, frame_outputs, registry
 from .colliders import instanced_collection
 from .groom_stage import remove_groom
 from .invalidation import invalidate
@@ -143,6 +143,9 @@ class FURCOLLIDE_OT_remove(SetupOperator, Operator):
         else:  # a copy: the render groom is the original's
             s.groom.output = None
             s.groom.bind_id = ""
+        if children_stage.owns_children(src):  # (a copy's is the original's: kept)
+            children_stage.remove_children_output(src)
+        s.children.output = None
         registry.clear_runtime(src)
         if out is not None:
             if self.keep_output:

@@ -6,7 +6,7 @@ Pipeline panel's scene settings: thin glue around :mod:`..core.pipeline`.
   :func:`core.pipeline.collider_distance`.
 * ``furcollide.children_from_guides``: Blender's own *Interpolate Hair
   Curves* node group on a setup's output (render children from the
-  collided guides).
+  collided guides, cleared of the colliders every frame: :mod:`.children_stage`).
 * ``Scene.furcollide_pipeline``: the settings the panel shows for the Fur Sampler
   (:mod:`.ops_sampler`) and the children.
 
@@ -28,13 +28,14 @@ from bpy.props import (
 )
 from bpy.types import Operator, PropertyGroup
 
-from . import bridge, compat
+from . import bridge, children_stage, compat
 from .colliders import collider_objects
 from .frame_outputs import write_attributes
 from .motion import DISTANCE_ATTRIBUTE
 from .ops_common import (
     SetupOperator,
     active_setup,
+    evaluate_now,
     redraw,
     reports_errors,
 )
@@ -273,17 +274,17 @@ class FURCOLLIDE_OT_collider_distance(_OutputOperator, Operator):
         return {"FINISHED"}
 
 
-#: Children are Blender's: nothing clears them (the panel says it too).
+#: What Children from Guides says when Clear Children is off (the panel says it too).
 _CHILDREN_NOTE = (
-    "Children from Guides are not collided: between guides they can cross a collider.",
-    "For renders with no crossing, use a Render Groom (Fur Pipeline > Render Groom > "
-    "Bind Groom): it gets a clearance pass.",
+    "Children are not cleared (Clear Children is off): between guides they can cross a "
+    "collider. Turn Clear Children on (Fur Pipeline > Children)."
 )
 
 
 class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
     """Children from Guides: add Blender's Interpolate Hair Curves to the output, so
-    dense render children grow on the source's Surface and follow the collided guides"""
+    dense render children grow on the source's Surface and follow the collided guides;
+    they are cleared of the colliders every frame (the children output renders them)"""
 
     bl_idname = "furcollide.children_from_guides"
     bl_label = "Children from Guides"
@@ -370,13 +371,21 @@ class FURCOLLIDE_OT_children_from_guides(_OutputOperator, Operator):
         out.data.surface = surf
         out.data.surface_uv_map = uv_name
         out.update_tag()
+        cleared = src.furcollide.children.use_children
+        if cleared:  # (what renders: the children with the clearance pass, every frame)
+            ch = children_stage.create_children_output(src, context.scene)
+        err = evaluate_now(context, src)
         self.report(
             {"INFO"},
             f"Children from guides on '{out.name}' (surface '{surf.name}', UV map "
             f"'{uv_name}', density {self.density:g}), placed on the Surface's rest shape"
-            + (f" ('Add Rest Position' turned on for '{surf.name}')" if added_rest else ""),
+            + (f" ('Add Rest Position' turned on for '{surf.name}')" if added_rest else "")
+            + (f"; cleared of the colliders into '{ch.name}' every frame" if cleared else ""),
         )
-        self.report({"WARNING"}, " ".join(_CHILDREN_NOTE))
+        if not cleared:
+            self.report({"WARNING"}, _CHILDREN_NOTE)
+        if err:
+            self.report({"WARNING"}, f"FurCollide: {err}")
         redraw(context)
         return {"FINISHED"}
 

@@ -22,7 +22,7 @@ from bpy.props import (
 from bpy.types import PropertyGroup
 
 from . import compat, registry
-from .properties_pipeline import FurCollideGroom, FurCollideMotion
+from .properties_pipeline import FurCollideChildren, FurCollideGroom, FurCollideMotion
 from .property_helpers import (
     NOT_ANIMATABLE,
     choice,
@@ -343,6 +343,10 @@ class FurCollideSettings(PropertyGroup):
         type=FurCollideGroom, name="Render Groom",
         description="A dense render groom that follows the collided guides",
     )
+    children: PointerProperty(
+        type=FurCollideChildren, name="Children",
+        description="The output's own children stack, cleared of the colliders every frame",
+    )
     bake_path: hidden(StringProperty, "Bake Path", "")
     #: The scene this setup belongs to (Add FurCollide records it): in any other scene
     #: the hair is in, the output shows the source as groomed (registry.owner).
@@ -418,7 +422,8 @@ SOLVER_PROPERTIES = (
     "collision_offset",
 )
 
-classes = (FurCollideCollider, FurCollideMotion, FurCollideGroom, FurCollideSettings)
+classes = (FurCollideCollider, FurCollideMotion, FurCollideGroom, FurCollideChildren,
+           FurCollideSettings)
 
 
 def register():

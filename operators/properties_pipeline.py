@@ -1,7 +1,8 @@
 """Settings of a setup's fur pipeline stages: wind, jiggle, the Region of Influence and
-the collider distance attribute (:class:`FurCollideMotion`, ``furcollide.motion``), and
-the render groom (:class:`FurCollideGroom`, ``furcollide.groom``). Registered with the
-setup's own settings (:mod:`.properties`)."""
+the collider distance attribute (:class:`FurCollideMotion`, ``furcollide.motion``), the
+render groom (:class:`FurCollideGroom`, ``furcollide.groom``) and the children cleared
+live (:class:`FurCollideChildren`, ``furcollide.children``). Registered with the setup's
+own settings (:mod:`.properties`)."""
 
 import bpy
 from bpy.props import (
@@ -21,6 +22,8 @@ from .property_helpers import (
     hidden,
     poll_hair,
     stat,
+    update_children,
+    update_children_viewport,
     update_groom,
     update_motion,
 )
@@ -206,3 +209,37 @@ class FurCollideGroom(PropertyGroup):
         """Does the setup's bake hold this render groom (its settings are the bake's)?"""
         src = self.id_data
         return bool(src.furcollide.is_baked and self.bind_id and self.baked_id == self.bind_id)
+
+
+class FurCollideChildren(PropertyGroup):
+    """The output's own children stack, cleared of the colliders every frame
+    (:mod:`.children_stage`)."""
+
+    use_children: BoolProperty(
+        name="Clear Children", default=True, update=update_children,
+        description="When the output carries Geometry Nodes modifiers (Children from "
+        "Guides, Interpolate, Clump, Frizz...), render their result with the clearance "
+        "pass every frame, in a children output FurCollide makes (the output itself is "
+        "then kept out of renders). Off: the output renders its modifiers as they are, "
+        "children crossing the colliders",
+    )
+    use_viewport: BoolProperty(
+        name="Clear in Viewport", default=True, update=update_children_viewport,
+        description="Run the clearance pass on the children in the viewport too. Off: "
+        "faster playback, the children shown as the stack makes them; renders and bakes "
+        "always clear them",
+    )
+    output: PointerProperty(
+        name="Children Output", type=bpy.types.Object, poll=poll_hair,
+        description="Hair object FurCollide writes the cleared children into every frame "
+        "(made when the output carries modifiers)",
+    )
+    stat_children: stat("Children", "children", "Children the output's stack made on the "
+                         "last frame")
+    stat_fixed: stat("Children Fixed", "children_fixed",
+                     "Children the clearance pass turned out of a collider on the last frame")
+    stat_unresolved: stat("Children Unresolved", "children_unresolved",
+                          "Children the clearance pass could not free (red)")
+    stat_invalid: stat("Children Invalid", "children_invalid",
+                       "Children FurCollide cannot solve (a zero-length segment, fewer "
+                       "than 2 points): shown as they are, in yellow")

@@ -12,7 +12,7 @@ import functools
 
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from . import bridge, frame_outputs, invalidation, maps, registry
+from . import bridge, children_stage, frame_outputs, invalidation, maps, registry
 from .colliders import instanced_collection
 
 # ------------------------------------------------------------------ updates
@@ -109,6 +109,9 @@ def update_memory_limit(self, context):
 @never_raises
 def update_show_result(self, context):
     frame_outputs.apply_visibility(self.id_data)
+    src = registry.source_of(self.id_data)
+    if src is not None:
+        children_stage.apply_visibility(src)
 
 
 def poll_collider(self, ob):
@@ -122,6 +125,25 @@ def poll_hair(self, ob):
 @never_raises
 def update_groom(self, context):
     invalidation.refresh_groom(self.id_data)
+
+
+@never_raises
+def update_children(self, context):
+    """Clear Children: off removes the children output (the output renders its own
+    stack again); on makes it on the next frame shown (now, in the UI)."""
+    src = registry.source_of(self.id_data)
+    if src is None:
+        return
+    if not self.use_children:
+        children_stage.remove_children_output(src)
+    invalidation.schedule_refresh(src.name)
+
+
+@never_raises
+def update_children_viewport(self, context):
+    src = registry.source_of(self.id_data)
+    if src is not None:
+        invalidation.schedule_refresh(src.name)
 
 
 # ------------------------------------------------------ property factories

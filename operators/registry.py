@@ -74,6 +74,7 @@ class Runtime:
     history: RootHistory = field(default_factory=RootHistory)  # jiggle
     groom: tuple | None = None  # (bind_id, groom_stage.GroomBinding): render groom
     groom_shown: tuple | None = None  # (frame, guides) the groom output shows
+    children: object = None  # children_stage.ChildrenState: the children output
     #: Why the playback cache is empty (until the start frame is solved again): the
     #: reason the frames that are not cached give, e.g. "'Box' moved: the playback
     #: cache was dropped".

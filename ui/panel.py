@@ -4,7 +4,7 @@ import bpy
 from bpy.types import Panel, UIList
 
 from ..core import framecache
-from ..operators import ops_bake, registry
+from ..operators import ops_bake, registry, rest_position
 from ..operators.clock import STAGES
 from ..operators.colliders import collider_lines, in_scene
 from ..operators.ops_common import active_setup, backend_message
@@ -106,6 +106,8 @@ class FURCOLLIDE_PT_main(Panel):
             box = layout.box()
             for i, line in enumerate(_wrap(message, _line_chars(context))):
                 box.label(text=line, icon=icon if i == 0 else "BLANK1")
+            if rest_position.BUTTON in message:  # (the fix the message names)
+                box.operator("furcollide.use_rest_position", icon="MOD_MESHDEFORM")
         if not context.scene.render.use_lock_interface:
             box = layout.box()
             box.label(text="Enable Render > Lock Interface", icon="ERROR")
@@ -300,6 +302,15 @@ class FURCOLLIDE_PT_stats(_Sub, Panel):
                       icon="ERROR" if g.stat_unresolved else "BLANK1")
             if g.stat_invalid:
                 col.label(text=f"Invalid (yellow): {g.stat_invalid}", icon="ERROR")
+        c = s.children
+        if c.output is not None:
+            col = layout.column(align=True)
+            col.label(text=f"Children: {c.stat_children}, {c.stat_fixed} fixed",
+                      icon="OUTLINER_DATA_CURVES")
+            col.label(text=f"Unresolved (red): {c.stat_unresolved}",
+                      icon="ERROR" if c.stat_unresolved else "BLANK1")
+            if c.stat_invalid:
+                col.label(text=f"Invalid (yellow): {c.stat_invalid}", icon="ERROR")
         draw_stage_times(layout, registry.stats_for(s.id_data))
 
 

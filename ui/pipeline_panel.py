@@ -1,8 +1,10 @@
 """View3D > Sidebar > FurCollide > Fur Pipeline: Fur Sampler, Fur Attach, wind and
-jiggle, Region of Influence and Fur Collider Distance, children and the render groom."""
+jiggle, Region of Influence and Fur Collider Distance, the children (cleared live) and
+the render groom."""
 
 from bpy.types import Panel
 
+from ..operators.children_stage import owns_children, stack_modifiers
 from ..operators.fur_attach import has_binding
 from ..operators.groom_stage import BIND_AGAIN, advice
 from ..operators.ops_common import active_setup
@@ -117,13 +119,54 @@ def draw_groom(layout, src):
         col.label(text=f"Invalid (yellow): {g.stat_invalid}", icon="ERROR")
 
 
-#: What the Children from Guides box says about collisions: the children are made by
-#: Blender's node group from the collided guides, so nothing clears them.
-CHILDREN_NOT_CLEARED = (
-    "Children are not collided: between guides they can cross a collider.",
-    "For renders with no crossing, use a Render Groom (Bind Groom below):",
-    "it gets a clearance pass.",
+#: How the children relate to the Render Groom (the Children box says it).
+CHILDREN_AND_GROOM = (
+    "Children are made from the collided guides by the output's",
+    "modifiers every frame; a Render Groom (below) is your own dense",
+    "groom bound to the guides. Both get the same clearance pass.",
 )
+
+
+def draw_children(layout, src, settings):
+    """Children: the output's own Geometry Nodes stack, cleared live into the children
+    output (Children from Guides adds Blender's Interpolate Hair Curves to it)."""
+    s = src.furcollide
+    c = s.children
+    box = layout.box()
+    box.label(text="Children", icon="OUTLINER_DATA_CURVES")
+    col = box.column()
+    col.prop(settings, "density")
+    col.prop(settings, "guides")
+    row = col.row()
+    row.enabled = src.data.surface is not None
+    op = row.operator("furcollide.children_from_guides", icon="OUTLINER_DATA_CURVES")
+    op.density, op.guides = settings.density, settings.guides
+    if src.data.surface is None:
+        col.label(text="Children need the source's Surface", icon="INFO")
+    col.prop(c, "use_children")
+    sub = col.column()
+    sub.enabled = c.use_children
+    sub.prop(c, "use_viewport")
+    stack = stack_modifiers(s.output)
+    if not stack:
+        col.label(text="No modifiers on the output make children", icon="INFO")
+    elif not c.use_children:
+        col.label(text="Children are not cleared: they can cross a collider", icon="ERROR")
+    elif not owns_children(src):
+        col.label(text="Not cleared yet: play a frame, or", icon="ERROR")
+        col.operator("furcollide.children_output", icon="OUTLINER_DATA_CURVES")
+    else:
+        col.label(text=f"Output: {c.output.name}", icon="OUTLINER_DATA_CURVES")
+        col.label(text=f"From: {', '.join(m.name for m in stack)}", icon="MODIFIER")
+        col.label(text=f"Children: {c.stat_children}, fixed: {c.stat_fixed}", icon="CHECKMARK")
+        if c.stat_unresolved:
+            col.label(text=f"Unresolved (red): {c.stat_unresolved}", icon="ERROR")
+        if c.stat_invalid:
+            col.label(text=f"Invalid (yellow): {c.stat_invalid}", icon="ERROR")
+        if not c.use_viewport:
+            col.label(text="Viewport: not cleared (renders and bakes are)", icon="INFO")
+    for i, line in enumerate(CHILDREN_AND_GROOM):
+        col.label(text=line, icon="INFO" if i == 0 else "BLANK1")
 
 
 class FURCOLLIDE_PT_pipeline(Panel):
@@ -177,19 +220,7 @@ class FURCOLLIDE_PT_pipeline(Panel):
         draw_motion(layout, src)
         draw_influence(layout, src)
 
-        box = layout.box()
-        box.label(text="Children from Guides", icon="MOD_PHYSICS")
-        col = box.column()
-        col.prop(s, "density")
-        col.prop(s, "guides")
-        row = col.row()
-        row.enabled = src.data.surface is not None
-        op = row.operator("furcollide.children_from_guides", icon="OUTLINER_DATA_CURVES")
-        op.density, op.guides = s.density, s.guides
-        if src.data.surface is None:
-            col.label(text="Children need the source's Surface", icon="INFO")
-        for i, line in enumerate(CHILDREN_NOT_CLEARED):
-            col.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
+        draw_children(layout, src, s)
         draw_groom(layout, src)
 
 

@@ -917,3 +917,84 @@ def groom_scene(fc):
     guides.furcollide.groom.groom = groom
     bpy.context.view_layer.objects.active = guides
     return guides, groom, box, out
+
+
+# ------------------------------------------------------- Blender's hair node assets
+#: The inputs of Blender's bundled hair node groups (``procedural_hair_node_assets.blend``:
+#: Generate, Interpolate, Clump, Frizz Hair Curves) the tests set, by what they mean:
+#: ``(socket name, socket type)`` candidates, matched per version in this one place.
+#: 4.2-5.0 take the Surface as an Object input and its UV map as an attribute input;
+#: 5.2's Interpolate has neither and reads the hair data's own ``surface`` and
+#: ``surface_uv_map`` (:func:`add_hair_asset` sets those on every version). The switch
+#: that scatters on the Surface's rest position is "Surface Rest Position" up to 5.0,
+#: "Resting Surface" in 5.2 (the add-on's ``operators/compat.py`` says the same).
+HAIR_INPUTS = {
+    "surface": (("Surface", "NodeSocketObject"),),
+    "uv_map": (("Surface UV Map", "NodeSocketVector"),),
+    "rest": (("Surface Rest Position", "NodeSocketBool"), ("Resting Surface", "NodeSocketBool")),
+    "density": (("Density", "NodeSocketFloat"),),
+    "length": (("Hair Length", "NodeSocketFloat"),),
+    "points": (("Control Points", "NodeSocketInt"),),
+    "seed": (("Seed", "NodeSocketInt"),),
+    "guides": (("Interpolation Guides", "NodeSocketInt"),),
+    "factor": (("Factor", "NodeSocketFloat"),),
+    "clump_distance": (("Guide Distance", "NodeSocketFloat"),),
+    "frizz_distance": (("Distance", "NodeSocketFloat"),),
+}
+#: Inputs a version may not have (the hair data's surface stands for them).
+_HAIR_OPTIONAL = {"surface", "uv_map"}
+
+
+def hair_asset_group(name):
+    """Blender's bundled hair node group ``name`` (appended once per file)."""
+    for ng in bpy.data.node_groups:
+        if ng.get("test_hair_asset") == name:
+            return ng
+    compat = sys.modules[ADDON + ".operators.compat"]
+    path = compat.find_datafile(compat.hair_asset_candidates())
+    assert path, "Blender's hair node assets are missing from this Blender"
+    with bpy.data.libraries.load(path, link=False) as (src, dst):
+        assert name in src.node_groups, (name, path)
+        dst.node_groups = [name]
+    ng = dst.node_groups[0]
+    ng["test_hair_asset"] = name
+    return ng
+
+
+def add_hair_asset(ob, group, at=None, **inputs):
+    """A Geometry Nodes modifier running Blender's hair node group ``group`` on hair
+    ``ob`` (at stack position ``at``, default last), its ``inputs`` set by the keys of
+    :data:`HAIR_INPUTS`. ``surface`` and ``uv_map`` also go to the hair data."""
+    compat = sys.modules[ADDON + ".operators.compat"]
+    mod = ob.modifiers.new(group, "NODES")
+    mod.node_group = hair_asset_group(group)
+    ids = compat.group_inputs(mod.node_group)
+    for key, value in inputs.items():
+        if key == "surface":
+            ob.data.surface = value
+        elif key == "uv_map":
+            ob.data.surface_uv_map = value
+        ident = next((ids[c] for c in HAIR_INPUTS[key] if c in ids), None)
+        if ident is None:
+            assert key in _HAIR_OPTIONAL, f"'{group}' of Blender {bpy.app.version_string} " \
+                f"has no input for {key!r}: {sorted(ids)}"
+        elif key == "uv_map":
+            compat.set_modifier_input_attribute(mod, ident, value)
+        else:
+            compat.set_modifier_input(mod, ident, value)
+    if at is not None:
+        compat.move_modifier(ob, mod, at)
+    return mod
+
+
+def evaluated_curves(ob, depsgraph=None):
+    """(world points (P, 3) float64, offsets (C+1,)) of ``ob``'s evaluated curves."""
+    dg = depsgraph or bpy.context.evaluated_depsgraph_get()
+    oe = ob.evaluated_get(dg)
+    d = oe.data
+    offs = np.zeros(len(d.curves) + 1, np.int32)
+    if len(d.curves):
+        d.curve_offset_data.foreach_get("value", offs)
+    P = np.empty(len(d.points) * 3, np.float32)
+    d.position_data.foreach_get("vector", P)
+    return oracle.transform(P.reshape(-1, 3), np.array(oe.matrix_world)), offs

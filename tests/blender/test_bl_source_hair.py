@@ -227,10 +227,13 @@ def test_animated_per_curve_enable(fc):
 
 
 def test_source_topology_change_is_reported_and_nothing_lost(fc):
+    """Curves added to the source mid-shot: the status says so and what to press (the
+    button as it is drawn, Reset Cache); the cached frames are kept; the output follows
+    the source, not collided, and is outdated (never frozen while marked current)."""
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
     rt = fc.registry.get_runtime(hair)
-    rec = positions_per_frame(out, range(1, 7))
+    positions_per_frame(out, range(1, 7))
     n = len(hair.data.curves)
     hair.data.add_curves([5])
     P = fc.positions(hair)
@@ -239,9 +242,11 @@ def test_source_topology_change_is_reported_and_nothing_lost(fc):
     bpy.context.scene.frame_set(7)
     msg = hair.furcollide.status_message
     assert "changed" in msg and str(n) in msg and str(n + 1) in msg
-    assert np.array_equal(fc.positions(out), rec[6])
+    assert "press Reset Cache and play from frame 1" in msg, msg
+    np.testing.assert_array_equal(fc.positions(out), fc.positions(hair))
+    assert hair.furcollide.is_outdated
     assert len(rt.memory) == 6
-    assert len(out.data.curves) == n
+    assert len(out.data.curves) == n + 1
     bpy.context.scene.frame_set(1)
     assert bpy.ops.furcollide.reset() == {"FINISHED"}
     assert len(out.data.curves) == n + 1
@@ -254,7 +259,6 @@ def test_source_data_swapped_for_more_curves_mid_play(fc, capsys):
     hair, box, out = small_setup(fc, frames=(1, 8))
     for f in range(1, 5):
         scene.frame_set(f)
-    shown = fc.positions(out).copy()
     more = make_hair(name="More", nx=5, ny=5)
     data = more.data
     bpy.data.objects.remove(more)
@@ -262,9 +266,11 @@ def test_source_data_swapped_for_more_curves_mid_play(fc, capsys):
     for f in (5, 6, 2):
         scene.frame_set(f)
         level, msg = fc.registry.status_for(hair)
-        assert level == "ERROR" and "16" in msg and "25" in msg and "Reset" in msg, msg
-        np.testing.assert_array_equal(fc.positions(out), shown)  # keeps its last result
-        assert len(out.data.curves) == 16
+        assert level == "ERROR" and "16" in msg and "25" in msg and "Reset Cache" in msg, msg
+        # the output follows the source (not collided), outdated
+        np.testing.assert_array_equal(fc.positions(out), fc.positions(hair))
+        assert hair.furcollide.is_outdated
+        assert len(out.data.curves) == 25
     assert "Traceback" not in capsys.readouterr().err
     scene.frame_set(4)
     activate(hair)
