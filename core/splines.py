@@ -42,6 +42,8 @@ solved polyline): their bound is 0.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
+from math import comb
 
 import numpy as np
 
@@ -137,11 +139,13 @@ class _Layout:
 
     def per_curve_max(self, values, where):
         """(C,) largest of point-indexed ``values`` over the points ``where`` of each
-        curve (0 where none)."""
+        curve (0 where none; a non-finite value, of a curve with a non-finite point the
+        solver leaves alone, counts as 0)."""
         out = np.zeros(self.C)
         idx = np.flatnonzero(where)
         if len(idx):
-            np.maximum.at(out, self.curve[idx], values[idx])
+            v = values[idx]
+            np.maximum.at(out, self.curve[idx], np.where(np.isfinite(v), v, 0.0))
         return out
 
 
@@ -228,6 +232,11 @@ def polygon_deviation(splines: Splines, points, offsets) -> np.ndarray:
     points : (P, 3) float ndarray
     offsets : (C+1,) int ndarray
     """
+    with np.errstate(invalid="ignore", over="ignore"):  # (non-finite curves count 0)
+        return _polygon_deviation(splines, points, offsets)
+
+
+def _polygon_deviation(splines: Splines, points, offsets) -> np.ndarray:
     lay = _Layout(offsets)
     P = np.asarray(points, np.float64)
     per_seg = np.zeros(lay.P)
@@ -285,7 +294,8 @@ def _bezier_measured(P, d, mask, splines):
 
 
 def _nurbs_valid(splines, lay, curves):
-    """Curves of ``curves`` (indices) Blender evaluates as NURBS, with their orders."""
+    """Curves of ``curves`` (indices) Blender evaluates as NURBS: (curves, orders,
+    knots modes)."""
     order = (np.full(lay.C, DEFAULT_ORDER) if splines.nurbs_order is None
              else np.asarray(splines.nurbs_order, np.int64))[curves]
     mode = (np.zeros(lay.C, np.int64) if splines.knots_mode is None
@@ -293,35 +303,120 @@ def _nurbs_valid(splines, lay, curves):
     n = lay.sizes[curves]
     ok = (order >= 2) & (n >= order)
     ok &= ~((mode == KNOTS_BEZIER) & (n <= order))  # (non-cyclic curves only here)
-    return curves[ok], order[ok]
+    return curves[ok], order[ok], mode[ok]
 
 
-def _nurbs_bound(splines, lay, P, d, nurbs, turn):
-    """(C,) bound of the NURBS curves ``nurbs`` (C,) bool: each window of ``order``
-    consecutive points lies within ``min_s max_q dist(Q_q, segment s)`` of the
-    polygon (the distance to a segment is convex), plus ``turn`` (a callable giving
-    the growth of a point's distance through the solve from the window's segment
-    lengths and index gaps) when given."""
+def _bspline_basis(knots, k, t):
+    """Cox-de Boor: (len(t), len(knots) - k) B-spline basis of order ``k`` at ``t``
+    (parameters inside knot spans)."""
+    U = np.asarray(knots, np.float64)
+    T = np.asarray(t, np.float64)[:, None]
+    N = ((U[:-1] <= T) & (T < U[1:])).astype(np.float64)
+    for r in range(2, k + 1):
+        nb = len(U) - r
+        den1 = U[r - 1:r - 1 + nb] - U[:nb]
+        den2 = U[r:r + nb] - U[1:1 + nb]
+        a = np.divide(T - U[:nb], den1, out=np.zeros((len(T), nb)), where=den1 > 0)
+        b = np.divide(U[r:r + nb] - T, den2, out=np.zeros((len(T), nb)), where=den2 > 0)
+        N = a * N[:, :nb] + b * N[:, 1:nb + 1]
+    return N
+
+
+@lru_cache(maxsize=64)
+def _bezier_extraction(n: int, k: int, mode: int) -> tuple:
+    """The Bezier pieces of a non-cyclic NURBS of ``n`` points, order ``k`` and knots
+    ``mode`` (NORMAL: uniform knots; ENDPOINT: clamped uniform, as Blender's
+    ``calculate_knots`` makes them): per half of each nonzero knot span, (the first
+    point of its window of ``k`` points, the (k, k) matrix taking the window's points
+    to that half's Bezier control points). Each piece of the curve (rational too, with positive
+    weights) lies in the convex hull of its Bezier points, which are close to the
+    control polygon where the window's points are (a uniform cubic's are within
+    a sixth of a second difference of it)."""
+    if mode == KNOTS_ENDPOINT:
+        knots = np.concatenate([np.zeros(k), np.arange(1, n - k + 1), np.full(k, n - k + 1)])
+    else:
+        knots = np.arange(n + k, dtype=np.float64)
+    p = k - 1
+    s = (np.arange(k) + 1.0) / (k + 1.0)  # sample parameters inside each span
+    bern = np.stack([comb(p, m) * s**m * (1 - s) ** (p - m) for m in range(k)], 1)
+    inv_bern = np.linalg.inv(bern)  # (once per layout: cached)
+    # de Casteljau halves: the two halves of a piece hug the polygon closer
+    half_l = np.array([[comb(i, j) / 2.0**i if j <= i else 0.0 for j in range(k)]
+                       for i in range(k)])
+    half_r = half_l[::-1, ::-1]
+    out = []
+    for i in range(k - 1, n):
+        if knots[i + 1] <= knots[i]:
+            continue
+        t = knots[i] + s * (knots[i + 1] - knots[i])
+        first = i - k + 1
+        N = _bspline_basis(knots, k, t)[:, first:first + k]
+        A = inv_bern @ N
+        for half in (half_l, half_r):
+            H = half @ A
+            H[np.abs(H) < 1e-12] = 0.0
+            out.append((first, H))
+    return tuple(out)
+
+
+def _nurbs_bound(splines, lay, P, d, nurbs, coef):
+    """(C,) bound of the NURBS curves ``nurbs`` (C,) bool.
+
+    Each piece of the curve lies in the convex hull of its Bezier points
+    (:func:`_bezier_extraction`; for knots modes it does not model, Bezier and
+    custom knots, the window's own points, a looser hull), so within
+    ``min_s max_b dist(B_b, segment s)`` of the polygon over the window's segments
+    ``s`` (the distance to one segment is convex). ``coef(curves, m)``, when given,
+    is how much two segments ``m`` apart can turn against each other in a solve: a
+    Bezier point, a fixed convex mix of the window's points, moves from segment
+    ``s`` by at most its mix of the points' own moves.
+    """
     out = np.zeros(lay.C)
-    curves, orders = _nurbs_valid(splines, lay, np.flatnonzero(nurbs))
+    curves, orders, modes = _nurbs_valid(splines, lay, np.flatnonzero(nurbs))
+    if not len(curves):
+        return out
     seglen = _norm(d)
-    for k in np.unique(orders):
-        cs = curves[orders == k]
-        nwin = lay.sizes[cs] - k + 1
-        starts = np.repeat(lay.offsets[cs], nwin) + _ramp(nwin)
-        owner = np.repeat(cs, nwin)
-        best = np.full(len(starts), np.inf)
-        for s in range(k - 1):
-            a, ds = P[starts + s], d[starts + s]
-            far = np.zeros(len(starts))
-            for q in range(k):
-                far = np.maximum(far, _point_segment_distance(P[starts + q], a, ds))
-            if turn is not None:
-                far = far + turn(owner, [(abs(j - s), seglen[starts + j])
-                                         for j in range(k - 1) if j != s])
-            best = np.minimum(best, far)
-        np.maximum.at(out, owner, best)
+    wts = (np.ones(lay.P) if splines.nurbs_weight is None
+           else np.asarray(splines.nurbs_weight, np.float64))
+    modeled = np.where(np.isin(modes, (KNOTS_NORMAL, KNOTS_ENDPOINT)), modes, -1)
+    keys = np.stack([lay.sizes[curves], orders, modeled], 1)
+    for n, k, mode in np.unique(keys, axis=0):
+        cs = curves[np.all(keys == (n, k, mode), axis=1)]
+        idx = lay.offsets[cs][:, None] + np.arange(n)
+        Q, w, L = P[idx], wts[idx], seglen[idx]
+        if mode < 0:  # the windows themselves
+            pieces = [(f, np.eye(k)) for f in range(n - k + 1)]
+        else:
+            pieces = _bezier_extraction(int(n), int(k), int(mode))
+        best = np.zeros(len(cs))
+        for first, A in pieces:
+            Wq, wq, Lq = Q[:, first:first + k], w[:, first:first + k], L[:, first:first + k]
+            mix = A[None] * wq[:, None, :]
+            mix /= mix.sum(2, keepdims=True)  # (m, Bezier point, window point), convex
+            B = np.einsum("mbq,mqx->mbx", mix, Wq)
+            piece = np.full(len(cs), np.inf)
+            for s in range(k - 1):
+                a, dv = Wq[:, s], Wq[:, s + 1] - Wq[:, s]
+                dist = np.stack([_point_segment_distance(B[:, b], a, dv)
+                                 for b in range(k)], 1)
+                if coef is not None:
+                    dist = dist + np.einsum("mbq,mq->mb", mix, _window_moves(cs, Lq, s, k, coef))
+                piece = np.minimum(piece, dist.max(1))
+            best = np.maximum(best, piece)
+        out[cs] = np.maximum(out[cs], np.where(np.isfinite(best), best, 0.0))
     return out
+
+
+def _window_moves(cs, L, s, k, coef):
+    """(m, k) how far each window point can move relative to the window's segment
+    ``s`` in a solve: the segments between them, each by ``coef(curves, gap) *
+    length``."""
+    moves = np.zeros((len(cs), k))
+    for q in range(k):
+        js = range(s + 1, q) if q > s else range(q, s)
+        for j in js:
+            moves[:, q] += coef(cs, abs(j - s)) * L[:, j]
+    return moves
 
 
 def _ramp(counts):
@@ -410,6 +505,11 @@ def clearance_margin(splines: Splines, points, offsets, settings, enabled=None) 
     * NURBS: a window point's distance from the window's segment ``s`` grows by at
       most ``sum_j c_|j-s| |d_j|`` over the window's other segments.
     """
+    with np.errstate(invalid="ignore", over="ignore"):  # (non-finite curves count 0)
+        return _clearance_margin(splines, points, offsets, settings, enabled)
+
+
+def _clearance_margin(splines: Splines, points, offsets, settings, enabled=None) -> np.ndarray:
     lay = _Layout(offsets)
     P = np.asarray(points, np.float64)
     out = np.zeros(lay.C)
@@ -430,10 +530,9 @@ def clearance_margin(splines: Splines, points, offsets, settings, enabled=None) 
     out = lay.per_curve_max(per_seg, lay.seg)
     nurbs = (types == NURBS) & open_c
     if nurbs.any():
-        def turn(owner, gaps):
-            return sum(_turn_coefficient(phi_c[owner], shrink, m) * length
-                       for m, length in gaps)
-        out = np.maximum(out, _nurbs_bound(splines, lay, P, d, nurbs, turn))
+        def coef(curves, m):
+            return _turn_coefficient(phi_c[curves], shrink, m)
+        out = np.maximum(out, _nurbs_bound(splines, lay, P, d, nurbs, coef))
     out = np.nan_to_num(out, nan=0.0, posinf=0.0)
     # float noise of straight curves is no curvature: no margin below it
     longest = lay.per_curve_max(seglen, lay.seg)

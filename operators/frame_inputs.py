@@ -55,6 +55,9 @@ class FrameInputs:
     #: Fur Attach's input (``fur_attach.AttachInput``) when it is on: ``points`` are
     #: its attached points (None when read with ``attach=False``: a baked frame shown).
     attached: object = None
+    #: How the source draws its curves (``frame_outputs.SourceSplines``; read by
+    #: ``frame_outputs.source_splines``). None: not read (a script: Catmull-Rom).
+    splines: object = None
 
     def __post_init__(self):
         if self.raw is None:

@@ -10,11 +10,12 @@ to solve and keep, and ``scripts/demo.py`` calls it with :meth:`setup.Setup.for_
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import Status, framecache
+from ..core import Status, framecache, splines
 from . import motion
 from .clock import clock
 
@@ -64,8 +65,9 @@ def solve_frame(setup, inputs) -> FrameResult:
     Exception
         Any error of the core or a stage (the solver's state is then unknown).
     """
-    res = setup.solver.step(inputs.points, inputs.colliders, growth=inputs.growth,
-                            enabled=inputs.enabled)
+    with drawn_clearance(setup.solver, inputs):
+        res = setup.solver.step(inputs.points, inputs.colliders, growth=inputs.growth,
+                                enabled=inputs.enabled)
     clock.add("collide", res.timings.get("total", 0.0))
     m = setup.motion
     if m is None or not m.active:
@@ -77,6 +79,50 @@ def solve_frame(setup, inputs) -> FrameResult:
     stats = frame_stats(res.status, inputs.frame, res.timings.get("total", 0.0))
     return FrameResult(points, res.status, attributes,
                        framecache.rows_differ(points, inputs.raw), stats, list(res.problems))
+
+
+def drawn_margin(settings, inputs) -> np.ndarray:
+    """(C,) how much farther than the solved polyline each curve must keep from the
+    colliders so that the spline Blender draws through its points clears them too
+    (``splines.clearance_margin`` of the source's curve types, rounded up by
+    ``splines.quantized``; 0 for Poly curves). Without the source's splines (a
+    script) the curves are Catmull-Rom, Blender's hair default."""
+    if inputs.splines is None:
+        sp = splines.Splines.catmull_rom(len(inputs.offsets) - 1)
+    else:
+        sp = inputs.splines.at(inputs.points, inputs.offsets)
+    margin = splines.clearance_margin(sp, inputs.points, inputs.offsets, settings,
+                                      inputs.enabled)
+    return splines.quantized(margin)
+
+
+@contextmanager
+def drawn_clearance(solver, inputs):
+    """Widen the clearance of ``solver``'s step by :func:`drawn_margin` (and restore
+    its settings and the colliders' own offsets afterwards).
+
+    Until ``core.Settings`` takes a per-curve ``clearance_margin``, every curve gets
+    the largest margin of the frame, on ``collision_offset`` and on each collider's
+    own offset. With it, this becomes the one line
+    ``solver.settings = settings.replace(clearance_margin=margin)`` (and no collider
+    is touched).
+    """
+    settings = solver.settings
+    margin = drawn_margin(settings, inputs)
+    widen = float(margin.max()) if len(margin) else 0.0
+    if widen <= 0.0:
+        yield
+        return
+    own = [(c, c.offset) for c in inputs.colliders if getattr(c, "offset", None) is not None]
+    solver.settings = settings.replace(collision_offset=settings.collision_offset + widen)
+    try:
+        for c, offset in own:
+            c.offset = offset + widen
+        yield
+    finally:
+        for c, offset in own:
+            c.offset = offset
+        solver.settings = settings
 
 
 def frame_stats(status, frame, solve_ms=0.0, source="solved") -> dict:

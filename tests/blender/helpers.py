@@ -917,3 +917,63 @@ def groom_scene(fc):
     guides.furcollide.groom.groom = groom
     bpy.context.view_layer.objects.active = guides
     return guides, groom, box, out
+
+
+# ------------------------------------------------------------- evaluated curves
+def _probe_group(ob):
+    """Geometry nodes reading ``ob``'s evaluated geometry in world space (Object Info,
+    Relative) and realizing the curves Blender draws (Resample Curve, Evaluated)."""
+    ng = bpy.data.node_groups.new(".furcollide_probe", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    info = ng.nodes.new("GeometryNodeObjectInfo")
+    info.transform_space = "RELATIVE"
+    info.inputs["Object"].default_value = ob
+    resample = ng.nodes.new("GeometryNodeResampleCurve")
+    if "Mode" in resample.inputs:  # (a menu socket in newer Blenders)
+        resample.inputs["Mode"].default_value = "Evaluated"
+    else:
+        resample.mode = "EVALUATED"
+    out = ng.nodes.new("NodeGroupOutput")
+    ng.links.new(info.outputs["Geometry"], resample.inputs["Curve"])
+    ng.links.new(resample.outputs[0], out.inputs[0])
+    return ng
+
+
+def evaluated_curves(ob):
+    """The curves Blender draws for hair object ``ob`` now (its modifiers included):
+    world points (P, 3) float64 and offsets (C+1,). Every Catmull-Rom, Bezier and NURBS
+    curve comes as its evaluated points, read through a temporary probe object (a
+    Resample Curve in Evaluated mode on ``ob``'s evaluated geometry)."""
+    ng = _probe_group(ob)
+    data = bpy.data.hair_curves.new(".furcollide_probe")
+    probe = bpy.data.objects.new(".furcollide_probe", data)
+    bpy.context.scene.collection.objects.link(probe)
+    try:
+        mod = probe.modifiers.new("probe", "NODES")
+        mod.node_group = ng
+        e = probe.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        P = np.empty(len(e.points) * 3, np.float32)
+        if len(P):
+            e.position_data.foreach_get("vector", P)
+        offs = np.zeros(len(e.curves) + 1, np.int32)
+        if len(e.curves):
+            e.curve_offset_data.foreach_get("value", offs)
+    finally:
+        bpy.data.objects.remove(probe)
+        bpy.data.hair_curves.remove(data)
+        bpy.data.node_groups.remove(ng)
+    return P.reshape(-1, 3).astype(np.float64), offs
+
+
+def evaluated_crossing(out, colliders, status=None):
+    """Curves whose status says resolved but whose *evaluated* curve (what Blender
+    draws: :func:`evaluated_curves`) surely crosses a collider's evaluated mesh."""
+    P, offs = evaluated_curves(out)
+    st = status_of(out) if status is None else status
+    assert len(offs) == len(st) + 1, "the evaluated output lost or gained curves"
+    bad = np.zeros(len(offs) - 1, bool)
+    for ob in colliders:
+        V, F = evaluated_world_mesh(ob)
+        bad |= oracle.segments_hit_mesh(P, offs, V, F, abs_eps=oracle.float32_margin(P, V))
+    return np.flatnonzero(bad & np.isin(st, RESOLVED))
