@@ -122,14 +122,22 @@ def get_positions(curves) -> np.ndarray:
 
 def set_positions(curves, P: np.ndarray) -> None:
     """Write local-space positions ``P`` (n, 3) into ``curves`` (original data), and
-    make everything evaluated from them see them (:func:`tag_changed`)."""
+    make everything evaluated from them see them (:func:`tag_changed`).
+
+    Positions equal bit for bit to the ones there are not written again: the tag
+    makes Blender evaluate every Catmull-Rom, Bezier and NURBS curve again (for the
+    object's bounds, at least), which frames that change nothing need not pay.
+    """
     n = len(curves.points)
     if P.shape != (n, 3):
         raise BridgeError(
             f"'{curves.name}' has {n} points but {P.shape[0]} positions were given"
         )
+    P = np.ascontiguousarray(P, np.float32)
+    if n and np.array_equal(get_positions(curves).view(np.uint32), P.view(np.uint32)):
+        return
     if n:
-        curves.position_data.foreach_set("vector", np.ascontiguousarray(P, np.float32).ravel())
+        curves.position_data.foreach_set("vector", P.ravel())
     tag_changed(curves)
 
 
@@ -349,8 +357,9 @@ def read_splines(curves) -> splines.Splines:
 
 def write_handles(curves, left, right, type_left, type_right) -> None:
     """Write Bezier handle positions (P, 3) (local space) and types (P,) into
-    ``curves``; the caller tags the change (:func:`tag_changed`)."""
+    ``curves``, and tag the change when anything differs from what is there."""
     n = len(curves.points)
+    changed = False
     for name, values, kind, key in (
         ("handle_left", left, "FLOAT_VECTOR", "vector"),
         ("handle_right", right, "FLOAT_VECTOR", "vector"),
@@ -362,8 +371,16 @@ def write_handles(curves, left, right, type_left, type_right) -> None:
             raise BridgeError(f"'{curves.name}' has {n} points but '{name}' has "
                               f"{len(attr.data)} values")
         dtype = np.float32 if kind == "FLOAT_VECTOR" else np.int32
-        if n:
-            attr.data.foreach_set(key, np.ascontiguousarray(values, dtype).ravel())
+        new = np.ascontiguousarray(values, dtype).ravel()
+        if not n:
+            continue
+        old = np.empty_like(new)
+        attr.data.foreach_get(key, old)
+        if not np.array_equal(old.view(np.uint32), new.view(np.uint32)):
+            attr.data.foreach_set(key, new)
+            changed = True
+    if changed:
+        tag_changed(curves)
 
 
 _VALUE_KEYS = {

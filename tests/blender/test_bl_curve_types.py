@@ -241,3 +241,74 @@ def _unit(v):
 
 def _angle(a, b):
     return float(np.arccos(np.clip(np.dot(a, b) / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))
+
+
+def _resample_group(count=16):
+    ng = bpy.data.node_groups.new("Resample", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi, go = ng.nodes.new("NodeGroupInput"), ng.nodes.new("NodeGroupOutput")
+    r = ng.nodes.new("GeometryNodeResampleCurve")
+    r.inputs["Count"].default_value = count
+    ng.links.new(gi.outputs[0], r.inputs["Curve"])
+    ng.links.new(r.outputs[0], go.inputs[0])
+    return ng
+
+
+def _trim_group(fc):
+    path = fc.package.operators.pipeline.hair_assets_path()
+    with bpy.data.libraries.load(path, link=False) as (_src, dst):
+        dst.node_groups = ["Trim Hair Curves"]
+    return dst.node_groups[0]
+
+
+def _stack(fc, ob, groups):
+    """Resample Curve, then Trim Hair Curves to 0.6 long, on ``ob``."""
+    compat = fc.package.operators.compat
+    for ng in groups:
+        mod = ob.modifiers.new(ng.name, "NODES")
+        mod.node_group = ng
+        if ng.name.startswith("Trim"):
+            ids = compat.group_inputs(ng)
+            compat.set_modifier_input(mod, ids[("Length", "NodeSocketFloat")], 0.6)
+
+
+def _evaluated_data(ob):
+    e = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    P = np.empty(len(e.points) * 3, np.float32)
+    e.position_data.foreach_get("vector", P)
+    offs = np.zeros(len(e.curves) + 1, np.int32)
+    e.curve_offset_data.foreach_get("value", offs)
+    return P.reshape(-1, 3), offs
+
+
+def _fresh(fc, out, groups):
+    """A new object with a copy of the output's curves built from scratch (no cache
+    of Blender's shared with the output's) and the same modifiers."""
+    hc = bpy.data.hair_curves.new("Fresh")
+    fc.bridge.copy_topology(out.data, hc)
+    ob = bpy.data.objects.new("Fresh", hc)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.matrix_world = out.matrix_world
+    _stack(fc, ob, groups)
+    return ob
+
+
+@pytest.mark.parametrize("kind", ["CATMULL_ROM", "BEZIER", "NURBS"])
+def test_modifiers_on_the_output_see_each_frame_solved(fc, kind):
+    """A Resample Curve and a Trim Hair Curves modifier on the output give, on every
+    frame played (and scrubbed back to), what the same stack gives on a fresh copy of
+    the output's curves."""
+    hair, b, out = pressed(kind, handles="MIXED")
+    groups = [_resample_group(), _trim_group(fc)]
+    _stack(fc, out, groups)
+    scene = bpy.context.scene
+    for f in (*range(FRAMES[0], FRAMES[1] + 1), 3, 2, 6):
+        scene.frame_set(f)
+        got, offs = _evaluated_data(out)
+        ref = _fresh(fc, out, groups)
+        want, offs_want = _evaluated_data(ref)
+        np.testing.assert_array_equal(offs, offs_want)
+        np.testing.assert_allclose(got, want, atol=1e-6, err_msg=f"frame {f}")
+        bpy.data.objects.remove(ref)
+    assert hair.furcollide.stat_colliding > 10
