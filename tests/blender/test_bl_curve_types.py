@@ -14,6 +14,7 @@ from helpers import (
     offsets_of,
     play,
     positions,
+    render_camera,
     setup,
     world,
 )
@@ -312,3 +313,35 @@ def test_modifiers_on_the_output_see_each_frame_solved(fc, kind):
         np.testing.assert_allclose(got, want, atol=1e-6, err_msg=f"frame {f}")
         bpy.data.objects.remove(ref)
     assert hair.furcollide.stat_colliding > 10
+
+
+def test_a_render_sees_each_frame_solved_through_the_output_modifiers(fc, tmp_path):
+    """An animation render: the render's own evaluation of the output's Resample Curve
+    modifier gives each frame's solved shape (what a fresh copy gives)."""
+    hair, b, out = pressed("CATMULL_ROM")
+    groups = [_resample_group()]
+    _stack(fc, out, groups)
+    scene = bpy.context.scene
+    render_camera(scene, px=16)
+    scene.render.filepath = str(tmp_path / "f_####")
+    seen = {}
+
+    def spy(sc, depsgraph):  # (after FurCollide's own frame handler)
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            depsgraph.update()  # the render's evaluation of what the handler wrote
+            e = out.evaluated_get(depsgraph).data
+            P = np.empty(len(e.points) * 3, np.float32)
+            e.position_data.foreach_get("vector", P)
+            seen[sc.frame_current] = P.reshape(-1, 3)
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render(animation=True)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    assert sorted(seen) == list(range(FRAMES[0], FRAMES[1] + 1))
+    for f, got in seen.items():
+        scene.frame_set(f)
+        ref = _fresh(fc, out, groups)
+        np.testing.assert_allclose(got, _evaluated_data(ref)[0], atol=1e-6, err_msg=f"frame {f}")
+        bpy.data.objects.remove(ref)
