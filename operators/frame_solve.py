@@ -96,6 +96,10 @@ def drawn_margin(settings, inputs) -> np.ndarray:
     return splines.quantized(margin)
 
 
+#: The largest collision offset ``core.Settings`` and ``core.Collider`` take.
+MAX_OFFSET = 1e6
+
+
 @contextmanager
 def drawn_clearance(solver, inputs):
     """Widen the clearance of ``solver``'s step by :func:`drawn_margin` (and restore
@@ -114,10 +118,12 @@ def drawn_clearance(solver, inputs):
         yield
         return
     own = [(c, c.offset) for c in inputs.colliders if getattr(c, "offset", None) is not None]
-    solver.settings = settings.replace(collision_offset=settings.collision_offset + widen)
+    # (an offset at its largest, 1e6, stays there: no curve is near a collider anyway)
+    solver.settings = settings.replace(
+        collision_offset=min(settings.collision_offset + widen, MAX_OFFSET))
     try:
         for c, offset in own:
-            c.offset = offset + widen
+            c.offset = min(offset + widen, MAX_OFFSET)
         yield
     finally:
         for c, offset in own:

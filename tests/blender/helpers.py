@@ -977,3 +977,19 @@ def evaluated_crossing(out, colliders, status=None):
         V, F = evaluated_world_mesh(ob)
         bad |= oracle.segments_hit_mesh(P, offs, V, F, abs_eps=oracle.float32_margin(P, V))
     return np.flatnonzero(bad & np.isin(st, RESOLVED))
+
+
+def poly(ob):
+    """Make every curve of hair object ``ob`` a Poly curve (Blender draws its control
+    polygon): the solve then needs no margin for a spline (``frame_solve.drawn_margin``),
+    for tests whose expectations are the polygon's exact clearance. Returns ``ob``."""
+    hc = ob.data
+    C = len(hc.curves)
+    if hasattr(hc, "set_types"):
+        hc.set_types(type="POLY", indices=list(range(C)))
+    else:  # 4.2: as an attribute; add_curves([]) has the types counted again
+        attr = hc.attributes.get("curve_type") or hc.attributes.new("curve_type", "INT8",
+                                                                     "CURVE")
+        attr.data.foreach_set("value", np.ones(C, np.int32))
+        hc.add_curves([])
+    return ob
