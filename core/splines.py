@@ -142,11 +142,12 @@ class _Layout:
         curve (0 where none; a non-finite value, of a curve with a non-finite point the
         solver leaves alone, counts as 0)."""
         out = np.zeros(self.C)
-        idx = np.flatnonzero(where)
-        if len(idx):
-            v = values[idx]
-            np.maximum.at(out, self.curve[idx], np.where(np.isfinite(v), v, 0.0))
-        return out
+        if self.P == 0:
+            return out
+        v = np.where(where & np.isfinite(values), values, 0.0)
+        nz = self.sizes > 0
+        out[nz] = np.maximum.reduceat(v, self.offsets[:-1][nz])
+        return np.maximum(out, 0.0)
 
 
 def _norm(v):
@@ -201,6 +202,19 @@ def _poly(*terms):
     return out
 
 
+def _across_max(alpha, beta):
+    """``max_t alpha t (1 - t)^2 + beta t^2 (1 - t)`` on [0, 1] for alpha, beta >= 0, in
+    closed form: the root of the derivative, ``t = a / (2 a - b + sqrt(a^2 - a b + b^2))``
+    with ``a >= b`` (the cubic is symmetric under ``t -> 1 - t``, alpha <-> beta)."""
+    swap = beta > alpha
+    a = np.where(swap, beta, alpha)
+    b = np.where(swap, alpha, beta)
+    den = 2.0 * a - b + np.sqrt(a * a - a * b + b * b)
+    t = np.divide(a, den, out=np.zeros_like(a), where=den > 0)
+    u = 1.0 - t
+    return t * u * (a * u + b * t)
+
+
 def _hermite_bound(L, a_perp, a_lo, a_hi, b_perp, b_lo, b_hi):
     """Bound on the distance of a Catmull-Rom segment from its chord.
 
@@ -208,13 +222,21 @@ def _hermite_bound(L, a_perp, a_lo, a_hi, b_perp, b_lo, b_hi):
     having a component across the chord of length at most ``a_perp`` and one along it
     in ``[a_lo, a_hi]`` (likewise ``b``). Across: at most ``max_t h10 a_perp + |h11|
     b_perp``; along, the point stays within the chord unless the along coordinate
-    ``t L + h10 a_par + h11 b_par`` leaves ``[0, L]``: that overshoot is added.
+    ``t L + h10 a_par + h11 b_par`` leaves ``[0, L]``: that overshoot is added. With
+    ``h10 <= min(t, (1 - t) / 4)`` and ``|h11| <= min(t / 4, 1 - t)`` it cannot, unless
+    ``|a_lo| + |b_hi| / 4 > L`` or ``|a_hi| / 4 + |b_lo| > L``: only those segments
+    (sharp bends, uneven segments) get the cubic maxima.
     """
-    across = _cubic_max01(*_poly((a_perp, _H10), (b_perp, -_H11)))
-    # lowest along coordinate: smallest a_par (h10 >= 0), largest b_par (h11 <= 0)
-    below = _cubic_max01(*_poly((-L, _T), (-a_lo, _H10), (-b_hi, _H11)))
-    above = _cubic_max01(*_poly((L, _T), (a_hi, _H10), (b_lo, _H11))) - L
-    return across + np.maximum(0.0, np.maximum(below, above))
+    out = _across_max(a_perp, b_perp)
+    maybe = np.flatnonzero((np.abs(a_lo) + 0.25 * np.abs(b_hi) > L)
+                           | (0.25 * np.abs(a_hi) + np.abs(b_lo) > L))
+    if len(maybe):
+        L, a_lo, a_hi, b_lo, b_hi = (x[maybe] for x in (L, a_lo, a_hi, b_lo, b_hi))
+        # lowest along coordinate: smallest a_par (h10 >= 0), largest b_par (h11 <= 0)
+        below = _cubic_max01(*_poly((-L, _T), (-a_lo, _H10), (-b_hi, _H11)))
+        above = _cubic_max01(*_poly((L, _T), (a_hi, _H10), (b_lo, _H11))) - L
+        out[maybe] += np.maximum(0.0, np.maximum(below, above))
+    return out
 
 
 # ------------------------------------------------------------ measured bounds
@@ -264,21 +286,31 @@ def _cyclic(splines, lay):
 
 def _catmull_rom_measured(lay, d, mask):
     """Per-segment bound of the Catmull-Rom segments ``mask`` (point-indexed)."""
-    j = np.flatnonzero(mask)
-    dj = d[j]
-    L = _norm(dj)
-    e, _ = _unit(dj)
-    # a = m_j - d_j: -d_j / 2 at a curve's first point, else (d_(j-1) - d_j) / 2
-    prev = np.maximum(j - 1, 0)
-    a = np.where(lay.first[j][:, None], -0.5 * dj, 0.5 * (d[prev] - dj))
+    L = _norm(d)
+    e = np.divide(d, L[:, None], out=np.zeros_like(d), where=L[:, None] > 0)
+    prev = _shifted(d, 1)  # (zero at a curve's first point: d is zero at its last)
+    nxt = _shifted(d, -1)
+    # a = m_j - d_j: -d_j / 2 at a curve's first point, else (d_(j-1) - d_j) / 2;
     # b = m_(j+1) - d_j: -d_j / 2 at its last point, else (d_(j+1) - d_j) / 2
-    nxt = np.minimum(j + 1, lay.P - 1)
-    b = np.where(lay.last[nxt][:, None], -0.5 * dj, 0.5 * (d[nxt] - dj))
+    a = np.where(lay.first[:, None], -0.5 * d, 0.5 * (prev - d))
+    b = np.where(_shifted(lay.last, -1, True)[:, None], -0.5 * d, 0.5 * (nxt - d))
+    j = np.flatnonzero(mask)
+    a, b, e, L = a[j], b[j], e[j], L[j]
     a_par = np.einsum("ij,ij->i", a, e)
     b_par = np.einsum("ij,ij->i", b, e)
     a_perp = _norm(a - a_par[:, None] * e)
     b_perp = _norm(b - b_par[:, None] * e)
     return _hermite_bound(L, a_perp, a_par, a_par, b_perp, b_par, b_par)
+
+
+def _shifted(x, k, fill=0):
+    """``x`` moved by ``k`` rows (``out[i] = x[i - k]``), ``fill`` where nothing is."""
+    out = np.full_like(x, fill)
+    if k > 0:
+        out[k:] = x[:-k]
+    else:
+        out[:k] = x[-k:]
+    return out
 
 
 def _bezier_measured(P, d, mask, splines):
@@ -389,34 +421,40 @@ def _nurbs_bound(splines, lay, P, d, nurbs, coef):
         else:
             pieces = _bezier_extraction(int(n), int(k), int(mode))
         best = np.zeros(len(cs))
+        if coef is not None:  # (gap, curve) turn coefficients, and the path matrices
+            cm = np.stack([coef(cs, m) for m in range(k)])
+            paths = [_window_paths(s_, k) for s_ in range(k - 1)]
         for first, A in pieces:
-            Wq, wq, Lq = Q[:, first:first + k], w[:, first:first + k], L[:, first:first + k]
+            Wq, wq, Lq = Q[:, first:first + k], w[:, first:first + k], L[:, first:first + k - 1]
             mix = A[None] * wq[:, None, :]
             mix /= mix.sum(2, keepdims=True)  # (m, Bezier point, window point), convex
             B = np.einsum("mbq,mqx->mbx", mix, Wq)
             piece = np.full(len(cs), np.inf)
-            for s in range(k - 1):
-                a, dv = Wq[:, s], Wq[:, s + 1] - Wq[:, s]
-                dist = np.stack([_point_segment_distance(B[:, b], a, dv)
-                                 for b in range(k)], 1)
+            for s_ in range(k - 1):
+                a, dv = Wq[:, s_], Wq[:, s_ + 1] - Wq[:, s_]
+                rel = B - a[:, None, :]
+                dd = np.einsum("mx,mx->m", dv, dv)[:, None]
+                t = np.clip(np.divide(np.einsum("mbx,mx->mb", rel, dv), dd,
+                                      out=np.zeros(rel.shape[:2]), where=dd > 0), 0.0, 1.0)
+                dist = _norm(rel - t[..., None] * dv[:, None, :])
                 if coef is not None:
-                    dist = dist + np.einsum("mbq,mq->mb", mix, _window_moves(cs, Lq, s, k, coef))
+                    gaps = np.abs(np.arange(k - 1) - s_)
+                    moves = (Lq * cm[gaps].T) @ paths[s_].T  # (m, window point)
+                    dist = dist + np.einsum("mbq,mq->mb", mix, moves)
                 piece = np.minimum(piece, dist.max(1))
             best = np.maximum(best, piece)
         out[cs] = np.maximum(out[cs], np.where(np.isfinite(best), best, 0.0))
     return out
 
 
-def _window_moves(cs, L, s, k, coef):
-    """(m, k) how far each window point can move relative to the window's segment
-    ``s`` in a solve: the segments between them, each by ``coef(curves, gap) *
-    length``."""
-    moves = np.zeros((len(cs), k))
+def _window_paths(s, k):
+    """(k, k - 1) 0/1: the segments between window point ``q`` and segment ``s`` (those
+    whose turn against ``s`` moves ``q`` relative to it)."""
+    M = np.zeros((k, k - 1))
     for q in range(k):
         js = range(s + 1, q) if q > s else range(q, s)
-        for j in js:
-            moves[:, q] += coef(cs, abs(j - s)) * L[:, j]
-    return moves
+        M[q, list(js)] = 1.0
+    return M
 
 
 def _ramp(counts):
@@ -543,28 +581,23 @@ def _clearance_margin(splines: Splines, points, offsets, settings, enabled=None)
 
 
 def _catmull_rom_margin(lay, d, seglen, mask, phi_c, shrink, settings):
+    c1 = _turn_coefficient(phi_c, shrink, 1)[lay.curve]
+    prev_len = _shifted(seglen, 1)
+    # half the second difference at each point (its two segments), grown by the turn:
+    # a segment's start uses its first point's, its end the next point's
+    A = 0.5 * np.minimum(_norm(d - _shifted(d, 1)) + c1 * np.maximum(seglen, prev_len),
+                         seglen + prev_len)
+    B = _shifted(A, -1)
+    end = _shifted(lay.last, -1, True)
     j = np.flatnonzero(mask)
-    c1 = _turn_coefficient(phi_c[lay.curve[j]], shrink, 1)
-    L = seglen[j]
-    prev = np.maximum(j - 1, 0)
-    nxt = np.minimum(j + 1, lay.P - 1)
-    # half second differences at the segment's start and end, grown by the turn
-    A = 0.5 * np.minimum(_norm(d[j] - d[prev]) + c1 * np.maximum(L, seglen[prev]),
-                         L + seglen[prev])
-    B = 0.5 * np.minimum(_norm(d[nxt] - d[j]) + c1 * np.maximum(L, seglen[nxt]),
-                         L + seglen[nxt])
-    start, end = lay.first[j], lay.last[nxt]
+    A, B, L, start, end = A[j], B[j], seglen[j], lay.first[j], end[j]
     # Shrink may shorten the chord (by scale_minimum at most) while the ends' along
     # terms shrink with it: the along test uses the shortest chord.
     L_min = L * (settings.scale_minimum if settings.shrink and settings.mode != "soft" else 1.0)
     half = -0.5 * L_min
-    a_perp = np.where(start, 0.0, A)
-    a_lo = np.where(start, half, -A)
-    a_hi = np.where(start, half, A)
-    b_perp = np.where(end, 0.0, B)
-    b_lo = np.where(end, half, -B)
-    b_hi = np.where(end, half, B)
-    return _hermite_bound(L_min, a_perp, a_lo, a_hi, b_perp, b_lo, b_hi)
+    return _hermite_bound(L_min, np.where(start, 0.0, A), np.where(start, half, -A),
+                          np.where(start, half, A), np.where(end, 0.0, B),
+                          np.where(end, half, -B), np.where(end, half, B))
 
 
 def _bezier_margin(lay, P, d, mask, splines, phi_c):
@@ -614,14 +647,19 @@ def _minimal_arc(a, b):
     v = np.cross(a, b)
     c = np.einsum("ij,ij->i", a, b)
     opposite = c < -1.0 + tol.PARALLEL_EPS
-    K = np.zeros((len(a), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    # Rodrigues with K = [v]x: I + K + K^2 / (1 + c), and K^2 = v v^T - |v|^2 I
     f = 1.0 / np.where(opposite, 1.0, 1.0 + c)
-    Rk = np.eye(3) + K + np.einsum("kij,kjl->kil", K, K) * f[:, None, None]
+    Rk = (v[:, :, None] * v[:, None, :]) * f[:, None, None]
+    Rk[:, [0, 1, 2], [0, 1, 2]] += (1.0 - np.einsum("ij,ij->i", v, v) * f)[:, None]
+    Rk[:, 0, 1] -= v[:, 2]
+    Rk[:, 0, 2] += v[:, 1]
+    Rk[:, 1, 2] -= v[:, 0]
+    Rk[:, 1, 0] += v[:, 2]
+    Rk[:, 2, 0] -= v[:, 1]
+    Rk[:, 2, 1] += v[:, 0]
     if opposite.any():
         p = stable_perpendicular(a[opposite])
-        Rk[opposite] = 2.0 * np.einsum("ki,kj->kij", p, p) - np.eye(3)
+        Rk[opposite] = 2.0 * (p[:, :, None] * p[:, None, :]) - np.eye(3)
     R[ok] = Rk
     return R
 
@@ -660,20 +698,20 @@ def point_rotations(before, after, offsets) -> np.ndarray:
     prev0[lay.first], prev1[lay.first] = 0.0, 0.0
     has_in = _norm(prev0) > 0
     has_out = _norm(u0) > 0
-    inner = np.flatnonzero(has_in & has_out & ~lay.first & ~lay.last)
+    is_inner = has_in & has_out & ~lay.first & ~lay.last
+    inner = np.flatnonzero(is_inner)
     if len(inner):
         R[inner] = _inner_rotations(prev0[inner], u0[inner], prev1[inner], u1[inner])
     # points with one usable segment: the root and tip rules
-    one = np.flatnonzero(~np.isin(np.arange(lay.P), inner) & (has_in | has_out))
+    one = np.flatnonzero(~is_inner & (has_in | has_out))
     if len(one):
         out_side = has_out[one]
         a = np.where(out_side[:, None], u0[one], prev0[one])
         b = np.where(out_side[:, None], u1[one], prev1[one])
-        nb = one + np.where(out_side, 1, -1)  # the neighbour along that segment
-        nb_inner = np.isin(nb, inner)
-        base = np.where(nb_inner[:, None, None], R[np.clip(nb, 0, lay.P - 1)], np.eye(3))
+        nb = np.clip(one + np.where(out_side, 1, -1), 0, lay.P - 1)  # along that segment
+        base = np.where(is_inner[nb][:, None, None], R[nb], np.eye(3))
         turned = np.einsum("kij,kj->ki", base, a)
-        R[one] = np.einsum("kij,kjl->kil", _minimal_arc(turned, b), base)
+        R[one] = np.matmul(_minimal_arc(turned, b), base)
     return R
 
 
@@ -691,13 +729,15 @@ def _inner_rotations(a0, b0, a1, b1):
         bis1[folded1] = stable_perpendicular(b1[folded1])
     bis0, _ = _unit(bis0)
     bis1, _ = _unit(bis1)
-    R = _minimal_arc(bis0, bis1)
     s0, s1 = _norm(n0), _norm(n1)
     planar = (s0 > tol.PARALLEL_EPS) & (s1 > tol.PARALLEL_EPS) & ~folded0 & ~folded1
+    R = np.empty((len(a0), 3, 3))
     if planar.any():
         F0 = _frame(bis0[planar], n0[planar] / s0[planar, None])
         F1 = _frame(bis1[planar], n1[planar] / s1[planar, None])
-        R[planar] = np.einsum("kij,klj->kil", F1, F0)  # F1 F0^T
+        R[planar] = np.matmul(F1, F0.transpose(0, 2, 1))
+    if not planar.all():
+        R[~planar] = _minimal_arc(bis0[~planar], bis1[~planar])
     return R
 
 

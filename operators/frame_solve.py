@@ -91,9 +91,40 @@ def drawn_margin(settings, inputs) -> np.ndarray:
         sp = splines.Splines.catmull_rom(len(inputs.offsets) - 1)
     else:
         sp = inputs.splines.at(inputs.points, inputs.offsets)
-    margin = splines.clearance_margin(sp, inputs.points, inputs.offsets, settings,
-                                      inputs.enabled)
-    return splines.quantized(margin)
+    key = _margin_key(settings, inputs, sp)
+    hit = _last_margin.get("key")
+    if hit is not None and _same_key(hit, key):
+        return _last_margin["margin"]
+    margin = splines.quantized(splines.clearance_margin(sp, inputs.points, inputs.offsets,
+                                                        settings, inputs.enabled))
+    _last_margin.update(key=key, margin=margin)
+    return margin
+
+
+# The last margin computed and what it was computed from: a groom that does not move
+# (a collider passing through still fur) gives the same margin every frame.
+_last_margin: dict = {}
+
+
+def _margin_key(settings, inputs, sp) -> tuple:
+    """(the settings that bound the turns, copies of every array the margin reads)."""
+    s = settings
+    arrays = (inputs.points, inputs.offsets, inputs.enabled, sp.types, sp.cyclic,
+              sp.handle_left, sp.handle_right, sp.handle_type_left, sp.handle_type_right,
+              sp.nurbs_order, sp.knots_mode, sp.nurbs_weight)
+    return ((s.mode, s.max_angle, s.shrink, s.scale_minimum, s.scale_angle),
+            *(None if a is None else np.array(a) for a in arrays))
+
+
+def _same_key(a, b) -> bool:
+    if a[0] != b[0]:
+        return False
+    for x, y in zip(a[1:], b[1:], strict=True):
+        if (x is None) != (y is None):
+            return False
+        if x is not None and not (x.shape == y.shape and np.array_equal(x, y)):
+            return False
+    return True
 
 
 #: The largest collision offset ``core.Settings`` and ``core.Collider`` take.
