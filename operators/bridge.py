@@ -17,6 +17,7 @@ import numpy as np
 from ..core import splines
 from ..core.framecache import curve_point_mask
 from ..core.status import Status
+from . import compat
 
 #: Per-curve status attribute written on the output (core ``Status`` codes).
 STATUS_ATTRIBUTE = "furcollide_status"
@@ -383,6 +384,9 @@ def write_handles(curves, left, right, type_left, type_right) -> None:
         tag_changed(curves)
 
 
+#: Blender's values of built-in curve attributes it does not store.
+_DEFAULTS = {"nurbs_order": splines.DEFAULT_ORDER}
+
 _VALUE_KEYS = {
     "FLOAT": ("value", np.float32, 1),
     "INT": ("value", np.int32, 1),
@@ -410,6 +414,11 @@ def _copy_attribute(attr, dst) -> None:
     if out is not None and (out.data_type != attr.data_type or out.domain != attr.domain):
         dst.attributes.remove(out)
         out = None
+    if out is None and attr.name in compat.UNSAFE_NEW_CURVE_ATTRIBUTES:
+        if n and np.any(buf != _DEFAULTS.get(attr.name, 0)):
+            print(f"FurCollide: '{dst.name}' draws its NURBS curves of order 4: Blender "
+                  f"{bpy.app.version_string} cannot be given '{attr.name}' from Python")
+        return
     if out is None:
         out = dst.attributes.new(attr.name, attr.data_type, attr.domain)
     if len(out.data) != n:

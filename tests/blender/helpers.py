@@ -979,17 +979,30 @@ def evaluated_crossing(out, colliders, status=None):
     return np.flatnonzero(bad & np.isin(st, RESOLVED))
 
 
+CURVE_TYPES = ("CATMULL_ROM", "POLY", "BEZIER", "NURBS")
+
+
+def set_curve_type(ob, kind, indices=None):
+    """Give the curves ``indices`` (all by default) of hair object ``ob`` the type
+    ``kind`` ('CATMULL_ROM', 'POLY', 'BEZIER' or 'NURBS'). Returns ``ob``."""
+    hc = ob.data
+    C = len(hc.curves)
+    idx = np.arange(C) if indices is None else np.asarray(indices)
+    if hasattr(hc, "set_types"):
+        hc.set_types(type=kind, indices=idx.tolist())
+    else:  # 4.2: as an attribute; add_curves([]) has the types counted again
+        attr = hc.attributes.get("curve_type") or hc.attributes.new("curve_type", "INT8",
+                                                                     "CURVE")
+        types = np.zeros(C, np.int32)
+        attr.data.foreach_get("value", types)
+        types[idx] = CURVE_TYPES.index(kind)
+        attr.data.foreach_set("value", types)
+        hc.add_curves([])
+    return ob
+
+
 def poly(ob):
     """Make every curve of hair object ``ob`` a Poly curve (Blender draws its control
     polygon): the solve then needs no margin for a spline (``frame_solve.drawn_margin``),
     for tests whose expectations are the polygon's exact clearance. Returns ``ob``."""
-    hc = ob.data
-    C = len(hc.curves)
-    if hasattr(hc, "set_types"):
-        hc.set_types(type="POLY", indices=list(range(C)))
-    else:  # 4.2: as an attribute; add_curves([]) has the types counted again
-        attr = hc.attributes.get("curve_type") or hc.attributes.new("curve_type", "INT8",
-                                                                     "CURVE")
-        attr.data.foreach_set("value", np.ones(C, np.int32))
-        hc.add_curves([])
-    return ob
+    return set_curve_type(ob, "POLY")

@@ -15,6 +15,7 @@ from helpers import (
     play,
     positions,
     render_camera,
+    set_curve_type,
     setup,
     world,
 )
@@ -73,7 +74,7 @@ def set_type(hair, kind, handles=AUTO, order=4, knots_mode=0):
     hc = hair.data
     C, P = len(hc.curves), len(hc.points)
     if kind != "CATMULL_ROM":
-        hc.set_types(type=kind, indices=list(range(C)))
+        set_curve_type(hair, kind)
     if kind == "BEZIER":
         X = positions(hair).astype(np.float64)
         offs = offsets_of(hair)
@@ -93,7 +94,8 @@ def set_type(hair, kind, handles=AUTO, order=4, knots_mode=0):
         _attr(hc, "handle_type_left", "INT8", "value", per_point)
         _attr(hc, "handle_type_right", "INT8", "value", per_point)
     if kind == "NURBS":
-        _attr(hc, "nurbs_order", "INT8", "value", np.full(C, order), "CURVE")
+        if order != 4:  # (Blender's default; 4.2 cannot create nurbs_order from Python)
+            _attr(hc, "nurbs_order", "INT8", "value", np.full(C, order), "CURVE")
         _attr(hc, "knots_mode", "INT8", "value", np.full(C, knots_mode), "CURVE")
         w = np.random.default_rng(2).uniform(0.5, 2.0, P)
         _attr(hc, "nurbs_weight", "FLOAT", "value", w)
