@@ -135,8 +135,9 @@ def source_splines(setup, inputs) -> SourceSplines:
                 and sp.handle_right is not None):
             M = bridge.matrix(src)
             local = inputs.local if inputs.local is not None else bridge.get_positions(data)
-            out.points = bridge.transform(local, M)  # (bit for bit ``inputs.raw`` without
-            out.left_local, out.right_local = sp.handle_left, sp.handle_right  # Fur Attach)
+            # (as read_inputs transforms them: bit for bit ``inputs.raw`` without Fur Attach)
+            out.points = bridge.transform(local, M)
+            out.left_local, out.right_local = sp.handle_left, sp.handle_right
             sp.handle_left = bridge.transform(sp.handle_left, M).astype(np.float64)
             sp.handle_right = bridge.transform(sp.handle_right, M).astype(np.float64)
         inputs.splines = out
