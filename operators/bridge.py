@@ -150,9 +150,10 @@ def tag_changed(curves) -> None:
     and NURBS curves, their evaluated point offsets, NURBS bases, tangents,
     normals, bounds, the per-type curve counts. The evaluated copy of the object
     shares those caches with the original (``CurvesGeometry``'s copy constructor
-    shares its runtime caches), so a modifier that reads evaluated positions
-    (Resample Curve, Trim, Children from Guides), a renderer or an exporter got the
-    previous frame's shape. ``update_tag`` only asks for a new evaluation.
+    shares its runtime caches), so a node that reads evaluated positions or lengths
+    (Resample Curve, Trim Hair Curves; in renders too) got an earlier frame's shape,
+    and the object's bounds were an earlier frame's. ``update_tag`` only asks for a
+    new evaluation.
 
     ``add_curves([])`` adds nothing and calls ``tag_topology_changed`` on the
     original, which drops every one of those caches and has the curve types counted
