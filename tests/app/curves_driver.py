@@ -10,8 +10,9 @@ event loop, so the viewport really redraws):
 
 1. install the packaged zip;
 2. a groom of 900 arched hairs, half Catmull-Rom and half Bezier (AUTO handles), a ball
-   pressing into it over frames 1-12; Add FurCollide; a Resample Curve and a Trim Hair
-   Curves modifier on the output (the README invites modifiers there);
+   pressing into it over frames 1-12; Add FurCollide; a Resample Curve and (where this
+   Blender ships the hair assets) a Trim Hair Curves modifier on the output (the README
+   invites modifiers there);
 3. play in the viewport (``screen.animation_play``), stop, then step with the arrow
    keys' operator (``screen.frame_offset``); at each stop, in the viewport's own
    depsgraph: the output's modifier result against the same stack on a fresh copy of
@@ -158,8 +159,12 @@ def resample_group(mode=None, count=16, source=None):
 
 
 def trim_group():
-    pipeline = sys.modules[ADDON + ".operators.pipeline"]
-    with bpy.data.libraries.load(pipeline.hair_assets_path(), link=False) as (_s, dst):
+    """Blender's Trim Hair Curves, or None where this Blender ships no hair assets
+    (Debian's package has none)."""
+    path = sys.modules[ADDON + ".operators.pipeline"].hair_assets_path()
+    if not path:
+        return None
+    with bpy.data.libraries.load(path, link=False) as (_s, dst):
         dst.node_groups = ["Trim Hair Curves"]
     return dst.node_groups[0]
 
@@ -266,7 +271,7 @@ def run():
     with override():
         ret = bpy.ops.furcollide.add()
     out = fur.furcollide.output
-    groups = [resample_group(), trim_group()]
+    groups = [g for g in (resample_group(), trim_group()) if g is not None]
     stack(out, groups)
     step("setup", add_return=sorted(ret), output=getattr(out, "name", None),
          modifiers=[m.name for m in out.modifiers])
