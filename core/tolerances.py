@@ -161,3 +161,16 @@ QUAT_FIT_ITERS = 64
 #: A root fit is used only if ``|N q - lambda q|`` is at most this times the
 #: eigenvalue bound (correct fits: ~1e-15); otherwise the SVD.
 QUAT_FIT_RESIDUAL = 1e-12
+
+#: Spline margins (``splines.clearance_margin``) below this fraction of a curve's
+#: longest segment are float noise of a straight curve (float32 points give second
+#: differences of ~1e-7 of a segment), not curvature: they count as 0, so straight
+#: Catmull-Rom hair solved Stiff keeps the plain (offset 0) collider path.
+SPLINE_MARGIN_NOISE = 1e-5
+
+#: Spline margins are rounded UP onto a geometric grid of this many steps per
+#: decade (``splines.quantized``: at most 10^(1/16) - 1 = 15 % above the bound). A
+#: margin follows the frame's curves; on the grid, an animated groom whose bound
+#: moves by a few ulps keeps its value, so the offset shells it selects are not
+#: rebuilt every frame.
+SPLINE_MARGIN_STEPS = 16

@@ -14,8 +14,10 @@ from contextlib import contextmanager
 import bpy
 import numpy as np
 
+from ..core import splines
 from ..core.framecache import curve_point_mask
 from ..core.status import Status
+from . import compat
 
 #: Per-curve status attribute written on the output (core ``Status`` codes).
 STATUS_ATTRIBUTE = "furcollide_status"
@@ -34,19 +36,16 @@ _RGBA = {
 #: RGBA (len(Status), 4) float32, one row per core ``Status`` code.
 STATUS_COLORS = np.array([_RGBA[s] for s in Status], np.float32)
 
-# Attributes never copied from the source to the output. Built-in curve
-# attributes with cached derived data must go through the API (writing
-# ``curve_type`` as a plain attribute corrupts Blender's type counts).
+# Attributes never copied from the source to the output. ``curve_type`` goes through
+# the API (``set_types``): written as a plain attribute it leaves Blender's per-type
+# curve counts wrong. The other built-in curve attributes (handles and their types,
+# NURBS order, knots mode and weights, resolution, cyclic) are copied as they are,
+# then :func:`tag_changed` drops the caches Blender derived from them.
 _SKIP_ATTRIBUTES = {
     "position",
     STATUS_ATTRIBUTE,
     COLOR_ATTRIBUTE,
     "curve_type",
-    "handle_type_left",
-    "handle_type_right",
-    "nurbs_order",
-    "knots_mode",
-    "normal_mode",
 }
 _CURVE_TYPES = ("CATMULL_ROM", "POLY", "BEZIER", "NURBS")
 
@@ -123,14 +122,46 @@ def get_positions(curves) -> np.ndarray:
 
 
 def set_positions(curves, P: np.ndarray) -> None:
-    """Write local-space positions ``P`` (n, 3) into ``curves`` (original data)."""
+    """Write local-space positions ``P`` (n, 3) into ``curves`` (original data), and
+    make everything evaluated from them see them (:func:`tag_changed`).
+
+    Positions equal bit for bit to the ones there are not written again: the tag
+    makes Blender evaluate every Catmull-Rom, Bezier and NURBS curve again (for the
+    object's bounds, at least), which frames that change nothing need not pay.
+    """
     n = len(curves.points)
     if P.shape != (n, 3):
         raise BridgeError(
             f"'{curves.name}' has {n} points but {P.shape[0]} positions were given"
         )
+    P = np.ascontiguousarray(P, np.float32)
+    if n and np.array_equal(get_positions(curves).view(np.uint32), P.view(np.uint32)):
+        return
     if n:
-        curves.position_data.foreach_set("vector", np.ascontiguousarray(P, np.float32).ravel())
+        curves.position_data.foreach_set("vector", P.ravel())
+    tag_changed(curves)
+
+
+def tag_changed(curves) -> None:
+    """Tell Blender that the positions (and any curve attribute) of ``curves`` changed.
+
+    Writing an attribute from Python (``foreach_set``) changes the data but not the
+    caches Blender derived from it: the evaluated positions of Catmull-Rom, Bezier
+    and NURBS curves, their evaluated point offsets, NURBS bases, tangents,
+    normals, bounds, the per-type curve counts. The evaluated copy of the object
+    shares those caches with the original (``CurvesGeometry``'s copy constructor
+    shares its runtime caches), so a node that reads evaluated positions or lengths
+    (Resample Curve, Trim Hair Curves; in renders too) got an earlier frame's shape,
+    and the object's bounds were an earlier frame's. ``update_tag`` only asks for a
+    new evaluation.
+
+    ``add_curves([])`` adds nothing and calls ``tag_topology_changed`` on the
+    original, which drops every one of those caches and has the curve types counted
+    again: the public API that does it on every supported Blender (4.2 has no
+    ``set_types``), for the cost of one pass over the curve offsets.
+    """
+    if len(curves.curves):
+        curves.add_curves([])
     curves.update_tag()
 
 
@@ -251,6 +282,7 @@ def copy_attributes(src, dst) -> None:
             _copy_attribute(attr, dst)
         except (RuntimeError, TypeError, ValueError, KeyError) as exc:
             print(f"FurCollide: attribute '{name}' not copied to '{dst.name}': {exc}")
+    tag_changed(dst)  # (resolution, NURBS order, handle types change what is evaluated)
 
 
 def attribute_state(src) -> tuple:
@@ -273,15 +305,88 @@ def attribute_state(src) -> tuple:
 def _copy_curve_types(src, dst) -> None:
     attr = src.attributes.get("curve_type")
     n = len(src.curves)
-    if attr is None or not n or not hasattr(dst, "set_types"):
+    if attr is None or not n:
         return
     types = np.empty(n, np.int32)
     attr.data.foreach_get("value", types)
-    for code in np.unique(types):
-        if 0 <= code < len(_CURVE_TYPES) and _CURVE_TYPES[code] != "CATMULL_ROM":
-            idx = np.flatnonzero(types == code)
-            dst.set_types(type=_CURVE_TYPES[code], indices=idx.tolist())
+    if hasattr(dst, "set_types"):  # (not in 4.2) the API keeps the type counts
+        for code in np.unique(types):
+            if 0 <= code < len(_CURVE_TYPES) and _CURVE_TYPES[code] != "CATMULL_ROM":
+                idx = np.flatnonzero(types == code)
+                dst.set_types(type=_CURVE_TYPES[code], indices=idx.tolist())
+        return
+    # 4.2: as an attribute; tag_changed (set_positions) has the types counted again
+    _copy_attribute(attr, dst)
 
+
+# ----------------------------------------------------------------- splines
+def attribute_values(curves, name: str, domain: str, n: int, width: int = 1):
+    """Values of attribute ``name`` on ``domain`` as an ndarray ((n,) or (n, width)),
+    or None when ``curves`` has no such attribute (or one of another domain, type or
+    size)."""
+    attr = curves.attributes.get(name)
+    spec = None if attr is None else _VALUE_KEYS.get(attr.data_type)
+    if spec is None or attr.domain != domain or spec[2] != width or len(attr.data) != n:
+        return None
+    key, dtype, _ = spec
+    buf = np.empty(n * width, dtype)
+    if n:
+        attr.data.foreach_get(key, buf)
+    return buf if width == 1 else buf.reshape(n, width)
+
+
+def read_splines(curves) -> splines.Splines:
+    """How Blender draws the curves of ``curves``: their types and, where used, the
+    Bezier handles (local space) and types, NURBS orders, knots modes and weights."""
+    C, P = len(curves.curves), len(curves.points)
+    types = attribute_values(curves, "curve_type", "CURVE", C)
+    types = np.zeros(C, np.int8) if types is None else types.astype(np.int8)
+    cyclic = attribute_values(curves, "cyclic", "CURVE", C)
+    sp = splines.Splines(types, None if cyclic is None else cyclic.astype(bool))
+    if sp.has(splines.BEZIER):
+        sp.handle_left = attribute_values(curves, "handle_left", "POINT", P, 3)
+        sp.handle_right = attribute_values(curves, "handle_right", "POINT", P, 3)
+        for side in ("left", "right"):
+            t = attribute_values(curves, f"handle_type_{side}", "POINT", P)
+            setattr(sp, f"handle_type_{side}",
+                    np.zeros(P, np.int8) if t is None else t.astype(np.int8))
+    if sp.has(splines.NURBS):
+        sp.nurbs_order = attribute_values(curves, "nurbs_order", "CURVE", C)
+        sp.knots_mode = attribute_values(curves, "knots_mode", "CURVE", C)
+        sp.nurbs_weight = attribute_values(curves, "nurbs_weight", "POINT", P)
+    return sp
+
+
+def write_handles(curves, left, right, type_left, type_right) -> None:
+    """Write Bezier handle positions (P, 3) (local space) and types (P,) into
+    ``curves``, and tag the change when anything differs from what is there."""
+    n = len(curves.points)
+    changed = False
+    for name, values, kind, key in (
+        ("handle_left", left, "FLOAT_VECTOR", "vector"),
+        ("handle_right", right, "FLOAT_VECTOR", "vector"),
+        ("handle_type_left", type_left, "INT8", "value"),
+        ("handle_type_right", type_right, "INT8", "value"),
+    ):
+        attr = _ensure_attribute(curves, name, kind, "POINT")
+        if len(attr.data) != n:
+            raise BridgeError(f"'{curves.name}' has {n} points but '{name}' has "
+                              f"{len(attr.data)} values")
+        dtype = np.float32 if kind == "FLOAT_VECTOR" else np.int32
+        new = np.ascontiguousarray(values, dtype).ravel()
+        if not n:
+            continue
+        old = np.empty_like(new)
+        attr.data.foreach_get(key, old)
+        if not np.array_equal(old.view(np.uint32), new.view(np.uint32)):
+            attr.data.foreach_set(key, new)
+            changed = True
+    if changed:
+        tag_changed(curves)
+
+
+#: Blender's values of built-in curve attributes it does not store.
+_DEFAULTS = {"nurbs_order": splines.DEFAULT_ORDER}
 
 _VALUE_KEYS = {
     "FLOAT": ("value", np.float32, 1),
@@ -310,6 +415,11 @@ def _copy_attribute(attr, dst) -> None:
     if out is not None and (out.data_type != attr.data_type or out.domain != attr.domain):
         dst.attributes.remove(out)
         out = None
+    if out is None and attr.name in compat.UNSAFE_NEW_CURVE_ATTRIBUTES:
+        if n and np.any(buf != _DEFAULTS.get(attr.name, 0)):
+            print(f"FurCollide: '{dst.name}' draws its NURBS curves of order 4: Blender "
+                  f"{bpy.app.version_string} cannot be given '{attr.name}' from Python")
+        return
     if out is None:
         out = dst.attributes.new(attr.name, attr.data_type, attr.domain)
     if len(out.data) != n:

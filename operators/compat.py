@@ -19,6 +19,11 @@ versions it was seen on (the test matrix runs every test on each of them).
 * **Blend-relative path properties**: 4.5+ accept ``options={'PATH_SUPPORTS_BLEND_RELATIVE'}``
   on a path property (without it 5.0 warns when a script sets a ``//`` path), 4.2 refuses
   the option at registration (:data:`BLEND_RELATIVE_PATH`).
+* **Built-in curve attributes created from Python**: 4.2 corrupts its memory creating
+  ``nurbs_order`` with ``attributes.new`` (a crash at a later allocation, from about
+  100 curves on); 4.5 and 5.0 do not (:data:`UNSAFE_NEW_CURVE_ATTRIBUTES`). 4.2 also
+  has no ``Curves.set_types``: curve types are written as the ``curve_type``
+  attribute there, then counted again by ``add_curves([])`` (``bridge.tag_changed``).
 * **Geometry-nodes modifier inputs**: up to 5.0 they are ID properties
   (``mod["Input_15"] = 10``, ``mod["Input_18_use_attribute"]``); 5.2 replaced them with
   ``mod.properties.inputs.Input_15.value`` / ``.type`` / ``.attribute_name``
@@ -38,6 +43,13 @@ VERSION: tuple = tuple(bpy.app.version)
 #: Options of a path property that takes ``//`` (blend-relative) paths: 4.5+ only.
 BLEND_RELATIVE_PATH: set = (
     {"PATH_SUPPORTS_BLEND_RELATIVE"} if VERSION >= (4, 5, 0) else set()
+)
+
+#: Built-in curve attributes that ``attributes.new`` cannot create on this Blender
+#: without corrupting its memory (4.2: ``nurbs_order``): the output draws them at
+#: Blender's default (order 4) instead.
+UNSAFE_NEW_CURVE_ATTRIBUTES: frozenset = (
+    frozenset({"nurbs_order"}) if VERSION < (4, 5, 0) else frozenset()
 )
 
 #: Blender's bundled hair node-group assets (file name).

@@ -57,6 +57,9 @@ class FrameInputs:
     attached: object = None
     #: Parameter maps at this frame: setting name -> (C,) values (:func:`maps.read_maps`).
     maps: dict = field(default_factory=dict)
+    #: How the source draws its curves (``frame_outputs.SourceSplines``; read by
+    #: ``frame_outputs.source_splines``). None: not read (a script: Catmull-Rom).
+    splines: object = None
 
     def __post_init__(self):
         if self.raw is None:

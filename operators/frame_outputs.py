@@ -11,9 +11,11 @@ source and output the viewport shows (:func:`apply_visibility`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from ..core import framecache
+from ..core import framecache, splines
 from . import bridge, compat
 from .clock import clock
 from .registry import source_of
@@ -48,7 +50,10 @@ def write(setup, inputs, points_world, status, changed=None, attributes=None) ->
 def _write(setup, inputs, points_world, status, changed, attributes) -> np.ndarray:
     rt = setup.rt
     data = setup.s.output.data
-    bridge.set_positions(data, output_local(inputs, points_world, changed))
+    local = output_local(inputs, points_world, changed)
+    bridge.set_positions(data, local)
+    if setup.ob is not None:
+        write_handles(data, source_splines(setup, inputs), inputs, points_world, local)
     if attributes:
         write_attributes(data, attributes)
     attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
@@ -83,6 +88,105 @@ def output_local(inputs, points_world, changed=None) -> np.ndarray:
     if len(idx):
         local[idx] = bridge.transform(points_world[idx], inputs.m_out_inv)
     return local
+
+
+@dataclass
+class SourceSplines:
+    """How the evaluated source draws its curves, as one frame reads it.
+
+    Attributes
+    ----------
+    world : core.splines.Splines
+        Types, NURBS data and Bezier handles, the handles in world space.
+    points : (P, 3) float32 ndarray or None
+        The source's world polygon the handles go with (Bezier only); the frame's
+        input when neither Fur Attach nor motion moved it.
+    left_local, right_local : (P, 3) float32 ndarrays or None
+        The source's own handles (local space): written back as they are where the
+        output sits on the source and a curve was not moved.
+    """
+
+    world: splines.Splines
+    points: np.ndarray | None = None
+    left_local: np.ndarray | None = None
+    right_local: np.ndarray | None = None
+
+    @property
+    def has_handles(self) -> bool:
+        return self.points is not None
+
+    def at(self, points, offsets) -> splines.Splines:
+        """The splines with the handles moved onto the polygon ``points`` (world)."""
+        sp = self.world
+        if not self.has_handles or points is self.points or np.array_equal(points, self.points):
+            return sp
+        return sp.with_handles(*splines.moved_handles(self.points, points, offsets,
+                                                      sp.handle_left, sp.handle_right))
+
+
+def source_splines(setup, inputs) -> SourceSplines:
+    """The source's splines of this frame (read once per frame, kept on ``inputs``)."""
+    if inputs.splines is None:
+        src = setup.ob.evaluated_get(setup.depsgraph)
+        data = src.data
+        sp = bridge.read_splines(data)
+        out = SourceSplines(sp)
+        if (sp.has(splines.BEZIER) and sp.handle_left is not None
+                and sp.handle_right is not None):
+            M = bridge.matrix(src)
+            local = inputs.local if inputs.local is not None else bridge.get_positions(data)
+            # (as read_inputs transforms them: bit for bit ``inputs.raw`` without Fur Attach)
+            out.points = bridge.transform(local, M)
+            out.left_local, out.right_local = sp.handle_left, sp.handle_right
+            sp.handle_left = bridge.transform(sp.handle_left, M).astype(np.float64)
+            sp.handle_right = bridge.transform(sp.handle_right, M).astype(np.float64)
+        inputs.splines = out
+    return inputs.splines
+
+
+def write_handles(data, source, inputs, points_world, local) -> None:
+    """Write the output's Bezier handles: each moves with its control point (the
+    source's polygon to the frame's input, then the input to ``points_world``), in
+    the output's local space; handle types as :func:`splines.written_handle_types`
+    says (VECTOR handles recomputed on their segments). Nothing without Bezier
+    curves.
+
+    ``local`` (P, 3) are the output's local positions just written.
+    """
+    if not source.has_handles:
+        return
+    sp, offs = source.world, inputs.offsets
+    hl, hr = splines.moved_handles(inputs.points, points_world, offs,
+                                   *_pair(source.at(inputs.points, offs)))
+    L = bridge.transform(hl, inputs.m_out_inv)
+    R = bridge.transform(hr, inputs.m_out_inv)
+    moved = _moved_curves(source.points, points_world, offs)
+    if inputs.local is not None:  # the output sits on the source: unmoved curves as they are
+        keep = ~np.repeat(moved, np.diff(offs))
+        L[keep], R[keep] = source.left_local[keep], source.right_local[keep]
+    tl, tr = splines.written_handle_types(sp.handle_type_left, sp.handle_type_right)
+    if moved.any():  # (unmoved curves keep their VECTOR handles bit for bit too)
+        sel = np.repeat(moved, np.diff(offs))
+        sub = np.concatenate([[0], np.cumsum(np.diff(offs)[moved])])
+        Ls, Rs = L[sel].astype(np.float64), R[sel].astype(np.float64)
+        cyc = None if sp.cyclic is None else sp.cyclic[moved]
+        splines.vector_handles(local[sel], sub, Ls, Rs, tl[sel], tr[sel], cyc)
+        L[sel], R[sel] = Ls, Rs
+    bridge.write_handles(data, L, R, tl, tr)
+
+
+def _pair(sp):
+    return sp.handle_left, sp.handle_right
+
+
+def _moved_curves(before, after, offsets) -> np.ndarray:
+    """(C,) bool: curves with a point that differs between ``before`` and ``after``."""
+    differ = framecache.rows_differ(after, before)
+    out = np.zeros(len(offsets) - 1, bool)
+    idx = np.flatnonzero(differ)
+    if len(idx):
+        out[np.searchsorted(offsets, idx, side="right") - 1] = True
+    return out
 
 
 def write_attributes(data, attributes: dict) -> None:
@@ -124,6 +228,7 @@ def sync_output(setup, inputs) -> None:
     elif not same:  # (the output's points stay: a held frame is still shown)
         bridge.copy_attributes(src, out.data)
     rt.output_attributes = (names, radius)
+    source_splines(setup, inputs)  # (the solve widens the clearance of spline curves)
 
 
 # ---------------------------------------------------------------- viewport

@@ -987,8 +987,10 @@ def add_hair_asset(ob, group, at=None, **inputs):
     return mod
 
 
-def evaluated_curves(ob, depsgraph=None):
-    """(world points (P, 3) float64, offsets (C+1,)) of ``ob``'s evaluated curves."""
+def evaluated_points(ob, depsgraph=None):
+    """(world points (P, 3) float64, offsets (C+1,)) of ``ob``'s evaluated control
+    points (after its modifiers; the curves Blender draws through them:
+    :func:`evaluated_curves`)."""
     dg = depsgraph or bpy.context.evaluated_depsgraph_get()
     oe = ob.evaluated_get(dg)
     d = oe.data
@@ -998,3 +1000,92 @@ def evaluated_curves(ob, depsgraph=None):
     P = np.empty(len(d.points) * 3, np.float32)
     d.position_data.foreach_get("vector", P)
     return oracle.transform(P.reshape(-1, 3), np.array(oe.matrix_world)), offs
+
+
+# ------------------------------------------------------------- evaluated curves
+def _probe_group(ob):
+    """Geometry nodes reading ``ob``'s evaluated geometry in world space (Object Info,
+    Relative) and realizing the curves Blender draws (Resample Curve, Evaluated)."""
+    ng = bpy.data.node_groups.new(".furcollide_probe", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    info = ng.nodes.new("GeometryNodeObjectInfo")
+    info.transform_space = "RELATIVE"
+    info.inputs["Object"].default_value = ob
+    resample = ng.nodes.new("GeometryNodeResampleCurve")
+    if "Mode" in resample.inputs:  # (a menu socket in newer Blenders)
+        resample.inputs["Mode"].default_value = "Evaluated"
+    else:
+        resample.mode = "EVALUATED"
+    out = ng.nodes.new("NodeGroupOutput")
+    ng.links.new(info.outputs["Geometry"], resample.inputs["Curve"])
+    ng.links.new(resample.outputs[0], out.inputs[0])
+    return ng
+
+
+def evaluated_curves(ob):
+    """The curves Blender draws for hair object ``ob`` now (its modifiers included):
+    world points (P, 3) float64 and offsets (C+1,). Every Catmull-Rom, Bezier and NURBS
+    curve comes as its evaluated points, read through a temporary probe object (a
+    Resample Curve in Evaluated mode on ``ob``'s evaluated geometry)."""
+    ng = _probe_group(ob)
+    data = bpy.data.hair_curves.new(".furcollide_probe")
+    probe = bpy.data.objects.new(".furcollide_probe", data)
+    bpy.context.scene.collection.objects.link(probe)
+    try:
+        mod = probe.modifiers.new("probe", "NODES")
+        mod.node_group = ng
+        e = probe.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        P = np.empty(len(e.points) * 3, np.float32)
+        if len(P):
+            e.position_data.foreach_get("vector", P)
+        offs = np.zeros(len(e.curves) + 1, np.int32)
+        if len(e.curves):
+            e.curve_offset_data.foreach_get("value", offs)
+    finally:
+        bpy.data.objects.remove(probe)
+        bpy.data.hair_curves.remove(data)
+        bpy.data.node_groups.remove(ng)
+    return P.reshape(-1, 3).astype(np.float64), offs
+
+
+def evaluated_crossing(out, colliders, status=None):
+    """Curves whose status says resolved but whose *evaluated* curve (what Blender
+    draws: :func:`evaluated_curves`) surely crosses a collider's evaluated mesh."""
+    P, offs = evaluated_curves(out)
+    st = status_of(out) if status is None else status
+    assert len(offs) == len(st) + 1, "the evaluated output lost or gained curves"
+    bad = np.zeros(len(offs) - 1, bool)
+    for ob in colliders:
+        V, F = evaluated_world_mesh(ob)
+        bad |= oracle.segments_hit_mesh(P, offs, V, F, abs_eps=oracle.float32_margin(P, V))
+    return np.flatnonzero(bad & np.isin(st, RESOLVED))
+
+
+CURVE_TYPES = ("CATMULL_ROM", "POLY", "BEZIER", "NURBS")
+
+
+def set_curve_type(ob, kind, indices=None):
+    """Give the curves ``indices`` (all by default) of hair object ``ob`` the type
+    ``kind`` ('CATMULL_ROM', 'POLY', 'BEZIER' or 'NURBS'). Returns ``ob``."""
+    hc = ob.data
+    C = len(hc.curves)
+    idx = np.arange(C) if indices is None else np.asarray(indices)
+    if hasattr(hc, "set_types"):
+        hc.set_types(type=kind, indices=idx.tolist())
+    else:  # 4.2: as an attribute; add_curves([]) has the types counted again
+        attr = hc.attributes.get("curve_type") or hc.attributes.new("curve_type", "INT8",
+                                                                     "CURVE")
+        types = np.zeros(C, np.int32)
+        attr.data.foreach_get("value", types)
+        types[idx] = CURVE_TYPES.index(kind)
+        attr.data.foreach_set("value", types)
+        hc.add_curves([])
+    return ob
+
+
+def poly(ob):
+    """Make every curve of hair object ``ob`` a Poly curve (Blender draws its control
+    polygon): the solve then needs no margin for a spline (``frame_solve.drawn_margin``),
+    for tests whose expectations are the polygon's exact clearance. Returns ``ob``."""
+    return set_curve_type(ob, "POLY")

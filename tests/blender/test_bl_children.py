@@ -23,7 +23,7 @@ from helpers import (
     activate,
     add_hair_asset,
     draw_panel,
-    evaluated_curves,
+    evaluated_points,
     linear,
     make_box,
     make_hair,
@@ -182,7 +182,7 @@ def _check_rendered(hair, head, hat, frame, least=1000):
     ch = hair.furcollide.children.output
     assert ch is not None
     assert _rendered(bpy.context.scene) == [ch], [o.name for o in _rendered(bpy.context.scene)]
-    P, offs = evaluated_curves(ch)
+    P, offs = evaluated_points(ch)
     st = _status(ch)
     assert len(st) == len(offs) - 1 > least
     bad = _crossing(P, offs, [hat]) & np.isin(st, RESOLVED)
@@ -242,10 +242,10 @@ def test_clumps_kept_where_no_collider_is_near(fc):
     head, hat, hair, out = _groomed_head(fc, rigged=False)
     scene.frame_set(3)
     c = hair.furcollide.children
-    P, offs = evaluated_curves(c.output)
+    P, offs = evaluated_points(c.output)
     c.use_viewport = False  # the stack's own children, not cleared
     scene.frame_set(3)
-    Q, offs_q = evaluated_curves(c.output)
+    Q, offs_q = evaluated_points(c.output)
     np.testing.assert_array_equal(offs, offs_q)
     guide = _guide_index(c.output)
     V, _F = tris_world(hat)
@@ -311,7 +311,7 @@ def test_bake_equals_playback_and_renders_equal_the_viewport(fc, tmp_path):
     live = {}
     for f in (1, 2):
         scene.frame_set(f)
-        live[f] = evaluated_curves(ch) + (_status(ch),)
+        live[f] = evaluated_points(ch) + (_status(ch),)
 
     def same(got, f, what):
         for a, b in zip(got, live[f], strict=True):
@@ -340,7 +340,7 @@ def test_bake_equals_playback_and_renders_equal_the_viewport(fc, tmp_path):
         assert bpy.ops.furcollide.bake() == {"FINISHED"} and hair.furcollide.is_baked
         for f in (1, 2):
             scene.frame_set(f)
-            same(evaluated_curves(ch) + (_status(ch),), f, "baked")
+            same(evaluated_points(ch) + (_status(ch),), f, "baked")
             assert hair.furcollide.status_message == ""
         seen.clear()
         bpy.ops.render.render(animation=True)
@@ -431,7 +431,7 @@ def test_resample_on_the_output_sees_the_guides_written(fc):
     moved = 0
     for f in range(1, 9):
         bpy.context.scene.frame_set(f)
-        P, offs = evaluated_curves(hair.furcollide.children.output)
+        P, offs = evaluated_points(hair.furcollide.children.output)
         G, goffs = world(out), offsets_of(out)
         moved += int(np.abs(G - world(hair)).max() > 0.01)
         if np.abs(P[offs[1:] - 1] - G[goffs[1:] - 1]).max() > 1e-5:
@@ -488,14 +488,14 @@ def test_source_whose_count_changes_every_frame(fc, tmp_path, capsys):
     counts = set()
     for f in range(1, 4):
         scene.frame_set(f)
-        counts.add(len(evaluated_curves(hair)[1]) - 1)
+        counts.add(len(evaluated_points(hair)[1]) - 1)
     assert len(counts) > 1, counts
     msg = hair.furcollide.status_message
     assert "'Interpolate Hair Curves' scatters its curves on the deforming Surface" in msg
     assert "Press Use Rest Position" in msg and "\n" not in msg, msg
     assert hair.furcollide.is_outdated
-    P, offs = evaluated_curves(out)
-    Q, offs_q = evaluated_curves(hair)
+    P, offs = evaluated_points(out)
+    Q, offs_q = evaluated_points(hair)
     np.testing.assert_array_equal(offs, offs_q)
     np.testing.assert_allclose(P, Q, atol=1e-5)  # the output follows the skin
     activate(hair)
@@ -512,7 +512,7 @@ def test_source_whose_count_changes_every_frame(fc, tmp_path, capsys):
     for f in FRAMES:
         scene.frame_set(f)
         assert hair.furcollide.status_message == "", (f, hair.furcollide.status_message)
-        counts.add(len(evaluated_curves(hair)[1]) - 1)
+        counts.add(len(evaluated_points(hair)[1]) - 1)
     assert len(counts) == 1
     assert "Traceback" not in capsys.readouterr().err
 
@@ -586,7 +586,7 @@ def test_children_from_guides_stay_on_the_deforming_skin_with_a_stable_count(fc)
     for f in range(1, 7):
         scene.frame_set(f)
         assert hair.furcollide.status_message == "", hair.furcollide.status_message
-        P, offs = evaluated_curves(ch)
+        P, offs = evaluated_points(ch)
         roots = P[offs[:-1]]
         if first is None:
             first = roots

@@ -18,7 +18,7 @@ import numpy as np
 import oracle  # (tests/core: on the path, conftest imports helpers first)
 import pytest
 import scenes
-from helpers import PINCHED, UNRESOLVED, activate, check_frame, make_hair, status_of
+from helpers import PINCHED, UNRESOLVED, activate, check_frame, make_hair, poly, status_of
 
 pytestmark = pytest.mark.blender
 
@@ -67,7 +67,8 @@ def scene_with(fc, ob, frames=(1, 3)):
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = frames
     scene.frame_set(frames[0])
-    hair = make_hair(nx=12, ny=12, npts=5, length=0.6, spacing=0.07)
+    # (Poly: the pinches are the roots in the mesh itself, no spline margin around it)
+    hair = poly(make_hair(nx=12, ny=12, npts=5, length=0.6, spacing=0.07))
     out = fc.setup(hair, [ob])
     return scene, hair, out
 

@@ -20,6 +20,7 @@ from helpers import (
     offsets_of,
     oracle,
     play_checked,
+    poly,
     positions,
     positions_per_frame,
     reference_frames,
@@ -585,7 +586,8 @@ def test_subdivision_surface_collider_collides_as_evaluated(fc):
     scene.frame_start, scene.frame_end = 1, 3
     scene.frame_set(1)
     # x = 0.23 crosses the cage (|x| <= 0.25) but not the subdivided shape (|x| <= 0.21)
-    hair = _hair_at("Fur", [(0.23, 0.0), (0.0, 0.0), (0.7, 0.0)])
+    # (Poly: the polygon's own clearance, no spline margin)
+    hair = poly(_hair_at("Fur", [(0.23, 0.0), (0.0, 0.0), (0.7, 0.0)]))
     box = make_box(location=(0, 0, 0.6))
     sub = box.modifiers.new("Subdivision", "SUBSURF")
     sub.levels = sub.render_levels = 2

@@ -15,6 +15,7 @@ from helpers import (
     no_faces,
     offsets_of,
     play,
+    poly,
     record,
     render_camera,
     save_in,
@@ -207,6 +208,7 @@ def test_jiggle_lags_behind_accelerating_roots_and_repeats(fc):
 def test_collider_distance_attribute_every_frame_and_cached(fc):
     scene = bpy.context.scene
     hair, box = fc.make_scene(frames=(1, 8))
+    poly(hair)  # (touching curves: distance 0, whatever the field's cells)
     out = fc.setup(hair, [box])
     m = hair.furcollide.motion
     m.write_collider_distance = True

@@ -27,6 +27,7 @@ from helpers import (
     make_hair,
     make_surface,
     offsets_of,
+    poly,
     positions,
     ragged_groom,
     record,
@@ -373,7 +374,7 @@ def test_collider_parented_to_an_animated_non_uniformly_scaled_empty(fc, offset)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, 8
     scene.frame_set(1)
-    hair = make_hair(nx=6, ny=4)
+    hair = poly(make_hair(nx=6, ny=4))  # (Poly: no spline margin, offset 0 is 0)
     ctrl = bpy.data.objects.new("Ctrl", None)
     scene.collection.objects.link(ctrl)
     box = make_box("Box", size=0.4, location=(0.0, 0.0, 0.6))
