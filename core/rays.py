@@ -21,6 +21,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from . import tolerances as tol
 from .errors import BackendUnavailable
 
 try:  # embreex wheels exist for linux-x64, windows-x64, macOS 13+ (arm64/x64) only
@@ -31,9 +32,6 @@ try:  # embreex wheels exist for linux-x64, windows-x64, macOS 13+ (arm64/x64) o
 except Exception as exc:  # pragma: no cover - depends on the platform
     _mc = _rs = None
     _EMBREE_ERROR = exc
-
-#: Below this many rays a batch is not worth splitting over threads.
-_MIN_RAYS_PER_THREAD = 4096
 
 _pool: ThreadPoolExecutor | None = None
 _pool_size = 0
@@ -263,7 +261,7 @@ class EmbreeBackend:
         tmax = np.ascontiguousarray(np.broadcast_to(tmax, (k,)), dtype=np.float32)
         if k == 0:
             return np.empty(0, np.int32)
-        n = int(min(threads, max(1, k // _MIN_RAYS_PER_THREAD)))
+        n = int(min(threads, max(1, k // tol.MIN_RAYS_PER_THREAD)))
         if n <= 1 or getattr(_local, "in_pool", False):
             # (on a pool thread: waiting for the pool's other threads could deadlock)
             return np.asarray(self._run(o, d, tmax, query), dtype=np.int32)

@@ -21,21 +21,6 @@ from .rays import both, default_threads
 from .soft import SoftSolve
 from .status import Status
 
-#: A step solves its curves in two halves, one per thread, from this many
-#: curves of work (:meth:`StepContext.in_halves`): in Soft every curve solved;
-#: in Stiff/Bend, by phase, the unrotated curves near a collider (tested at
-#: their input shape) and the curves searched (rotated ones near a collider,
-#: new contacts). Curves are independent, so each half gives the curves what
-#: the whole would, bit for bit; the halves' numpy passes and ray queries
-#: overlap (both release the GIL). Below it the per-call overhead of twice the
-#: numpy calls costs more than the overlap gains. Measured A/B in one process
-#: (``make bench``, 24 frames): Bend under the orbiting ellipsoid (7,300
-#: tested, 3,000 searched: only the test split) 39.5 ms, 38-39 split at this
-#: threshold, 46 with every phase split; under the hat (15,000 searched)
-#: 83-89 -> 79-84 ms; Soft 87-93 -> 75-78 and 201-210 -> 140-155 ms; the
-#: render groom's clearance pass (a fresh solver: all new contacts) 72 -> 65 ms.
-SPLIT_MIN_CURVES = 4096
-
 
 class StepContext:
     """Everything one step needs; methods are the phases of the step."""
@@ -677,13 +662,13 @@ class StepContext:
 
     def in_halves(self, fn, work, *parts, **kw):
         """``fn(self, *parts, **kw)``; with ``work`` of at least
-        :data:`SPLIT_MIN_CURVES` curves and two threads or more, as two calls on
+        :data:`tolerances.SPLIT_MIN_CURVES` curves and two threads or more, as two calls on
         two threads, each with every other curve of each of ``parts`` (curve
         index arrays) and a shallow copy of this context: the per-curve arrays
         are shared (the halves write disjoint curves in place), the ray count
         and the thread count (one each: the halves are the parallelism) their
         own. ``fn`` must give each curve what it gives it in the whole."""
-        if self.threads < 2 or work < SPLIT_MIN_CURVES:
+        if self.threads < 2 or work < tol.SPLIT_MIN_CURVES:
             fn(self, *parts, **kw)
             return
         halves = [copy.copy(self) for _ in range(2)]

@@ -15,17 +15,6 @@ from ..errors import ColliderError, InputError
 from ..layout import check_offsets
 from ..rays import default_threads
 
-#: Per-frame stages (Fur Attach, the render groom's deformation) run in two
-#: halves on two threads (:func:`core.rays.in_two`) from this many items
-#: (curves, guides). The items are independent, so the halves give what the
-#: whole gives, bit for bit; their long numpy passes release the GIL and
-#: overlap. Below it the halves' own overhead (a hand-over to the ray pool,
-#: twice the numpy calls) is more than they save. Measured (2 cores, 50,000
-#: render curves, 7,500 guides): the groom's blend 35 -> 21 ms, Fur Attach
-#: 9.8 -> 5.7 ms. (The guides' root fits, 2.3 ms of short passes, stay on one
-#: thread: two only interleave them.)
-SPLIT_MIN_ITEMS = 2048
-
 
 def thread_count(threads) -> int:
     """Threads a stage may use: ``threads`` (a positive integer), or every CPU

@@ -20,7 +20,6 @@ from .. import tolerances as tol
 from ..closest import barycentric, closest_faces
 from ..errors import ColliderError, InputError
 from ..rays import in_two
-from . import _curves
 from ._curves import check_curves, check_surface, degenerate_faces, thread_count, uniform_size
 
 
@@ -213,7 +212,7 @@ class Binding:
         V_now : (n, 3) array_like of float
             The deformed growth surface (same topology as at bind time).
         threads : int or None, default None
-            Threads to use (None: every CPU). From ``_curves.SPLIT_MIN_ITEMS``
+            Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS``
             curves of one CV count the curves are moved in two halves on two
             threads; the result is the same bit for bit.
 
@@ -260,7 +259,7 @@ class Binding:
                 o += O[:, i, None]
             out[a:b] = oc.transpose(1, 2, 0)
 
-        in_two(move, C, threads, _curves.SPLIT_MIN_ITEMS)
+        in_two(move, C, threads, tol.SPLIT_MIN_ITEMS)
         return out.reshape(-1, 3)
 
     @cached_property

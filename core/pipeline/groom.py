@@ -24,7 +24,6 @@ from ..rays import in_two
 from ..settings import Settings
 from ..solver import Solver
 from ..status import Status
-from . import _curves
 from ._curves import (
     as_points,
     check_curves,
@@ -35,8 +34,6 @@ from ._curves import (
 )
 from .distance import LowerBoundField
 
-#: Above this share of reaching curves the clearance pass solves them all (no gather).
-_CLEARANCE_ALL = 0.7
 #: Neighbouring guide roots used to find each guide's root rotation.
 _FRAME_NEIGHBORS = 4
 
@@ -443,9 +440,9 @@ class GroomDeformer:
                 for j in range(1, n):  # the sums of np.cumsum(axis=1), one CV column a pass
                     o[:, j] += o[:, j - 1]
 
-            in_two(chain, Rn, threads, _curves.SPLIT_MIN_ITEMS)
+            in_two(chain, Rn, threads, tol.SPLIT_MIN_ITEMS)
             return out.reshape(-1, 3)
-        in_two(blend, S, threads, _curves.SPLIT_MIN_ITEMS)
+        in_two(blend, S, threads, tol.SPLIT_MIN_ITEMS)
         step = np.empty_like(self.rp)
         step[self.rs0 + 1] = seg.T
         step[roff[:-1]] = roots(0, Rn)
@@ -484,7 +481,7 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
         Roots to use instead of the guide-driven ones (e.g. the render
         groom's own Fur Attach roots, which stay exactly on the surface).
     threads : int or None, default None
-        Threads to use (None: every CPU). From ``_curves.SPLIT_MIN_ITEMS`` guides or
+        Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS`` guides or
         render curves the work runs in two halves on two threads; the result
         is the same bit for bit.
 
@@ -572,7 +569,7 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
         solve[0] = True  # (one curve, unchanged: the solver still checks its other inputs)
     status = np.zeros(R, np.int8)
     n = uniform_size(off)
-    if R == 0 or solve.mean() > _CLEARANCE_ALL:  # (gathering would cost more than it saves)
+    if R == 0 or solve.mean() > tol.CLEARANCE_SOLVE_ALL:  # (gathering would cost more)
         res = Solver(off, settings).step(pts, colliders, growth=growth)
         out = np.asarray(res.points, np.float64)
         status = res.status
