@@ -15,6 +15,7 @@ collider keep its BVH in its own space and move the rays instead.
 
 from __future__ import annotations
 
+import numbers
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -22,7 +23,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from . import tolerances as tol
-from .errors import BackendUnavailable
+from .errors import BackendUnavailable, InputError
 
 try:  # embreex wheels exist for linux-x64, windows-x64, macOS 13+ (arm64/x64) only
     from embreex import mesh_construction as _mc
@@ -65,6 +66,17 @@ def default_threads() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
+
+
+def thread_count(threads) -> int:
+    """Threads a stage may use: ``threads`` (a positive integer), or every CPU
+    for None (as :attr:`core.settings.Settings.threads`)."""
+    if threads is None:
+        return default_threads()
+    if isinstance(threads, (bool, np.bool_)) or not isinstance(threads, numbers.Integral) \
+            or threads < 1:
+        raise InputError(f"threads must be a positive integer or None, got {threads!r}")
+    return int(threads)
 
 
 def _executor(n: int) -> ThreadPoolExecutor:

@@ -14,7 +14,7 @@ from functools import partial
 
 import numpy as np
 
-from . import rigid
+from . import curves, rigid
 from . import rotations as rot
 from . import tolerances as tol
 from .rays import both, default_threads
@@ -27,7 +27,7 @@ class StepContext:
 
     def __init__(self, layout, state, settings, points, cols, growth, warm_start=True,
                  groups=None):
-        """``layout`` (:class:`core.layout.CurveLayout`) and ``state``
+        """``layout`` (:class:`core.curves.CurveLayout`) and ``state``
         (:class:`core.state.SolverState`) are the solver's: the step reads the
         state in :meth:`load_state` and writes the next one in
         :meth:`store_state`. ``cols``: ``(collider, offset)`` entries, one per
@@ -81,22 +81,17 @@ class StepContext:
             L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg))
             self.curve_len = np.add.reduceat(L, layout.soff[:-1], dtype=np.float64)
             shortest = np.minimum.reduceat(L, layout.soff[:-1])
-        # Curves the step cannot work with (Solver.step marks them INVALID and
-        # steps again with stand-ins for them): a zero-length segment, or a
-        # length that overflows. (Non-finite points never get here.)
-        self.degenerate = ~(shortest > tol.ZERO_SEGMENT_REL * self.curve_len)
-        self.degenerate |= ~np.isfinite(self.curve_len)
+        # Curves the step cannot work with (core.curves.degenerate: Solver.step
+        # marks them INVALID and steps again with stand-ins for them): a
+        # zero-length segment, or a length that overflows. (Non-finite points
+        # never get here.)
+        self.degenerate = curves.degenerate(shortest, self.curve_len)
         self.degenerate_reason = ""
         if self.degenerate.any():
             c = int(np.argmax(self.degenerate))
-            if not np.isfinite(self.curve_len[c]):
-                self.degenerate_reason = (
-                    f"curve {c} is too large: its length overflows (coordinates ~1e19+)")
-            else:
-                a, b = int(layout.soff[c]), int(layout.soff[c + 1])
-                k = int(layout.seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
-                self.degenerate_reason = (
-                    f"curve {c} has a zero-length segment between points {k} and {k + 1}")
+            a, b = int(layout.soff[c]), int(layout.soff[c + 1])
+            k = int(layout.seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
+            self.degenerate_reason = curves.degenerate_reason(c, self.curve_len[c], k)
             return  # (the caller steps again without them)
         if ns:
             self.roots = points.reshape(-1, ns + 1, 3)[:, 0].astype(np.float64)

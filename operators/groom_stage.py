@@ -37,7 +37,7 @@ import numpy as np
 
 from .. import core
 from ..core import Status, framecache, pipeline
-from ..core.pipeline._curves import as_given, bad_curves
+from ..core.curves import as_given, invalid_curves
 from . import bridge, registry
 from .clock import clock
 from .colliders import collider_list, in_scene
@@ -613,8 +613,8 @@ class GroomBinding:
         """
         render_offsets = np.asarray(render_offsets, np.int64)
         guide_offsets = np.asarray(guide_offsets, np.int64)
-        bad_r, why_r = bad_curves(render_ref, render_offsets)
-        bad_g, why_g = bad_curves(guides_ref, guide_offsets)
+        bad_r, why_r = invalid_curves(render_ref, render_offsets)
+        bad_g, why_g = invalid_curves(guides_ref, guide_offsets)
         name = f"'{groom.name}'" if groom is not None else "the render groom"
         if bad_r.all():
             raise ValueError(f"No curve of {name} can be used: {why_r}")

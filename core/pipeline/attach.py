@@ -18,9 +18,10 @@ import numpy as np
 from .. import rotations as rot
 from .. import tolerances as tol
 from ..closest import barycentric, closest_faces
+from ..curves import check_curves, uniform_size
 from ..errors import ColliderError, InputError
-from ..rays import in_two
-from ._curves import check_curves, check_surface, degenerate_faces, thread_count, uniform_size
+from ..mesh import check_surface, degenerate_faces
+from ..rays import in_two, thread_count
 
 
 def _frames(V, F, face):

@@ -42,12 +42,13 @@ from .. import rotations as rot
 from .. import tolerances as tol
 from ..closest import closest_on_triangles
 from ..collider import Collider
+from ..curves import check_curves, layout, row_norm
 from ..errors import InputError
+from ..mesh import check_surface
 from ..proximity import TriangleGrid as _TriGrid
 from ..proximity import box_cells as _box_cells
 from ..proximity import plane_crosses_cells as _plane_crosses_cells
 from ..proximity import planes as _planes
-from ._curves import check_curves, check_surface, layout, row_norm
 
 #: Sub-pieces of a segment in the distance-field lower bound.
 _FAR_PIECES = 8

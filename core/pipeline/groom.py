@@ -18,20 +18,20 @@ import numpy as np
 from .. import rotations as rot
 from .. import tolerances as tol
 from ..collider import Collider
+from ..curves import (
+    as_points,
+    check_curves,
+    degenerate,
+    layout,
+    segmented_cumsum,
+    uniform_size,
+)
 from ..errors import InputError
 from ..proximity import knn
-from ..rays import in_two
+from ..rays import in_two, thread_count
 from ..settings import Settings
 from ..solver import Solver
 from ..status import Status
-from ._curves import (
-    as_points,
-    check_curves,
-    layout,
-    segmented_cumsum,
-    thread_count,
-    uniform_size,
-)
 from .distance import LowerBoundField
 
 #: Neighbouring guide roots used to find each guide's root rotation.
@@ -645,9 +645,9 @@ def _gather(off, idx):
 
 
 def _degenerate(pts, off, idx, n):
-    """The solver's zero-length segment rule (``tolerances.ZERO_SEGMENT_REL``) on
-    the curves ``idx``: curves the pass does not solve are INVALID as they would
-    be in the solver. Returns the offending curves of ``idx``."""
+    """The solver's rule on lengths (:func:`core.curves.degenerate`) on the curves
+    ``idx``: curves the pass does not solve are INVALID as they would be in the
+    solver. Returns the offending curves of ``idx``."""
     if len(idx) == 0:
         return idx
     sub, sub_off = _take(pts, off, idx, n)
@@ -667,7 +667,7 @@ def _degenerate(pts, off, idx, n):
         for j in range(1, n - 1):
             total += L[:, j]
             np.minimum(short, L[:, j], out=short)
-        return idx[maybe[~(short > tol.ZERO_SEGMENT_REL * total)]]
+        return idx[maybe[degenerate(short, total)]]
     else:
         d = np.diff(sub, axis=0)
         L = np.sqrt(np.einsum("ij,ij->i", d, d))[layout(sub_off)[2]]
@@ -675,7 +675,7 @@ def _degenerate(pts, off, idx, n):
         first = np.cumsum(nseg) - nseg
         total = np.add.reduceat(L, first)
         short = np.minimum.reduceat(L, first)
-    return idx[~(short > tol.ZERO_SEGMENT_REL * total)]
+    return idx[degenerate(short, total)]
 
 
 def _boxes(pts, off):

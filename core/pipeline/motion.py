@@ -13,9 +13,9 @@ import math
 import numpy as np
 
 from .. import tolerances as tol
+from ..curves import arc_length, check_curves, layout, rechain
 from ..errors import InputError
-from ..rays import in_two
-from ._curves import arc_length, check_curves, layout, rechain, thread_count
+from ..rays import in_two, thread_count
 
 #: Sinusoids summed per noise channel.
 _WAVES = 4
