@@ -10,6 +10,7 @@ Public API (paper names, see README "The fur pipeline")::
         bind_groom, GroomWeights, deform_groom,          # render groom follows guides
         GroomDeformer,                                   #   (its bind-time work, explicit)
         clearance_pass,                                  # final clearance (FurCollide)
+        Shot, Motion, RootHistory,                       # a shot, frame by frame
     )
 
 Curves use Blender's layout: ``points`` (P, 3) and ``offsets`` (C+1,),
@@ -25,6 +26,7 @@ from .distance import (
     segment_mesh_distance,
     segment_triangle_distance,
 )
+from .frame import FrameResult, Motion, RootHistory, Shot
 from .groom import GroomDeformer, GroomWeights, bind_groom, clearance_pass, deform_groom, knn
 from .influence import region_of_influence
 from .motion import jiggle, spring_impulse_response, wind, wind_noise
@@ -35,6 +37,10 @@ __all__ = [
     "Binding",
     "GroomDeformer",
     "GroomWeights",
+    "FrameResult",
+    "Motion",
+    "RootHistory",
+    "Shot",
     "bind",
     "bind_groom",
     "clearance_pass",
