@@ -268,15 +268,15 @@ class StepContext:
         else:
             seg0 = self.Dseg[self.layout.soff[idx]]
             last = self.points[self.layout.offsets[idx + 1] - 1]
-        t = rot._unit3(np.ascontiguousarray(seg0.T, dtype=np.float64))
+        t = rot.unit3(np.ascontiguousarray(seg0.T, dtype=np.float64))
         rootT = self.roots[idx].T
         chord = np.empty((3, len(idx)))
         for i in range(3):
             np.subtract(last[:, i], rootT[i], out=chord[i])
-        u = chord - rot._dot3(chord, t) * t
-        ratio = rot._norm3(u) / self.curve_len[idx]
+        u = chord - rot.dot3(chord, t) * t
+        ratio = rot.norm3(u) / self.curve_len[idx]
         B, ref, e1 = rot.curve_frames(t, u, ratio, prev)
-        return B, ref, (t, e1, rot._cross3(t, e1))
+        return B, ref, (t, e1, rot.cross3(t, e1))
 
     @staticmethod
     def _from_frame(rows, a):

@@ -61,14 +61,14 @@ def _frame_axes(T):
     a, b, c = Tc[:, :, 0], Tc[:, :, 1], Tc[:, :, 2]
     e = b - a
     ca = c - a
-    n = rot._cross3(e, ca)
-    le = np.sqrt(rot._dot3(e, e))
-    ln = np.sqrt(rot._dot3(n, n))
-    scale = np.maximum(np.sqrt(rot._dot3(ca, ca)), le)
+    n = rot.cross3(e, ca)
+    le = np.sqrt(rot.dot3(e, e))
+    ln = np.sqrt(rot.dot3(n, n))
+    scale = np.maximum(np.sqrt(rot.dot3(ca, ca)), le)
     ok = (le > 0) & (ln > tol.ATTACH_FRAME_MIN_SIN * scale**2)
     e /= np.where(ok, le, 1.0)
     n /= np.where(ok, ln, 1.0)
-    t = rot._cross3(n, e)
+    t = rot.cross3(n, e)
     return (e, t, n), ok
 
 

@@ -317,22 +317,22 @@ class GroomDeformer:
         out = np.empty((G, n - 1, 4))
         for j in range(n - 1):
             tn = (g3[:, j + 1] - g3[:, j]).T  # (3, G)
-            tn = rot._unit3(tn)
+            tn = rot.unit3(tn)
             v = rot.quat_rotate_soa(p, np.ascontiguousarray(tr3[:, j].T))
-            v = rot._unit3(v)
+            v = rot.unit3(v)
             # quat_swing(v, tn): minimal rotation taking v to tn
-            c = rot._dot3(v, tn)
+            c = rot.dot3(v, tn)
             sw = np.empty((4, G))
             sw[0] = 1.0 + c
-            sw[1:] = rot._cross3(v, tn)
+            sw[1:] = rot.cross3(v, tn)
             anti = c < -1 + 1e-12
             if anti.any():
                 sw[:, anti] = rot.quat_swing(v[:, anti].T, tn[:, anti].T).T
-            sw /= np.sqrt(sw[0] * sw[0] + rot._dot3(sw[1:], sw[1:]))
+            sw /= np.sqrt(sw[0] * sw[0] + rot.dot3(sw[1:], sw[1:]))
             # quat_mul(sw, p)
             q = np.empty((4, G))
-            q[0] = sw[0] * p[0] - rot._dot3(sw[1:], p[1:])
-            q[1:] = sw[0] * p[1:] + p[0] * sw[1:] + rot._cross3(sw[1:], p[1:])
+            q[0] = sw[0] * p[0] - rot.dot3(sw[1:], p[1:])
+            q[1:] = sw[0] * p[1:] + p[0] * sw[1:] + rot.cross3(sw[1:], p[1:])
             out[:, j] = q.T
             p = q
         return out.reshape(-1, 4)
