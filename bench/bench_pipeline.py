@@ -14,7 +14,8 @@ Per frame, in the order of the add-on's frame handler:
   not a pipeline stage, printed for scale);
 * ``motion``: ``wind`` after collision + ``collider_distance`` (capped at the
   longest displacement, as the add-on does) + ``region_of_influence``;
-* ``groom``: ``deform_groom`` of the render groom (roots from its Fur Attach);
+* ``groom``: the render groom following the guides (``GroomDeformer.deform``, its
+  bind-time work made once with the scene; roots from its Fur Attach);
 * ``clearance``: ``clearance_pass`` of the deformed render groom;
 * ``clear_all``: for scale, what the clearance pass did before it culled the
   curves that cannot change (the solver, fresh, Stiff, on every render curve:
@@ -60,11 +61,11 @@ from cpu import OpenBlas, single_blas  # noqa: E402
 
 from core import Collider, Settings, Solver  # noqa: E402
 from core.pipeline import (  # noqa: E402
+    GroomDeformer,
     bind,
     bind_groom,
     clearance_pass,
     collider_distance,
-    deform_groom,
     region_of_influence,
     sample_guides,
     wind,
@@ -231,6 +232,8 @@ class Scene:
         self.rbind = bind(self.render, self.roff, self.V, self.F)
         self.t_bind = time.perf_counter() - tb
         self.weights = bind_groom(rroots, self.guides[self.goff[:-1]], 4)
+        self.deformer = GroomDeformer(self.render, self.roff, self.guides, self.goff,
+                                      self.weights)
         self.SV, self.SF = shell(tris)
         self.col = Collider(self.SV, self.SF, matrix=shell_matrix(0, frames), name="shell")
         self.solver = Solver(self.goff, Settings(mode="bend", threads=threads))
@@ -269,8 +272,7 @@ def stage_motion(sc, guides_out, frame):
 
 
 def stage_groom(sc, guides_final, render_attached):
-    return deform_groom(sc.render, sc.roff, sc.guides, guides_final, sc.goff, sc.weights,
-                        render_roots_now=render_attached[sc.roff[:-1]], threads=sc.threads)
+    return sc.deformer.deform(guides_final, render_attached[sc.roff[:-1]], threads=sc.threads)
 
 
 def stage_clearance(sc, render_now):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import tolerances as tol
 from .proximity import TriangleGrid
 
 
@@ -77,8 +78,6 @@ def closest_on_triangles(p, a, b, c):
     return out
 
 
-#: Search boxes spanning more cells than this move to a coarser grid.
-_MAX_CELLS = 512
 #: Queries per block of the search (bounds the candidate pairs in memory).
 _QUERY_BLOCK = 8192
 #: Triangles sampled for the first upper bound of a query far from the mesh.
@@ -129,7 +128,7 @@ def closest_points_on_mesh(V, F, Q, grid=None):
     triangle size), starting small (queries usually lie on or near the
     surface): a query is settled once the closest triangle found is within
     the searched radius, since every triangle within it was a candidate. A
-    query whose search box grows past ``_MAX_CELLS`` cells continues on a
+    query whose search box grows past ``tolerances.CLOSEST_MAX_CELLS`` cells continues on a
     grid of twice the cell size (up to one that holds the whole mesh in a
     few cells), and a query that found no triangle yet starts from its
     distance to a sample of the triangles (an upper bound): only the cells
@@ -173,7 +172,7 @@ def closest_points_on_mesh(V, F, Q, grid=None):
             r = rho[sel][:, None]
             ilo = np.clip(np.floor((Q[sel] - r - g.glo) / g.h), -1, g.dims).astype(np.int64)
             ihi = np.clip(np.floor((Q[sel] + r - g.glo) / g.h), -1, g.dims).astype(np.int64)
-            fit = ((ihi - ilo + 1).prod(1) <= _MAX_CELLS) | bool((g.dims <= 2).all())
+            fit = ((ihi - ilo + 1).prod(1) <= tol.CLOSEST_MAX_CELLS) | bool((g.dims <= 2).all())
             out = sel[~fit]
             level[out] += 1  # searched again on a coarser grid
             lost = out[~np.isfinite(best[out])] if lv >= 2 else out[:0]

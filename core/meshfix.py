@@ -277,7 +277,7 @@ def _wanted_senses(V, G, labels, closed_part, sense):
     if len(parts) == 0:
         return want
     want[parts] = 1.0
-    if len(parts) == 1 or len(parts) > _NEST_MAX_PARTS:
+    if len(parts) == 1 or len(parts) > tol.NEST_MAX_PARTS:
         return want
     lo = np.full((len(closed_part), 3), np.inf)
     hi = np.full((len(closed_part), 3), -np.inf)
@@ -308,9 +308,6 @@ def _wanted_senses(V, G, labels, closed_part, sense):
 
 #: Face centres of a closed part tested against another to call it nested.
 _NEST_PROBES = 16
-#: Above this many closed parts (a scatter of pebbles) nesting is not looked
-#: for: every closed part faces outward.
-_NEST_MAX_PARTS = 64
 #: A fixed, generic direction for the parity rays of :func:`_inside`.
 _RAY = np.array([0.5773502691896258, 0.5773502691896257, 0.5773502691896259]) + np.array(
     [0.0123, -0.0071, 0.0049])

@@ -13,12 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import tolerances as tol
+
 #: Grid cells along the longest side, at most.
 MAX_DIMS = 256
-#: Triangles spanning more grid cells than this are tested by every search.
-BIG_CELLS = 4096
-#: Triangle grids with at most this many cells get a dense cell -> triangles lookup.
-DENSE_CELLS = 1 << 23
 #: Pairs (query, reference) per chunk of the brute-force nearest neighbours.
 KNN_CHUNK = 4_000_000
 
@@ -30,7 +28,7 @@ def _dot(a, b):
 class TriangleGrid:
     """Uniform grid of triangle bounding boxes (cell size ``h``).
 
-    Triangles whose box spans more than ``BIG_CELLS`` cells (a ground
+    Triangles whose box spans more than ``tolerances.GRID_BIG_CELLS`` cells (a ground
     plane next to a detailed character) are not registered in cells: they
     are in :attr:`big` and every search tests them.
     """
@@ -44,7 +42,7 @@ class TriangleGrid:
         self.dims = np.floor((hi.max(0) - self.glo) / h).astype(np.int64) + 1
         ilo = np.floor((lo - self.glo) / h).astype(np.int64)
         ihi = np.floor((hi - self.glo) / h).astype(np.int64)
-        big = (ihi - ilo + 1).prod(1) > BIG_CELLS
+        big = (ihi - ilo + 1).prod(1) > tol.GRID_BIG_CELLS
         self.big = np.flatnonzero(big)
         small = np.flatnonzero(~big)
         cell, owner = box_cells(ilo[small], ihi[small])
@@ -61,7 +59,7 @@ class TriangleGrid:
         # dense lookup: triangles of cell key k are tris[start[k]:start[k + 1]]
         n_keys = int((self.dims + 2).prod())
         self.start = None
-        if n_keys <= DENSE_CELLS:
+        if n_keys <= tol.GRID_DENSE_CELLS:
             self.start = np.zeros(n_keys + 1, np.int64)
             np.cumsum(np.bincount(self.keys, minlength=n_keys), out=self.start[1:])
 

@@ -15,13 +15,15 @@ collider keep its BVH in its own space and move the rays instead.
 
 from __future__ import annotations
 
+import numbers
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .errors import BackendUnavailable
+from . import tolerances as tol
+from .errors import BackendUnavailable, InputError
 
 try:  # embreex wheels exist for linux-x64, windows-x64, macOS 13+ (arm64/x64) only
     from embreex import mesh_construction as _mc
@@ -31,9 +33,6 @@ try:  # embreex wheels exist for linux-x64, windows-x64, macOS 13+ (arm64/x64) o
 except Exception as exc:  # pragma: no cover - depends on the platform
     _mc = _rs = None
     _EMBREE_ERROR = exc
-
-#: Below this many rays a batch is not worth splitting over threads.
-_MIN_RAYS_PER_THREAD = 4096
 
 _pool: ThreadPoolExecutor | None = None
 _pool_size = 0
@@ -67,6 +66,17 @@ def default_threads() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
+
+
+def thread_count(threads) -> int:
+    """Threads a stage may use: ``threads`` (a positive integer), or every CPU
+    for None (as :attr:`core.settings.Settings.threads`)."""
+    if threads is None:
+        return default_threads()
+    if isinstance(threads, (bool, np.bool_)) or not isinstance(threads, numbers.Integral) \
+            or threads < 1:
+        raise InputError(f"threads must be a positive integer or None, got {threads!r}")
+    return int(threads)
 
 
 def _executor(n: int) -> ThreadPoolExecutor:
@@ -263,7 +273,7 @@ class EmbreeBackend:
         tmax = np.ascontiguousarray(np.broadcast_to(tmax, (k,)), dtype=np.float32)
         if k == 0:
             return np.empty(0, np.int32)
-        n = int(min(threads, max(1, k // _MIN_RAYS_PER_THREAD)))
+        n = int(min(threads, max(1, k // tol.MIN_RAYS_PER_THREAD)))
         if n <= 1 or getattr(_local, "in_pool", False):
             # (on a pool thread: waiting for the pool's other threads could deadlock)
             return np.asarray(self._run(o, d, tmax, query), dtype=np.int32)

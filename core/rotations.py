@@ -191,9 +191,9 @@ def quat_rotate_soa(q, v):
     rotating vectors ``v`` (3, ...), returned as (3, ...) (the arithmetic of
     :func:`quat_rotate`, term by term)."""
     w, u = q[0], q[1:]
-    t = _cross3(u, v)
+    t = cross3(u, v)
     t *= 2.0
-    out = _cross3(u, t)
+    out = cross3(u, t)
     for i in range(3):
         out[i] += v[i] + w * t[i]
     return out
@@ -280,7 +280,7 @@ def rotation_axis(c, d):
     return a
 
 
-def _dot3(a, b):
+def dot3(a, b):
     """Row dots of component arrays (3, k): the sums of :func:`dot`."""
     out = a[0] * b[0]
     out += a[1] * b[1]
@@ -288,18 +288,18 @@ def _dot3(a, b):
     return out
 
 
-def _norm3(v):
+def norm3(v):
     """Row lengths of component arrays (3, k), as ``np.linalg.norm``."""
-    return np.sqrt(_dot3(v, v))
+    return np.sqrt(dot3(v, v))
 
 
-def _unit3(v, n=None):
+def unit3(v, n=None):
     """:func:`normalize` on component arrays (3, k); zero rows stay zero."""
-    n = _norm3(v) if n is None else n
+    n = norm3(v) if n is None else n
     return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
 
 
-def _cross3(a, b):
+def cross3(a, b):
     """``np.cross`` on component arrays (3, k) (the same products)."""
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
     for i, (j, k) in enumerate(((1, 2), (2, 0), (0, 1))):
@@ -344,27 +344,27 @@ def curve_frames(t, u_shape, shape_ratio, prev_ref=None):
         a = np.ascontiguousarray(prev_ref[:, 0].T)
         v = np.ascontiguousarray(prev_ref[:, 1].T)
         # rotate_between(v, a, t)
-        w = _cross3(a, t)
-        c = _dot3(a, t)
+        w = cross3(a, t)
+        c = dot3(a, t)
         kk = 1.0 / np.maximum(1.0 + c, 1e-12)
         carried = v * c
-        carried += _cross3(w, v)
-        carried += w * (_dot3(w, v) * kk)
-        carried = carried - _dot3(carried, t) * t
-        n = _norm3(carried)
+        carried += cross3(w, v)
+        carried += w * (dot3(w, v) * kk)
+        carried = carried - dot3(carried, t) * t
+        n = norm3(carried)
         bad = n < 0.5
-        carried = _unit3(carried, n)
+        carried = unit3(carried, n)
         if bad.any():
             carried[:, bad] = stable_perpendicular(t[:, bad].T).T
     alpha = np.clip(
         (shape_ratio - tol.FRAME_SHAPE_LO) / (tol.FRAME_SHAPE_HI - tol.FRAME_SHAPE_LO), 0.0, 1.0
     )
-    e1 = alpha * _unit3(u_shape)
+    e1 = alpha * unit3(u_shape)
     e1 += (1.0 - alpha) * carried
-    e1 = e1 - _dot3(e1, t) * t
-    n = _norm3(e1)
+    e1 = e1 - dot3(e1, t) * t
+    n = norm3(e1)
     bad = n < 1e-6
-    e1 = _unit3(e1, n)
+    e1 = unit3(e1, n)
     e1[:, bad] = carried[:, bad]
     k = t.shape[1]
     frames = np.empty((k, 3, 3))
@@ -372,7 +372,7 @@ def curve_frames(t, u_shape, shape_ratio, prev_ref=None):
     for out, e in ((frames, e1), (ref, carried)):
         out[:, 0] = t.T
         out[:, 1] = e.T
-        out[:, 2] = _cross3(t, e).T
+        out[:, 2] = cross3(t, e).T
     return frames, ref, e1
 
 

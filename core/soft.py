@@ -246,11 +246,11 @@ class _SegmentTurn:
         self.ctx = ctx
         ax = np.ascontiguousarray(axis.T)
         v = np.ascontiguousarray(d.T)
-        along = rot._dot3(ax, v)
+        along = rot.dot3(ax, v)
         Y = ax * along
         V0 = v - Y
-        X = rot._cross3(ax, v)
-        length = rot._norm3(v)
+        X = rot.cross3(ax, v)
+        length = rot.norm3(v)
         self.back, self.grow = ctx.ray_growth(length, root)
         o = np.ascontiguousarray(o.T)
         self.per_col = []

@@ -35,8 +35,9 @@ a few offset shells, ``Collider.clearance_groups``).
 
 Where things are
 ----------------
-:mod:`.layout` (``CurveLayout``: where each curve's points and segments
-are), :mod:`.state` (``SolverState``: what one step hands the next),
+:mod:`.curves` (``CurveLayout``: where each curve's points and segments
+are; the rule for the curves the solver leaves as they are, INVALID),
+:mod:`.state` (``SolverState``: what one step hands the next),
 :mod:`.step` (a step's shared machinery: candidates, local frames,
 deformation, batched ray queries, first hits, Put to Growth Surface),
 :mod:`.rigid` (Stiff, Bend, the warm-start search, Shrink, Recovery,
@@ -53,9 +54,10 @@ import time
 
 import numpy as np
 
+from . import curves
 from .collider import Collider
+from .curves import CurveLayout
 from .errors import InputError, SettingsError
-from .layout import CurveLayout
 from .rays import beside
 from .settings import Settings
 from .state import STATE_VERSION, SolverState
@@ -192,83 +194,6 @@ class Solver:
         self._state = SolverState.from_arrays(arrs, self.n_curves, self.layout.n_segments)
 
     # --------------------------------------------------------------- input
-    def _check_points(self, points):
-        if not isinstance(points, np.ndarray):
-            try:
-                points = np.asarray(points)
-            except Exception as exc:
-                raise InputError(f"points must be a (P, 3) float array: {exc}") from None
-        if points.ndim != 2 or points.shape[1] != 3:
-            raise InputError(f"points must have shape (P, 3), got {points.shape}")
-        if points.dtype not in (np.float32, np.float64):
-            raise InputError(f"points must be float32 or float64, got {points.dtype}")
-        if len(points) != self.n_points:
-            raise InputError(
-                f"points has {len(points)} rows but offsets describe {self.n_points} points"
-            )
-        return np.ascontiguousarray(points)
-
-    def _non_finite(self, points):
-        """Curves with a non-finite point: ``(mask (C,) bool, reason)``."""
-        if np.isfinite(points.reshape(-1)).all():  # (one flat pass: the usual case)
-            return np.zeros(self.n_curves, bool), ""
-        finite = np.isfinite(points).all(axis=1)
-        rows = np.flatnonzero(~finite)
-        owner = self.layout.owner(rows)
-        bad = np.zeros(self.n_curves, bool)
-        bad[owner] = True
-        i, c = int(rows[0]), int(owner[0])
-        return bad, f"curve {c}: point {i} is not finite ({points[i].tolist()})"
-
-    @staticmethod
-    def _problems(bad, reasons):
-        """The step's report on its INVALID curves (the first one's reason)."""
-        if not bad.any():
-            return []
-        first = min(reasons, key=lambda r: r[0])[1]
-        n = int(bad.sum())
-        more = (f" ({n} invalid curves: left as they are, not solved)" if n > 1
-                else " (left as it is, not solved)")
-        return [first + more]
-
-    def _stand_in(self, points, bad):
-        """``points`` with the invalid curves replaced by short straight ones at
-        their root (never solved; only so the step's arithmetic stays finite)."""
-        off = self.layout.offsets
-        out = points.copy()
-        pts = np.flatnonzero(np.repeat(bad, np.diff(off)))
-        owner = self.layout.owner(pts)
-        root = points[off[owner]].astype(np.float64)
-        root = np.where(np.isfinite(root).all(axis=1)[:, None], root, 0.0)
-        j = pts - off[owner]
-        scale = 1e-6 * np.maximum(1.0, np.abs(root).max(axis=1))
-        out[pts] = root + (j * scale)[:, None] * np.array([0.0, 0.0, 1.0])
-        return out
-
-    def _as_given(self, points, bad):
-        """The invalid curves' own points, every non-finite point replaced by the
-        nearest finite one before it on its curve (after it for leading ones;
-        the origin when the curve has none): an output never holds NaN."""
-        pts = np.flatnonzero(np.repeat(bad, np.diff(self.layout.offsets)))
-        p = points[pts].copy()
-        ok = np.isfinite(p).all(axis=1)
-        if ok.all():
-            return pts, p
-        owner = self.layout.owner(pts)
-        idx = np.where(ok, np.arange(len(p)), -1)
-        fwd = np.maximum.accumulate(idx)  # last finite point so far
-        start = np.r_[0, np.flatnonzero(np.diff(owner)) + 1]
-        first_of = np.repeat(start, np.diff(np.r_[start, len(p)]))
-        fwd = np.where(fwd >= first_of, fwd, -1)  # (not from an earlier curve)
-        # leading non-finite points: the first finite point of the curve
-        nxt = np.where(ok, np.arange(len(p)), len(p))
-        nxt = np.minimum.accumulate(nxt[::-1])[::-1]
-        last_of = np.repeat(np.r_[start[1:], len(p)] - 1, np.diff(np.r_[start, len(p)]))
-        nxt = np.where(nxt <= last_of, nxt, -1)
-        src = np.where(fwd >= 0, fwd, nxt)
-        # a finite point is its own source (its last finite point so far)
-        return pts, np.where(src[:, None] >= 0, p[np.maximum(src, 0)], 0.0)
-
     def _check_enabled(self, enabled):
         if enabled is None:
             return np.ones(self.n_curves, bool)
@@ -339,16 +264,17 @@ class Solver:
         """
         t_start = time.perf_counter()
         s = self._check_settings(self._settings)
-        points = self._check_points(points)
+        points = curves.check_points(points, self.n_points)
         enabled = self._check_enabled(enabled)
         # Curves the solver cannot work with (a non-finite point, a zero-length
-        # segment) are left as they are (INVALID) and every other curve is
-        # solved: the step works on stand-ins for them.
+        # segment: core.curves) are left as they are (INVALID) and every other
+        # curve is solved: the step works on stand-ins for them.
         given = points
-        invalid, why = self._non_finite(points)
+        off = self.layout.offsets
+        invalid, why = curves.non_finite(points, off)
         reasons = [(int(np.argmax(invalid)), why)] if invalid.any() else []
         if invalid.any():
-            points = self._stand_in(given, invalid)
+            points = curves.stand_ins(given, off, invalid)
         if colliders is None:
             colliders = ()
         elif isinstance(colliders, Collider):
@@ -382,11 +308,11 @@ class Solver:
             if ctx.degenerate.any():
                 reasons.append((int(np.argmax(ctx.degenerate)), ctx.degenerate_reason))
                 invalid = invalid | ctx.degenerate
-                points = self._stand_in(given, invalid)
+                points = curves.stand_ins(given, off, invalid)
                 ctx = StepContext(layout, state, s, points, cols, growth, warm, groups)
                 waits += ctx.builds
             enabled = enabled & ~invalid
-            problems = self._problems(invalid, reasons)
+            problems = curves.invalid_report(invalid, reasons)
             seg_invalid = np.repeat(invalid, layout.nseg)
             kept = state.rows(invalid, seg_invalid) if invalid.any() else None
             timings = ctx.timings
@@ -453,7 +379,7 @@ class Solver:
         finally:
             stored()
         if invalid.any():
-            rows, own = self._as_given(given, invalid)
+            rows, own = curves.given_rows(given, off, invalid)
             out[rows] = own
             status[invalid] = Status.INVALID
             state.put_rows(invalid, seg_invalid, kept)  # their state: as before this step

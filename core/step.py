@@ -14,27 +14,12 @@ from functools import partial
 
 import numpy as np
 
-from . import rigid
+from . import curves, rigid
 from . import rotations as rot
 from . import tolerances as tol
 from .rays import both, default_threads
 from .soft import SoftSolve
 from .status import Status
-
-#: A step solves its curves in two halves, one per thread, from this many
-#: curves of work (:meth:`StepContext.in_halves`): in Soft every curve solved;
-#: in Stiff/Bend, by phase, the unrotated curves near a collider (tested at
-#: their input shape) and the curves searched (rotated ones near a collider,
-#: new contacts). Curves are independent, so each half gives the curves what
-#: the whole would, bit for bit; the halves' numpy passes and ray queries
-#: overlap (both release the GIL). Below it the per-call overhead of twice the
-#: numpy calls costs more than the overlap gains. Measured A/B in one process
-#: (``make bench``, 24 frames): Bend under the orbiting ellipsoid (7,300
-#: tested, 3,000 searched: only the test split) 39.5 ms, 38-39 split at this
-#: threshold, 46 with every phase split; under the hat (15,000 searched)
-#: 83-89 -> 79-84 ms; Soft 87-93 -> 75-78 and 201-210 -> 140-155 ms; the
-#: render groom's clearance pass (a fresh solver: all new contacts) 72 -> 65 ms.
-SPLIT_MIN_CURVES = 4096
 
 
 class StepContext:
@@ -42,7 +27,7 @@ class StepContext:
 
     def __init__(self, layout, state, settings, points, cols, growth, warm_start=True,
                  groups=None):
-        """``layout`` (:class:`core.layout.CurveLayout`) and ``state``
+        """``layout`` (:class:`core.curves.CurveLayout`) and ``state``
         (:class:`core.state.SolverState`) are the solver's: the step reads the
         state in :meth:`load_state` and writes the next one in
         :meth:`store_state`. ``cols``: ``(collider, offset)`` entries, one per
@@ -96,22 +81,17 @@ class StepContext:
             L = np.sqrt(np.einsum("ij,ij->i", self.Dseg, self.Dseg))
             self.curve_len = np.add.reduceat(L, layout.soff[:-1], dtype=np.float64)
             shortest = np.minimum.reduceat(L, layout.soff[:-1])
-        # Curves the step cannot work with (Solver.step marks them INVALID and
-        # steps again with stand-ins for them): a zero-length segment, or a
-        # length that overflows. (Non-finite points never get here.)
-        self.degenerate = ~(shortest > tol.ZERO_SEGMENT_REL * self.curve_len)
-        self.degenerate |= ~np.isfinite(self.curve_len)
+        # Curves the step cannot work with (core.curves.degenerate: Solver.step
+        # marks them INVALID and steps again with stand-ins for them): a
+        # zero-length segment, or a length that overflows. (Non-finite points
+        # never get here.)
+        self.degenerate = curves.degenerate(shortest, self.curve_len)
         self.degenerate_reason = ""
         if self.degenerate.any():
             c = int(np.argmax(self.degenerate))
-            if not np.isfinite(self.curve_len[c]):
-                self.degenerate_reason = (
-                    f"curve {c} is too large: its length overflows (coordinates ~1e19+)")
-            else:
-                a, b = int(layout.soff[c]), int(layout.soff[c + 1])
-                k = int(layout.seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
-                self.degenerate_reason = (
-                    f"curve {c} has a zero-length segment between points {k} and {k + 1}")
+            a, b = int(layout.soff[c]), int(layout.soff[c + 1])
+            k = int(layout.seg_start[a + int(np.argmin(L[c] if ns else L[a:b]))])
+            self.degenerate_reason = curves.degenerate_reason(c, self.curve_len[c], k)
             return  # (the caller steps again without them)
         if ns:
             self.roots = points.reshape(-1, ns + 1, 3)[:, 0].astype(np.float64)
@@ -288,15 +268,15 @@ class StepContext:
         else:
             seg0 = self.Dseg[self.layout.soff[idx]]
             last = self.points[self.layout.offsets[idx + 1] - 1]
-        t = rot._unit3(np.ascontiguousarray(seg0.T, dtype=np.float64))
+        t = rot.unit3(np.ascontiguousarray(seg0.T, dtype=np.float64))
         rootT = self.roots[idx].T
         chord = np.empty((3, len(idx)))
         for i in range(3):
             np.subtract(last[:, i], rootT[i], out=chord[i])
-        u = chord - rot._dot3(chord, t) * t
-        ratio = rot._norm3(u) / self.curve_len[idx]
+        u = chord - rot.dot3(chord, t) * t
+        ratio = rot.norm3(u) / self.curve_len[idx]
         B, ref, e1 = rot.curve_frames(t, u, ratio, prev)
-        return B, ref, (t, e1, rot._cross3(t, e1))
+        return B, ref, (t, e1, rot.cross3(t, e1))
 
     @staticmethod
     def _from_frame(rows, a):
@@ -677,13 +657,13 @@ class StepContext:
 
     def in_halves(self, fn, work, *parts, **kw):
         """``fn(self, *parts, **kw)``; with ``work`` of at least
-        :data:`SPLIT_MIN_CURVES` curves and two threads or more, as two calls on
+        :data:`tolerances.SPLIT_MIN_CURVES` curves and two threads or more, as two calls on
         two threads, each with every other curve of each of ``parts`` (curve
         index arrays) and a shallow copy of this context: the per-curve arrays
         are shared (the halves write disjoint curves in place), the ray count
         and the thread count (one each: the halves are the parallelism) their
         own. ``fn`` must give each curve what it gives it in the whole."""
-        if self.threads < 2 or work < SPLIT_MIN_CURVES:
+        if self.threads < 2 or work < tol.SPLIT_MIN_CURVES:
             fn(self, *parts, **kw)
             return
         halves = [copy.copy(self) for _ in range(2)]

@@ -174,3 +174,77 @@ SPLINE_MARGIN_NOISE = 1e-5
 #: moves by a few ulps keeps its value, so the offset shells it selects are not
 #: rebuilt every frame.
 SPLINE_MARGIN_STEPS = 16
+
+# ------------------------------------------------------------------------------
+# Thresholds of work. Each decides between two ways of computing the same thing
+# (two threads or one, one structure or another): only the time depends on them,
+# never a result (the tests force each way and compare the bits).
+
+#: A step solves its curves in two halves, one per thread, from this many
+#: curves of work (``StepContext.in_halves``): in Soft every curve solved;
+#: in Stiff/Bend, by phase, the unrotated curves near a collider (tested at
+#: their input shape) and the curves searched (rotated ones near a collider,
+#: new contacts). Curves are independent, so each half gives the curves what
+#: the whole would, bit for bit; the halves' numpy passes and ray queries
+#: overlap (both release the GIL). Below it the per-call overhead of twice the
+#: numpy calls costs more than the overlap gains. Measured A/B in one process
+#: (``make bench``, 24 frames): Bend under the orbiting ellipsoid (7,300
+#: tested, 3,000 searched: only the test split) 39.5 ms, 38-39 split at this
+#: threshold, 46 with every phase split; under the hat (15,000 searched)
+#: 83-89 -> 79-84 ms; Soft 87-93 -> 75-78 and 201-210 -> 140-155 ms; the
+#: render groom's clearance pass (a fresh solver: all new contacts) 72 -> 65 ms.
+SPLIT_MIN_CURVES = 4096
+
+#: Per-frame stages of the fur pipeline (Fur Attach, the render groom's
+#: deformation, wind) run in two halves on two threads (``core.rays.in_two``)
+#: from this many items (curves, guides). The items are independent, so the
+#: halves give what the whole gives, bit for bit; their long numpy passes
+#: release the GIL and overlap. Below it the halves' own overhead (a hand-over
+#: to the ray pool, twice the numpy calls) is more than they save. Measured (2
+#: cores, 50,000 render curves, 7,500 guides): the groom's blend 35 -> 21 ms,
+#: Fur Attach 9.8 -> 5.7 ms. (The guides' root fits, 2.3 ms of short passes,
+#: stay on one thread: two only interleave them.)
+SPLIT_MIN_ITEMS = 2048
+
+#: Below this many rays per thread a ray batch is not split over threads
+#: (``core.rays``: the hand-over costs more than the rays).
+MIN_RAYS_PER_THREAD = 4096
+
+#: The render groom's clearance pass gathers the curves that may touch a
+#: collider into a curve set of their own; above this share of all curves it
+#: solves them all instead (gathering would cost more than it saves).
+CLEARANCE_SOLVE_ALL = 0.7
+
+#: Fur Collider Distance: segments whose search box spans more grid cells than
+#: this take the lower-bound path (they are far from the collider compared to
+#: the cells).
+DISTANCE_MAX_CELLS = 512
+
+#: Fur Collider Distance: node fields (the default, fast path) have at most
+#: this many nodes; a collider that would need more (huge next to the curves)
+#: takes the exact search.
+DISTANCE_NODE_MAX = 1 << 23
+
+#: Closest points on a mesh: a query whose search box grows past this many
+#: cells continues on a coarser grid.
+CLOSEST_MAX_CELLS = 512
+
+#: Triangle grids (``core.proximity``): triangles spanning more grid cells than
+#: this are tested by every search instead of being listed in their cells.
+GRID_BIG_CELLS = 4096
+
+#: Triangle grids with at most this many cells get a dense cell -> triangles
+#: lookup (a sorted search above it).
+GRID_DENSE_CELLS = 1 << 23
+
+# ------------------------------------------------------------------------------
+# Tolerances of the fur pipeline and the mesh repairs.
+
+#: Fur Collider Distance: a collider matrix whose singular values agree to this
+#: (relative) is a rotation and uniform scale (float32 rounding of a Blender
+#: matrix included): distances in the collider's space scale to world units.
+SIMILARITY_REL = 1e-5
+
+#: Above this many closed parts (a scatter of pebbles) ``core.meshfix`` does not
+#: look for parts nested in others: every closed part faces outward.
+NEST_MAX_PARTS = 64

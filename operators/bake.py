@@ -209,7 +209,7 @@ def resume_inputs_match(ob, directory, f, scene) -> bool:
 def resume_frame(ob, directory) -> int | None:
     """Last frame of a contiguous, matching partial bake (None: start over)."""
     s = ob.furcollide
-    if motion.needs_history(s.motion):
+    if motion.values(s.motion).needs_history:
         return None  # jiggle needs the roots of every frame since the start: start over
     have = set(framecache.list_frames(directory))
     fp = settings_fingerprint(ob)

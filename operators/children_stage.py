@@ -44,13 +44,14 @@ import bpy
 import numpy as np
 
 from ..core import Status, framecache, pipeline
+from ..core.curves import subset
 from . import bridge, compat, registry
 from .clock import clock
 from .colliders import collider_list, in_scene
 from .dependencies import DEPENDENCY_MODIFIER
 from .frame_inputs import shown
 from .frame_outputs import hide_in_viewport
-from .groom_stage import clearance_settings, curve_subset
+from .groom_stage import clearance_settings
 
 #: The modifier FurCollide puts on the output, right after its dependency modifier,
 #: that passes the guides on to the artist's stack only while FurCollide opens it.
@@ -455,7 +456,7 @@ def clear_children(s, world, offsets, colliders):
         pts, status, n_fixed = pipeline.clearance_pass(world, offsets, colliders,
                                                        settings=settings, fallback=fallback)
         return np.asarray(pts, np.float32), status, n_fixed
-    rows, sub = curve_subset(offsets, ~short)
+    rows, sub = subset(offsets, ~short)
     out = world.copy()
     status[short] = Status.INVALID
     if len(sub) > 1:

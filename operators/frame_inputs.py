@@ -22,7 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import framecache
+from ..core.pipeline.frame import before_collision
 from . import bridge, keyed, maps, motion
+from .clock import clock
 from .colliders import collider_objects, read_collider_inputs, renders_otherwise
 from .fur_attach import attach_input
 from .setup import signature, structure, structure_change
@@ -104,16 +106,18 @@ def read_inputs(setup, attach=True) -> FrameInputs:
 
 
 def prepare_input(setup, inp) -> None:
-    """Record the roots for jiggle and apply the motion that runs before collision."""
-    m, f, rt = setup.motion, inp.frame, setup.rt
-    if motion.needs_history(m) and f >= setup.s.frame_start:
+    """Record the roots for jiggle and apply the motion that runs before collision
+    (:func:`core.pipeline.frame.before_collision`)."""
+    m, f, rt = motion.values(setup.motion), inp.frame, setup.rt
+    if m.needs_history and f >= setup.s.frame_start:
         # (before the start frame the hair counts as at rest: frames viewed there
         # must not change a bake, which starts at the start frame)
         rt.history.record(f, inp.points[inp.offsets[:-1]])
-    moved = motion.apply_motion(m, "INPUT", inp.points, inp.offsets, f, setup.fps, rt.history,
-                                setup.s.core_threads)
+    with clock.timing("motion"):
+        moved = before_collision(m, inp.points, inp.offsets, f, setup.fps, rt.history,
+                                 setup.s.core_threads)
     if moved is not None:
-        inp.points = np.asarray(moved, np.float32)
+        inp.points = moved
         inp.local = None
 
 

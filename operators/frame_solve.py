@@ -1,51 +1,25 @@
-"""One frame's solve: :func:`solve_frame`, the single path of playback, bake, CLI and demo.
+"""One frame's solve: :func:`solve_frame`, the single path of playback, bake and CLI.
 
-``solve_frame(setup, inputs) -> FrameResult`` steps the setup's core ``Solver`` on the
-frame's inputs (world curves, enable mask, colliders, growth surface), then runs the
-stages after collision (wind and jiggle limited by the Region of Influence, the collider
-distance attribute; :func:`motion.output_stage`). It reads no Blender data and writes
+``solve_frame(setup, inputs) -> FrameResult`` runs the core's frame sequence
+(:func:`core.pipeline.frame.solve`: the setup's ``Solver`` on the frame's inputs, then the
+stages after collision: wind and jiggle limited by the Region of Influence, the collider
+distance attribute) with the setup's motion settings read into plain values. It writes
 nothing: the frame rules (:mod:`.frame_rules`) and the bake (:mod:`.bake`) decide what
-to solve and keep, and ``scripts/demo.py`` calls it with :meth:`setup.Setup.for_script`.
+to solve and keep. Scripts run the same sequence without Blender objects
+(:class:`core.pipeline.frame.Shot`, ``scripts/demo.py``).
 """
 
 from __future__ import annotations
 
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import Status, framecache, splines
+from ..core import splines
+from ..core.pipeline import frame
+from ..core.pipeline.frame import FrameResult, frame_stats  # noqa: F401 (the glue's names)
 from . import motion
 from .clock import clock
-
-
-@dataclass
-class FrameResult:
-    """What :func:`solve_frame` returns.
-
-    Attributes
-    ----------
-    points : (P, 3) float32 ndarray
-        The frame's final curves (world), after the stages.
-    status : (C,) int8 ndarray
-        Core ``Status`` code per curve.
-    attributes : dict
-        Per-point attributes for the output (name -> (P,) array).
-    changed : (P,) bool ndarray
-        The points that differ from the input before motion (``inputs.raw``).
-    stats : dict
-        The panel's statistics (:func:`frame_stats`).
-    problems : list of str
-        What is wrong with the curves the core marked INVALID (``StepResult.problems``).
-    """
-
-    points: np.ndarray
-    status: np.ndarray
-    attributes: dict = field(default_factory=dict)
-    changed: np.ndarray | None = None
-    stats: dict = field(default_factory=dict)
-    problems: list = field(default_factory=list)
 
 
 def solve_frame(setup, inputs) -> FrameResult:
@@ -55,8 +29,7 @@ def solve_frame(setup, inputs) -> FrameResult:
     ----------
     setup : setup.Setup
         Its ``solver`` holds the previous frame's state (or was reset for the start
-        frame); its ``motion`` settings (None: no stage), ``fps`` and ``history`` drive
-        the stages.
+        frame); its ``motion`` settings, ``fps`` and ``history`` drive the stages.
     inputs : frame_inputs.FrameInputs
         ``points``, ``offsets``, ``enabled``, ``colliders``, ``growth`` and ``frame``.
 
@@ -65,20 +38,16 @@ def solve_frame(setup, inputs) -> FrameResult:
     Exception
         Any error of the core or a stage (the solver's state is then unknown).
     """
+    m = motion.values(setup.motion)
     with drawn_clearance(setup.solver, inputs):
-        res = setup.solver.step(inputs.points, inputs.colliders, growth=inputs.growth,
-                                enabled=inputs.enabled)
-    clock.add("collide", res.timings.get("total", 0.0))
-    m = setup.motion
-    if m is None or not m.active:
-        points, attributes = res.points, {}
-    else:
-        points, attributes = motion.output_stage(m, res.points, inputs.offsets, inputs.frame,
-                                                 setup.fps, setup.history, inputs.colliders,
-                                                 setup.s.core_threads)
-    stats = frame_stats(res.status, inputs.frame, res.timings.get("total", 0.0))
-    return FrameResult(points, res.status, attributes,
-                       framecache.rows_differ(points, inputs.raw), stats, list(res.problems))
+        result = frame.solve(setup.solver, inputs.points, inputs.offsets, inputs.frame,
+                             inputs.colliders, growth=inputs.growth, enabled=inputs.enabled,
+                             motion=m, fps=setup.fps if m.active else 24.0,
+                             history=setup.history, threads=setup.s.core_threads,
+                             raw=inputs.raw)
+    for stage, ms in result.timings.items():
+        clock.add(stage, ms)
+    return result
 
 
 def drawn_margin(settings, inputs) -> np.ndarray:
@@ -154,12 +123,3 @@ def drawn_clearance(solver, inputs):
         yield
     finally:
         solver.settings = settings
-
-
-def frame_stats(status, frame, solve_ms=0.0, source="solved") -> dict:
-    """Panel statistics: the number of curves per core ``Status`` (named in lower case;
-    free curves are not counted), the frame, the solve time and where it came from."""
-    counts = np.bincount(status.astype(np.intp, copy=False), minlength=len(Status))
-    stats = {s.name.lower(): int(counts[s]) for s in Status if s != Status.FREE}
-    stats.update(frame=int(frame), solve_ms=float(solve_ms), source=source)
-    return stats

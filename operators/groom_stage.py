@@ -1,9 +1,10 @@
 """The render groom stage: a dense groom follows the collided guides (paper section 2).
 
 ``furcollide.groom_bind`` (:mod:`.ops_groom`) binds an existing render groom to a setup's
-guides (:class:`GroomBinding`, saved on the groom output object). Every frame the frame
+guides (:class:`core.pipeline.GroomBinding`, saved on the groom output object: this module
+keeps its storage, :func:`store_groom` and :func:`load_groom`). Every frame the frame
 rules show, :func:`run` deforms the render curves with the guides just written
-(:func:`core.pipeline.deform_groom`), then the **clearance pass**
+(:meth:`core.pipeline.GroomBinding.deform`), then the **clearance pass**
 (:func:`core.pipeline.clearance_pass`) frees the render curves that still cross a
 collider, and writes the result with its ``furcollide_status`` and ``furcollide_color``
 (as the guides' output). What the stage does, frame by frame:
@@ -37,7 +38,7 @@ import numpy as np
 
 from .. import core
 from ..core import Status, framecache, pipeline
-from ..core.pipeline._curves import as_given, bad_curves
+from ..core.pipeline import GroomBinding
 from . import bridge, registry
 from .clock import clock
 from .colliders import collider_list, in_scene
@@ -533,183 +534,22 @@ def groom_digest(groom) -> int:
 
 
 # -------------------------------------------------------------- binding
-class GroomBinding:
-    """A render groom bound to a setup's guides (see ``furcollide.groom_bind``).
+def build_binding(render_ref, render_offsets, guides_ref, guide_offsets, k, surface=None,
+                  groom=None):
+    """:meth:`core.pipeline.GroomBinding.build` with the render groom ``groom`` named in
+    its messages and its name and curves recorded (:func:`groom_changes`).
 
-    Render curves the solver cannot work with are set aside (``invalid``): they
-    are shown as they are (moved rigidly with their Surface triangle when the roots
-    are bound to it), ``Status.INVALID``. So are guides: the render curves follow
-    the others.
+    Returns (arrays for :func:`store_groom`, notes); ValueError when no render curve
+    (or no guide) can be used.
     """
-
-    def __init__(self, arrays: dict):
-        self.render_ref = np.asarray(arrays["render_ref"], np.float64)
-        self.render_offsets = np.asarray(arrays["render_offsets"], np.int64)
-        self.guides_ref = np.asarray(arrays["guides_ref"], np.float64)
-        self.guide_offsets = np.asarray(arrays["guide_offsets"], np.int64)
-        R, G = len(self.render_offsets) - 1, len(self.guide_offsets) - 1
-        self.invalid = np.asarray(arrays.get("invalid", np.zeros(R, bool)), bool)
-        self.guides_used = np.asarray(arrays.get("guides_used", np.ones(G, bool)), bool)
-        self.weights = pipeline.GroomWeights.from_arrays(
-            {"index": arrays["weights_index"], "weight": arrays["weights_weight"]}
-        )
-        self.roots = None  # Binding of the valid render roots to the Surface (optional)
-        self.fixed = None  # Binding of the invalid render curves to the Surface (optional)
-        self.surface_key = None
-        if "root_face" in arrays:
-            self.roots = pipeline.Binding.from_arrays(
-                {k[5:]: arrays[k] for k in arrays if k.startswith("root_")}
-            )
-            self.surface_key = tuple(int(k) for k in arrays["surface_key"])
-        if "fixed_face" in arrays:
-            self.fixed = pipeline.Binding.from_arrays(
-                {k[6:]: arrays[k] for k in arrays if k.startswith("fixed_")}
-            )
-        self.groom_name = str(arrays["groom_name"]) if "groom_name" in arrays else ""
-        self.groom_digest = (int(np.asarray(arrays["groom_digest"]).view(np.uint64)[0])
-                             if "groom_digest" in arrays else None)
-        self.groom_counts = tuple(int(k) for k in arrays.get("groom_counts", (0, 0)))
-        self.guides_k = int(arrays["guides_k"]) if "guides_k" in arrays else 0
-        #: What Bind Groom set aside (shown every frame while it is so), or ''.
-        self.note = str(arrays["note"]) if "note" in arrays else ""
-        self._rows_v, self._off_v = self.subset(~self.invalid)
-        self._rows_i, _ = self.subset(self.invalid)
-        self._g_rows, self._g_off = curve_subset(self.guide_offsets, self.guides_used)
-        self._deformer = None
-
-    def subset(self, which):
-        """(rows (k,), offsets) of the render curves ``which`` (bool (R,))."""
-        return curve_subset(self.render_offsets, which)
-
-    @staticmethod
-    def build(render_ref, render_offsets, guides_ref, guide_offsets, k, surface=None,
-              groom=None):
-        """Bind (all world space, reference pose).
-
-        Parameters
-        ----------
-        render_ref : (P, 3) float array
-        render_offsets : (R+1,) int array
-        guides_ref : (Q, 3) float array
-        guide_offsets : (G+1,) int array
-        k : int
-            Guides per Curve.
-        surface : (V, F, key) or None
-            The Surface (world) the render roots stay on, and its topology key.
-        groom : bpy.types.Object, optional
-            The render groom (its name and curves are recorded: :func:`groom_changes`).
-
-        Returns
-        -------
-        arrays : dict
-            What :func:`store_groom` saves.
-        notes : list of str
-            The curves set aside (invalid render curves, guides), naming the first.
-
-        Raises
-        ------
-        ValueError
-            No render curve (or no guide) can be used.
-        """
-        render_offsets = np.asarray(render_offsets, np.int64)
-        guide_offsets = np.asarray(guide_offsets, np.int64)
-        bad_r, why_r = bad_curves(render_ref, render_offsets)
-        bad_g, why_g = bad_curves(guides_ref, guide_offsets)
-        name = f"'{groom.name}'" if groom is not None else "the render groom"
-        if bad_r.all():
-            raise ValueError(f"No curve of {name} can be used: {why_r}")
-        if bad_g.all():
-            raise ValueError(f"No guide can be followed: {why_g}")
-        render_ref = as_given(render_ref, render_offsets, bad_r)
-        guides_ref = as_given(guides_ref, guide_offsets, bad_g)
-        rows_v, off_v = curve_subset(render_offsets, ~bad_r)
-        g_rows, g_off = curve_subset(guide_offsets, ~bad_g)
-        weights = pipeline.bind_groom(render_ref[rows_v][off_v[:-1]],
-                                      guides_ref[g_rows][g_off[:-1]],
-                                      k=min(int(k), len(g_off) - 1))
-        arrays = {
-            "render_ref": render_ref, "render_offsets": render_offsets,
-            "guides_ref": guides_ref, "guide_offsets": guide_offsets,
-            "weights_index": weights.index, "weights_weight": weights.weight,
-            "invalid": bad_r, "guides_used": ~bad_g, "guides_k": np.int64(k),
-        }
-        if surface is not None:
-            V, F, key = surface
-            b = pipeline.bind(render_ref[rows_v], off_v, V, F, drop_degenerate=True)
-            arrays.update({"root_" + n: v for n, v in b.arrays().items()})
-            if bad_r.any():
-                rows_i, off_i = curve_subset(render_offsets, bad_r)
-                b = pipeline.bind(render_ref[rows_i], off_i, V, F, drop_degenerate=True)
-                arrays.update({"fixed_" + n: v for n, v in b.arrays().items()})
-            arrays["surface_key"] = np.asarray(key, np.int64)
-        if groom is not None:
-            offs = bridge.curve_offsets(groom.data)
-            arrays["groom_name"] = np.array(groom.name)
-            arrays["groom_digest"] = np.array([groom_digest(groom)], np.uint64).view(np.int64)
-            arrays["groom_counts"] = np.array([len(offs) - 1, int(offs[-1])], np.int64)
-        notes = []
-        if bad_r.any():
-            n = int(bad_r.sum())
-            notes.append(
-                f"{n} curve{'s' if n > 1 else ''} of {name} cannot be solved ({why_r}): "
-                f"{'they are' if n > 1 else 'it is'} shown as {'they are' if n > 1 else 'it is'},"
-                " in yellow (Invalid). Fix the groom's curves and press Bind Groom again")
-        if bad_g.any():
-            n = int(bad_g.sum())
-            notes.append(f"{n} guide{'s' if n > 1 else ''} cannot be followed ({why_g}): "
-                         "the render curves follow the others")
-        if notes:
-            arrays["note"] = np.array("Render groom: " + "; ".join(notes))
-        return arrays, notes
-
-    def deform(self, guides_now, surface_V=None, threads=None):
-        """The render curves following ``guides_now`` (world), on ``threads``
-        threads (None: all CPUs; the same result for any count).
-
-        Returns
-        -------
-        points : (P, 3) float64 ndarray
-        status : (R,) int8 ndarray
-            ``Status.INVALID`` for the curves set aside (and any the guides made
-            non-finite this frame: they are shown at their reference shape), else FREE.
-        """
-        roots = None
-        if self.roots is not None and surface_V is not None:
-            roots = self.roots.roots(surface_V)
-        if self._deformer is None:
-            self._deformer = pipeline.GroomDeformer(
-                self.render_ref[self._rows_v], self._off_v, self.guides_ref[self._g_rows],
-                self._g_off, self.weights)
-        gn = np.asarray(guides_now, np.float64)[self._g_rows]
-        moved = self._deformer.deform(gn, roots, threads)
-        status = np.where(self.invalid, Status.INVALID, Status.FREE).astype(np.int8)
-        if len(self._rows_i):
-            points = self.render_ref.copy()
-            points[self._rows_v] = moved
-            if self.fixed is not None and surface_V is not None:
-                points[self._rows_i] = self.fixed.apply(surface_V, threads)
-        else:  # (every curve is valid: the deformer's result as it is)
-            points = np.asarray(moved, np.float64)
-        if not np.isfinite(points.sum()):  # (a guide degenerated this frame: never NaN)
-            finite = np.isfinite(points).all(axis=1)
-            R = len(self.render_offsets) - 1
-            curve = np.repeat(np.arange(R), np.diff(self.render_offsets))
-            bad = np.zeros(R, bool)
-            bad[curve[~finite]] = True
-            rows, _ = self.subset(bad)
-            points[rows] = self.render_ref[rows]
-            status[bad] = Status.INVALID
-        return points, status
-
-
-def curve_subset(offsets, which):
-    """(rows, offsets) of the curves ``which`` (bool (C,)) of the layout ``offsets``:
-    the points of those curves, and their layout as a curve set of their own."""
-    idx = np.flatnonzero(which)
-    sizes = np.diff(offsets)[idx]
-    rows = np.repeat(offsets[idx] - (np.cumsum(sizes) - sizes), sizes) + np.arange(
-        int(sizes.sum()))
-    return rows, np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    name, record = "the render groom", None
+    if groom is not None:
+        offs = bridge.curve_offsets(groom.data)
+        name = f"'{groom.name}'"
+        record = {"groom_name": groom.name, "groom_digest": groom_digest(groom),
+                  "groom_counts": (len(offs) - 1, int(offs[-1]))}
+    return GroomBinding.build(render_ref, render_offsets, guides_ref, guide_offsets, k,
+                              surface, name=name, record=record)
 
 
 def store_groom(out, arrays: dict) -> None:

@@ -17,7 +17,7 @@ from .colliders import in_scene
 from .dependencies import update_dependencies
 from .frame_inputs import read_inputs
 from .frame_outputs import hide_in_viewport
-from .groom_stage import GroomBinding, remove_groom, store_groom
+from .groom_stage import build_binding, remove_groom, store_groom
 from .ops_common import (
     SetupOperator,
     active_setup,
@@ -83,7 +83,7 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
             # render roots stay exactly on the shared Surface (Fur Attach of the roots)
             V, F = bridge.surface_mesh_world(surf, dg)
             surface = (V, F, bridge.mesh_topology_key(surf.evaluated_get(dg).data))
-        arrays, notes = GroomBinding.build(
+        arrays, notes = build_binding(
             render_ref, roff, inp.points, inp.offsets, g.guides, surface, groom=groom
         )
         out = g.output

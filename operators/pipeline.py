@@ -28,10 +28,10 @@ from bpy.props import (
 )
 from bpy.types import Operator, PropertyGroup
 
+from ..core.pipeline.frame import DISTANCE_ATTRIBUTE
 from . import bridge, children_stage, compat
 from .colliders import collider_objects
 from .frame_outputs import write_attributes
-from .motion import DISTANCE_ATTRIBUTE
 from .ops_common import (
     SetupOperator,
     active_setup,

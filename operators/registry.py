@@ -32,8 +32,8 @@ import bpy
 
 from .. import core
 from ..core import framecache
+from ..core.pipeline.frame import RootHistory
 from . import bridge
-from .motion import RootHistory
 
 
 @dataclass

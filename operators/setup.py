@@ -14,6 +14,7 @@ import bpy
 
 from .. import core
 from ..core import framecache
+from ..core.pipeline.frame import RootHistory
 from . import keyed, motion, registry
 from .colliders import collider_objects, in_scene
 from .maps import MAPPED
@@ -24,9 +25,8 @@ class Setup:
 
     Parameters
     ----------
-    ob : bpy.types.Object or None
-        The source hair object (None for a script without Blender objects:
-        :meth:`for_script`).
+    ob : bpy.types.Object
+        The source hair object.
     scene : bpy.types.Scene
         The scene being evaluated (its ``frame_current`` / ``frame_subframe``).
     depsgraph : bpy.types.Depsgraph
@@ -50,14 +50,6 @@ class Setup:
         self.rt = registry.get_runtime(ob) if rt is None else rt
         self.baked = None
 
-    @classmethod
-    def for_script(cls, solver) -> Setup:
-        """A setup without Blender objects around a core ``Solver`` (``scripts/demo.py``'s
-        core path): :func:`frame_solve.solve_frame` runs the solver and no stage."""
-        rt = registry.Runtime("script")
-        rt.solver = solver
-        return cls(None, None, None, rt)
-
     @property
     def s(self):
         """The setup's properties (``ob.furcollide``)."""
@@ -77,15 +69,14 @@ class Setup:
         return self.rt.solver
 
     @property
-    def history(self) -> motion.RootHistory:
+    def history(self) -> RootHistory:
         """The roots of the frames seen (jiggle)."""
         return self.rt.history
 
     @property
     def motion(self):
-        """The motion settings (wind, jiggle, Region of Influence, distance attribute),
-        None without a Blender object."""
-        return None if self.ob is None else self.ob.furcollide.motion
+        """The motion settings (wind, jiggle, Region of Influence, distance attribute)."""
+        return self.ob.furcollide.motion
 
     @property
     def fps(self) -> float:

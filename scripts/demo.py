@@ -239,40 +239,15 @@ def counts_of(status):
     return {int(v): int(c) for v, c in zip(vals, n, strict=True)}
 
 
-def addon_package():
-    """The add-on's package: the registered one, else this checkout imported as a plain
-    package (its modules import ``bpy``; nothing is registered)."""
-    import importlib
-    import importlib.util
-
-    if ADDON in sys.modules:
-        return sys.modules[ADDON]
-    name = "furcollide_checkout"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(
-            name, ROOT / "__init__.py", submodule_search_locations=[str(ROOT)]
-        )
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return importlib.import_module(name)
-
-
 def collide_with_core(bpy, demo, frame_end):
-    """Solve frame by frame with the core, through the add-on's own per-frame solve
-    (``operators.frame_solve.solve_frame``, the one playback and bakes use) but without
-    its operators or frame handler; return (outputs, per-frame points)."""
-    import importlib
-
+    """Solve frame by frame with the core's frame sequence (``core.pipeline.Shot``: the
+    stages playback and bakes run, from plain arrays), without the add-on's operators
+    or frame handler; return (outputs, per-frame points)."""
     import demo_scene as ds
     import numpy as np
 
-    package = addon_package().__name__
-    core = importlib.import_module(package + ".core")
-    Collider, Settings, Solver = core.Collider, core.Settings, core.Solver
-    Setup = importlib.import_module(package + ".operators.setup").Setup
-    FrameInputs = importlib.import_module(package + ".operators.frame_inputs").FrameInputs
-    solve_frame = importlib.import_module(package + ".operators.frame_solve").solve_frame
+    from core import Collider, Settings
+    from core.pipeline import Shot
 
     scene = demo.scene
     setups = []
@@ -292,9 +267,8 @@ def collide_with_core(bpy, demo, frame_end):
         if surf is not None:
             V, F = ds.mesh_world(surf)
             growth = Collider(V, F, matrix=np.array(surf.matrix_world), name=surf.name)
-        settings = Settings(**SETTINGS[kind])
-        setup = Setup.for_script(Solver(ds.curve_offsets(hair), settings))
-        setups.append((hair, out, colliders, cols, growth, setup))
+        shot = Shot(ds.curve_offsets(hair), Settings(**SETTINGS[kind]))
+        setups.append((hair, out, colliders, cols, growth, shot))
 
     stats = Stats([hair.name for hair, *_ in setups])
     stats.header()
@@ -302,15 +276,13 @@ def collide_with_core(bpy, demo, frame_end):
     for f in range(scene.frame_start, frame_end + 1):
         scene.frame_set(f)
         row, pts_f = [], []
-        for hair, _out, colliders, cols, growth, setup in setups:
+        for hair, _out, colliders, cols, growth, shot in setups:
             for ob, col in zip(colliders, cols, strict=True):
                 col.matrix = np.array(ob.matrix_world)  # rigid motion: no BVH rebuild
             if growth is not None:
                 growth.matrix = np.array(hair.data.surface.matrix_world)
             t0 = time.perf_counter()
-            inputs = FrameInputs(ds.hair_points(hair), ds.curve_offsets(hair), frame=f,
-                                 colliders=cols, growth=growth)
-            res = solve_frame(setup, inputs)
+            res = shot.frame(f, ds.hair_points(hair), cols, growth=growth)
             ms = (time.perf_counter() - t0) * 1e3
             row.append((counts_of(res.status), ms))
             pts_f.append(res.points)

@@ -9,7 +9,9 @@ Public API (paper names, see README "The fur pipeline")::
         collider_distance, region_of_influence,          # Collider Distance, RoI
         bind_groom, GroomWeights, deform_groom,          # render groom follows guides
         GroomDeformer,                                   #   (its bind-time work, explicit)
+        GroomBinding,                                    #   a whole bound groom, per frame
         clearance_pass,                                  # final clearance (FurCollide)
+        Shot, Motion, RootHistory,                       # a shot, frame by frame
     )
 
 Curves use Blender's layout: ``points`` (P, 3) and ``offsets`` (C+1,),
@@ -25,7 +27,16 @@ from .distance import (
     segment_mesh_distance,
     segment_triangle_distance,
 )
-from .groom import GroomDeformer, GroomWeights, bind_groom, clearance_pass, deform_groom, knn
+from .frame import FrameResult, Motion, RootHistory, Shot
+from .groom import (
+    GroomBinding,
+    GroomDeformer,
+    GroomWeights,
+    bind_groom,
+    clearance_pass,
+    deform_groom,
+    knn,
+)
 from .influence import region_of_influence
 from .motion import jiggle, spring_impulse_response, wind, wind_noise
 from .sampler import dart_throwing, neighbor_pairs, sample_guides
@@ -33,8 +44,13 @@ from .sampler import dart_throwing, neighbor_pairs, sample_guides
 __all__ = [
     "surface_values",
     "Binding",
+    "GroomBinding",
     "GroomDeformer",
     "GroomWeights",
+    "FrameResult",
+    "Motion",
+    "RootHistory",
+    "Shot",
     "bind",
     "bind_groom",
     "clearance_pass",

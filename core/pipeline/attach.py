@@ -18,10 +18,10 @@ import numpy as np
 from .. import rotations as rot
 from .. import tolerances as tol
 from ..closest import barycentric, closest_faces
+from ..curves import check_curves, uniform_size
 from ..errors import ColliderError, InputError
-from ..rays import in_two
-from . import _curves
-from ._curves import check_curves, check_surface, degenerate_faces, thread_count, uniform_size
+from ..mesh import check_surface, degenerate_faces
+from ..rays import in_two, thread_count
 
 
 def _frames(V, F, face):
@@ -61,14 +61,14 @@ def _frame_axes(T):
     a, b, c = Tc[:, :, 0], Tc[:, :, 1], Tc[:, :, 2]
     e = b - a
     ca = c - a
-    n = rot._cross3(e, ca)
-    le = np.sqrt(rot._dot3(e, e))
-    ln = np.sqrt(rot._dot3(n, n))
-    scale = np.maximum(np.sqrt(rot._dot3(ca, ca)), le)
+    n = rot.cross3(e, ca)
+    le = np.sqrt(rot.dot3(e, e))
+    ln = np.sqrt(rot.dot3(n, n))
+    scale = np.maximum(np.sqrt(rot.dot3(ca, ca)), le)
     ok = (le > 0) & (ln > tol.ATTACH_FRAME_MIN_SIN * scale**2)
     e /= np.where(ok, le, 1.0)
     n /= np.where(ok, ln, 1.0)
-    t = rot._cross3(n, e)
+    t = rot.cross3(n, e)
     return (e, t, n), ok
 
 
@@ -213,7 +213,7 @@ class Binding:
         V_now : (n, 3) array_like of float
             The deformed growth surface (same topology as at bind time).
         threads : int or None, default None
-            Threads to use (None: every CPU). From ``_curves.SPLIT_MIN_ITEMS``
+            Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS``
             curves of one CV count the curves are moved in two halves on two
             threads; the result is the same bit for bit.
 
@@ -260,7 +260,7 @@ class Binding:
                 o += O[:, i, None]
             out[a:b] = oc.transpose(1, 2, 0)
 
-        in_two(move, C, threads, _curves.SPLIT_MIN_ITEMS)
+        in_two(move, C, threads, tol.SPLIT_MIN_ITEMS)
         return out.reshape(-1, 3)
 
     @cached_property

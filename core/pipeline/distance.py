@@ -39,18 +39,17 @@ from __future__ import annotations
 import numpy as np
 
 from .. import rotations as rot
+from .. import tolerances as tol
 from ..closest import closest_on_triangles
 from ..collider import Collider
+from ..curves import check_curves, layout, row_norm
 from ..errors import InputError
+from ..mesh import check_surface
 from ..proximity import TriangleGrid as _TriGrid
 from ..proximity import box_cells as _box_cells
 from ..proximity import plane_crosses_cells as _plane_crosses_cells
 from ..proximity import planes as _planes
-from ._curves import check_curves, check_surface, layout, row_norm
 
-#: Segments whose search box spans more grid cells than this take the
-#: lower-bound path (they are far from the collider compared to the cells).
-_MAX_CELLS = 512
 #: Sub-pieces of a segment in the distance-field lower bound.
 _FAR_PIECES = 8
 #: Cells along the longest side of the lower-bound distance field, at most.
@@ -67,9 +66,6 @@ _NEAR_WINDOW = 8
 _NEAR_PIECES = 2
 #: Pair (segment, triangle) entries per chunk of the exact search.
 _CHUNK_PAIRS = 400_000
-#: Node fields (the default, fast path) have at most this many nodes; a
-#: collider that would need more (huge next to the curves) takes the exact search.
-_NODE_MAX = 1 << 23
 #: Node field windows (cells beyond its band) are multiples of this, at most _NODE_WINDOW_MAX.
 _NODE_WINDOW_STEP = 8
 _NODE_WINDOW_MAX = 32
@@ -472,7 +468,7 @@ class _MeshIndex:
         if cap is not None and np.isfinite(cap):
             w = min(w, _NODE_WINDOW_STEP * int(np.ceil((cap / h + 6) / _NODE_WINDOW_STEP)))
         dims = np.floor((self.hi - self.lo + 2 * (w + 2) * h) / h) + 2
-        if float(np.prod(dims)) > _NODE_MAX:
+        if float(np.prod(dims)) > tol.DISTANCE_NODE_MAX:
             return None
         return h, w
 
@@ -530,11 +526,6 @@ class _MeshIndex:
         return np.maximum(lb.reshape(S, pieces) - (seg / (2 * pieces))[:, None], 0.0).min(1)
 
 
-#: A matrix whose singular values agree to this (relative) is a rotation and
-#: uniform scale (float32 rounding of a Blender matrix included).
-_SIMILARITY_TOL = 1e-5
-
-
 def _similarity(M3):
     """Smallest singular value ``s`` of ``M3`` if it is a similarity, else None.
 
@@ -542,7 +533,7 @@ def _similarity(M3):
     world distance, and is within the matrix's (tiny) anisotropy of it.
     """
     sv = np.linalg.svd(M3, compute_uv=False)
-    if sv[-1] > 0 and sv[0] <= sv[-1] * (1 + _SIMILARITY_TOL):
+    if sv[-1] > 0 and sv[0] <= sv[-1] * (1 + tol.SIMILARITY_REL):
         return float(sv[-1])
     return None
 
@@ -580,7 +571,7 @@ def segment_mesh_distance(A, B, V, F, max_distance=None):
 
     An expanding search over a grid of the triangles finds the exact
     distance of segments near the mesh; segments whose search box would
-    span more than ``_MAX_CELLS`` grid cells (far from the mesh compared to
+    span more than ``tolerances.DISTANCE_MAX_CELLS`` grid cells (far from the mesh compared to
     its triangles) get a conservative lower bound from distance fields of
     the mesh's occupied cells instead (64 cells along the mesh's box, and
     along that box grown by 0.5 and 2 times its size on every side, where
@@ -684,7 +675,7 @@ def _exact_distance(ix, A, B, cap):
                       -1, g.dims).astype(np.int64)
         ihi = np.clip(np.floor((np.maximum(A[todo], B[todo]) + r[:, None] - g.glo) / g.h),
                       -1, g.dims).astype(np.int64)
-        ok = (ihi - ilo + 1).prod(1) <= _MAX_CELLS
+        ok = (ihi - ilo + 1).prod(1) <= tol.DISTANCE_MAX_CELLS
         far[todo[~ok]] = True
         todo, ilo, ihi = todo[ok], ilo[ok], ihi[ok]
         _search(A, B, ix, g, todo, ilo, ihi, rho, capv, best)
@@ -947,7 +938,7 @@ def collider_distance(points, offsets, colliders, return_exact=False, max_distan
         field below it: the cell ``h`` is the collider's median triangle size,
         halved until it is at most half the curves' median segment length
         (about 1.3 cells below on average). A collider whose field would be
-        too big for that (``_NODE_MAX`` nodes: a huge collider next to short
+        too big for that (``tolerances.DISTANCE_NODE_MAX`` nodes: a huge collider next to short
         curves) and ``exact=True`` use the exact search instead: exact (float64
         rounding) for segments near a collider (within a few triangle sizes
         or segment lengths), a lower bound from coarse distance fields

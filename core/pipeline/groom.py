@@ -6,37 +6,40 @@ roots of every render curve and their inverse-distance weights;
 of its guides, blended per CV along the normalized arc length;
 :func:`clearance_pass` runs FurCollide once on the result so that render
 curves that still pass through a collider (between the guides) are
-resolved, and counts them.
+resolved, and counts them. :class:`GroomBinding` is a whole bound groom
+(curves set aside, roots on the surface) with its own deformer, as the
+Blender glue saves it on the groom output and deforms it every frame.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import rotations as rot
 from .. import tolerances as tol
 from ..collider import Collider
+from ..curves import (
+    as_given,
+    as_points,
+    check_curves,
+    degenerate,
+    invalid_curves,
+    layout,
+    segmented_cumsum,
+    subset,
+    uniform_size,
+)
 from ..errors import InputError
 from ..proximity import knn
-from ..rays import in_two
+from ..rays import in_two, thread_count
 from ..settings import Settings
 from ..solver import Solver
 from ..status import Status
-from . import _curves
-from ._curves import (
-    as_points,
-    check_curves,
-    layout,
-    segmented_cumsum,
-    thread_count,
-    uniform_size,
-)
+from .attach import Binding, bind
 from .distance import LowerBoundField
 
-#: Above this share of reaching curves the clearance pass solves them all (no gather).
-_CLEARANCE_ALL = 0.7
 #: Neighbouring guide roots used to find each guide's root rotation.
 _FRAME_NEIGHBORS = 4
 
@@ -55,8 +58,6 @@ class GroomWeights:
 
     index: np.ndarray
     weight: np.ndarray
-    #: The :class:`GroomDeformer` of the last :func:`deform_groom` call (a cache).
-    _deformer: object = field(default=None, init=False, repr=False, compare=False)
 
     def arrays(self) -> dict:
         return {"index": self.index, "weight": self.weight}
@@ -117,8 +118,9 @@ class GroomDeformer:
     pair the two guide segments to interpolate and the interpolation
     parameter. :meth:`deform` then only finds the guides' rotations and
     blends them onto the render segments, in cache-sized blocks of
-    component arrays. :func:`deform_groom` keeps one on its ``weights`` and
-    reuses it while its inputs are equal, so callers get this for free.
+    component arrays. Build one per bound groom and call :meth:`deform` every
+    frame (:class:`GroomBinding` owns one); :func:`deform_groom` builds one per
+    call.
 
     Parameters
     ----------
@@ -229,22 +231,6 @@ class GroomDeformer:
         groot_r = self.gr[self.goff[:-1]]
         self.rel = rp[roff[:-1]][:, None] - groot_r[self.index]  # (R, k, 3)
 
-    def matches(self, render_ref_points, render_offsets, guides_ref_points, guide_offsets,
-                weights) -> bool:
-        """Were these the arguments of the constructor (equal values)?"""
-        try:
-            return (
-                isinstance(weights, GroomWeights)
-                and np.array_equal(np.asarray(render_offsets), self.roff)
-                and np.array_equal(np.asarray(guide_offsets), self.goff)
-                and np.array_equal(np.asarray(weights.index), self.index)
-                and np.array_equal(np.asarray(weights.weight), self.weight)
-                and np.array_equal(np.asarray(guides_ref_points), self.gr)
-                and np.array_equal(np.asarray(render_ref_points), self.rp)
-            )
-        except Exception:  # noqa: BLE001 - unconvertible input: the constructor reports it
-            return False
-
     # ----------------------------------------------------------- per frame
     def _root_rotations(self, gn):
         """Rotation of every guide at its root (G, 4): best fit of its root neighbourhood.
@@ -331,22 +317,22 @@ class GroomDeformer:
         out = np.empty((G, n - 1, 4))
         for j in range(n - 1):
             tn = (g3[:, j + 1] - g3[:, j]).T  # (3, G)
-            tn = rot._unit3(tn)
+            tn = rot.unit3(tn)
             v = rot.quat_rotate_soa(p, np.ascontiguousarray(tr3[:, j].T))
-            v = rot._unit3(v)
+            v = rot.unit3(v)
             # quat_swing(v, tn): minimal rotation taking v to tn
-            c = rot._dot3(v, tn)
+            c = rot.dot3(v, tn)
             sw = np.empty((4, G))
             sw[0] = 1.0 + c
-            sw[1:] = rot._cross3(v, tn)
+            sw[1:] = rot.cross3(v, tn)
             anti = c < -1 + 1e-12
             if anti.any():
                 sw[:, anti] = rot.quat_swing(v[:, anti].T, tn[:, anti].T).T
-            sw /= np.sqrt(sw[0] * sw[0] + rot._dot3(sw[1:], sw[1:]))
+            sw /= np.sqrt(sw[0] * sw[0] + rot.dot3(sw[1:], sw[1:]))
             # quat_mul(sw, p)
             q = np.empty((4, G))
-            q[0] = sw[0] * p[0] - rot._dot3(sw[1:], p[1:])
-            q[1:] = sw[0] * p[1:] + p[0] * sw[1:] + rot._cross3(sw[1:], p[1:])
+            q[0] = sw[0] * p[0] - rot.dot3(sw[1:], p[1:])
+            q[1:] = sw[0] * p[1:] + p[0] * sw[1:] + rot.cross3(sw[1:], p[1:])
             out[:, j] = q.T
             p = q
         return out.reshape(-1, 4)
@@ -443,9 +429,9 @@ class GroomDeformer:
                 for j in range(1, n):  # the sums of np.cumsum(axis=1), one CV column a pass
                     o[:, j] += o[:, j - 1]
 
-            in_two(chain, Rn, threads, _curves.SPLIT_MIN_ITEMS)
+            in_two(chain, Rn, threads, tol.SPLIT_MIN_ITEMS)
             return out.reshape(-1, 3)
-        in_two(blend, S, threads, _curves.SPLIT_MIN_ITEMS)
+        in_two(blend, S, threads, tol.SPLIT_MIN_ITEMS)
         step = np.empty_like(self.rp)
         step[self.rs0 + 1] = seg.T
         step[roff[:-1]] = roots(0, Rn)
@@ -464,11 +450,11 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
     with the weights (quaternion averaging), and the curve is re-chained
     from its root, which follows the guides' root frames.
 
-    Everything that depends only on the reference poses and the weights is
-    computed on the first call and kept on ``weights`` (a
-    :class:`GroomDeformer`), reused while the reference arrays, offsets and
-    weights are equal (checked every call); per frame only the guides'
-    rotations and the blend remain.
+    Everything that depends only on the reference poses and the weights (a
+    :class:`GroomDeformer`) is computed by every call: frame after frame, build
+    the deformer once and call its :meth:`GroomDeformer.deform` (or use a
+    :class:`GroomBinding`), so that only the guides' rotations and the blend
+    remain per frame.
 
     Parameters
     ----------
@@ -484,7 +470,7 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
         Roots to use instead of the guide-driven ones (e.g. the render
         groom's own Fur Attach roots, which stay exactly on the surface).
     threads : int or None, default None
-        Threads to use (None: every CPU). From ``_curves.SPLIT_MIN_ITEMS`` guides or
+        Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS`` guides or
         render curves the work runs in two halves on two threads; the result
         is the same bit for bit.
 
@@ -494,16 +480,219 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
         Identity when the guides do not move; a rigid motion of all guides
         moves the groom rigidly. Segment lengths are kept.
     """
-    if not isinstance(weights, GroomWeights):
-        raise InputError(f"weights must be a GroomWeights, got {type(weights).__name__}")
-    deformer = weights._deformer
-    if deformer is None or not deformer.matches(render_ref_points, render_offsets,
-                                                guides_ref_points, guide_offsets, weights):
-        weights._deformer = None  # never keep a stale one behind an error
-        deformer = GroomDeformer(render_ref_points, render_offsets, guides_ref_points,
-                                 guide_offsets, weights)
-        weights._deformer = deformer
+    deformer = GroomDeformer(render_ref_points, render_offsets, guides_ref_points,
+                             guide_offsets, weights)
     return deformer.deform(guides_now_points, render_roots_now, threads)
+
+
+# ---------------------------------------------------------------- binding
+class GroomBinding:
+    """A render groom bound to guides: the reference poses, each render curve's guides
+    and weights (:func:`bind_groom`) and, optionally, the render roots bound to the
+    growth surface (Fur Attach); every frame :meth:`deform` makes the groom follow the
+    guides with the binding's own :class:`GroomDeformer` (its bind-time work, made on
+    the first :meth:`deform` and kept with the binding).
+
+    Render curves the solver cannot work with (:func:`core.curves.invalid_curves`) are
+    set aside (``invalid``): they are shown as they are (moved rigidly with their
+    surface triangle when the roots are bound to it), ``Status.INVALID``. So are
+    guides: the render curves follow the others.
+
+    Parameters
+    ----------
+    arrays : dict of ndarray
+        What :meth:`build` returns (saved and loaded as they are, e.g. ``np.savez``).
+
+    Attributes
+    ----------
+    render_ref, render_offsets, guides_ref, guide_offsets
+        The reference poses (world) and layouts.
+    invalid : (R,) bool
+        Render curves set aside.
+    guides_used : (G,) bool
+        Guides the render curves follow.
+    weights : GroomWeights
+        Of the valid render curves, over the used guides.
+    roots, fixed : Binding or None
+        The valid render curves' roots, and the invalid curves, bound to the surface.
+    surface_key : tuple of int or None
+        The caller's key of the surface's topology at bind time.
+    guides_k : int
+        Guides per render curve asked for.
+    note : str
+        What :meth:`build` set aside, or ''.
+    groom_name, groom_digest, groom_counts
+        What the caller recorded to recognise the bound groom later (``record`` of
+        :meth:`build`): '' / None / (0, 0) when not recorded.
+    """
+
+    def __init__(self, arrays: dict):
+        self.render_ref = np.asarray(arrays["render_ref"], np.float64)
+        self.render_offsets = np.asarray(arrays["render_offsets"], np.int64)
+        self.guides_ref = np.asarray(arrays["guides_ref"], np.float64)
+        self.guide_offsets = np.asarray(arrays["guide_offsets"], np.int64)
+        R, G = len(self.render_offsets) - 1, len(self.guide_offsets) - 1
+        self.invalid = np.asarray(arrays.get("invalid", np.zeros(R, bool)), bool)
+        self.guides_used = np.asarray(arrays.get("guides_used", np.ones(G, bool)), bool)
+        self.weights = GroomWeights.from_arrays(
+            {"index": arrays["weights_index"], "weight": arrays["weights_weight"]}
+        )
+        self.roots = None
+        self.fixed = None
+        self.surface_key = None
+        if "root_face" in arrays:
+            self.roots = Binding.from_arrays(
+                {k[5:]: arrays[k] for k in arrays if k.startswith("root_")}
+            )
+            self.surface_key = tuple(int(k) for k in arrays["surface_key"])
+        if "fixed_face" in arrays:
+            self.fixed = Binding.from_arrays(
+                {k[6:]: arrays[k] for k in arrays if k.startswith("fixed_")}
+            )
+        self.groom_name = str(arrays["groom_name"]) if "groom_name" in arrays else ""
+        self.groom_digest = (int(np.asarray(arrays["groom_digest"]).view(np.uint64)[0])
+                             if "groom_digest" in arrays else None)
+        self.groom_counts = tuple(int(k) for k in arrays.get("groom_counts", (0, 0)))
+        self.guides_k = int(arrays["guides_k"]) if "guides_k" in arrays else 0
+        self.note = str(arrays["note"]) if "note" in arrays else ""
+        self._rows_v, self._off_v = self.subset(~self.invalid)
+        self._rows_i, _ = self.subset(self.invalid)
+        self._g_rows, self._g_off = subset(self.guide_offsets, self.guides_used)
+        #: This binding's GroomDeformer (made by the first :meth:`deform`).
+        self.deformer = None
+
+    def subset(self, which):
+        """(rows (k,), offsets) of the render curves ``which`` (bool (R,))."""
+        return subset(self.render_offsets, which)
+
+    @staticmethod
+    def build(render_ref, render_offsets, guides_ref, guide_offsets, k, surface=None,
+              name="the render groom", record=None):
+        """Bind (all world space, reference pose).
+
+        Parameters
+        ----------
+        render_ref : (P, 3) float array
+        render_offsets : (R+1,) int array
+        guides_ref : (Q, 3) float array
+        guide_offsets : (G+1,) int array
+        k : int
+            Guides per render curve.
+        surface : (V, F, key) or None
+            The surface (world) the render roots stay on, and the caller's key of
+            its topology (kept as ``surface_key``).
+        name : str
+            The render groom in messages ("No curve of {name} can be used").
+        record : dict, optional
+            ``groom_name``, ``groom_digest`` (an int), ``groom_counts`` (curves,
+            points): what the caller needs to recognise the bound groom later.
+
+        Returns
+        -------
+        arrays : dict
+            What :class:`GroomBinding` is made of (save it as it is).
+        notes : list of str
+            The curves set aside (invalid render curves, guides), naming the first.
+
+        Raises
+        ------
+        InputError
+            No render curve (or no guide) can be used.
+        """
+        render_offsets = np.asarray(render_offsets, np.int64)
+        guide_offsets = np.asarray(guide_offsets, np.int64)
+        bad_r, why_r = invalid_curves(render_ref, render_offsets)
+        bad_g, why_g = invalid_curves(guides_ref, guide_offsets)
+        if bad_r.all():
+            raise InputError(f"No curve of {name} can be used: {why_r}")
+        if bad_g.all():
+            raise InputError(f"No guide can be followed: {why_g}")
+        render_ref = as_given(render_ref, render_offsets, bad_r)
+        guides_ref = as_given(guides_ref, guide_offsets, bad_g)
+        rows_v, off_v = subset(render_offsets, ~bad_r)
+        g_rows, g_off = subset(guide_offsets, ~bad_g)
+        weights = bind_groom(render_ref[rows_v][off_v[:-1]], guides_ref[g_rows][g_off[:-1]],
+                             k=min(int(k), len(g_off) - 1))
+        arrays = {
+            "render_ref": render_ref, "render_offsets": render_offsets,
+            "guides_ref": guides_ref, "guide_offsets": guide_offsets,
+            "weights_index": weights.index, "weights_weight": weights.weight,
+            "invalid": bad_r, "guides_used": ~bad_g, "guides_k": np.int64(k),
+        }
+        if surface is not None:
+            V, F, key = surface
+            b = bind(render_ref[rows_v], off_v, V, F, drop_degenerate=True)
+            arrays.update({"root_" + n: v for n, v in b.arrays().items()})
+            if bad_r.any():
+                rows_i, off_i = subset(render_offsets, bad_r)
+                b = bind(render_ref[rows_i], off_i, V, F, drop_degenerate=True)
+                arrays.update({"fixed_" + n: v for n, v in b.arrays().items()})
+            arrays["surface_key"] = np.asarray(key, np.int64)
+        if record is not None:
+            arrays["groom_name"] = np.array(record["groom_name"])
+            arrays["groom_digest"] = np.array([record["groom_digest"]], np.uint64).view(
+                np.int64)
+            arrays["groom_counts"] = np.asarray(record["groom_counts"], np.int64)
+        notes = []
+        if bad_r.any():
+            n = int(bad_r.sum())
+            notes.append(
+                f"{n} curve{'s' if n > 1 else ''} of {name} cannot be solved ({why_r}): "
+                f"{'they are' if n > 1 else 'it is'} shown as {'they are' if n > 1 else 'it is'},"
+                " in yellow (Invalid). Fix the groom's curves and press Bind Groom again")
+        if bad_g.any():
+            n = int(bad_g.sum())
+            notes.append(f"{n} guide{'s' if n > 1 else ''} cannot be followed ({why_g}): "
+                         "the render curves follow the others")
+        if notes:
+            arrays["note"] = np.array("Render groom: " + "; ".join(notes))
+        return arrays, notes
+
+    def deform(self, guides_now, surface_V=None, threads=None):
+        """The render curves following ``guides_now`` (world), on ``threads``
+        threads (None: all CPUs; the same result for any count).
+
+        Parameters
+        ----------
+        guides_now : (Q, 3) array_like
+            The guides now (e.g. the solver's output), the bound layout.
+        surface_V : (n, 3) array_like, optional
+            The surface's world vertices now (the roots follow it when bound).
+
+        Returns
+        -------
+        points : (P, 3) float64 ndarray
+        status : (R,) int8 ndarray
+            ``Status.INVALID`` for the curves set aside (and any the guides made
+            non-finite this frame: they are shown at their reference shape), else FREE.
+        """
+        roots = None
+        if self.roots is not None and surface_V is not None:
+            roots = self.roots.roots(surface_V)
+        if self.deformer is None:
+            self.deformer = GroomDeformer(
+                self.render_ref[self._rows_v], self._off_v, self.guides_ref[self._g_rows],
+                self._g_off, self.weights)
+        gn = np.asarray(guides_now, np.float64)[self._g_rows]
+        moved = self.deformer.deform(gn, roots, threads)
+        status = np.where(self.invalid, Status.INVALID, Status.FREE).astype(np.int8)
+        if len(self._rows_i):
+            points = self.render_ref.copy()
+            points[self._rows_v] = moved
+            if self.fixed is not None and surface_V is not None:
+                points[self._rows_i] = self.fixed.apply(surface_V, threads)
+        else:  # (every curve is valid: the deformer's result as it is)
+            points = np.asarray(moved, np.float64)
+        if not np.isfinite(points.sum()):  # (a guide degenerated this frame: never NaN)
+            finite = np.isfinite(points).all(axis=1)
+            R = len(self.render_offsets) - 1
+            curve = np.repeat(np.arange(R), np.diff(self.render_offsets))
+            bad = np.zeros(R, bool)
+            bad[curve[~finite]] = True
+            rows, _ = self.subset(bad)
+            points[rows] = self.render_ref[rows]
+            status[bad] = Status.INVALID
+        return points, status
 
 
 def clearance_pass(render_points, render_offsets, colliders, settings=None, growth=None,
@@ -572,7 +761,7 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
         solve[0] = True  # (one curve, unchanged: the solver still checks its other inputs)
     status = np.zeros(R, np.int8)
     n = uniform_size(off)
-    if R == 0 or solve.mean() > _CLEARANCE_ALL:  # (gathering would cost more than it saves)
+    if R == 0 or solve.mean() > tol.CLEARANCE_SOLVE_ALL:  # (gathering would cost more)
         res = Solver(off, settings).step(pts, colliders, growth=growth)
         out = np.asarray(res.points, np.float64)
         status = res.status
@@ -648,9 +837,9 @@ def _gather(off, idx):
 
 
 def _degenerate(pts, off, idx, n):
-    """The solver's zero-length segment rule (``tolerances.ZERO_SEGMENT_REL``) on
-    the curves ``idx``: curves the pass does not solve are INVALID as they would
-    be in the solver. Returns the offending curves of ``idx``."""
+    """The solver's rule on lengths (:func:`core.curves.degenerate`) on the curves
+    ``idx``: curves the pass does not solve are INVALID as they would be in the
+    solver. Returns the offending curves of ``idx``."""
     if len(idx) == 0:
         return idx
     sub, sub_off = _take(pts, off, idx, n)
@@ -670,7 +859,7 @@ def _degenerate(pts, off, idx, n):
         for j in range(1, n - 1):
             total += L[:, j]
             np.minimum(short, L[:, j], out=short)
-        return idx[maybe[~(short > tol.ZERO_SEGMENT_REL * total)]]
+        return idx[maybe[degenerate(short, total)]]
     else:
         d = np.diff(sub, axis=0)
         L = np.sqrt(np.einsum("ij,ij->i", d, d))[layout(sub_off)[2]]
@@ -678,7 +867,7 @@ def _degenerate(pts, off, idx, n):
         first = np.cumsum(nseg) - nseg
         total = np.add.reduceat(L, first)
         short = np.minimum.reduceat(L, first)
-    return idx[~(short > tol.ZERO_SEGMENT_REL * total)]
+    return idx[degenerate(short, total)]
 
 
 def _boxes(pts, off):

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..curves import as_points, check_curves, row_norm
 from ..errors import InputError
-from ._curves import as_points, check_curves, row_norm
 
 
 def region_of_influence(points, offsets, displaced, distance, margin=0.99):

@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 
+from .. import tolerances as tol
+from ..curves import arc_length, check_curves, layout, rechain
 from ..errors import InputError
-from ..rays import in_two
-from . import _curves
-from ._curves import arc_length, check_curves, layout, rechain, thread_count
+from ..rays import in_two, thread_count
 
 #: Sinusoids summed per noise channel.
 _WAVES = 4
@@ -139,7 +139,7 @@ def wind(points, offsets, frame, direction=(1.0, 0.0, 0.0), strength=0.1, freque
         Re-chain the moved curve keeping every segment's length (the curve
         bends instead of stretching).
     threads : int or None, default None
-        Threads to use (None: every CPU). From ``_curves.SPLIT_MIN_ITEMS``
+        Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS``
         curves the work runs in two halves on two threads; the result is the
         same bit for bit (every curve's wind is its own).
 
@@ -175,7 +175,7 @@ def wind(points, offsets, frame, direction=(1.0, 0.0, 0.0), strength=0.1, freque
         disp = _weights(p, o, falloff)[:, None] * push[curve]
         out[a:b] = _displace(p, o, disp, preserve_length)
 
-    in_two(blow, len(off) - 1, threads, _curves.SPLIT_MIN_ITEMS)
+    in_two(blow, len(off) - 1, threads, tol.SPLIT_MIN_ITEMS)
     return out
 
 

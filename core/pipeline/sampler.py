@@ -19,8 +19,9 @@ import math
 
 import numpy as np
 
+from ..curves import as_points
 from ..errors import InputError
-from ._curves import as_points, check_surface, triangle_areas
+from ..mesh import check_surface, triangle_areas
 
 #: Bisection steps on the radius.
 _BISECT = 14

@@ -1,5 +1,5 @@
 """Hunt 6: the demo's scene (scripts/demo_scene.py) at a size where a step solves its
-phases in two halves on two threads (core.step.SPLIT_MIN_CURVES curves of work),
+phases in two halves on two threads (core.tolerances.SPLIT_MIN_CURVES curves of work),
 driven frame by frame with ``scene.frame_set`` as an artist plays, scrubs, jumps,
 changes settings (Mode, Rotation Precision, Recovery Rate, Plasticity, Threads) mid-shot,
 saves and reopens, bakes, and re-runs Fur Sampler. Every frame is checked against
@@ -69,9 +69,9 @@ def split_spy(monkeypatch):
 
 def split_phases(calls):
     """The phases that ran in two halves."""
-    step = sys.modules[ADDON + ".core.step"]
+    tolerances = sys.modules[ADDON + ".core.tolerances"]
     return {name for name, work, threads in calls
-            if work >= step.SPLIT_MIN_CURVES and threads >= 2}
+            if work >= tolerances.SPLIT_MIN_CURVES and threads >= 2}
 
 
 def demo_fur(mode="bend", threads=0, n_fur=N_FUR, **settings):
@@ -495,8 +495,8 @@ def test_threads_one_is_one_thread_for_the_whole_frame(fc, split_spy):
     split_spy.clear()  # (what building the pipeline solved, with the default Threads)
     for f in range(1, 17):
         demo.scene.frame_set(f)
-    step = sys.modules[ADDON + ".core.step"]
-    assert max(w for _, w, _ in split_spy) >= step.SPLIT_MIN_CURVES  # (the pass's work)
+    tolerances = sys.modules[ADDON + ".core.tolerances"]
+    assert max(w for _, w, _ in split_spy) >= tolerances.SPLIT_MIN_CURVES  # (the pass's work)
     assert {t for _, _, t in split_spy} == {1}, sorted(
         {(n, w, t) for n, w, t in split_spy if t > 1})[:5]
 

@@ -264,15 +264,16 @@ def test_a_failing_stage_is_reported_and_the_frame_solves_again(fc, monkeypatch)
     clean = world(out)
     bpy.ops.furcollide.reset()
     play(scene, range(1, 5))
-    real = fc.motion.output_stage
+    stages = fc.core.pipeline.frame  # (the core's frame sequence: motion after collision)
+    real = stages.after_collision
 
     def boom(*a, **k):
         raise ValueError("stage exploded")
 
-    monkeypatch.setattr(fc.motion, "output_stage", boom)
+    monkeypatch.setattr(stages, "after_collision", boom)
     scene.frame_set(5)
     assert "stage exploded" in hair.furcollide.status_message
-    monkeypatch.setattr(fc.motion, "output_stage", real)
+    monkeypatch.setattr(stages, "after_collision", real)
     scene.frame_set(5)
     np.testing.assert_array_equal(world(out), clean)
 

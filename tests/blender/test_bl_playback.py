@@ -277,16 +277,15 @@ def test_fps_change_mid_session_keeps_a_plain_setup_exact(fc):
 
 
 def test_one_solve_serves_playback_and_scripts(fc):
-    """``frame_solve.solve_frame`` on a ``Setup.for_script`` (scripts/demo.py's core
-    path: no Blender object, no frame handler) gives, bit for bit, what playback wrote:
-    one solve serves both."""
+    """The core's frame sequence from plain arrays (``core.pipeline.Shot``, scripts/demo.py's
+    core path: no Blender object, no frame handler) gives, bit for bit, what playback
+    wrote: one solve serves both."""
     scene = bpy.context.scene
     hair, box = fc.make_scene(frames=(1, 8))
     out = fc.setup(hair, [box])
     played = positions_per_frame(out, range(1, 9))  # source and output at the origin
     offsets = offsets_of(hair)
-    setup = fc.Setup.for_script(
-        fc.core.Solver(offsets, fc.setup_module.core_settings(hair)))
+    shot = fc.core.pipeline.Shot(offsets, fc.setup_module.core_settings(hair))
     me = box.data
     V = np.empty(len(me.vertices) * 3, np.float32)
     me.attributes["position"].data.foreach_get("vector", V)
@@ -302,9 +301,7 @@ def test_one_solve_serves_playback_and_scripts(fc):
                                         drop_degenerate=True, name=box.name)
         else:
             collider.matrix = M  # rigid: the BVH is kept, as in playback
-        inputs = fc.frame_inputs.FrameInputs(positions(hair), offsets, frame=f,
-                                             colliders=[collider])
-        result = fc.frame_solve.solve_frame(setup, inputs)
+        result = shot.frame(f, positions(hair), [collider])
         np.testing.assert_array_equal(result.points, played[f], err_msg=f"frame {f}")
         assert result.stats["frame"] == f
     assert any((p != positions(hair)).any() for p in played.values())  # the box met the hair

@@ -486,7 +486,7 @@ def test_threads_is_honoured_by_fur_attach_and_the_render_groom(fc, monkeypatch)
     gout = guides.furcollide.groom.output
     m = guides.furcollide.motion
     m.use_wind, m.wind_stage, m.wind_strength = True, "OUTPUT", 0.2
-    monkeypatch.setattr(sys.modules[ADDON + ".core.pipeline._curves"], "SPLIT_MIN_ITEMS", 1)
+    monkeypatch.setattr(sys.modules[ADDON + ".core.tolerances"], "SPLIT_MIN_ITEMS", 1)
     seen = []  # (stage module, threads, thread idents of the halves)
     for stage in ("attach", "groom", "motion"):
         mod = sys.modules[ADDON + ".core.pipeline." + stage]

@@ -384,7 +384,7 @@ def test_collider_distance_computed_once_per_frame(fc, monkeypatch):
     m.write_collider_distance = True
     m.distance_max = 0.05
     calls = []
-    core = fc.motion.pipeline
+    core = fc.core.pipeline.distance  # (the core's frame sequence calls it there)
     real = core.collider_distance
 
     def counted(*a, **kw):

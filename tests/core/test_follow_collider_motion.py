@@ -253,12 +253,12 @@ def _assert_no_crossing_plate(p, offs, V, F, M, st):
 # ------------------------------------------------- threads, state, restore
 @contextlib.contextmanager
 def _split_from(n):
-    old = core.step.SPLIT_MIN_CURVES
-    core.step.SPLIT_MIN_CURVES = n
+    old = core.tolerances.SPLIT_MIN_CURVES
+    core.tolerances.SPLIT_MIN_CURVES = n
     try:
         yield
     finally:
-        core.step.SPLIT_MIN_CURVES = old
+        core.tolerances.SPLIT_MIN_CURVES = old
 
 
 @pytest.mark.parametrize("mode", MODES)

@@ -9,7 +9,7 @@ sided, collision offsets, changing ``enabled`` masks) these check that
 
 * a snapshot/restore into a fresh solver continues bit for bit,
 * the thread count never changes a bit, nor does a step solved in two halves
-  on two threads (``core.step.SPLIT_MIN_CURVES``, forced down to a few curves),
+  on two threads (``core.tolerances.SPLIT_MIN_CURVES``, forced down to a few curves),
 * with an explicit ``deforming`` flag a collider's history never matters,
 * float64 input keeps the invariants (oracle-checked), and
 * a collider far from the curves on some frames is never built needlessly.
@@ -269,12 +269,12 @@ def test_restore_into_a_fresh_solver_continues_bit_for_bit(n_frames, data, threa
 def split_from(n):
     """Steps solve their curves in two halves from ``n`` curves of work (the
     benchmark's scenes reach the real threshold; these scenes have a few dozen)."""
-    old = core.step.SPLIT_MIN_CURVES
-    core.step.SPLIT_MIN_CURVES = n
+    old = core.tolerances.SPLIT_MIN_CURVES
+    core.tolerances.SPLIT_MIN_CURVES = n
     try:
         yield
     finally:
-        core.step.SPLIT_MIN_CURVES = old
+        core.tolerances.SPLIT_MIN_CURVES = old
 
 
 @FAST
@@ -285,7 +285,7 @@ def test_thread_count_never_changes_a_bit(n_frames, split, data):
     scene = data.draw(animated_scenes(n_frames), label="scene")
     s = data.draw(solver_settings(), label="settings")
     runs = {1: run(scene, s.replace(threads=1), range(n_frames))[:2]}
-    with split_from(core.step.SPLIT_MIN_CURVES if split is None else split):
+    with split_from(core.tolerances.SPLIT_MIN_CURVES if split is None else split):
         for t in (2, 3):
             runs[t] = run(scene, s.replace(threads=t), range(n_frames))[:2]
     for t in (2, 3):
@@ -326,7 +326,7 @@ def test_thread_count_never_changes_a_bit_on_split_batches(mode, offset, dtype, 
         col = Collider(V, F, double_sided=double)
         solver = Solver(offs, Settings(mode=mode, threads=t, collision_offset=offset))
         out = []
-        with split_from(core.step.SPLIT_MIN_CURVES if split is None else split):
+        with split_from(core.tolerances.SPLIT_MIN_CURVES if split is None else split):
             for f in range(3):
                 col.vertices = shapes[f]
                 r = solver.step(pts, [col], enabled=masks[f])

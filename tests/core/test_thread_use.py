@@ -6,7 +6,7 @@ used, which only a benchmark would otherwise see: a probe batch of a few curves 
 traced on all of the step's threads, a large one is built and traced in two halves
 by two threads, each half tracing on its own thread (not both halves on both
 threads: four tracers on two cores). A step with many curves of work is solved in
-two halves, one per thread (``core.step.SPLIT_MIN_CURVES``).
+two halves, one per thread (``core.tolerances.SPLIT_MIN_CURVES``).
 """
 
 from __future__ import annotations
@@ -95,9 +95,9 @@ _PHASES = (("rigid", "_new_contacts"), ("rigid", "_search"), ("step", "_solve_so
 def _phases(monkeypatch, split_from):
     """Record (phase, thread, curve arrays, ctx.threads) of every call of the
     phases a step may split, the threshold set to ``split_from`` curves of work."""
-    from core import rigid, step
+    from core import rigid, step, tolerances
 
-    monkeypatch.setattr(step, "SPLIT_MIN_CURVES", split_from)
+    monkeypatch.setattr(tolerances, "SPLIT_MIN_CURVES", split_from)
     seen = []
     for mod_name, name in _PHASES:
         mod = rigid if mod_name == "rigid" else step
@@ -180,9 +180,9 @@ def test_a_step_with_little_work_or_one_thread_is_solved_whole(monkeypatch, mode
 def test_an_error_in_the_other_half_reaches_the_caller(monkeypatch):
     """The half on the pool thread fails: the step raises its error (after the
     caller's own half has finished; no half is left running)."""
-    from core import rigid, step
+    from core import rigid, tolerances
 
-    monkeypatch.setattr(step, "SPLIT_MIN_CURVES", 100)
+    monkeypatch.setattr(tolerances, "SPLIT_MIN_CURVES", 100)
     pts, offs, col = _pressed_grid(20)
     solver = Solver(offs, Settings(mode="bend", threads=2))
     solver.step(pts, [col])

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from core.curves import as_points, check_curves, layout, segmented_cumsum
 from core.errors import InputError
-from core.pipeline._curves import as_points, check_curves, layout, segmented_cumsum
 from core.pipeline.groom import knn
 
 _FRAME_NEIGHBORS = 4

@@ -9,9 +9,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis_profiles import examples
 
-from core import Collider, Settings, Solver
+from core import Collider, Settings, Solver, Status
 from core.errors import InputError
-from core.pipeline import GroomWeights, bind_groom, clearance_pass, deform_groom, knn, wind
+from core.pipeline import (
+    GroomBinding,
+    GroomWeights,
+    bind,
+    bind_groom,
+    clearance_pass,
+    deform_groom,
+    knn,
+    wind,
+)
 
 PROP = settings(max_examples=examples(10))
 FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED, DISABLED = range(6)
@@ -96,6 +105,59 @@ def test_roots_follow_the_guides_and_explicit_roots():
     roots = rp[ro[:-1]] + 1.0
     out = deform_groom(rp, ro, gp, gp, go, w, render_roots_now=roots)
     np.testing.assert_array_equal(out[ro[:-1]], roots)
+
+
+def test_a_binding_deforms_as_deform_groom_with_its_own_deformer(monkeypatch):
+    """GroomBinding: the arrays it is built from (saved and loaded as they are) give a
+    binding whose groom follows the guides as deform_groom does, its roots on the
+    surface when bound to it; its GroomDeformer is made once, by the first frame."""
+    _, gp, go, rp, ro = _groom(8)
+    V, F = po.icosphere((0, 0, 0), 1.0, 2)
+    arrays, notes = GroomBinding.build(rp, ro, gp, go, 4, surface=(V, F, (len(V), len(F))))
+    assert notes == []
+    binding = GroomBinding(dict(arrays))
+    assert binding.deformer is None and binding.surface_key == (len(V), len(F))
+    made = []
+    from core.pipeline import groom as groom_mod
+
+    real = groom_mod.GroomDeformer
+
+    def counted(*a, **k):
+        made.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(groom_mod, "GroomDeformer", counted)
+    w = GroomWeights(arrays["weights_index"], arrays["weights_weight"])
+    V2 = V * 1.1
+    for f in range(3):
+        gn = wind(gp, go, f, strength=0.3, turbulence=1.0) * 1.1
+        points, status = binding.deform(gn, V2, threads=1)
+        roots = bind(rp, ro, V, F, drop_degenerate=True).roots(V2)
+        np.testing.assert_array_equal(points, real(rp, ro, gp, go, w).deform(gn, roots, 1))
+        assert (status == Status.FREE).all()
+    assert made == [1]
+
+
+def test_a_binding_sets_invalid_curves_aside():
+    _, gp, go, rp, ro = _groom(9)
+    bad = rp.copy()
+    bad[ro[3] + 1] = bad[ro[3]]  # a zero-length segment
+    bad[ro[7] + 1] = np.nan
+    gbad = gp.copy()
+    gbad[go[2] + 1] = np.inf
+    arrays, notes = GroomBinding.build(bad, ro, gbad, go, 4, name="'Groom'")
+    assert notes[0].startswith("2 curves of 'Groom' cannot be solved (curve 3 has a zero")
+    assert notes[1].startswith("1 guide cannot be followed (curve 2: point")
+    binding = GroomBinding(arrays)
+    assert np.flatnonzero(binding.invalid).tolist() == [3, 7]
+    assert not binding.guides_used[2] and binding.note.startswith("Render groom: 2 curves")
+    points, status = binding.deform(gbad, threads=1)
+    assert np.flatnonzero(status == Status.INVALID).tolist() == [3, 7]
+    assert np.isfinite(points).all()  # (never NaN: set aside as the solver outputs them)
+    rows, _ = binding.subset(binding.invalid)
+    np.testing.assert_array_equal(points[rows], binding.render_ref[rows])
+    with pytest.raises(InputError, match="No guide can be followed"):
+        GroomBinding.build(rp, ro, np.full_like(gp, np.nan), go, 4)
 
 
 def _oracle_hits(points, offsets, V, F):

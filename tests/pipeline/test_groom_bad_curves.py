@@ -15,8 +15,8 @@ import numpy as np
 import pipe_oracle as po
 
 from core import Collider, Settings, Status
+from core.curves import as_given, invalid_curves
 from core.pipeline import clearance_pass
-from core.pipeline._curves import as_given, bad_curves
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
 import oracle  # noqa: E402  (the core tests' brute-force segment/triangle oracle)
@@ -30,20 +30,20 @@ def _scene(seed=3, n=150):
     return pts, off, ball
 
 
-def test_bad_curves_names_the_first_one():
+def test_invalid_curves_names_the_first_one():
     pts, off, _ = _scene()
-    assert not bad_curves(pts, off)[0].any()
+    assert not invalid_curves(pts, off)[0].any()
     p = pts.copy()
     p[off[7] + 3] = p[off[7] + 2]
-    bad, why = bad_curves(p, off)
+    bad, why = invalid_curves(p, off)
     assert np.flatnonzero(bad).tolist() == [7]
     assert why == f"curve 7 has a zero-length segment between points {off[7] + 2} and {off[7] + 3}"
     p[off[4] + 1] = np.nan
-    bad, why = bad_curves(p, off)
+    bad, why = invalid_curves(p, off)
     assert np.flatnonzero(bad).tolist() == [4, 7]
     assert why.startswith(f"curve 4: point {off[4] + 1} is not finite")
     one = np.array([0, 1, 3])
-    bad, why = bad_curves(np.zeros((3, 3)) + [[0, 0, 0], [0, 0, 0], [0, 0, 1]], one)
+    bad, why = invalid_curves(np.zeros((3, 3)) + [[0, 0, 0], [0, 0, 0], [0, 0, 1]], one)
     assert bad.tolist() == [True, False] and why == "curve 0 has fewer than 2 points"
 
 

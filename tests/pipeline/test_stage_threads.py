@@ -1,6 +1,6 @@
 """Fur Attach and the render groom on two threads (``threads``, issue 11).
 
-From ``core.pipeline._curves.SPLIT_MIN_ITEMS`` curves :meth:`Binding.apply`
+From ``core.tolerances.SPLIT_MIN_ITEMS`` curves :meth:`Binding.apply`
 and :func:`deform_groom` (its blend; the guides' root fits stay on one thread) run
 in two halves, one on
 a ray-pool thread, one on the caller's. Curves are independent, so the result
@@ -20,9 +20,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis_profiles import examples
 
-from core import rays
+from core import rays, tolerances
 from core.errors import InputError
-from core.pipeline import _curves, bind, bind_groom, deform_groom, wind
+from core.pipeline import bind, bind_groom, deform_groom, wind
 
 PROP = settings(max_examples=examples(25), deadline=None)
 
@@ -85,7 +85,7 @@ def test_two_threads_give_the_bits_of_one(seed, n_guides, n_render, uniform, own
     one = (b.apply(V2, threads=1), deform_groom(rp, ro, gp, gn, go, w, roots, threads=1),
            wind(rp, ro, threads=1, **blow))
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(_curves, "SPLIT_MIN_ITEMS", 1)
+        mp.setattr(tolerances, "SPLIT_MIN_ITEMS", 1)
         halves = _Halves(mp)
         two = (b.apply(V2, threads=2), deform_groom(rp, ro, gp, gn, go, w, roots, threads=2),
                wind(rp, ro, threads=2, **blow))
@@ -103,11 +103,11 @@ def test_one_thread_or_few_curves_run_whole_on_the_caller(monkeypatch):
     w = bind_groom(rp[ro[:-1]], gp[go[:-1]], 3)
     halves = _Halves(monkeypatch)
     me = {threading.get_ident()}
-    monkeypatch.setattr(_curves, "SPLIT_MIN_ITEMS", 1)
+    monkeypatch.setattr(tolerances, "SPLIT_MIN_ITEMS", 1)
     b.apply(V, threads=1)
     deform_groom(rp, ro, gp, gp, go, w, threads=1)
     wind(rp, ro, 3, threads=1)
-    monkeypatch.setattr(_curves, "SPLIT_MIN_ITEMS", 301)
+    monkeypatch.setattr(tolerances, "SPLIT_MIN_ITEMS", 301)
     b.apply(V, threads=2)
     deform_groom(rp, ro, gp, gp, go, w, threads=2)
     wind(rp, ro, 3, threads=2)
