@@ -27,6 +27,8 @@ from .errors import SettingsError
 np_bool = np.bool_  # numpy booleans count as flags, not as numbers
 
 MODES = ("stiff", "bend", "soft")
+#: The largest distance (world units) a collision offset or clearance margin takes.
+MAX_DISTANCE = 1e6
 PINCH_RESOLUTIONS = ("stop", "growth_surface")
 
 #: The fields that take a parameter map: one number, or a (C,) array with one
@@ -244,8 +246,8 @@ class Settings:
         num("scale_angle", 0.0, 360.0, lo_open=True)
         num("recovery_rate", 0.0, 1.0)
         num("plasticity", 0.0, 1.0)
-        num("collision_offset", 0.0, 1e6)
-        num("clearance_margin", 0.0, 1e6)
+        num("collision_offset", 0.0, MAX_DISTANCE)
+        num("clearance_margin", 0.0, MAX_DISTANCE)
         for name in ("attract_to_growth_surface", "shrink", "recover_pinched",
                      "follow_collider_motion"):
             flag(name)

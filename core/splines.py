@@ -634,6 +634,52 @@ def quantized(margin) -> np.ndarray:
     return out
 
 
+class DrawnMargin:
+    """How much farther than its solved polygon each curve must keep from the
+    colliders, so that the curve Blender draws through its points clears them too:
+    :func:`clearance_margin`, rounded up by :func:`quantized` (0 for Poly curves).
+
+    Keeps the last margin and what it was computed from: a groom that does not move
+    (a collider passing through still fur) gives the same margin every frame without
+    computing it again. One per shot (a setup, a script's :class:`Shot`).
+    """
+
+    def __init__(self):
+        self._key = None
+        self._margin = None
+
+    def __call__(self, splines: Splines, points, offsets, settings, enabled=None):
+        """(C,) float64 margins of the curves ``points`` / ``offsets`` drawn as
+        ``splines``, through any solve of ``settings``."""
+        key = self._key_of(settings, splines, points, offsets, enabled)
+        if self._key is not None and _same_key(self._key, key):
+            return self._margin
+        margin = quantized(clearance_margin(splines, points, offsets, settings, enabled))
+        self._key, self._margin = key, margin
+        return margin
+
+    @staticmethod
+    def _key_of(settings, sp, points, offsets, enabled) -> tuple:
+        """(the settings that bound the turns, copies of every array the margin reads)."""
+        s = settings
+        arrays = (points, offsets, enabled, sp.types, sp.cyclic, sp.handle_left,
+                  sp.handle_right, sp.handle_type_left, sp.handle_type_right, sp.nurbs_order,
+                  sp.knots_mode, sp.nurbs_weight)
+        return ((s.mode, s.max_angle, s.shrink, s.scale_minimum, s.scale_angle),
+                *(None if a is None else np.array(a) for a in arrays))
+
+
+def _same_key(a, b) -> bool:
+    if a[0] != b[0]:
+        return False
+    for x, y in zip(a[1:], b[1:], strict=True):
+        if (x is None) != (y is None):
+            return False
+        if x is not None and not (x.shape == y.shape and np.array_equal(x, y)):
+            return False
+    return True
+
+
 # ------------------------------------------------------------ handle rotations
 def _minimal_arc(a, b):
     """(k, 3, 3) minimal rotations taking unit rows ``a`` to unit rows ``b``

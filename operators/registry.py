@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import bpy
 
 from .. import core
-from ..core import framecache
+from ..core import framecache, splines
 from ..core.pipeline.frame import RootHistory
 from . import bridge
 
@@ -47,6 +47,8 @@ class Runtime:
     #: frames and the jiggle history belong to: :meth:`adopt_topology` changes it.
     topology: tuple | None = None
     colliders: dict = field(default_factory=dict)  # collider uid -> colliders.ColliderEntry
+    #: The spline margin of the last frame solved and what it was computed from.
+    drawn: splines.DrawnMargin = field(default_factory=splines.DrawnMargin)
     #: Follow Collider Motion: frame -> {collider uid: core Placement} of cached frames.
     placements: dict = field(default_factory=dict)
     growth: object = None  # colliders.ColliderEntry of the growth surface

@@ -248,6 +248,7 @@ def collide_with_core(bpy, demo, frame_end):
 
     from core import Collider, Settings
     from core.pipeline import Shot
+    from core.splines import Splines
 
     scene = demo.scene
     setups = []
@@ -267,7 +268,10 @@ def collide_with_core(bpy, demo, frame_end):
         if surf is not None:
             V, F = ds.mesh_world(surf)
             growth = Collider(V, F, matrix=np.array(surf.matrix_world), name=surf.name)
-        shot = Shot(ds.curve_offsets(hair), Settings(**SETTINGS[kind]))
+        offsets = ds.curve_offsets(hair)
+        # (the hair draws as Catmull-Rom, Blender's default: the drawn curves are kept clear)
+        shot = Shot(offsets, Settings(**SETTINGS[kind]),
+                    splines=Splines.catmull_rom(len(offsets) - 1))
         setups.append((hair, out, colliders, cols, growth, shot))
 
     stats = Stats([hair.name for hair, *_ in setups])

@@ -23,12 +23,14 @@ Motion settings are :class:`Motion` (plain values, the names of the setup's
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from .. import framecache
-from ..settings import Settings
+from .. import splines as splines_module
+from ..settings import MAX_DISTANCE, Settings
 from ..solver import Solver
 from ..status import Status
 from . import distance as _distance
@@ -255,7 +257,8 @@ class FrameResult:
 
 
 def solve(solver, points, offsets, frame, colliders=(), growth=None, enabled=None,
-          motion=None, fps=24.0, history=None, threads=None, raw=None) -> FrameResult:
+          motion=None, fps=24.0, history=None, threads=None, raw=None, splines=None,
+          drawn=None) -> FrameResult:
     """Collide and the stages after it: one frame's solve from its (prepared) input.
 
     Parameters
@@ -280,13 +283,20 @@ def solve(solver, points, offsets, frame, colliders=(), growth=None, enabled=Non
     raw : (P, 3) ndarray, optional
         The input before motion (``FrameResult.changed`` is relative to it;
         default ``points``).
+    splines : core.splines.Splines, optional
+        How the curves are drawn (Blender's curve types, handles, NURBS): the
+        solve widens their clearance so the drawn curve clears the colliders, not
+        only its polygon (:func:`drawn_clearance`). None: drawn as polygons.
+    drawn : core.splines.DrawnMargin, optional
+        Keeps the last margin (one per shot); a new one when not given.
 
     Raises
     ------
     Exception
         Any error of the solver or a stage (the solver's state is then unknown).
     """
-    res = solver.step(points, colliders, growth=growth, enabled=enabled)
+    with drawn_clearance(solver, points, offsets, enabled, splines, drawn):
+        res = solver.step(points, colliders, growth=growth, enabled=enabled)
     timings = {"collide": res.timings.get("total", 0.0)}
     if motion is None or not motion.active:
         out, attributes = res.points, {}
@@ -300,6 +310,35 @@ def solve(solver, points, offsets, frame, colliders=(), growth=None, enabled=Non
     changed = framecache.rows_differ(out, points if raw is None else raw)
     return FrameResult(out, res.status, attributes, changed, stats, list(res.problems),
                        timings)
+
+
+@contextmanager
+def drawn_clearance(solver, points, offsets, enabled, sp, drawn=None):
+    """Widen the clearance of ``solver``'s step by the curves' drawn margin
+    (:class:`core.splines.DrawnMargin` of splines ``sp``; nothing for None or Poly
+    curves); its settings are restored afterwards.
+
+    Every curve is widened by the largest margin of the frame, as
+    ``Settings.clearance_margin`` (added to whatever offset applies to each collider,
+    its own or the setting's): one shell per collider. Per-curve margins would make
+    each collider one shell per level of margin, each level a ray query per search
+    round (a BVH build per frame for a deforming collider); the frame's largest margin
+    is a few thousandths of the hair's length.
+    """
+    if sp is None or sp.drawn_as_polygon:
+        yield
+        return
+    settings = solver.settings
+    margin = (drawn or splines_module.DrawnMargin())(sp, points, offsets, settings, enabled)
+    widen = float(margin.max()) if len(margin) else 0.0
+    if widen <= 0.0:
+        yield
+        return
+    solver.settings = settings.replace(clearance_margin=min(widen, MAX_DISTANCE))
+    try:
+        yield
+    finally:
+        solver.settings = settings
 
 
 def frame_stats(status, frame, solve_ms=0.0, source="solved") -> dict:
@@ -332,6 +371,10 @@ class Shot:
         Jiggle's history starts here (frames before it count as the hair at rest).
     threads : int or None
         Threads of the stages (None: all CPUs; the solver's are ``settings.threads``).
+    splines : core.splines.Splines, optional
+        How the curves are drawn (None: as polygons). Hair Blender draws with its
+        default Catmull-Rom type: ``Splines.catmull_rom(C)``; the solve then keeps
+        the drawn curves clear, not only their polygons (:func:`drawn_clearance`).
 
     Examples
     --------
@@ -342,7 +385,7 @@ class Shot:
     """
 
     def __init__(self, offsets, settings=None, motion=None, fps=24.0, binding=None,
-                 frame_start=None, threads=None):
+                 frame_start=None, threads=None, splines=None):
         self.solver = Solver(offsets, settings if settings is not None else Settings())
         self.offsets = self.solver.layout.offsets
         self.motion = motion
@@ -351,6 +394,8 @@ class Shot:
         self.frame_start = frame_start
         self.threads = threads
         self.history = RootHistory()
+        self.splines = splines
+        self.drawn = splines_module.DrawnMargin()
 
     def attach(self, surface):
         """The bound curves on the surface's vertices ``surface`` (n, 3) world,
@@ -391,7 +436,8 @@ class Shot:
                 points = moved
             motion_ms = 1e3 * (time.perf_counter() - t0)
         result = solve(self.solver, points, self.offsets, frame, colliders, growth, enabled,
-                       m, self.fps, self.history, self.threads, raw=raw)
+                       m, self.fps, self.history, self.threads, raw=raw,
+                       splines=self.splines, drawn=self.drawn)
         result.timings["attach"] = attach_ms
         result.timings["motion"] = result.timings.get("motion", 0.0) + motion_ms
         return result

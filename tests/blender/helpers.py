@@ -1086,6 +1086,6 @@ def set_curve_type(ob, kind, indices=None):
 
 def poly(ob):
     """Make every curve of hair object ``ob`` a Poly curve (Blender draws its control
-    polygon): the solve then needs no margin for a spline (``frame_solve.drawn_margin``),
+    polygon): the solve then needs no margin for a spline (``core.splines.DrawnMargin``),
     for tests whose expectations are the polygon's exact clearance. Returns ``ob``."""
     return set_curve_type(ob, "POLY")

@@ -18,6 +18,7 @@ from helpers import (
     check_frame,
     fcurves,
     make_hair,
+    poly,
     positions,
     status_of,
     sweep_box,
@@ -169,6 +170,7 @@ def test_bake_equals_a_script_stepping_the_core_with_each_frames_values(fc):
     from core import Collider, Settings, Solver  # the core the add-on ships
 
     scene, hair, box, out = _shot(fc)
+    poly(hair)  # (drawn as its polygon: the core's Solver alone, no spline margin)
     _keyed_recovery(hair.furcollide, hair)
     _keyed_plasticity(hair.furcollide, hair)
     frames = range(FRAMES[0], FRAMES[1] + 1)

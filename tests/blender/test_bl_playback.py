@@ -285,7 +285,9 @@ def test_one_solve_serves_playback_and_scripts(fc):
     out = fc.setup(hair, [box])
     played = positions_per_frame(out, range(1, 9))  # source and output at the origin
     offsets = offsets_of(hair)
-    shot = fc.core.pipeline.Shot(offsets, fc.setup_module.core_settings(hair))
+    C = len(offsets) - 1  # (the hair draws its curves as Catmull-Rom, Blender's default)
+    shot = fc.core.pipeline.Shot(offsets, fc.setup_module.core_settings(hair),
+                                 splines=fc.core.splines.Splines.catmull_rom(C))
     me = box.data
     V = np.empty(len(me.vertices) * 3, np.float32)
     me.attributes["position"].data.foreach_get("vector", V)
