@@ -30,6 +30,7 @@ INPUTS = "FurCollide Inputs"
 FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED = (
     Status.FREE, Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED)
 RESOLVED = (FREE, COLLIDING, RECOVERING)
+INVALID = Status.INVALID
 SHOT_FRAMES = (1, 6)
 HALF = 0.25
 
@@ -724,6 +725,28 @@ def resolved_crossing(out, colliders, status=None):
         margin = oracle.float32_margin(P, V)
         bad |= oracle.segments_hit_mesh(P, offs, V, F, abs_eps=margin)
     return np.flatnonzero(bad & np.isin(st, RESOLVED))
+
+
+def crossing_unmarked(gout, colliders, unmarked=None):
+    """Render curves of ``gout`` crossing a collider (the oracle, float32 margin) whose
+    root is outside every closed collider and whose status does not say so.
+    ``colliders``: objects (each taken as closed) or ``(object, closed)`` pairs;
+    ``unmarked``: the statuses that do not say so (default: all but UNRESOLVED and
+    INVALID)."""
+    P, offs = world(gout), offsets_of(gout)
+    st = status_of(gout)
+    roots = P[offs[:-1]]
+    crossing = np.zeros(len(offs) - 1, bool)
+    inside = np.zeros(len(offs) - 1, bool)
+    for c in colliders:
+        ob, closed = c if isinstance(c, tuple) else (c, True)
+        V, F = tris_world(ob)
+        crossing |= oracle.segments_hit_mesh(P, offs, V, F, abs_eps=oracle.float32_margin(P, V))
+        if closed:
+            inside |= oracle.points_inside_closed_mesh(roots, V, F)
+    says_not = (~np.isin(st, (UNRESOLVED, INVALID)) if unmarked is None
+                else np.isin(st, unmarked))
+    return np.flatnonzero(crossing & ~inside & says_not)
 
 
 def check_frame(hair, out, colliders, exact_roots=True, lengths=True, status=""):
