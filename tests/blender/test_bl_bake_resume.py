@@ -667,3 +667,57 @@ def test_free_bake_on_a_copy_keeps_the_originals_bake(fc, copy, tmp_path, capsys
     # ... the original's bake is still there and still plays
     assert hair.furcollide.is_baked
     assert len(frames_on_disk(d)) == 4
+
+
+# ------------------------------------------------------------ the Cache Directory
+def test_a_new_cache_directory_after_a_failed_bake_is_used(fc, tmp_path):
+    """The Cache Directory points at a file (a typo, an unmounted share): Bake fails at
+    frame 1. The artist fixes the Directory (Cache panel, still editable) and presses
+    Bake again: it must bake there, not fail again on the old path."""
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    blocker = tmp_path / "cache_is_a_file"
+    blocker.write_text("not a directory")
+    hair.furcollide.cache_directory = str(blocker) + os.sep
+    save_in(tmp_path)
+    with pytest.raises(RuntimeError, match="Not a directory"):
+        bpy.ops.furcollide.bake()
+    good = tmp_path / "good cache"
+    hair.furcollide.cache_directory = str(good) + os.sep
+    bpy.ops.furcollide.bake()  # (the new directory, not the old path's error again)
+    assert hair.furcollide.is_baked
+    assert os.path.abspath(bpy.path.abspath(hair.furcollide.bake_path)).startswith(str(good))
+
+
+def test_a_partial_bake_resumed_after_a_directory_change_goes_to_the_new_directory(
+        fc, tmp_path, monkeypatch):
+    """A bake crashes at frame 4 (frames 1-3 on disk, next to the .blend). The artist
+    then points Directory at the farm share and presses Bake: every frame must end up
+    on the share (the render nodes read only it)."""
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    save_in(tmp_path)
+    bake_crashing_at(fc, monkeypatch, 4)
+    share = tmp_path / "farm share"
+    hair.furcollide.cache_directory = str(share) + os.sep
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    d = bpy.path.abspath(hair.furcollide.bake_path)
+    assert os.path.abspath(d).startswith(str(share)), d
+    assert len(bake_files(d)) == 12
+
+
+def test_a_relative_cache_directory_set_from_a_script_does_not_warn(fc):
+    """README: the Directory defaults to ``//furcollide_cache/`` ('//' = next to the
+    .blend). A TD's script setting another relative folder the same way gets no warning
+    (Blender 5.0 warns "FurCollideSettings.cache_directory: does not support blend
+    relative "//" prefix" for a property not marked as a relative path, the file
+    browser's Relative Path option) and the value is stored as given."""
+    import warnings
+
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        hair.furcollide.cache_directory = "//shot cache/"
+    assert hair.furcollide.cache_directory == "//shot cache/"
+    assert [str(w.message) for w in caught] == []
