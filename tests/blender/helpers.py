@@ -23,6 +23,9 @@ from core import Status
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
 import oracle  # noqa: E402, F401  (the core tests' brute-force segment/triangle oracle)
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pipeline"))
+import pipe_oracle  # noqa: E402  (the pipeline tests' brute-force distances)
+
 #: The add-on's module name: the tests register this checkout from a "dev" repository.
 ADDON = "bl_ext.fcdev.furcollide"
 
@@ -940,6 +943,196 @@ def groom_scene(fc):
     guides.furcollide.groom.groom = groom
     bpy.context.view_layer.objects.active = guides
     return guides, groom, box, out
+
+
+# ------------------------------------------------- the fur pipeline through a shot
+#: The frames of :func:`pipeline_scene`'s shot.
+PIPELINE_FRAMES = range(1, 7)
+
+
+def pipeline_scene(fc, skin="move"):
+    """The groom scene as the README's pipeline: Fur Attach guides on a Surface that
+    moves (``skin``: 'move' keyed location, 'shape' a shape key, 'armature' a bone),
+    strong wind after collision held by the Region of Influence, the collider distance
+    attribute, a render groom bound with its clearance pass. Returns
+    (guides, groom, box, out, gout)."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    surf = guides.data.surface
+    if skin == "move":
+        surf.location = (0, 0, 0)
+        surf.keyframe_insert("location", frame=1)
+        surf.location = (0.1, 0.0, 0.05)
+        surf.keyframe_insert("location", frame=6)
+    elif skin == "shape":
+        surf.shape_key_add(name="Basis")
+        k = surf.shape_key_add(name="Bulge")
+        co = np.empty(len(k.data) * 3, np.float32)
+        k.data.foreach_get("co", co)
+        co = co.reshape(-1, 3)
+        co[:, 2] += 0.15 * np.exp(-(co[:, 0] ** 2 + co[:, 1] ** 2))
+        k.data.foreach_set("co", co.ravel())
+        k.value = 0.0
+        k.keyframe_insert("value", frame=1)
+        k.value = 1.0
+        k.keyframe_insert("value", frame=6)
+    elif skin == "armature":
+        arm = bpy.data.objects.new("Rig", bpy.data.armatures.new("Rig"))
+        scene.collection.objects.link(arm)
+        activate(arm)
+        bpy.ops.object.mode_set(mode="EDIT")
+        b = arm.data.edit_bones.new("Bone")
+        b.head, b.tail = (0, 0, 0), (0, 0, 0.5)
+        bpy.ops.object.mode_set(mode="OBJECT")
+        vg = surf.vertex_groups.new(name="Bone")
+        vg.add(list(range(len(surf.data.vertices))), 1.0, "REPLACE")
+        mod = surf.modifiers.new("Armature", "ARMATURE")
+        mod.object = arm
+        pb = arm.pose.bones["Bone"]
+        pb.rotation_mode = "XYZ"
+        pb.rotation_euler = (0, 0, 0)
+        pb.keyframe_insert("rotation_euler", frame=1)
+        pb.rotation_euler = (0.15, 0, 0.3)
+        pb.keyframe_insert("rotation_euler", frame=6)
+    scene.frame_set(1)
+    return wind_and_bind(guides, groom, box, out)
+
+
+def wind_and_bind(guides, groom, box, out):
+    """Wind and the collider distance on, Fur Attach and the groom bound: the shot's
+    (guides, groom, box, output, groom output)."""
+    s = guides.furcollide
+    m = s.motion
+    m.use_wind, m.wind_strength, m.wind_turbulence = True, 0.3, 1.0
+    m.write_collider_distance, m.distance_max = True, 0.3
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    return guides, groom, box, out, s.groom.output
+
+
+def roots_off_surface(ob, surf, tol=1e-4):
+    """Curves of hair object ``ob`` whose root is farther than ``tol`` from ``surf``'s
+    evaluated mesh (world space)."""
+    P, offs = world(ob), offsets_of(ob)
+    V, F = tris_world(surf)
+    d = pipe_oracle.point_mesh_distance(P[offs[:-1]].astype(np.float64), V, F)
+    return np.flatnonzero(d > tol)
+
+
+def check_pipeline_frame(guides, groom, box, colliders=None, what="", guides_clear=True,
+                         groom_clear=True):
+    """The README's per-frame promises for the whole pipeline. ``guides_clear``: the
+    Region of Influence is on (off, wind after collision may push guides into a
+    collider); ``groom_clear``: the Clearance Pass is on."""
+    s = guides.furcollide
+    colliders = [box] if colliders is None else colliders
+    out, gout = s.output, s.groom.output
+    surf = guides.data.surface
+    if s.status_message == "":  # (a held frame says so: the guides are the last result)
+        if guides_clear:
+            assert len(resolved_crossing(out, colliders)) == 0, what
+        assert len(roots_off_surface(out, surf)) == 0, what
+    if groom_clear:
+        bad = crossing_unmarked(gout, colliders)
+        assert len(bad) == 0, (what, bad)
+    assert len(roots_off_surface(gout, surf)) == 0, (what, roots_off_surface(gout, surf))
+    ok = ~np.isin(status_of(gout), (INVALID,))
+    goffs = offsets_of(gout)
+    ref = seg_lengths(positions(groom), goffs)
+    got = seg_lengths(positions(gout), goffs)
+    per_seg_ok = np.repeat(ok, np.diff(goffs) - 1)
+    np.testing.assert_allclose(got[per_seg_ok], ref[per_seg_ok], rtol=1e-3, atol=1e-5,
+                               err_msg=what)
+
+
+def distance_attribute(ob):
+    """The output's ``furcollide_collider_distance`` (P,) float32, or None."""
+    a = ob.data.attributes.get("furcollide_collider_distance")
+    if a is None:
+        return None
+    d = np.empty(len(a.data), np.float32)
+    a.data.foreach_get("value", d)
+    return d
+
+
+def pipeline_frame(guides):
+    """What a pipeline setup on ``guides`` shows: :func:`pipeline_state` and the output's
+    collider distance attribute."""
+    s = guides.furcollide
+    return (world(s.output).copy(), status_of(s.output).copy(),
+            world(s.groom.output).copy(), status_of(s.groom.output).copy(),
+            distance_attribute(s.output))
+
+
+def same_pipeline_frame(a, b, what=""):
+    """Two :func:`pipeline_frame` (or :func:`pipeline_state`) records are equal, bit for bit."""
+    names = ("guides", "guide status", "groom", "groom status", "collider distance")
+    for x, y, name in zip(a, b, names[:len(a)], strict=True):
+        np.testing.assert_array_equal(x, y, err_msg=f"{what} {name}")
+
+
+def play_pipeline(guides, groom, box, frames=PIPELINE_FRAMES, colliders=None, check=True, **kw):
+    """Play ``frames`` (checked with :func:`check_pipeline_frame`, ``kw`` passed on):
+    ``{frame: pipeline_frame(guides)}``."""
+    scene = bpy.context.scene
+    rec = {}
+    for f in frames:
+        scene.frame_set(f)
+        if check:
+            check_pipeline_frame(guides, groom, box, colliders, what=f"frame {f}", **kw)
+        rec[f] = pipeline_frame(guides)
+    return rec
+
+
+def make_wall(name="Wall"):
+    """A thin wall (a closed box) across the render curves between guides only: at
+    x = 0.05 (the guides are at multiples of 0.3, the render curves of 0.1 + 0.05)."""
+    w = make_box(name, size=1.0, location=(0.0, 0.0, 0.0))
+    w.scale = (0.02, 0.6, 0.6)
+    w.location = (0.05, 0.0, 0.7)
+    return w
+
+
+def wall_collider(guides, strength):
+    """:func:`make_wall` in its own collection "Props" (so it can be excluded), with a
+    Displace modifier of ``strength`` (so it can be switched off), added as a collider
+    of ``guides``."""
+    scene = bpy.context.scene
+    coll = bpy.data.collections.new("Props")
+    scene.collection.children.link(coll)
+    wall = make_wall()
+    coll.objects.link(wall)
+    scene.collection.objects.unlink(wall)
+    wall.modifiers.new("Push", "DISPLACE").strength = strength
+    activate(guides, wall)
+    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    return wall
+
+
+#: The ways an artist switches a collider off (:func:`toggle_collider`); hidden or
+#: excluded from the view layer, a collider is still in the scene and keeps colliding.
+COLLIDER_CHANGES = ["hide_viewport", "hide_set", "exclude", "modifier_off", "disabled"]
+KEEPS_COLLIDING = ("hide_viewport", "hide_set", "exclude")
+
+
+def toggle_collider(kind, ob, guides, off):
+    """Switch collider ``ob`` off (``off``) or on again, as an artist does."""
+    scene = bpy.context.scene
+    if kind == "hide_viewport":
+        ob.hide_viewport = off
+    elif kind == "hide_set":
+        ob.hide_set(off)
+    elif kind == "exclude":
+        lc = bpy.context.view_layer.layer_collection.children[ob.users_collection[0].name]
+        lc.exclude = off
+    elif kind == "modifier_off":
+        ob.modifiers["Push"].show_viewport = not off
+    elif kind == "disabled":
+        for c in guides.furcollide.colliders:
+            if c.object == ob:
+                c.enabled = not off
+    scene.frame_set(scene.frame_current)
 
 
 # ------------------------------------------------------- Blender's hair node assets

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from helpers import (
     COLLIDING,
+    PIPELINE_FRAMES,
+    activate,
     assert_same_frames,
     bake_files_of,
     bake_setup,
@@ -15,10 +17,14 @@ from helpers import (
     check_render,
     make_box,
     make_hair,
+    pipeline_frame,
+    pipeline_scene,
+    play_pipeline,
     positions,
     render_camera,
     render_spy,
     render_watching,
+    same_pipeline_frame,
     save_in,
     status_of,
     sweep_box,
@@ -578,3 +584,54 @@ def test_a_source_denser_in_renders_says_why_the_render_shows_the_viewport_curve
     scene.frame_set(3)
     np.testing.assert_array_equal(world(out), before)
     assert "other curves" not in hair.furcollide.status_message
+
+
+# ------------------------------------------------------ a pipeline setup
+@pytest.mark.parametrize("baked", [False, True], ids=["played", "baked"])
+def test_f12_with_motion_blur_of_a_pipeline_frame(fc, tmp_path, baked):
+    """F12 (one frame, motion blur on) in the middle of a played (or baked) pipeline
+    shot: the viewport shows the same frame bit for bit afterwards, nothing is said,
+    and the cache still gives every frame."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    s = guides.furcollide
+    save_in(tmp_path)
+    first = play_pipeline(guides, groom, box)
+    if baked:
+        activate(guides)
+        assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    render_camera(scene)
+    scene.render.use_motion_blur = True
+    scene.render.filepath = str(tmp_path / "f12")
+    scene.frame_set(4)
+    assert bpy.ops.render.render(write_still=False) == {"FINISHED"}
+    assert s.status_message == "", s.status_message
+    same_pipeline_frame(pipeline_frame(guides), first[4], "after F12")
+    for f in (6, 2, 5):
+        scene.frame_set(f)
+        same_pipeline_frame(pipeline_frame(guides), first[f], f"after F12, frame {f}")
+        assert s.status_message == "", s.status_message
+
+
+@pytest.mark.parametrize("baked", [False, True], ids=["played", "baked"])
+def test_animation_render_with_motion_blur_of_the_pipeline(fc, tmp_path, baked):
+    """The whole shot rendered with motion blur, guides hidden from render: every
+    whole frame rendered is the viewport's, bit for bit, nothing said."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    scene.frame_end = guides.furcollide.frame_end = PIPELINE_FRAMES[-1]
+    save_in(tmp_path)
+    first = play_pipeline(guides, groom, box)
+    if baked:
+        activate(guides)
+        assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    for o in (guides, out, groom):
+        o.hide_render = True
+    render_camera(scene)
+    scene.render.use_motion_blur = True
+    scene.frame_set(1)
+    seen, statuses = render_watching(tmp_path, "mb", [out, gout], guides)
+    check_render(seen, statuses, [out, gout], PIPELINE_FRAMES)
+    for f in PIPELINE_FRAMES:
+        scene.frame_set(f)
+        same_pipeline_frame(pipeline_frame(guides), first[f], f"after the render, frame {f}")

@@ -8,6 +8,7 @@ import pytest
 from helpers import (
     HALF,
     INPUTS,
+    PIPELINE_FRAMES,
     RESOLVED,
     activate,
     check_render,
@@ -19,12 +20,16 @@ from helpers import (
     make_box,
     make_surface,
     offsets_of,
+    pipeline_frame,
+    pipeline_scene,
     play,
+    play_pipeline,
     positions,
     ragged_groom,
     render_camera,
     render_watching,
     reopen,
+    same_pipeline_frame,
     save_in,
     seg_lengths,
     segments_in_box,
@@ -600,3 +605,43 @@ def test_reopened_unbaked_render_groom_replays_the_same(fc, tmp_path):
     assert "not saved with the file" in msg and "Play from frame 1" in msg, msg
     _same(played, scene, gout, range(1, 9), "replayed")
     assert guides.furcollide.status_message == ""
+
+
+# ------------------------------------------------------------- in a shot
+def test_groom_bound_again_mid_shot_on_a_moved_skin(fc):
+    """Bind Groom pressed again at frame 4 (the skin has moved, the guides are attached
+    to it): the groom's roots stay on the skin at every frame and every promise holds."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    play_pipeline(guides, groom, box)
+    scene.frame_set(4)
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    rec = play_pipeline(guides, groom, box)
+    for f in (5, 2, 6):
+        scene.frame_set(f)
+        same_pipeline_frame(pipeline_frame(guides), rec[f], f"scrub {f}")
+
+
+def test_render_groom_with_an_enable_attribute(fc):
+    """The render groom itself carries furcollide_enable with curves off: the enable
+    attribute is the setup source's (README "Per-curve enable"); the render groom's is
+    not read, so every render curve follows the guides and gets the clearance pass
+    (none left crossing unmarked, the switched-off ones included)."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    a = groom.data.attributes.new("furcollide_enable", "BOOLEAN", "CURVE")
+    on = np.ones(len(groom.data.curves), bool)
+    on[::2] = False
+    a.data.foreach_set("value", on)
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    fixed_off = 0
+    for f in PIPELINE_FRAMES:
+        scene.frame_set(f)
+        assert guides.furcollide.status_message == ""
+        assert len(crossing_unmarked(gout, [box])) == 0, f
+        st = status_of(gout)
+        fixed_off += int((st[~on] == 1).sum())
+    assert fixed_off > 0  # (curves switched off on the groom were moved too)

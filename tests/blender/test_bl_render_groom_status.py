@@ -3,10 +3,13 @@ count its unresolved and invalid curves, no crossing left unmarked (oracle), cur
 it cannot solve set aside at Bind Groom, edits of the groom reported, and a groom that
 keeps following the skin while the guides' frame fails (issue 17)."""
 
+from functools import partial
+
 import bpy
 import numpy as np
 import pytest
 from helpers import (
+    PIPELINE_FRAMES,
     RESOLVED,
     UNRESOLVED,
     activate,
@@ -16,9 +19,14 @@ from helpers import (
     mesh_object,
     move_skin,
     offsets_of,
+    pipeline_frame,
+    pipeline_scene,
     play,
+    play_pipeline,
     positions,
     reopen,
+    roots_off_surface,
+    same_pipeline_frame,
     save_in,
     seg_lengths,
     status_of,
@@ -448,3 +456,129 @@ def test_a_groom_stage_error_is_prefixed_once(fc):
     assert msg.count("Render groom:") == 1
     said = fc.groom_stage.error_message(ValueError("Render groom: the guides now have 3"))
     assert said == "Render groom: the guides now have 3"
+
+
+# ---------------------------------------- the render groom's source in a shot
+def _set_groom_points(groom, edit):
+    P = positions(groom).copy()
+    edit(P, offsets_of(groom))
+    groom.data.position_data.foreach_set("vector", P.ravel())
+    groom.data.update_tag()
+
+
+def _break_curve_7(bad, P, offs):
+    """Render curve 7 made bad in place: a NaN CV, or a zero-length segment."""
+    P[offs[7] + 2] = np.nan if bad == "nan" else P[offs[7] + 1]
+
+
+@pytest.mark.parametrize("bad", ["nan", "zero_length"])
+def test_a_bad_curve_in_the_groom_after_bind(fc, bad):
+    """One render curve of the groom goes bad after Bind Groom (a NaN, a zero-length
+    segment): the status says the groom was edited, the output keeps following the
+    guides with the bound curves: no NaN out, every promise held."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    play_pipeline(guides, groom, box, range(1, 4))
+
+    _set_groom_points(groom, partial(_break_curve_7, bad))
+    for f in range(3, 7):
+        scene.frame_set(f)
+        level, msg = fc.registry.status_for(guides)
+        assert level == "WARNING" and "'Groom' was edited since Bind Groom" in msg, msg
+        assert np.isfinite(world(gout)).all()
+        # (the bound curves are the reference: the lengths are the bound ones)
+        assert len(crossing_unmarked(gout, [box])) == 0, f
+        assert len(roots_off_surface(gout, guides.data.surface)) == 0, f
+
+
+@pytest.mark.parametrize("bad", ["nan", "zero_length"])
+def test_a_bad_curve_at_bind_follows_the_skin(fc, bad):
+    """A render curve that cannot be solved at Bind Groom is set aside (INVALID, yellow)
+    and moves with its Surface triangle: its root stays on the moving skin, no NaN
+    out, and the other curves hold every promise."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+
+    _set_groom_points(groom, partial(_break_curve_7, bad))
+    surf = guides.data.surface
+    surf.location = (0, 0, 0)
+    surf.keyframe_insert("location", frame=1)
+    surf.location = (0.1, 0.0, 0.05)
+    surf.keyframe_insert("location", frame=6)
+    scene.frame_set(1)
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    for f in PIPELINE_FRAMES:
+        scene.frame_set(f)
+        st = status_of(gout)
+        assert np.flatnonzero(st == INVALID).tolist() == [7], f
+        P = world(gout)
+        offs = offsets_of(gout)
+        good = np.ones(len(P), bool)
+        good[offs[7]:offs[8]] = False
+        assert np.isfinite(P[good]).all()
+        assert len(crossing_unmarked(gout, [box])) == 0, f
+        assert len(roots_off_surface(gout, surf)) == 0, f
+
+
+def _delete_curves_modifier(ob, below):
+    """A Geometry Nodes modifier deleting the curves of index < ``below``."""
+    ng = bpy.data.node_groups.new("Cull", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi = ng.nodes.new("NodeGroupInput")
+    go = ng.nodes.new("NodeGroupOutput")
+    dl = ng.nodes.new("GeometryNodeDeleteGeometry")
+    dl.domain = "CURVE"
+    idx = ng.nodes.new("GeometryNodeInputIndex")
+    cmp = ng.nodes.new("FunctionNodeCompare")
+    cmp.data_type, cmp.operation = "INT", "LESS_THAN"
+    # (by type: the node's socket list differs across Blender versions; 5.1+ builds it
+    # for the data type)
+    a, b = [sock for sock in cmp.inputs if sock.type == "INT"][:2]
+    ng.links.new(idx.outputs[0], a)
+    b.default_value = below
+    ng.links.new(cmp.outputs[0], dl.inputs["Selection"])
+    ng.links.new(gi.outputs[0], dl.inputs["Geometry"])
+    ng.links.new(dl.outputs[0], go.inputs[0])
+    mod = ob.modifiers.new("Cull", "NODES")
+    mod.node_group = ng
+    return mod
+
+
+def test_groom_with_fewer_curves_than_bound_from_a_modifier(fc):
+    """A modifier on the render groom gives fewer curves than when bound (mid-shot):
+    the status names the counts and what to press; the output keeps the bound curves,
+    following the guides; the modifier off again, nothing is said."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    first = play_pipeline(guides, groom, box)
+    scene.frame_set(3)
+    mod = _delete_curves_modifier(groom, 10)
+    for f in range(3, 7):
+        scene.frame_set(f)
+        level, msg = fc.registry.status_for(guides)
+        assert level == "WARNING" and "'Groom' now gives 134 curves" in msg, msg
+        assert "press Bind Groom again" in msg
+        same_pipeline_frame(pipeline_frame(guides), first[f], f"bound curves shown, frame {f}")
+    mod.show_viewport = False
+    scene.frame_set(5)
+    scene.frame_set(6)
+    assert fc.registry.status_for(guides) == ("INFO", "")
+    same_pipeline_frame(pipeline_frame(guides), first[6], "modifier off")
+
+
+def test_clearance_pass_off_marks_nothing(fc):
+    """With the Clearance Pass off, render curves between guides cross the box and
+    their status is FREE (grey): nothing marks them (README: Render Groom)."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    guides.furcollide.groom.use_clearance = False
+    crossing = 0
+    for f in PIPELINE_FRAMES:
+        scene.frame_set(f)
+        assert (status_of(gout) == 0).all()
+        crossing += len(crossing_unmarked(gout, [box]))
+    assert crossing > 0

@@ -7,7 +7,20 @@ playing from the start frame does too, and then nothing more is said about the f
 import bpy
 import numpy as np
 import pytest
-from helpers import bake_setup, draw_enabled, positions, reopen, save_in, status_of
+from helpers import (
+    PIPELINE_FRAMES,
+    bake_setup,
+    check_pipeline_frame,
+    draw_enabled,
+    pipeline_frame,
+    pipeline_scene,
+    play_pipeline,
+    positions,
+    reopen,
+    same_pipeline_frame,
+    save_in,
+    status_of,
+)
 
 pytestmark = pytest.mark.blender
 
@@ -123,3 +136,27 @@ def test_saved_again_before_playing_still_says_it(fc, tmp_path):
     path = save_in(tmp_path, "fresh.blend")
     scene, hair, out = _opened(fc, path)
     assert fc.registry.status_for(hair) == ("INFO", "")
+
+
+# ------------------------------------------------------ a pipeline setup
+def test_saved_and_reopened_mid_playback(fc, tmp_path):
+    """Saved at frame 3 of a played shot, reopened: the held frames say so and the
+    groom still holds every promise; played from the start frame, the first session's
+    frames bit for bit."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    first = play_pipeline(guides, groom, box)
+    scene.frame_set(3)
+    path = save_in(tmp_path)
+    reopen(path)
+    scene = bpy.context.scene
+    guides, groom, box = (bpy.data.objects[n] for n in ("Guides", "Groom", "Box"))
+    assert scene.frame_current == 3
+    same_pipeline_frame(pipeline_frame(guides), first[3], "reopened at frame 3")
+    for f in (3, 4, 5, 6):
+        scene.frame_set(f)
+        check_pipeline_frame(guides, groom, box, what=f"reopened, frame {f}")
+    again = play_pipeline(guides, groom, box)
+    assert guides.furcollide.status_message == ""
+    for f in PIPELINE_FRAMES:
+        same_pipeline_frame(again[f], first[f], f"reopened, replayed: frame {f}")
