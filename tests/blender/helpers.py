@@ -1135,6 +1135,252 @@ def toggle_collider(kind, ob, guides, off):
     scene.frame_set(scene.frame_current)
 
 
+# ------------------------------------------------------------ the demo's scene
+#: The demo's "fur" settings (scripts/demo.py SETTINGS["fur"]).
+DEMO_FUR = dict(
+    mode="bend",
+    rotation_precision=0.5,
+    collision_offset=0.008,
+    recovery_rate=0.3,
+    pinch_resolution="growth_surface",
+)
+#: What a demo setup on the fur says on a quiet frame: nothing, or the cloth's note.
+CLOTH_NOTE = "Colliders: no pinch detection for 'Cloth': open mesh (112 open edges)"
+QUIET = ("", CLOTH_NOTE)
+#: Curves of fur on the demo's body at real size: enough that the cloth and the pusher
+#: put more than core.step.SPLIT_MIN_CURVES (4096) curves into a phase, so a step solves
+#: its phases in two halves on two threads (the tests that need it check it).
+REAL_SIZE = 20000
+#: The real-size shot: the pusher reaches the fur at ~8, the cloth lands at 16, the pinch
+#: from 19.
+REAL_LAST = 24
+REAL_FRAMES = range(1, REAL_LAST + 1)
+#: Wind after collision with the Region of Influence and the collider distance, as the
+#: demo's pipeline has them (scripts/demo.py pipeline_setup).
+DEMO_PIPELINE_MOTION = dict(
+    use_wind=True, wind_stage="OUTPUT", wind_strength=0.04, wind_direction=(1.0, 0.4, 0.0),
+    wind_turbulence=0.8, wind_frequency=0.7, wind_scale=0.4, use_region_of_influence=True,
+    write_collider_distance=True, distance_max=0.1)
+
+
+def demo_build(fur_count, grass_count=50):
+    """The demo's scene (``scripts/demo_scene.py``: a turning body with fur, a pusher and a
+    cloth; grass under a rolling ball), built in an empty file; returns its handles."""
+    scripts = str(Path(__file__).resolve().parents[2] / "scripts")
+    if scripts not in sys.path:
+        sys.path.insert(0, scripts)
+    import demo_scene
+
+    return demo_scene.build(fur_count=fur_count, grass_count=grass_count)
+
+
+def demo_fur(n_fur, last, mode="bend", grass=50, scene_end=None, **settings):
+    """The demo with a FurCollide setup on its body fur (pusher and cloth), the demo's
+    settings (``mode`` and ``settings`` on top), Frame Range 1..``last``; the scene's range
+    the same, or 1..``scene_end``. Returns (demo, fur, out)."""
+    demo = demo_build(n_fur, grass)
+    activate(demo.fur, demo.pusher, demo.cloth)
+    assert bpy.ops.furcollide.add() == {"FINISHED"}
+    s = demo.fur.furcollide
+    for k, v in dict(DEMO_FUR, mode=mode, **settings).items():
+        setattr(s, k, v)
+    s.frame_start, s.frame_end = 1, last
+    if scene_end is None:
+        demo.scene.frame_start, demo.scene.frame_end = 1, last
+    else:
+        demo.scene.frame_end = scene_end
+    demo.scene.frame_set(1)
+    return demo, demo.fur, s.output
+
+
+def real_size_fur(mode="bend", threads=0, n_fur=REAL_SIZE, **settings):
+    """:func:`demo_fur` at real size over :data:`REAL_FRAMES` (the scene's range four
+    frames longer), with ``threads``."""
+    return demo_fur(n_fur, REAL_LAST, mode, scene_end=REAL_LAST + 4, threads=threads,
+                    **settings)
+
+
+def demo_pipeline(n_fur, last, motion, fraction=0.25, scene_range=True,
+                  collider_offsets=False):
+    """The demo's pipeline (scripts/demo.py pipeline_setup) on ``n_fur`` curves: Fur
+    Sampler (``fraction``), FurCollide on the guides with the demo's settings over
+    1..``last`` (the scene's range too with ``scene_range``; each collider with the
+    setup's Collision Offset as its own with ``collider_offsets``), Fur Attach, the
+    ``motion`` settings, the fur bound as the render groom with the clearance pass.
+    Returns (demo, guides, out, gout)."""
+    demo = demo_build(n_fur)
+    scene = demo.scene
+    if scene_range:
+        scene.frame_start, scene.frame_end = 1, last
+    scene.frame_set(1)
+    activate(demo.fur)
+    assert bpy.ops.furcollide.fur_sampler(fraction=fraction, seed=3) == {"FINISHED"}
+    guides = bpy.context.view_layer.objects.active
+    activate(guides, demo.pusher, demo.cloth)
+    assert bpy.ops.furcollide.add() == {"FINISHED"}
+    s = guides.furcollide
+    for k, v in DEMO_FUR.items():
+        setattr(s, k, v)
+    s.frame_start, s.frame_end = 1, last
+    if collider_offsets:
+        for c in s.colliders:
+            c.use_offset, c.collision_offset = True, DEMO_FUR["collision_offset"]
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    m = s.motion
+    for k, v in motion.items():
+        setattr(m, k, v)
+    s.groom.groom = demo.fur
+    s.groom.use_clearance = True
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    return demo, guides, s.output, s.groom.output
+
+
+def real_size_pipeline(n_fur=REAL_SIZE, fraction=0.25):
+    """:func:`demo_pipeline` as the demo makes it, with ``n_fur`` render curves, over
+    :data:`REAL_FRAMES`."""
+    return demo_pipeline(n_fur, REAL_LAST, DEMO_PIPELINE_MOTION, fraction,
+                         scene_range=False, collider_offsets=True)
+
+
+def world_meshes(objects, depsgraph=None):
+    """:func:`tris_world` of every object: [(V, F), ...]."""
+    return [tris_world(o, depsgraph) for o in objects]
+
+
+def curves_crossing(P, offs, meshes, st=None, keep=RESOLVED):
+    """Curves whose status is in ``keep`` (all when ``st`` is None) that surely cross
+    one of ``meshes`` ((V, F) in world space): ``oracle.curves_crossing`` (culled, with
+    the float32 margin)."""
+    return oracle.curves_crossing(P, offs, meshes, None if st is None else np.isin(st, keep))
+
+
+def check_demo_frame(demo, hair, out, what="", lengths=True):
+    """README's per-frame promises for a plain demo setup: no resolved curve crosses the
+    pusher or the cloth, roots exactly the source's, lengths kept (no Shrink). Returns
+    the statuses."""
+    offs = offsets_of(out)
+    st = status_of(out)
+    bad = curves_crossing(world(out), offs, world_meshes([demo.pusher, demo.cloth]), st)
+    assert len(bad) == 0, (what, len(bad), bad[:10], st[bad[:10]])
+    src, res = positions(hair), positions(out)
+    np.testing.assert_array_equal(res[offs[:-1]], src[offs[:-1]], err_msg=f"{what}: roots")
+    if lengths:
+        ok = np.repeat(st != INVALID, np.diff(offs) - 1)
+        np.testing.assert_allclose(seg_lengths(res, offs)[ok], seg_lengths(src, offs)[ok],
+                                   rtol=2e-4, atol=1e-6, err_msg=f"{what}: lengths")
+    return st
+
+
+def demo_checks(demo, hair, out):
+    """:func:`check_demo_frame` as a ``check(frame)`` for :func:`play_demo`."""
+    return lambda f: check_demo_frame(demo, hair, out, what=f"frame {f}")
+
+
+def frame_of(out):
+    """What ``out`` shows: (positions, statuses), copies."""
+    return positions(out).copy(), status_of(out).copy()
+
+
+def same_frame(a, b, what=""):
+    """Two :func:`frame_of` records are equal, bit for bit."""
+    np.testing.assert_array_equal(a[0], b[0], err_msg=f"{what}: positions")
+    np.testing.assert_array_equal(a[1], b[1], err_msg=f"{what}: status")
+
+
+def play_demo(scene, hair, out, frames=REAL_FRAMES, check=None):
+    """frame_set every frame ({frame: :func:`frame_of`}); the setup says nothing but the
+    cloth's note and is never outdated; ``check(frame)`` after each."""
+    rec = {}
+    for f in frames:
+        scene.frame_set(f)
+        assert hair.furcollide.status_message in QUIET, (f, hair.furcollide.status_message)
+        assert not hair.furcollide.is_outdated, f
+        if check is not None:
+            check(f)
+        rec[f] = frame_of(out)
+    return rec
+
+
+def reset_cache(hair):
+    """Press Reset Cache on ``hair``'s setup."""
+    activate(hair)
+    assert bpy.ops.furcollide.reset() == {"FINISHED"}
+
+
+def groom_snapshot(ob):
+    """What the artist groomed: positions, layout, every attribute's values and the
+    object's matrix."""
+    d = ob.data
+    attrs = {}
+    for a in d.attributes:
+        if a.name.startswith("."):
+            continue
+        n = len(a.data)
+        key = ("vector" if a.data_type in ("FLOAT_VECTOR", "FLOAT2") else
+               "color" if a.data_type in ("FLOAT_COLOR", "BYTE_COLOR") else "value")
+        width = {"FLOAT_VECTOR": 3, "FLOAT2": 2, "FLOAT_COLOR": 4, "BYTE_COLOR": 4}.get(
+            a.data_type, 1)
+        buf = np.empty(n * width, np.float64 if key != "value" or a.data_type == "FLOAT"
+                       else np.int64)
+        if a.data_type == "BOOLEAN":
+            buf = np.empty(n, bool)
+        a.data.foreach_get(key, buf)
+        attrs[(a.name, a.domain, a.data_type)] = buf
+    return positions(ob).copy(), offsets_of(ob).copy(), attrs, np.array(ob.matrix_world)
+
+
+def assert_groom_unchanged(ob, snap, what=""):
+    """``ob`` is as :func:`groom_snapshot` recorded it, bit for bit."""
+    now = groom_snapshot(ob)
+    np.testing.assert_array_equal(now[0], snap[0], err_msg=f"{ob.name} positions {what}")
+    np.testing.assert_array_equal(now[1], snap[1], err_msg=f"{ob.name} layout {what}")
+    assert now[2].keys() == snap[2].keys(), (what, now[2].keys() ^ snap[2].keys())
+    for k in snap[2]:
+        np.testing.assert_array_equal(now[2][k], snap[2][k], err_msg=f"{ob.name} {k} {what}")
+    np.testing.assert_array_equal(now[3], snap[3], err_msg=f"{ob.name} matrix {what}")
+
+
+# ------------------------------------------------------ renders with motion blur
+def cycles_motion_blur(scene, tmp_path, position="CENTER"):
+    """Cycles (1 sample, 16 px) with motion blur at shutter ``position``, Lock Interface
+    on, frames written to ``tmp_path``."""
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 1
+    scene.cycles.device = "CPU"
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.render.use_lock_interface = True
+    scene.render.use_motion_blur = True
+    scene.render.motion_blur_position = position
+    scene.render.filepath = str(tmp_path / "mb_####")
+
+
+def render_recording(hair, record):
+    """Render the animation; [((frame, subframe), record(depsgraph), status message,
+    outdated)] for every RENDER-depsgraph frame change, after FurCollide's handler."""
+    seen = []
+
+    def spy(sc, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            s = hair.furcollide
+            seen.append(
+                (
+                    (sc.frame_current, round(sc.frame_subframe, 3)),
+                    record(depsgraph),
+                    s.status_message,
+                    s.is_outdated,
+                )
+            )
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render(animation=True)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    return seen
+
+
 # ------------------------------------------------------- Blender's hair node assets
 #: The inputs of Blender's bundled hair node groups (``procedural_hair_node_assets.blend``:
 #: Generate, Interpolate, Clump, Frizz Hair Curves) the tests set, by what they mean:

@@ -9,21 +9,29 @@ import pytest
 from helpers import (
     COLLIDING,
     PIPELINE_FRAMES,
+    QUIET,
     activate,
     assert_same_frames,
     bake_files_of,
     bake_setup,
     check_frame,
     check_render,
+    cycles_motion_blur,
+    demo_fur,
+    frame_of,
     make_box,
     make_hair,
     pipeline_frame,
     pipeline_scene,
+    play_demo,
     play_pipeline,
     positions,
     render_camera,
+    render_recording,
     render_spy,
     render_watching,
+    reset_cache,
+    same_frame,
     same_pipeline_frame,
     save_in,
     status_of,
@@ -635,3 +643,114 @@ def test_animation_render_with_motion_blur_of_the_pipeline(fc, tmp_path, baked):
     for f in PIPELINE_FRAMES:
         scene.frame_set(f)
         same_pipeline_frame(pipeline_frame(guides), first[f], f"after the render, frame {f}")
+
+
+# ------------------------------------------- the demo's scene, with motion blur
+#: The fur (6,000 curves: the pusher reaches it at frame 8, the cloth comes down from 1).
+R_FUR, R_LAST = 6000, 12
+
+#: Motion blur centred on the frame runs in every lane; the other shutter positions
+#: (the same frame rules, other orders of the motion steps) in the main lane only.
+OTHER_POSITIONS = pytest.mark.slow
+
+
+@pytest.mark.parametrize("position", [
+    "CENTER", pytest.param("START", marks=OTHER_POSITIONS),
+    pytest.param("END", marks=OTHER_POSITIONS)])
+def test_motion_blur_render_of_a_played_setup(fc, tmp_path, position):
+    """README "Time": a subframe "never steps ... the output keeps the whole frame";
+    "Animation renders show the solved ... result on every frame". An animation render
+    with motion blur (Cycles' motion steps fire the frame handler at subframes) of a
+    setup nobody played: every whole frame rendered is a fresh viewport play's frame
+    bit for bit, every subframe shows the whole frame being rendered, nothing is said,
+    and afterwards the playback cache holds the whole frames only, as played."""
+    demo, hair, out = demo_fur(R_FUR, R_LAST)
+    scene = demo.scene
+    ref = play_demo(scene, hair, out, range(1, R_LAST + 1))
+    assert (ref[R_LAST][1] == 1).sum() > 20  # the pusher and the cloth reached the fur
+    reset_cache(hair)
+    scene.frame_set(1)
+    cycles_motion_blur(scene, tmp_path, position)
+    seen = render_recording(hair, lambda dg: frame_of(out))
+    assert any(sub for (_, sub), *_ in seen), "no motion step was rendered"
+    last_whole = None
+    for (f, sub), got, msg, outdated in seen:
+        assert msg in QUIET and not outdated, (f, sub, msg)
+        if sub == 0.0:
+            same_frame(got, ref[f], f"{position}: rendered frame {f}")
+            last_whole = f
+        else:  # the whole frame being rendered, evaluated just before
+            same_frame(got, ref[last_whole], f"{position}: subframe {f}+{sub}")
+    rt = fc.registry.get_runtime(hair)
+    assert sorted(rt.memory.frames) == list(range(1, R_LAST + 1))
+    for f in (R_LAST, 3, 9):
+        scene.frame_set(f)
+        same_frame(frame_of(out), ref[f], f"after the render, frame {f}")
+    scene.frame_set(R_LAST + 1)  # after the end: the end frame held
+    same_frame(frame_of(out), ref[R_LAST], "after the end")
+
+
+@pytest.mark.parametrize("position", ["CENTER", pytest.param("END", marks=OTHER_POSITIONS)])
+def test_motion_blur_render_of_a_baked_setup(fc, tmp_path, position):
+    """README "Time": at a subframe "a baked setup blends its two neighbouring baked
+    frames (from Frame End on it shows Frame End)". Every subframe of the render is
+    exactly ``a + (b - a) * subframe`` of the two bake files (the start frame's motion
+    step before it keeps the start frame), every whole frame the bake, nothing said,
+    and the viewport afterwards the bake."""
+    demo, hair, out = demo_fur(R_FUR, R_LAST)
+    scene = demo.scene
+    save_in(tmp_path)
+    activate(hair)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    d = bpy.path.abspath(hair.furcollide.bake_path)
+    baked = {f: fc.cache.read_frame(d, f, state=False)[0] for f in range(1, R_LAST + 1)}
+    cycles_motion_blur(scene, tmp_path, position)
+    seen = render_recording(hair, lambda dg: world(out).astype(np.float32))
+    blended = 0
+    for (f, sub), got, msg, outdated in seen:
+        assert msg in QUIET and not outdated, (f, sub, msg)
+        if sub == 0.0:
+            np.testing.assert_array_equal(got, baked[f], err_msg=f"whole frame {f}")
+            last_whole = f
+        elif f < 1:
+            np.testing.assert_array_equal(got, baked[last_whole], err_msg="before the start")
+        else:
+            a, b = (f, f + 1) if f < R_LAST else (R_LAST, R_LAST)
+            want = baked[a] + (baked[b] - baked[a]) * np.float32(sub)
+            np.testing.assert_allclose(got, want, atol=1e-6, err_msg=f"subframe {f}+{sub}")
+            blended += not np.array_equal(baked[a], baked[b])
+    assert blended > 5
+    for f in (R_LAST, 4):
+        scene.frame_set(f)
+        np.testing.assert_array_equal(world(out).astype(np.float32), baked[f])
+        assert hair.furcollide.status_message in QUIET
+
+
+def test_f12_with_motion_blur_in_the_middle_of_playback(fc, tmp_path):
+    """An F12 still with motion blur at frame 8 while playing (frames 1-10 cached):
+    the still sees frame 8, the subframes change no cached frame, and playing on from
+    frame 10 gives what an uninterrupted play gives, bit for bit."""
+    demo, hair, out = demo_fur(R_FUR, R_LAST)
+    scene = demo.scene
+    ref = play_demo(scene, hair, out, range(1, R_LAST + 1))
+    reset_cache(hair)
+    play_demo(scene, hair, out, range(1, 11))
+    scene.frame_set(8)
+    cycles_motion_blur(scene, tmp_path)
+    seen = []
+
+    def spy(sc, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            seen.append(((sc.frame_current, round(sc.frame_subframe, 3)), frame_of(out)))
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render()
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    assert {k for k, _ in seen} >= {(8, 0.0), (7, 0.75), (8, 0.25)}, [k for k, _ in seen]
+    for key, got in seen:
+        same_frame(got, ref[8], f"F12 at {key}")
+    assert sorted(fc.registry.get_runtime(hair).memory.frames) == list(range(1, 11))
+    for f, got in play_demo(scene, hair, out, [9, 10, 11, 12, 2]).items():
+        same_frame(got, ref[f], f"after F12, frame {f}")
