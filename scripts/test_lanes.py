@@ -24,11 +24,13 @@ lane's Python, numpy and embreex (the pins of ``requirements/``) they would run 
 exactly as in the main lane, so these two lanes leave them out (``BPY_FREE``); the 5.2
 lane runs them on Python 3.13 and numpy 2.
 
-(**) Tests marked ``slow`` (the real-size scenes of ``tests/blender/test_bl_hunt6.py``, and
-the demo-sized searches, grass, Shrink and off-centre shutters of ``test_bl_hunt7.py``,
-about two and a half minutes) play the same frames on every Blender: they run in the main lane only,
-which keeps ``make test`` within its 15 minutes; every other Blender-side test runs in
-every ``bpy`` lane.
+(**) Tests marked ``slow`` (the demo's scene at real and demo size:
+``tests/blender/test_bl_demo_scale.py`` and ``test_bl_warm_start.py``, and single tests of
+``test_bl_playback.py``, ``test_bl_save_mid_playback.py``, ``test_bl_bake_resume.py``,
+``test_bl_memory.py`` and ``test_bl_baked_pipeline.py``; the off-centre motion-blur shutters
+of ``test_bl_render.py``; about two and a half minutes) play the same frames on every
+Blender: they run in the main lane only, which keeps ``make test`` within its 15 minutes;
+every other Blender-side test runs in every ``bpy`` lane.
 
 Each lane is judged by pytest's own JUnit report (counts of passed, failed, errors):
 a lane that cannot be prepared, collects no test, or reports a failure fails the run,

@@ -23,6 +23,9 @@ from core import Status
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
 import oracle  # noqa: E402, F401  (the core tests' brute-force segment/triangle oracle)
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pipeline"))
+import pipe_oracle  # noqa: E402  (the pipeline tests' brute-force distances)
+
 #: The add-on's module name: the tests register this checkout from a "dev" repository.
 ADDON = "bl_ext.fcdev.furcollide"
 
@@ -30,6 +33,7 @@ INPUTS = "FurCollide Inputs"
 FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED = (
     Status.FREE, Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED)
 RESOLVED = (FREE, COLLIDING, RECOVERING)
+INVALID = Status.INVALID
 SHOT_FRAMES = (1, 6)
 HALF = 0.25
 
@@ -726,6 +730,28 @@ def resolved_crossing(out, colliders, status=None):
     return np.flatnonzero(bad & np.isin(st, RESOLVED))
 
 
+def crossing_unmarked(gout, colliders, unmarked=None):
+    """Render curves of ``gout`` crossing a collider (the oracle, float32 margin) whose
+    root is outside every closed collider and whose status does not say so.
+    ``colliders``: objects (each taken as closed) or ``(object, closed)`` pairs;
+    ``unmarked``: the statuses that do not say so (default: all but UNRESOLVED and
+    INVALID)."""
+    P, offs = world(gout), offsets_of(gout)
+    st = status_of(gout)
+    roots = P[offs[:-1]]
+    crossing = np.zeros(len(offs) - 1, bool)
+    inside = np.zeros(len(offs) - 1, bool)
+    for c in colliders:
+        ob, closed = c if isinstance(c, tuple) else (c, True)
+        V, F = tris_world(ob)
+        crossing |= oracle.segments_hit_mesh(P, offs, V, F, abs_eps=oracle.float32_margin(P, V))
+        if closed:
+            inside |= oracle.points_inside_closed_mesh(roots, V, F)
+    says_not = (~np.isin(st, (UNRESOLVED, INVALID)) if unmarked is None
+                else np.isin(st, unmarked))
+    return np.flatnonzero(crossing & ~inside & says_not)
+
+
 def check_frame(hair, out, colliders, exact_roots=True, lengths=True, status=""):
     """The per-frame invariants; returns the status codes. ``status``: the status
     message expected (None: not checked)."""
@@ -917,6 +943,445 @@ def groom_scene(fc):
     guides.furcollide.groom.groom = groom
     bpy.context.view_layer.objects.active = guides
     return guides, groom, box, out
+
+
+# ------------------------------------------------- the fur pipeline through a shot
+#: The frames of :func:`pipeline_scene`'s shot.
+PIPELINE_FRAMES = range(1, 7)
+
+
+def pipeline_scene(fc, skin="move"):
+    """The groom scene as the README's pipeline: Fur Attach guides on a Surface that
+    moves (``skin``: 'move' keyed location, 'shape' a shape key, 'armature' a bone),
+    strong wind after collision held by the Region of Influence, the collider distance
+    attribute, a render groom bound with its clearance pass. Returns
+    (guides, groom, box, out, gout)."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    surf = guides.data.surface
+    if skin == "move":
+        surf.location = (0, 0, 0)
+        surf.keyframe_insert("location", frame=1)
+        surf.location = (0.1, 0.0, 0.05)
+        surf.keyframe_insert("location", frame=6)
+    elif skin == "shape":
+        surf.shape_key_add(name="Basis")
+        k = surf.shape_key_add(name="Bulge")
+        co = np.empty(len(k.data) * 3, np.float32)
+        k.data.foreach_get("co", co)
+        co = co.reshape(-1, 3)
+        co[:, 2] += 0.15 * np.exp(-(co[:, 0] ** 2 + co[:, 1] ** 2))
+        k.data.foreach_set("co", co.ravel())
+        k.value = 0.0
+        k.keyframe_insert("value", frame=1)
+        k.value = 1.0
+        k.keyframe_insert("value", frame=6)
+    elif skin == "armature":
+        arm = bpy.data.objects.new("Rig", bpy.data.armatures.new("Rig"))
+        scene.collection.objects.link(arm)
+        activate(arm)
+        bpy.ops.object.mode_set(mode="EDIT")
+        b = arm.data.edit_bones.new("Bone")
+        b.head, b.tail = (0, 0, 0), (0, 0, 0.5)
+        bpy.ops.object.mode_set(mode="OBJECT")
+        vg = surf.vertex_groups.new(name="Bone")
+        vg.add(list(range(len(surf.data.vertices))), 1.0, "REPLACE")
+        mod = surf.modifiers.new("Armature", "ARMATURE")
+        mod.object = arm
+        pb = arm.pose.bones["Bone"]
+        pb.rotation_mode = "XYZ"
+        pb.rotation_euler = (0, 0, 0)
+        pb.keyframe_insert("rotation_euler", frame=1)
+        pb.rotation_euler = (0.15, 0, 0.3)
+        pb.keyframe_insert("rotation_euler", frame=6)
+    scene.frame_set(1)
+    return wind_and_bind(guides, groom, box, out)
+
+
+def wind_and_bind(guides, groom, box, out):
+    """Wind and the collider distance on, Fur Attach and the groom bound: the shot's
+    (guides, groom, box, output, groom output)."""
+    s = guides.furcollide
+    m = s.motion
+    m.use_wind, m.wind_strength, m.wind_turbulence = True, 0.3, 1.0
+    m.write_collider_distance, m.distance_max = True, 0.3
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    return guides, groom, box, out, s.groom.output
+
+
+def roots_off_surface(ob, surf, tol=1e-4):
+    """Curves of hair object ``ob`` whose root is farther than ``tol`` from ``surf``'s
+    evaluated mesh (world space)."""
+    P, offs = world(ob), offsets_of(ob)
+    V, F = tris_world(surf)
+    d = pipe_oracle.point_mesh_distance(P[offs[:-1]].astype(np.float64), V, F)
+    return np.flatnonzero(d > tol)
+
+
+def check_pipeline_frame(guides, groom, box, colliders=None, what="", guides_clear=True,
+                         groom_clear=True):
+    """The README's per-frame promises for the whole pipeline. ``guides_clear``: the
+    Region of Influence is on (off, wind after collision may push guides into a
+    collider); ``groom_clear``: the Clearance Pass is on."""
+    s = guides.furcollide
+    colliders = [box] if colliders is None else colliders
+    out, gout = s.output, s.groom.output
+    surf = guides.data.surface
+    if s.status_message == "":  # (a held frame says so: the guides are the last result)
+        if guides_clear:
+            assert len(resolved_crossing(out, colliders)) == 0, what
+        assert len(roots_off_surface(out, surf)) == 0, what
+    if groom_clear:
+        bad = crossing_unmarked(gout, colliders)
+        assert len(bad) == 0, (what, bad)
+    assert len(roots_off_surface(gout, surf)) == 0, (what, roots_off_surface(gout, surf))
+    ok = ~np.isin(status_of(gout), (INVALID,))
+    goffs = offsets_of(gout)
+    ref = seg_lengths(positions(groom), goffs)
+    got = seg_lengths(positions(gout), goffs)
+    per_seg_ok = np.repeat(ok, np.diff(goffs) - 1)
+    np.testing.assert_allclose(got[per_seg_ok], ref[per_seg_ok], rtol=1e-3, atol=1e-5,
+                               err_msg=what)
+
+
+def distance_attribute(ob):
+    """The output's ``furcollide_collider_distance`` (P,) float32, or None."""
+    a = ob.data.attributes.get("furcollide_collider_distance")
+    if a is None:
+        return None
+    d = np.empty(len(a.data), np.float32)
+    a.data.foreach_get("value", d)
+    return d
+
+
+def pipeline_frame(guides):
+    """What a pipeline setup on ``guides`` shows: :func:`pipeline_state` and the output's
+    collider distance attribute."""
+    s = guides.furcollide
+    return (world(s.output).copy(), status_of(s.output).copy(),
+            world(s.groom.output).copy(), status_of(s.groom.output).copy(),
+            distance_attribute(s.output))
+
+
+def same_pipeline_frame(a, b, what=""):
+    """Two :func:`pipeline_frame` (or :func:`pipeline_state`) records are equal, bit for bit."""
+    names = ("guides", "guide status", "groom", "groom status", "collider distance")
+    for x, y, name in zip(a, b, names[:len(a)], strict=True):
+        np.testing.assert_array_equal(x, y, err_msg=f"{what} {name}")
+
+
+def play_pipeline(guides, groom, box, frames=PIPELINE_FRAMES, colliders=None, check=True, **kw):
+    """Play ``frames`` (checked with :func:`check_pipeline_frame`, ``kw`` passed on):
+    ``{frame: pipeline_frame(guides)}``."""
+    scene = bpy.context.scene
+    rec = {}
+    for f in frames:
+        scene.frame_set(f)
+        if check:
+            check_pipeline_frame(guides, groom, box, colliders, what=f"frame {f}", **kw)
+        rec[f] = pipeline_frame(guides)
+    return rec
+
+
+def make_wall(name="Wall"):
+    """A thin wall (a closed box) across the render curves between guides only: at
+    x = 0.05 (the guides are at multiples of 0.3, the render curves of 0.1 + 0.05)."""
+    w = make_box(name, size=1.0, location=(0.0, 0.0, 0.0))
+    w.scale = (0.02, 0.6, 0.6)
+    w.location = (0.05, 0.0, 0.7)
+    return w
+
+
+def wall_collider(guides, strength):
+    """:func:`make_wall` in its own collection "Props" (so it can be excluded), with a
+    Displace modifier of ``strength`` (so it can be switched off), added as a collider
+    of ``guides``."""
+    scene = bpy.context.scene
+    coll = bpy.data.collections.new("Props")
+    scene.collection.children.link(coll)
+    wall = make_wall()
+    coll.objects.link(wall)
+    scene.collection.objects.unlink(wall)
+    wall.modifiers.new("Push", "DISPLACE").strength = strength
+    activate(guides, wall)
+    assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
+    return wall
+
+
+#: The ways an artist switches a collider off (:func:`toggle_collider`); hidden or
+#: excluded from the view layer, a collider is still in the scene and keeps colliding.
+COLLIDER_CHANGES = ["hide_viewport", "hide_set", "exclude", "modifier_off", "disabled"]
+KEEPS_COLLIDING = ("hide_viewport", "hide_set", "exclude")
+
+
+def toggle_collider(kind, ob, guides, off):
+    """Switch collider ``ob`` off (``off``) or on again, as an artist does."""
+    scene = bpy.context.scene
+    if kind == "hide_viewport":
+        ob.hide_viewport = off
+    elif kind == "hide_set":
+        ob.hide_set(off)
+    elif kind == "exclude":
+        lc = bpy.context.view_layer.layer_collection.children[ob.users_collection[0].name]
+        lc.exclude = off
+    elif kind == "modifier_off":
+        ob.modifiers["Push"].show_viewport = not off
+    elif kind == "disabled":
+        for c in guides.furcollide.colliders:
+            if c.object == ob:
+                c.enabled = not off
+    scene.frame_set(scene.frame_current)
+
+
+# ------------------------------------------------------------ the demo's scene
+#: The demo's "fur" settings (scripts/demo.py SETTINGS["fur"]).
+DEMO_FUR = dict(
+    mode="bend",
+    rotation_precision=0.5,
+    collision_offset=0.008,
+    recovery_rate=0.3,
+    pinch_resolution="growth_surface",
+)
+#: What a demo setup on the fur says on a quiet frame: nothing, or the cloth's note.
+CLOTH_NOTE = "Colliders: no pinch detection for 'Cloth': open mesh (112 open edges)"
+QUIET = ("", CLOTH_NOTE)
+#: Curves of fur on the demo's body at real size: enough that the cloth and the pusher
+#: put more than core.tolerances.SPLIT_MIN_CURVES (4096) curves into a phase, so a step solves
+#: its phases in two halves on two threads (the tests that need it check it).
+REAL_SIZE = 20000
+#: The real-size shot: the pusher reaches the fur at ~8, the cloth lands at 16, the pinch
+#: from 19.
+REAL_LAST = 24
+REAL_FRAMES = range(1, REAL_LAST + 1)
+#: Wind after collision with the Region of Influence and the collider distance, as the
+#: demo's pipeline has them (scripts/demo.py pipeline_setup).
+DEMO_PIPELINE_MOTION = dict(
+    use_wind=True, wind_stage="OUTPUT", wind_strength=0.04, wind_direction=(1.0, 0.4, 0.0),
+    wind_turbulence=0.8, wind_frequency=0.7, wind_scale=0.4, use_region_of_influence=True,
+    write_collider_distance=True, distance_max=0.1)
+
+
+def demo_build(fur_count, grass_count=50):
+    """The demo's scene (``scripts/demo_scene.py``: a turning body with fur, a pusher and a
+    cloth; grass under a rolling ball), built in an empty file; returns its handles."""
+    scripts = str(Path(__file__).resolve().parents[2] / "scripts")
+    if scripts not in sys.path:
+        sys.path.insert(0, scripts)
+    import demo_scene
+
+    return demo_scene.build(fur_count=fur_count, grass_count=grass_count)
+
+
+def demo_fur(n_fur, last, mode="bend", grass=50, scene_end=None, polygons=False, **settings):
+    """The demo with a FurCollide setup on its body fur (pusher and cloth), the demo's
+    settings (``mode`` and ``settings`` on top), Frame Range 1..``last``; the scene's range
+    the same, or 1..``scene_end``; ``polygons``: its fur Poly (no spline margin). Returns
+    (demo, fur, out)."""
+    demo = demo_build(n_fur, grass)
+    if polygons:
+        poly(demo.fur)
+    activate(demo.fur, demo.pusher, demo.cloth)
+    assert bpy.ops.furcollide.add() == {"FINISHED"}
+    s = demo.fur.furcollide
+    for k, v in dict(DEMO_FUR, mode=mode, **settings).items():
+        setattr(s, k, v)
+    s.frame_start, s.frame_end = 1, last
+    if scene_end is None:
+        demo.scene.frame_start, demo.scene.frame_end = 1, last
+    else:
+        demo.scene.frame_end = scene_end
+    demo.scene.frame_set(1)
+    return demo, demo.fur, s.output
+
+
+def real_size_fur(mode="bend", threads=0, n_fur=REAL_SIZE, **settings):
+    """:func:`demo_fur` at real size over :data:`REAL_FRAMES` (the scene's range four
+    frames longer), with ``threads``."""
+    return demo_fur(n_fur, REAL_LAST, mode, scene_end=REAL_LAST + 4, threads=threads,
+                    **settings)
+
+
+def demo_pipeline(n_fur, last, motion, fraction=0.25, scene_range=True,
+                  collider_offsets=False):
+    """The demo's pipeline (scripts/demo.py pipeline_setup) on ``n_fur`` curves: Fur
+    Sampler (``fraction``), FurCollide on the guides with the demo's settings over
+    1..``last`` (the scene's range too with ``scene_range``; each collider with the
+    setup's Collision Offset as its own with ``collider_offsets``), Fur Attach, the
+    ``motion`` settings, the fur bound as the render groom with the clearance pass.
+    Returns (demo, guides, out, gout)."""
+    demo = demo_build(n_fur)
+    scene = demo.scene
+    if scene_range:
+        scene.frame_start, scene.frame_end = 1, last
+    scene.frame_set(1)
+    activate(demo.fur)
+    assert bpy.ops.furcollide.fur_sampler(fraction=fraction, seed=3) == {"FINISHED"}
+    guides = bpy.context.view_layer.objects.active
+    activate(guides, demo.pusher, demo.cloth)
+    assert bpy.ops.furcollide.add() == {"FINISHED"}
+    s = guides.furcollide
+    for k, v in DEMO_FUR.items():
+        setattr(s, k, v)
+    s.frame_start, s.frame_end = 1, last
+    if collider_offsets:
+        for c in s.colliders:
+            c.use_offset, c.collision_offset = True, DEMO_FUR["collision_offset"]
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    m = s.motion
+    for k, v in motion.items():
+        setattr(m, k, v)
+    s.groom.groom = demo.fur
+    s.groom.use_clearance = True
+    activate(guides)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    return demo, guides, s.output, s.groom.output
+
+
+def real_size_pipeline(n_fur=REAL_SIZE, fraction=0.25):
+    """:func:`demo_pipeline` as the demo makes it, with ``n_fur`` render curves, over
+    :data:`REAL_FRAMES`."""
+    return demo_pipeline(n_fur, REAL_LAST, DEMO_PIPELINE_MOTION, fraction,
+                         scene_range=False, collider_offsets=True)
+
+
+def world_meshes(objects, depsgraph=None):
+    """:func:`tris_world` of every object: [(V, F), ...]."""
+    return [tris_world(o, depsgraph) for o in objects]
+
+
+def curves_crossing(P, offs, meshes, st=None, keep=RESOLVED):
+    """Curves whose status is in ``keep`` (all when ``st`` is None) that surely cross
+    one of ``meshes`` ((V, F) in world space): ``oracle.curves_crossing`` (culled, with
+    the float32 margin)."""
+    return oracle.curves_crossing(P, offs, meshes, None if st is None else np.isin(st, keep))
+
+
+def check_demo_frame(demo, hair, out, what="", lengths=True):
+    """README's per-frame promises for a plain demo setup: no resolved curve crosses the
+    pusher or the cloth, roots exactly the source's, lengths kept (no Shrink). Returns
+    the statuses."""
+    offs = offsets_of(out)
+    st = status_of(out)
+    bad = curves_crossing(world(out), offs, world_meshes([demo.pusher, demo.cloth]), st)
+    assert len(bad) == 0, (what, len(bad), bad[:10], st[bad[:10]])
+    src, res = positions(hair), positions(out)
+    np.testing.assert_array_equal(res[offs[:-1]], src[offs[:-1]], err_msg=f"{what}: roots")
+    if lengths:
+        ok = np.repeat(st != INVALID, np.diff(offs) - 1)
+        np.testing.assert_allclose(seg_lengths(res, offs)[ok], seg_lengths(src, offs)[ok],
+                                   rtol=2e-4, atol=1e-6, err_msg=f"{what}: lengths")
+    return st
+
+
+def demo_checks(demo, hair, out):
+    """:func:`check_demo_frame` as a ``check(frame)`` for :func:`play_demo`."""
+    return lambda f: check_demo_frame(demo, hair, out, what=f"frame {f}")
+
+
+def frame_of(out):
+    """What ``out`` shows: (positions, statuses), copies."""
+    return positions(out).copy(), status_of(out).copy()
+
+
+def same_frame(a, b, what=""):
+    """Two :func:`frame_of` records are equal, bit for bit."""
+    np.testing.assert_array_equal(a[0], b[0], err_msg=f"{what}: positions")
+    np.testing.assert_array_equal(a[1], b[1], err_msg=f"{what}: status")
+
+
+def play_demo(scene, hair, out, frames=REAL_FRAMES, check=None):
+    """frame_set every frame ({frame: :func:`frame_of`}); the setup says nothing but the
+    cloth's note and is never outdated; ``check(frame)`` after each."""
+    rec = {}
+    for f in frames:
+        scene.frame_set(f)
+        assert hair.furcollide.status_message in QUIET, (f, hair.furcollide.status_message)
+        assert not hair.furcollide.is_outdated, f
+        if check is not None:
+            check(f)
+        rec[f] = frame_of(out)
+    return rec
+
+
+def reset_cache(hair):
+    """Press Reset Cache on ``hair``'s setup."""
+    activate(hair)
+    assert bpy.ops.furcollide.reset() == {"FINISHED"}
+
+
+def groom_snapshot(ob):
+    """What the artist groomed: positions, layout, every attribute's values and the
+    object's matrix."""
+    d = ob.data
+    attrs = {}
+    for a in d.attributes:
+        if a.name.startswith("."):
+            continue
+        n = len(a.data)
+        key = ("vector" if a.data_type in ("FLOAT_VECTOR", "FLOAT2") else
+               "color" if a.data_type in ("FLOAT_COLOR", "BYTE_COLOR") else "value")
+        width = {"FLOAT_VECTOR": 3, "FLOAT2": 2, "FLOAT_COLOR": 4, "BYTE_COLOR": 4}.get(
+            a.data_type, 1)
+        buf = np.empty(n * width, np.float64 if key != "value" or a.data_type == "FLOAT"
+                       else np.int64)
+        if a.data_type == "BOOLEAN":
+            buf = np.empty(n, bool)
+        a.data.foreach_get(key, buf)
+        attrs[(a.name, a.domain, a.data_type)] = buf
+    return positions(ob).copy(), offsets_of(ob).copy(), attrs, np.array(ob.matrix_world)
+
+
+def assert_groom_unchanged(ob, snap, what=""):
+    """``ob`` is as :func:`groom_snapshot` recorded it, bit for bit."""
+    now = groom_snapshot(ob)
+    np.testing.assert_array_equal(now[0], snap[0], err_msg=f"{ob.name} positions {what}")
+    np.testing.assert_array_equal(now[1], snap[1], err_msg=f"{ob.name} layout {what}")
+    assert now[2].keys() == snap[2].keys(), (what, now[2].keys() ^ snap[2].keys())
+    for k in snap[2]:
+        np.testing.assert_array_equal(now[2][k], snap[2][k], err_msg=f"{ob.name} {k} {what}")
+    np.testing.assert_array_equal(now[3], snap[3], err_msg=f"{ob.name} matrix {what}")
+
+
+# ------------------------------------------------------ renders with motion blur
+def cycles_motion_blur(scene, tmp_path, position="CENTER"):
+    """Cycles (1 sample, 16 px) with motion blur at shutter ``position``, Lock Interface
+    on, frames written to ``tmp_path``."""
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 1
+    scene.cycles.device = "CPU"
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.render.use_lock_interface = True
+    scene.render.use_motion_blur = True
+    scene.render.motion_blur_position = position
+    scene.render.filepath = str(tmp_path / "mb_####")
+
+
+def render_recording(hair, record):
+    """Render the animation; [((frame, subframe), record(depsgraph), status message,
+    outdated)] for every RENDER-depsgraph frame change, after FurCollide's handler."""
+    seen = []
+
+    def spy(sc, depsgraph):
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            s = hair.furcollide
+            seen.append(
+                (
+                    (sc.frame_current, round(sc.frame_subframe, 3)),
+                    record(depsgraph),
+                    s.status_message,
+                    s.is_outdated,
+                )
+            )
+
+    bpy.app.handlers.frame_change_post.append(spy)
+    try:
+        bpy.ops.render.render(animation=True)
+    finally:
+        bpy.app.handlers.frame_change_post.remove(spy)
+    return seen
 
 
 # ------------------------------------------------------- Blender's hair node assets

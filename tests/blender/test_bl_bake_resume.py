@@ -13,6 +13,8 @@ import bpy
 import numpy as np
 import pytest
 from helpers import (
+    DEMO_FUR,
+    REAL_FRAMES,
     activate,
     assert_same_frames,
     bake_crashing_at,
@@ -20,19 +22,30 @@ from helpers import (
     bake_files_of,
     bake_setup,
     build_setup,
+    curves_crossing,
+    demo_build,
     draw_enabled,
+    frame_of,
     frames_on_disk,
     make_hair,
     no_traceback,
+    offsets_of,
+    play_demo,
+    positions,
     preroll_scene,
+    real_size_fur,
     record,
     reopen,
+    same_frame,
     save_as,
     save_in,
+    seg_lengths,
     small_setup,
     status_of,
     sweep_box,
     sweep_setup,
+    world,
+    world_meshes,
 )
 
 pytestmark = pytest.mark.blender
@@ -667,3 +680,183 @@ def test_free_bake_on_a_copy_keeps_the_originals_bake(fc, copy, tmp_path, capsys
     # ... the original's bake is still there and still plays
     assert hair.furcollide.is_baked
     assert len(frames_on_disk(d)) == 4
+
+
+# ------------------------------------------------------------ the Cache Directory
+def test_a_new_cache_directory_after_a_failed_bake_is_used(fc, tmp_path):
+    """The Cache Directory points at a file (a typo, an unmounted share): Bake fails at
+    frame 1. The artist fixes the Directory (Cache panel, still editable) and presses
+    Bake again: it must bake there, not fail again on the old path."""
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    blocker = tmp_path / "cache_is_a_file"
+    blocker.write_text("not a directory")
+    hair.furcollide.cache_directory = str(blocker) + os.sep
+    save_in(tmp_path)
+    with pytest.raises(RuntimeError, match="Not a directory"):
+        bpy.ops.furcollide.bake()
+    good = tmp_path / "good cache"
+    hair.furcollide.cache_directory = str(good) + os.sep
+    bpy.ops.furcollide.bake()  # (the new directory, not the old path's error again)
+    assert hair.furcollide.is_baked
+    assert os.path.abspath(bpy.path.abspath(hair.furcollide.bake_path)).startswith(str(good))
+
+
+def test_a_partial_bake_resumed_after_a_directory_change_goes_to_the_new_directory(
+        fc, tmp_path, monkeypatch):
+    """A bake crashes at frame 4 (frames 1-3 on disk, next to the .blend). The artist
+    then points Directory at the farm share and presses Bake: every frame must end up
+    on the share (the render nodes read only it)."""
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    save_in(tmp_path)
+    bake_crashing_at(fc, monkeypatch, 4)
+    share = tmp_path / "farm share"
+    hair.furcollide.cache_directory = str(share) + os.sep
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    d = bpy.path.abspath(hair.furcollide.bake_path)
+    assert os.path.abspath(d).startswith(str(share)), d
+    assert len(bake_files(d)) == 12
+
+
+def test_a_relative_cache_directory_set_from_a_script_does_not_warn(fc):
+    """README: the Directory defaults to ``//furcollide_cache/`` ('//' = next to the
+    .blend). A TD's script setting another relative folder the same way gets no warning
+    (Blender 5.0 warns "FurCollideSettings.cache_directory: does not support blend
+    relative "//" prefix" for a property not marked as a relative path, the file
+    browser's Relative Path option) and the value is stored as given."""
+    import warnings
+
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        hair.furcollide.cache_directory = "//shot cache/"
+    assert hair.furcollide.cache_directory == "//shot cache/"
+    assert [str(w.message) for w in caught] == []
+
+
+# ------------------------------------------------- the demo's scene at real size
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+def test_a_bake_resumed_after_a_crash_gives_the_played_frames(fc, tmp_path, monkeypatch,
+                                                              mode):
+    """A bake that crashed at frame 21 (the pinch, where the warm start's memory
+    matters: the resumed bake starts from the state in frame 20's file), resumed with
+    Threads 1: every baked frame equals the played one bit for bit (README: "The next
+    Bake resumes after the last frame whose files match"; each file holds "the full
+    solver state")."""
+    demo, hair, out = real_size_fur(mode, threads=2)
+    first = play_demo(demo.scene, hair, out)
+    save_in(tmp_path)
+    demo.scene.frame_set(1)
+    activate(hair)
+    bake_crashing_at(fc, monkeypatch, 21)
+    hair.furcollide.threads = 1
+    activate(hair)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    for f in REAL_FRAMES:
+        demo.scene.frame_set(f)
+        assert not hair.furcollide.is_outdated, hair.furcollide.status_message
+        same_frame(frame_of(out), first[f], f"{mode}: resumed bake, frame {f}")
+
+
+# ----------------------------------------------- the demo's grass and fur, Bake All
+#: The Grass Trampling preset (ui/preset_files/Grass_Trampling.py).
+GRASS_TRAMPLING = dict(
+    mode="bend",
+    rotation_precision=0.5,
+    max_angle=170.0,
+    collision_offset=0.01,
+    recovery_rate=0.05,
+    plasticity=0.6,
+    pinch_resolution="stop",
+)
+
+
+def grass_and_fur(n_grass, n_fur, last):
+    """The demo's grass (the Grass Trampling preset, Ball) and fur (the demo's fur
+    settings, Pusher and Cloth; its range ends 8 frames earlier) setups. Returns
+    (demo, [grass output, fur output])."""
+    demo = demo_build(fur_count=n_fur, grass_count=n_grass)
+    scene = demo.scene
+    scene.frame_start, scene.frame_end = 1, last
+    for hair, cols, values, end in (
+        (demo.grass, [demo.ball], GRASS_TRAMPLING, last),
+        (demo.fur, [demo.pusher, demo.cloth], DEMO_FUR, last - 8),
+    ):
+        activate(hair, *cols)
+        assert bpy.ops.furcollide.add() == {"FINISHED"}
+        for k, v in values.items():
+            setattr(hair.furcollide, k, v)
+        hair.furcollide.frame_start, hair.furcollide.frame_end = 1, end
+    scene.frame_set(1)
+    return demo, [demo.grass.furcollide.output, demo.fur.furcollide.output]
+
+
+def shown(scene, outs, frames, check=None):
+    rec = {}
+    for f in frames:
+        scene.frame_set(f)
+        if check is not None:
+            check(f)
+        rec[f] = [frame_of(o) for o in outs]
+    return rec
+
+
+def same_shots(got, want, what):
+    for f in got:
+        for k, (a, b) in enumerate(zip(got[f], want[f], strict=True)):
+            same_frame(a, b, f"{what}, frame {f}, setup {k}")
+
+
+@pytest.mark.slow
+def test_grass_bake_all_played_back_freed_and_baked_again(fc, tmp_path):
+    """README "Bake (disk cache)" on the demo's two setups at the demo's size (2,500
+    blades of Grass Trampling under the rolling ball, 40 frames; the fur besides, with a
+    shorter range): played with checks (no resolved blade crosses the ball, roots and
+    lengths kept); Bake All; the baked frames played and scrubbed are the played frames
+    bit for bit, nothing said; Free All Bakes, Plasticity and the fur's Recovery Rate
+    changed, Bake All again: the new bake is what playing the shot with the new settings
+    gives, bit for bit, and the change shows (the trail is another)."""
+    last = 40
+    demo, outs = grass_and_fur(2500, 500, last)
+    scene, grass = demo.scene, demo.grass
+    g = grass.furcollide
+    offs, src = offsets_of(grass), positions(grass)
+
+    def check(f):
+        assert g.status_message == "" and not g.is_outdated, (f, g.status_message)
+        if f % 4:
+            return
+        st = status_of(g.output)
+        bad = curves_crossing(world(g.output), offs, world_meshes([demo.ball]), st)
+        assert len(bad) == 0, (f, bad[:5])
+        P = positions(g.output)
+        np.testing.assert_array_equal(P[offs[:-1]], src[offs[:-1]])
+        np.testing.assert_allclose(
+            seg_lengths(P, offs), seg_lengths(src, offs), rtol=2e-4, atol=1e-6
+        )
+
+    played = shown(scene, outs, range(1, last + 1), check)
+    trail = played[last][0][1]
+    assert (trail == 2).sum() > 200, np.bincount(trail)  # trampled blades recovering
+    save_in(tmp_path)
+    scene.frame_set(1)
+    assert bpy.ops.furcollide.bake_all() == {"FINISHED"}
+    assert g.is_baked and demo.fur.furcollide.is_baked
+    same_shots(shown(scene, outs, range(1, last + 1), check), played, "baked")
+    same_shots(shown(scene, outs, [30, 5, last, 17, 1, 29]), played, "baked, scrubbed")
+    activate(grass)
+    assert bpy.ops.furcollide.free_bake_all() == {"FINISHED"}
+    assert not g.is_baked and not demo.fur.furcollide.is_baked
+    g.plasticity = 0.3
+    demo.fur.furcollide.recovery_rate = 0.5
+    scene.frame_set(1)
+    assert bpy.ops.furcollide.bake_all() == {"FINISHED"}
+    rebaked = shown(scene, outs, range(1, last + 1), check)
+    activate(grass)
+    assert bpy.ops.furcollide.free_bake_all() == {"FINISHED"}
+    scene.frame_set(1)
+    same_shots(shown(scene, outs, range(1, last + 1), check), rebaked, "played after")
+    assert not np.array_equal(rebaked[last][0][0], played[last][0][0])

@@ -8,15 +8,28 @@ import bpy
 import numpy as np
 import pytest
 from helpers import (
+    COLLIDER_CHANGES,
+    KEEPS_COLLIDING,
+    PIPELINE_FRAMES,
+    REAL_FRAMES,
     EnabledLayout,
     activate,
     draw_enabled,
     groom_scene,
     move_skin,
+    no_traceback,
+    pipeline_frame,
+    pipeline_scene,
+    pipeline_state,
     play,
+    play_pipeline,
+    real_size_pipeline,
     reopen,
+    same_pipeline_frame,
     save_in,
     status_of,
+    toggle_collider,
+    wall_collider,
     world,
 )
 
@@ -303,3 +316,103 @@ def test_a_bake_from_before_the_attached_part_is_checked_as_before(fc, tmp_path,
     s = guides.furcollide
     assert s.is_outdated and (f"the source hair '{guides.name}' changed"
                               in s.status_message), s.status_message
+
+
+# ------------------------------------------- changes after the bake, in a shot
+GROOM_CHANGES = [
+    ("groom", "use_clearance", False),
+    ("", "collision_offset", 0.05),
+    ("motion", "wind_strength", 0.6),
+    ("groom", "guides", 2),
+]
+
+
+@pytest.mark.parametrize("part,name,value", GROOM_CHANGES, ids=[c[1] for c in GROOM_CHANGES])
+def test_baked_with_the_render_groom_then_a_setting_changed(fc, tmp_path, part, name, value):
+    """A setting changed after baking with the render groom: outdated at once and on
+    every frame (never a stale frame shown as current); set back, the bake again."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    s = guides.furcollide
+    save_in(tmp_path)
+    played = play_pipeline(guides, groom, box)
+    activate(guides)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert s.groom.is_baked_with
+    baked = play_pipeline(guides, groom, box)
+    for f in PIPELINE_FRAMES:
+        same_pipeline_frame(baked[f], played[f], f"baked vs played frame {f}")
+    data = getattr(s, part) if part else s
+    before = getattr(data, name)
+    setattr(data, name, value)
+    for f in (4, 2, 6):
+        scene.frame_set(f)
+        assert s.is_outdated or name == "guides", (name, f)  # (the bound groom: a note)
+        assert s.status_message != "", (name, f)
+        assert "baked with other settings" in s.status_message or "Bind Groom" in (
+            s.status_message), s.status_message
+    setattr(data, name, before)
+    for f in PIPELINE_FRAMES:
+        scene.frame_set(f)
+        assert not s.is_outdated and s.status_message == "", (f, s.status_message)
+        same_pipeline_frame(pipeline_frame(guides), baked[f], f"set back, frame {f}")
+
+
+@pytest.mark.parametrize("kind", COLLIDER_CHANGES)
+def test_a_collider_switched_off_on_a_baked_pipeline(fc, tmp_path, kind):
+    """Baked with the render groom, then a collider switched off: never a frame shown
+    as current that was solved with it (hidden or excluded, it still collides: the
+    bake holds); switched on again, the bake."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    s = guides.furcollide
+    wall = wall_collider(guides, 0.02)
+    save_in(tmp_path)
+    activate(guides)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    baked = play_pipeline(guides, groom, box, colliders=[box, wall])
+    scene.frame_set(3)
+    toggle_collider(kind, wall, guides, True)
+    for f in (3, 4, 6):
+        scene.frame_set(f)
+        if kind in KEEPS_COLLIDING:
+            assert not s.is_outdated and s.status_message == "", (kind, f, s.status_message)
+            same_pipeline_frame(pipeline_frame(guides), baked[f], f"{kind}: the bake, {f}")
+        else:
+            assert s.is_outdated and s.status_message, (kind, f)
+    toggle_collider(kind, wall, guides, False)
+    for f in PIPELINE_FRAMES:
+        scene.frame_set(f)
+        assert not s.is_outdated and s.status_message == "", (kind, f, s.status_message)
+        same_pipeline_frame(pipeline_frame(guides), baked[f], f"{kind} on again, frame {f}")
+
+
+# ------------------------------------------------- the demo's scene at real size
+@pytest.mark.slow
+def test_pipeline_baked_at_real_size(fc, tmp_path, capsys):
+    """The real-size pipeline played (Threads 2), saved at frame 10 and reopened, then
+    baked with Threads 1 (the render groom baked with it): every baked frame, guides and
+    render groom, equals the first session's bit for bit; no traceback anywhere."""
+    demo, guides, out, gout = real_size_pipeline()
+    scene = demo.scene
+    first = {}
+    for f in REAL_FRAMES:
+        scene.frame_set(f)
+        first[f] = pipeline_state(guides)
+    scene.frame_set(10)
+    name = guides.name
+    path = save_in(tmp_path)
+    reopen(path)
+    scene = bpy.context.scene
+    guides = bpy.data.objects[name]
+    same_pipeline_frame(pipeline_state(guides), first[10], "reopened at frame 10")
+    guides.furcollide.threads = 1
+    scene.frame_set(1)
+    activate(guides)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert guides.furcollide.groom.is_baked_with
+    for f in list(REAL_FRAMES) + [7, 22, 1]:
+        scene.frame_set(f)
+        assert not guides.furcollide.is_outdated, guides.furcollide.status_message
+        same_pipeline_frame(pipeline_state(guides), first[f], f"baked frame {f}")
+    no_traceback(capsys)

@@ -18,7 +18,18 @@ import numpy as np
 import oracle  # (tests/core: on the path, conftest imports helpers first)
 import pytest
 import scenes
-from helpers import PINCHED, UNRESOLVED, activate, check_frame, make_hair, poly, status_of
+from helpers import (
+    PINCHED,
+    UNRESOLVED,
+    activate,
+    check_frame,
+    make_hair,
+    offsets_of,
+    poly,
+    status_of,
+    tris_world,
+    world,
+)
 
 pytestmark = pytest.mark.blender
 
@@ -214,3 +225,68 @@ def test_the_colliders_panel_shows_the_lines(fc):
         Layout(), hair.furcollide)})(), bpy.context)
     assert any(t.startswith("Repaired 'Ball': ") and "faces turned outward" in t
                and icon == "INFO" for t, icon in labels), labels
+
+
+# ------------------------------------------ closed colliders made the usual ways
+def hair_setup(fc, colliders, nx=10, ny=10, spacing=0.06, length=0.3, frames=(1, 3)):
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = frames
+    scene.frame_set(frames[0])
+    hair = make_hair(nx=nx, ny=ny, npts=5, length=length, spacing=spacing)
+    out = fc.setup(hair, colliders)
+    return scene, hair, out
+
+
+def roots_world(ob):
+    return world(ob)[offsets_of(ob)[:-1]]
+
+
+def test_fur_inside_a_solidified_helmet_is_not_pinched(fc):
+    """A helmet made the usual way (a ball with a Solidify modifier) over fur: the fur
+    grows inside the cavity, outside the helmet's solid. No root is pinched, nothing
+    says the helmet was repaired."""
+    V, F = scenes.icosphere((0.0, 0.0, 0.0), 0.6, subdivisions=3)
+    helmet = mesh("Helmet", V, F, location=(0.0, 0.0, 0.05))
+    sol = helmet.modifiers.new("Solidify", "SOLIDIFY")
+    sol.thickness = 0.08
+    sol.offset = 1.0  # (outward: the cavity keeps the ball's radius)
+    scene, hair, out = hair_setup(fc, [helmet])
+    Vw, Fw = tris_world(helmet)
+    inside = oracle.points_inside_closed_mesh(roots_world(hair), Vw, Fw)
+    assert not inside.any()  # the oracle: every root in the cavity, none in the solid
+    msg = hair.furcollide.status_message
+    assert (status_of(out) != PINCHED).all(), (np.bincount(status_of(out)), msg)
+    assert "turned outward" not in msg, msg
+
+
+def test_two_joined_crates_touching_still_detect_pinches(fc):
+    """Two closed boxes joined into one object (Ctrl-J), side by side, sunk into the
+    fur: roots inside either are pinched, and the status does not call the mesh open."""
+    # (sides off the roots' grid lines: a root exactly on a face is neither in nor out)
+    Va, Fa = scenes.box([-0.3, -0.155, -0.1], [0.0, 0.155, 0.2])
+    Vb, Fb = scenes.box([0.0, -0.155, -0.1], [0.3, 0.155, 0.2])
+    crates = mesh("Crates", np.concatenate([Va, Vb]), np.concatenate([Fa, Fb + len(Va)]))
+    scene, hair, out = hair_setup(fc, [crates], nx=12, ny=12, spacing=0.06)
+    Vw, Fw = tris_world(crates)
+    inside = oracle.points_inside_closed_mesh(roots_world(hair), Vw, Fw)
+    assert inside.sum() >= 10
+    msg = hair.furcollide.status_message
+    assert "open mesh" not in msg, msg
+    np.testing.assert_array_equal(status_of(out) == PINCHED, inside)
+
+
+def test_an_imported_ball_with_a_not_quite_bit_identical_seam_detects_pinches(fc):
+    V, F = scenes.uv_sphere([0.1, 0.2, 0.3], 0.5, 32, 16)
+    V = (V * 2.0924042).astype(np.float32)
+    right = V[F].mean(axis=1)[:, 1] > 0.2 * 2.0924042
+    V2 = np.concatenate([V, np.nextafter(V, np.float32(4))])
+    F2 = F.copy()
+    F2[right] += len(V)
+    ball = mesh("Ball", V2, F2, location=(0.0, 0.0, -0.4))
+    scene, hair, out = hair_setup(fc, [ball], nx=12, ny=12, spacing=0.1)
+    Vw, Fw = tris_world(ball)
+    inside = oracle.points_inside_closed_mesh(roots_world(hair), Vw, Fw)
+    assert inside.sum() >= 10
+    msg = hair.furcollide.status_message
+    assert "open mesh" not in msg, msg
+    np.testing.assert_array_equal(status_of(out) == PINCHED, inside)

@@ -20,7 +20,9 @@ from helpers import (
     mesh_object,
     no_faces,
     offsets_of,
+    pipeline_scene,
     play,
+    play_pipeline,
     render_camera,
     render_watching,
     save_in,
@@ -572,3 +574,17 @@ def test_an_edit_away_from_the_roots_keeps_the_playback_cache(fc):
     assert len(rt.memory) == 0
     level, msg = fc.registry.status_for(hair)
     assert f"the Surface '{surf.name}' the curves are attached to" in msg, msg
+
+
+# -------------------------------------------------- a pipeline setup
+def test_guides_fur_attach_bound_again_mid_shot(fc):
+    """Fur Attach pressed Bind again at frame 3 (another reference frame) after Bind
+    Groom: every frame still holds the promises."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    play_pipeline(guides, groom, box)
+    scene.frame_set(3)
+    activate(guides)
+    assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
+    play_pipeline(guides, groom, box)
+    assert guides.furcollide.status_message == "", guides.furcollide.status_message

@@ -22,7 +22,18 @@ import tracemalloc
 import bpy
 import numpy as np
 import pytest
-from helpers import activate, make_hair
+from helpers import (
+    REAL_FRAMES,
+    REAL_LAST,
+    activate,
+    frame_of,
+    make_hair,
+    play_demo,
+    positions,
+    real_size_fur,
+    reset_cache,
+    same_frame,
+)
 
 pytestmark = pytest.mark.blender
 
@@ -113,3 +124,35 @@ def test_playback_memory_is_flat_once_the_cache_is_full(fc, traced):
     assert np.mean(per_frame) > 0.3  # a leak of a fraction of a frame would show
     assert grew < 0.5, traced  # (a third of a cached frame in 32 frames)
     assert rss_grew < 16, rss  # (the allocator's noise is about 6 MB here)
+
+
+# ------------------------------------------------- the demo's scene at real size
+@pytest.mark.slow
+def test_memory_limit_at_real_size(fc):
+    """The Memory Limit at its minimum (16 MB) with 20,000 curves and wind after
+    collision (every point cached): the frames it keeps are shown bit for bit, a frame
+    whose state was dropped holds the next one and says so, and playing from the start
+    gives the same frames again."""
+    demo, hair, out = real_size_fur()
+    s = hair.furcollide
+    m = s.motion
+    m.use_wind, m.wind_stage, m.wind_strength = True, "OUTPUT", 0.04
+    first = play_demo(demo.scene, hair, out)
+    s.memory_limit = 16
+    reset_cache(hair)
+    play_demo(demo.scene, hair, out)
+    rt = fc.registry.get_runtime(hair, create=False)
+    kept = sorted(rt.memory.frames)
+    with_state = [f for f in kept if rt.memory.state(f) is not None]
+    assert len(kept) < REAL_LAST or len(with_state) < len(kept), (kept, with_state)
+    for f in kept[::-1]:
+        demo.scene.frame_set(f)
+        assert not s.is_outdated, (f, s.status_message)
+        same_frame(frame_of(out), first[f], f"memory-limited cache, frame {f}")
+    gone = [f for f in REAL_FRAMES if f not in kept and f - 1 not in kept]
+    assert gone
+    demo.scene.frame_set(gone[0])  # evicted: a jump ahead holds a cached frame
+    assert s.is_outdated and "not cached" in s.status_message, s.status_message
+    assert any(np.array_equal(positions(out), first[g][0]) for g in kept)
+    for f, got in play_demo(demo.scene, hair, out).items():
+        same_frame(got, first[f], f"played again, frame {f}")

@@ -169,3 +169,48 @@ def test_the_palette_has_one_readme_colour_per_status(fc):
     codes = [int(s) for s in fc.core.Status]
     assert len(palette) == len(codes)
     assert {c: colour_name(palette[c]) for c in codes} == {c: README_COLOURS[c] for c in codes}
+
+
+# ------------------------------------------ the evaluated source's other attributes
+def _radius_modifier(ob, value):
+    """A geometry-nodes modifier on ``ob`` setting every curve's radius (what the
+    artist uses for the render width); returns its Set Curve Radius node."""
+    ng = bpy.data.node_groups.new("Width", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi, go = ng.nodes.new("NodeGroupInput"), ng.nodes.new("NodeGroupOutput")
+    sr = ng.nodes.new("GeometryNodeSetCurveRadius")
+    sr.inputs["Radius"].default_value = value
+    ng.links.new(gi.outputs[0], sr.inputs["Curve"])
+    ng.links.new(sr.outputs[0], go.inputs[0])
+    ob.modifiers.new("Width", "NODES").node_group = ng
+    return sr
+
+
+def _radii(ob):
+    d = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    r = np.empty(len(d.points), np.float32)
+    d.attributes["radius"].data.foreach_get("value", r)
+    return r
+
+
+def test_the_output_follows_the_evaluated_sources_radius(fc):
+    """README: each frame FurCollide reads the *evaluated* source (after its modifiers)
+    and the output has its curves. The artist widens the fur after Add (the source's
+    Set Curve Radius modifier: 0.01 -> 0.05) and plays: the output, which is what
+    renders (the source is hidden from render), gets the new width, and keeps it after
+    Reset Cache (no Remove + Add, which would delete the output and the artist's
+    modifiers on it)."""
+    hair, box = fc.make_scene()
+    sr = _radius_modifier(hair, 0.01)
+    out = fc.setup(hair, [box])
+    np.testing.assert_allclose(_radii(out), 0.01)
+    sr.inputs["Radius"].default_value = 0.05
+    scene = bpy.context.scene
+    for f in range(1, 5):
+        scene.frame_set(f)
+    np.testing.assert_allclose(_radii(hair), 0.05)
+    bpy.context.view_layer.objects.active = hair
+    assert bpy.ops.furcollide.reset() == {"FINISHED"}
+    scene.frame_set(1)
+    np.testing.assert_allclose(_radii(out), 0.05)

@@ -6,7 +6,17 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from helpers import activate, dense_groom, make_box, make_hair, make_surface, no_faces, play
+from helpers import (
+    activate,
+    demo_build,
+    dense_groom,
+    make_box,
+    make_hair,
+    make_surface,
+    no_faces,
+    play,
+    world,
+)
 
 pytestmark = pytest.mark.blender
 
@@ -386,3 +396,20 @@ def test_children_from_guides_refuses_a_surface_without_faces(fc):
     with pytest.raises(RuntimeError, match="no faces"):
         bpy.ops.furcollide.children_from_guides()
     assert "FurCollide Children" not in out.modifiers
+
+
+# ------------------------------------------------------- on the demo's body
+def test_fur_sampler_gives_the_same_guides_at_any_frame(fc):
+    """README: "The same Seed always gives the same guides". Run again later in the shot
+    (the demo's body, the groom's Surface, has turned by frame 12): the same curves."""
+    demo = demo_build(fur_count=3000, grass_count=50)
+    got = []
+    for f in (1, 12, 1):
+        demo.scene.frame_set(f)
+        activate(demo.fur)
+        assert bpy.ops.furcollide.fur_sampler(fraction=0.15, seed=3) == {"FINISHED"}
+        g = bpy.context.view_layer.objects.active
+        got.append(world(g))
+    assert len(got[0]) == 450 * 8
+    for g in got[1:]:
+        np.testing.assert_array_equal(g, got[0])

@@ -6,13 +6,20 @@ import bpy
 import numpy as np
 import pytest
 from helpers import (
+    REAL_FRAMES,
     assert_same_frames,
+    check_demo_frame,
     check_frame,
+    frame_of,
     offsets_of,
+    play_demo,
     positions,
     positions_per_frame,
     preroll_scene,
+    real_size_fur,
     record,
+    reset_cache,
+    same_frame,
     status_of,
 )
 
@@ -307,3 +314,63 @@ def test_one_solve_serves_playback_and_scripts(fc):
         np.testing.assert_array_equal(result.points, played[f], err_msg=f"frame {f}")
         assert result.stats["frame"] == f
     assert any((p != positions(hair)).any() for p in played.values())  # the box met the hair
+
+
+# ------------------------------------------------------------- the demo's scene
+def test_a_setting_changed_mid_shot_drops_the_playback_cache(fc):
+    """README "Time" > Invalidation: a changed setting drops the whole playback cache,
+    as Blender's point cache does: played to 6, Recovery Rate changed, frame 7 is not
+    stepped from frame 6 (solved with the old setting); the output keeps frame 6 and
+    says why (not only the frames after the current one are dropped). Threads changes
+    no result and drops nothing."""
+    demo, hair, out = real_size_fur(n_fur=3000)
+    first = play_demo(demo.scene, hair, out, range(1, 7))
+    hair.furcollide.threads = 1
+    demo.scene.frame_set(7)
+    assert not hair.furcollide.is_outdated, hair.furcollide.status_message
+    demo.scene.frame_set(6)
+    hair.furcollide.recovery_rate = 0.8
+    demo.scene.frame_set(7)
+    s = hair.furcollide
+    assert s.is_outdated and "Recovery Rate changed" in s.status_message, s.status_message
+    same_frame(frame_of(out), first[6], "frame 7 after the change: the output held")
+
+
+MID_SHOT = [("mode", "stiff"), ("mode", "soft"), ("rotation_precision", 0.25),
+            ("recovery_rate", 0.8), ("plasticity", 0.6)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,value", MID_SHOT, ids=[f"{n}={v}" for n, v in MID_SHOT])
+def test_a_setting_changed_mid_shot(fc, name, value):
+    """Played to 14 (Bend), a setting changed: the frames after it are held and say why
+    (the whole playback cache is dropped), scrubbed back a frame cached with the old
+    setting is not shown (the output keeps what it showed). Played from the start:
+    every frame holds the promises (checked every sixth frame), and equals a fresh
+    solve (Reset Cache) with the new setting. Set back and played again: the first
+    session's frames bit for bit. (The crossing oracle runs on frames 2, 8, 14 and 20:
+    before the pusher, entering, pinching, with the cloth on the fur; every frame in
+    test_bl_demo_scale.py's test_demo_played_scrubbed_and_jumped.)"""
+    demo, hair, out = real_size_fur()
+    s = hair.furcollide
+    scene = demo.scene
+    first = play_demo(demo.scene, hair, out, range(1, 15))
+    before = getattr(s, name)
+    setattr(s, name, value)
+    for f in (15, 16, 8, 3):
+        scene.frame_set(f)
+        said = f"{s.bl_rna.properties[name].name} changed"
+        assert s.is_outdated and said in s.status_message, (
+            f, s.status_message)
+        same_frame(frame_of(out), first[14], f"frame {f} after the change: the output held")
+    new = {}
+    for f in REAL_FRAMES:
+        new.update(play_demo(demo.scene, hair, out, [f]))
+        if f % 6 == 2:
+            check_demo_frame(demo, hair, out, what=f"{name}={value}, frame {f}")
+    reset_cache(hair)
+    for f, got in play_demo(demo.scene, hair, out).items():
+        same_frame(got, new[f], f"{name}={value}: replayed vs fresh, frame {f}")
+    setattr(s, name, before)
+    for f, got in play_demo(demo.scene, hair, out, range(1, 15)).items():
+        same_frame(got, first[f], f"{name} set back, frame {f}")

@@ -7,7 +7,29 @@ playing from the start frame does too, and then nothing more is said about the f
 import bpy
 import numpy as np
 import pytest
-from helpers import bake_setup, draw_enabled, positions, reopen, save_in, status_of
+from helpers import (
+    CLOTH_NOTE,
+    PIPELINE_FRAMES,
+    REAL_FRAMES,
+    activate,
+    assert_groom_unchanged,
+    bake_setup,
+    check_pipeline_frame,
+    draw_enabled,
+    frame_of,
+    groom_snapshot,
+    pipeline_frame,
+    pipeline_scene,
+    play_demo,
+    play_pipeline,
+    positions,
+    real_size_fur,
+    reopen,
+    same_frame,
+    same_pipeline_frame,
+    save_in,
+    status_of,
+)
 
 pytestmark = pytest.mark.blender
 
@@ -123,3 +145,64 @@ def test_saved_again_before_playing_still_says_it(fc, tmp_path):
     path = save_in(tmp_path, "fresh.blend")
     scene, hair, out = _opened(fc, path)
     assert fc.registry.status_for(hair) == ("INFO", "")
+
+
+# ------------------------------------------------------ a pipeline setup
+def test_saved_and_reopened_mid_playback(fc, tmp_path):
+    """Saved at frame 3 of a played shot, reopened: the held frames say so and the
+    groom still holds every promise; played from the start frame, the first session's
+    frames bit for bit."""
+    scene = bpy.context.scene
+    guides, groom, box, out, gout = pipeline_scene(fc)
+    first = play_pipeline(guides, groom, box)
+    scene.frame_set(3)
+    path = save_in(tmp_path)
+    reopen(path)
+    scene = bpy.context.scene
+    guides, groom, box = (bpy.data.objects[n] for n in ("Guides", "Groom", "Box"))
+    assert scene.frame_current == 3
+    same_pipeline_frame(pipeline_frame(guides), first[3], "reopened at frame 3")
+    for f in (3, 4, 5, 6):
+        scene.frame_set(f)
+        check_pipeline_frame(guides, groom, box, what=f"reopened, frame {f}")
+    again = play_pipeline(guides, groom, box)
+    assert guides.furcollide.status_message == ""
+    for f in PIPELINE_FRAMES:
+        same_pipeline_frame(again[f], first[f], f"reopened, replayed: frame {f}")
+
+
+# ------------------------------------------------- the demo's scene at real size
+@pytest.mark.slow
+def test_saved_mid_playback_reopened_and_baked(fc, tmp_path):
+    """Played to 14 with Threads 2, saved, reopened: the saved frame shown and held on a
+    jump, said so; played from the start with Threads 1: the first session bit for bit.
+    Baked (Threads 1) and the baked frames played and scrubbed: the first session bit
+    for bit, nothing said. The groom never changes."""
+    demo, hair, out = real_size_fur(threads=2)
+    groomed = groom_snapshot(hair)
+    first = play_demo(demo.scene, hair, out)
+    demo.scene.frame_set(14)
+    path = save_in(tmp_path)
+    reopen(path)
+    scene = bpy.context.scene
+    hair = bpy.data.objects["Fur"]
+    out = hair.furcollide.output
+    s = hair.furcollide
+    assert scene.frame_current == 14
+    same_frame(frame_of(out), first[14], "reopened")
+    scene.frame_set(16)
+    assert "not saved with the file" in s.status_message, s.status_message
+    same_frame(frame_of(out), first[14], "reopened, frame 16 held")
+    s.threads = 1
+    for f, got in play_demo(scene, hair, out).items():
+        same_frame(got, first[f], f"reopened and replayed, frame {f}")
+    scene.frame_set(1)
+    activate(hair)
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    assert s.is_baked
+    s.threads = 2
+    for f in list(REAL_FRAMES) + [20, 3, 24, 11]:
+        scene.frame_set(f)
+        assert s.status_message in ("", CLOTH_NOTE) and not s.is_outdated, (f, s.status_message)
+        same_frame(frame_of(out), first[f], f"baked frame {f}")
+    assert_groom_unchanged(hair, groomed)

@@ -20,6 +20,9 @@ FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED, DISABLED = (
     Status.FREE, Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED,
     Status.DISABLED)
 EXCLUDED = (PINCHED, UNRESOLVED, DISABLED)
+#: The same and INVALID: for scenes that may hold a curve with a non-finite point or a
+#: zero-length segment (the solver leaves it as its input, not solved).
+EXCLUDED_OR_INVALID = (*EXCLUDED, Status.INVALID)
 
 
 def fit_rotation(A, B):

@@ -186,6 +186,14 @@ def affine(R=None, t=(0, 0, 0), s=1.0):
     return M
 
 
+def turning_sweep(f):
+    """A collider's matrix at frame ``f`` of a sweep through fur on the plane z = 0
+    (``fur_on_plane``, extent about 1): it moves from (-0.7, 0, 0.6) by (0.3, 0.05, -0.05)
+    a frame, turning by 0.2 rad a frame about (0, 1, 0.3)."""
+    return affine(rotation_matrix([0, 1, 0.3], 0.2 * f),
+                  t=[-0.7 + 0.3 * f, 0.05 * f, 0.6 - 0.05 * f])
+
+
 # ---------------------------------------------------------------- curves
 def pack(curves, dtype=np.float64):
     """List of (n_i,3) arrays -> (points, offsets)."""

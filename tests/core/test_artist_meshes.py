@@ -134,3 +134,43 @@ def test_repairs_are_reported():
     text = r.describe()
     assert "welded" in text and "duplicated" in text and "outward" in text
     assert Collider(V, F).repairs.describe() == ""
+
+
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+def test_two_separate_closed_balls_both_pinch(mode):
+    """Two disjoint balls in one mesh (an asset's parts), one wound inward: each is a
+    closed part of its own; roots inside either are pinched, the rest resolved clear."""
+    Va, Fa = scenes.uv_sphere([-0.5, 0, 0.1], 0.3, 24, 12)
+    Vb, Fb = scenes.uv_sphere([0.5, 0, 0.1], 0.3, 24, 12)
+    V = np.concatenate([Va, Vb])
+    F = np.concatenate([Fa, Fb[:, ::-1] + len(Va)])
+    rng = np.random.default_rng(4)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=120, extent=0.9, n_cvs=(3, 7),
+                                    length=(0.4, 0.8))
+    res = Solver(offs, Settings(mode=mode)).step(pts, [Collider(V, F)])
+    roots = pts[offs[:-1]]
+    Vok = np.concatenate([Va, Vb])
+    Fok = np.concatenate([Fa, Fb + len(Va)])
+    inside = oracle.points_inside_closed_mesh(roots, Vok, Fok)
+    assert inside.sum() >= 4
+    np.testing.assert_array_equal(res.status == Status.PINCHED, inside)
+    geom.assert_no_intersection(res.points, offs, res.status, [(Vok, Fok)],
+                                excluded=geom.EXCLUDED_OR_INVALID)
+
+
+@pytest.mark.parametrize("scale", [1.0, 2.0924042])
+def test_a_seam_whose_copies_differ_by_one_ulp_is_welded(scale):
+    """An unwelded seam whose vertex copies are not bit-identical (an exporter's float32
+    rounding, a mirror seam): the copies are ~3e-8 apart, 50x closer than WELD_REL of the
+    mesh's size, so the ball is closed and detects pinches."""
+    V, F = scenes.uv_sphere([0.1, 0.2, 0.3], 0.5, 32, 16)
+    V = (V * scale).astype(np.float32)
+    right = V[F].mean(axis=1)[:, 1] > 0.2 * scale
+    V2 = np.concatenate([V, np.nextafter(V, np.float32(4))])
+    F2 = F.copy()
+    F2[right] += len(V)
+    gap = float(np.abs(V2[len(V):] - V).max())
+    diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+    assert gap < 0.1 * 1e-6 * diag  # (tolerances.WELD_REL = 1e-6)
+    col = Collider(V2, F2)
+    assert col.closed and col.repairs.open_edges == 0, col.repairs.describe()

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import scenes
 
-from core import Collider, Settings, Solver
+from core import Collider, Settings, Solver, Status
 
 
 def _sweep(f, x0):
@@ -99,3 +99,44 @@ def test_curves_keep_their_own_state_frame_after_frame_in_any_batch(mode):
         np.testing.assert_array_equal(a.status, np.concatenate([r.status for r in b]))
         colliding += int((np.asarray(a.status) == 1).sum())
     assert colliding > 20
+
+
+@pytest.mark.parametrize("bad", ["nan", "duplicated_point", "inf_root"])
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+def test_one_bad_curve_changes_no_other_curve(mode, bad):
+    """A ragged groom with one broken curve (a NaN CV, a duplicated CV, an infinite
+    root): every other curve is solved bit for bit as in the groom without the break,
+    on every frame of a sweep; the broken one is INVALID, never NaN, and its root stays."""
+    rng = np.random.default_rng(7)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=60, curly=0.3, extent=0.9, n_cvs=(2, 9),
+                                    length=(0.5, 1.0))
+    pts = pts.astype(np.float32)
+    k = 23
+    assert offs[k + 1] - offs[k] >= 3
+    broken = pts.copy()
+    if bad == "nan":
+        broken[offs[k] + 1] = np.nan
+    elif bad == "duplicated_point":
+        broken[offs[k] + 2] = broken[offs[k] + 1]
+    else:
+        broken[offs[k]] = np.inf
+    V, F = scenes.uv_sphere([0, 0, 0], 0.4, 24, 12)
+    col = Collider(V, F)
+    a, b = Solver(offs, Settings(mode=mode)), Solver(offs, Settings(mode=mode))
+    others = np.ones(len(offs) - 1, bool)
+    others[k] = False
+    rows = np.repeat(others, np.diff(offs))
+    touched = 0
+    for f in range(6):
+        col.matrix = scenes.turning_sweep(f)
+        ra = a.step(pts, [col])
+        rb = b.step(broken, [col])
+        assert np.isfinite(rb.points).all()
+        assert rb.status[k] == Status.INVALID
+        assert rb.problems and f"curve {k}" in rb.problems[0], rb.problems
+        np.testing.assert_array_equal(rb.status[others], ra.status[others], err_msg=f"{f}")
+        np.testing.assert_array_equal(rb.points[rows], ra.points[rows], err_msg=f"{f}")
+        touched += int((ra.status != 0).sum())
+        if bad != "inf_root":
+            assert np.array_equal(rb.points[offs[k]], broken[offs[k]])
+    assert touched > 10

@@ -10,12 +10,13 @@ Checked against the parity oracle on the mesh as the artist meant it.
 
 from __future__ import annotations
 
+import geom
 import numpy as np
 import oracle
 import pytest
 import scenes
 
-from core import Collider
+from core import Collider, Settings, Solver, Status
 from core.meshfix import tidy
 
 
@@ -124,3 +125,83 @@ def test_one_closed_part_first_crossing_decides_as_the_full_walk(shape):
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(a, oracle.points_inside_closed_mesh(
         P, V, F if shape != "flipped_torus" else F[:, ::-1]))
+
+
+# ------------------------------------------------------- fur inside a hollow ball
+def hollow_ball(r_out=1.0, r_in=0.8, center=(0.0, 0.0, 0.0)):
+    """A hollow ball (a helmet, a Solidify'd sphere): an outer shell wound outward and an
+    inner shell wound inward (its normals face the cavity), both closed, correct."""
+    Vo, Fo = scenes.icosphere(center, r_out, subdivisions=3)
+    Vi, Fi = scenes.icosphere(center, r_in, subdivisions=3)
+    V = np.concatenate([Vo, Vi])
+    F = np.concatenate([Fo, Fi[:, ::-1] + len(Vo)])
+    return V, F
+
+
+def _cavity_fur(rng, n=20, half=0.3, length=0.2, npts=3):
+    roots = rng.uniform(-half, half, (n, 3))
+    t = np.linspace(0.0, length, npts)
+    pts = (roots[:, None, :] + t[None, :, None] * np.array([0.0, 0.0, 1.0])).reshape(-1, 3)
+    return pts.astype(np.float32), np.arange(0, n * npts + 1, npts), roots
+
+
+def test_roots_in_the_cavity_of_a_hollow_ball_are_not_pinched():
+    """Fur growing inside a correctly modelled hollow ball (a head under a helmet made
+    with Solidify) is outside the collider's solid: its roots are not pinched, and
+    nothing says faces were 'turned outward' (they already were right)."""
+    V, F = hollow_ball()
+    rng = np.random.default_rng(0)
+    pts, offs, roots = _cavity_fur(rng)
+    assert not oracle.points_inside_closed_mesh(roots, V, F).any()  # the oracle agrees
+    col = Collider(V.astype(np.float32), F)
+    res = Solver(offs, Settings()).step(pts, [col])
+    assert not (res.status == Status.PINCHED).any(), res.status
+    assert col.repairs.flipped == 0, col.repairs.describe()
+
+
+def test_fur_in_a_hollow_ball_keeps_the_collision_offset_from_the_inner_wall():
+    """Fur inside the cavity whose tips pierce the inner wall: resolved, clear of the
+    wall, and at least (about) the Collision Offset away from it."""
+    V, F = hollow_ball(r_out=1.0, r_in=0.5)
+    rng = np.random.default_rng(1)
+    pts, offs, roots = _cavity_fur(rng, n=30, half=0.15, length=0.45, npts=5)
+    res = Solver(offs, Settings(mode="bend", collision_offset=0.03)).step(
+        pts, [Collider(V, F)])
+    st = np.asarray(res.status)
+    assert (st == Status.COLLIDING).sum() >= 5, st
+    geom.assert_no_intersection(res.points, offs, st, [(V, F)],
+                                excluded=geom.EXCLUDED_OR_INVALID)
+    keep = ~np.isin(st, geom.EXCLUDED_OR_INVALID)
+    # (the cavity wall is at 0.5: the fur stays within 0.5 - offset of the centre)
+    far = np.array([np.linalg.norm(res.points[offs[c]:offs[c + 1]], axis=1).max()
+                    for c in range(len(offs) - 1)])
+    assert (far[keep] <= 0.5 - 0.025).all(), far[keep].max()
+
+
+# ------------------------------------------------------- closed parts side by side
+def two_boxes(touch):
+    """Two closed boxes in one mesh (two crates joined with Ctrl-J): side by side
+    touching along a face, along an edge, or apart."""
+    Va, Fa = scenes.box([-0.5, -0.25, 0.0], [0.0, 0.25, 0.5])
+    lo, hi = {"face": ([0.0, -0.25, 0.0], [0.5, 0.25, 0.5]),
+              "edge": ([0.0, 0.25, 0.0], [0.5, 0.75, 0.5]),
+              "apart": ([0.01, -0.25, 0.0], [0.5, 0.25, 0.5])}[touch]
+    Vb, Fb = scenes.box(lo, hi)
+    return np.concatenate([Va, Vb]), np.concatenate([Fa, Fb + len(Va)])
+
+
+@pytest.mark.parametrize("touch", [
+    "apart",
+    "face",
+    "edge",
+])
+def test_two_closed_boxes_in_one_mesh_still_detect_pinches(touch):
+    """Each box is closed and wound outward: a root inside either is pinched (the
+    parity oracle on the mesh as given), before and after the core's repairs."""
+    V, F = two_boxes(touch)
+    P = np.random.default_rng(0).uniform(-0.6, 0.8, (1500, 3))
+    inside = oracle.points_inside_closed_mesh(P, V, F)
+    assert inside.sum() > 100
+    col = Collider(V, F)
+    assert col.detects_pinch, col.repairs
+    np.testing.assert_array_equal(col.contains(P), inside)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import geom
 import numpy as np
 import oracle
+import pytest
 import scenes
 import strategies as strat
 from geom import FAST
@@ -247,3 +248,35 @@ def test_an_unresolved_bend_curve_keeps_its_last_bent_shape():
     assert np.asarray(r2.status)[0] == Status.UNRESOLVED
     np.testing.assert_allclose(r2.points, r1.points, atol=1e-12)
     assert not solver.state["stiff"][0]
+
+
+@pytest.mark.parametrize("modes", [("stiff", "soft"), ("soft", "bend"), ("bend", "stiff")])
+def test_switching_mode_mid_shot_keeps_the_invariants(modes):
+    """Settings switched to another mode mid-shot (the solver resets): every frame after
+    keeps no resolved crossing, roots exact, no NaN; the switched solver equals a fresh
+    solver in the new mode started at the switch."""
+    rng = np.random.default_rng(5)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=70, curly=0.2, extent=0.9, n_cvs=(3, 8))
+    V, F = scenes.uv_sphere([0, 0, 0], 0.4, 24, 12)
+    col = Collider(V, F)
+    solver = Solver(offs, Settings(mode=modes[0]))
+    fresh = Solver(offs, Settings(mode=modes[1]))
+    for f in range(6):
+        col.matrix = scenes.turning_sweep(f)
+        if f == 3:
+            solver.settings = Settings(mode=modes[1])
+        res = solver.step(pts, [col])
+        geom.assert_roots_exact(pts, res.points, offs)
+        assert np.isfinite(res.points).all()
+        geom.assert_no_intersection(res.points, offs, res.status,
+                                    [(oracle.transform(V, col.matrix), F)],
+                                    excluded=geom.EXCLUDED_OR_INVALID)
+        if f >= 3:
+            ref = fresh.step(pts, [col])
+            np.testing.assert_array_equal(res.points, ref.points)
+            np.testing.assert_array_equal(res.status, ref.status)
+    snap = solver.state  # a snapshot of the new mode restores into a solver of that mode
+    other = Solver(offs, Settings(mode=modes[1]))
+    other.state = snap
+    with pytest.raises(ValueError, match="another mode"):
+        Solver(offs, Settings(mode=modes[0])).state = snap

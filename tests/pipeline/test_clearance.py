@@ -10,6 +10,9 @@ make a frame depend on the frames before it.
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pipe_oracle as po
 import pytest
@@ -20,6 +23,9 @@ from hypothesis_profiles import examples
 from core import Collider, Settings, Solver, Status
 from core.pipeline import clearance_pass
 from core.pipeline import groom as groom_mod
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
+import scenes  # noqa: E402  (the core tests' scene builders)
 
 PROP = settings(max_examples=examples(15), deadline=None)
 
@@ -240,3 +246,37 @@ def test_the_field_clears_only_segments_that_are_far(seed, aniso, scale):
                                         *(np.tile(T[:, i], (len(A), 1)) for i in range(3)))
     dist = dist.reshape(len(A), m).min(1)
     assert (dist > need).all()
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.04])
+def test_clearance_pass_equals_solving_every_curve(offset):
+    """clearance_pass solves only the curves whose box meets a collider's (offset)
+    bounds: the result must equal one solve of the whole ragged groom, with a global
+    Collision Offset and a collider's own offset, and a NaN curve among them."""
+    rng = np.random.default_rng(9)
+    pts, offs = scenes.fur_on_plane(rng, n_curves=150, curly=0.2, extent=2.0, n_cvs=(2, 9),
+                                    length=(0.4, 0.9))
+    pts[offs[40] + 1] = np.nan
+    Va, Fa = scenes.uv_sphere([0, 0, 0], 0.35, 24, 12)
+    Vb, Fb = scenes.box([-0.2, -0.2, -0.2], [0.2, 0.2, 0.2])
+    cols = [Collider(Va, Fa, matrix=scenes.translation([-0.9, 0.3, 0.5])),
+            Collider(Vb, Fb, matrix=scenes.translation([1.0, -0.8, 0.35]), offset=0.06)]
+    settings = Settings(mode="stiff", collision_offset=offset)
+    fallback = Settings(mode="bend", collision_offset=offset)
+    out, st, n_fixed = clearance_pass(pts, offs, cols, settings=settings, fallback=fallback)
+    ref = Solver(offs, settings).step(pts, cols)
+    ref_pts, ref_st = np.asarray(ref.points, np.float64).copy(), ref.status.copy()
+    again = np.flatnonzero(ref_st == Status.UNRESOLVED)
+    if len(again):
+        rb = Solver(offs, fallback).step(pts, cols)
+        for c in again:
+            if rb.status[c] != Status.UNRESOLVED:
+                ref_pts[offs[c]:offs[c + 1]] = rb.points[offs[c]:offs[c + 1]]
+                ref_st[c] = rb.status[c]
+    np.testing.assert_array_equal(st, ref_st)
+    np.testing.assert_array_equal(out, ref_pts)
+    assert st[40] == Status.INVALID and np.isfinite(out).all()
+    with np.errstate(invalid="ignore"):
+        moved = np.logical_or.reduceat(np.any(out != pts, axis=1), offs[:-1])
+    assert n_fixed == int((moved & (st != Status.INVALID)).sum()) > 0
+    assert 0 < (st == Status.COLLIDING).sum() < 150

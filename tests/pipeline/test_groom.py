@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pipe_oracle as po
 import pytest
@@ -21,6 +24,9 @@ from core.pipeline import (
     knn,
     wind,
 )
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
+import scenes  # noqa: E402  (the core tests' scene builders)
 
 PROP = settings(max_examples=examples(10))
 FREE, COLLIDING, RECOVERING, PINCHED, UNRESOLVED, DISABLED = range(6)
@@ -215,3 +221,39 @@ def test_few_guides_rigid_motion(n_guides):
     R = po.rotation([0.3, -1, 0.2], 2.0)
     out = deform_groom(rp, ro, gp, gp @ R.T + 1.0, go, w)
     np.testing.assert_allclose(out, rp @ R.T + 1.0, atol=1e-9, rtol=0)
+
+
+def _bend(pts, offs, angle):
+    """Each curve bent about x at its root by ``angle`` (radians) times its arc fraction."""
+    out = pts.copy()
+    for c in range(len(offs) - 1):
+        s, e = offs[c], offs[c + 1]
+        n = e - s - 1
+        p = pts[s]
+        for j in range(n):
+            R = scenes.rotation_matrix([1, 0, 0], angle * (j + 1) / n)
+            out[s + j + 1] = p + (pts[s + j + 1] - pts[s + j]) @ R.T
+            p = out[s + j + 1]
+    return out
+
+
+@pytest.mark.parametrize("move", ["still", "rigid", "bent"])
+def test_render_curves_lying_on_ragged_guides_follow_them(move):
+    """README: a render curve lying on a guide follows it exactly (and a still guide set
+    leaves the groom unchanged, a rigid motion moves it rigidly), with guides and render
+    curves of mixed CV counts."""
+    rng = np.random.default_rng(3)
+    g_pts, g_off = scenes.fur_on_plane(rng, n_curves=12, curly=0.0, lean=0.2, extent=1.0,
+                                       n_cvs=(2, 9))
+    roots = g_pts[g_off[:-1]]
+    w = bind_groom(roots, roots, k=1)
+    if move == "still":
+        now = g_pts.copy()
+    elif move == "rigid":
+        R = scenes.rotation_matrix([0.2, 1, 0.4], 0.7)
+        now = g_pts @ R.T + [0.3, -0.2, 0.1]
+    else:
+        now = _bend(g_pts, g_off, 0.6)
+    out = deform_groom(g_pts, g_off, g_pts, now, g_off, w)
+    assert np.isfinite(out).all()
+    np.testing.assert_allclose(out, now, atol=1e-9)
