@@ -1,6 +1,6 @@
 # FurCollide developer commands. Each target bootstraps the pinned .venv first.
 PY := .venv/bin/python
-.PHONY: venv test test-main test-matrix test-app test-core lint bench demo package mutate
+.PHONY: venv test test-main test-matrix test-app test-core lint bench demo package mutate docs-images
 
 venv:
 	@./scripts/bootstrap.sh
@@ -51,3 +51,9 @@ demo: venv
 
 package: venv
 	$(PY) scripts/package.py
+
+# The documentation's screenshots (docs/img/*.png), made by the real Blender application:
+# the app lane's chroot (Debian's Blender 4.3 under Xvfb; needs root, built once) walks the
+# README's quick start on the demo scene (tests/app/docs_driver.py). About 5 minutes.
+docs-images: venv
+	$(PY) scripts/docs_images.py
