@@ -1,6 +1,6 @@
 # FurCollide developer commands. Each target bootstraps the pinned .venv first.
 PY := .venv/bin/python
-.PHONY: venv test test-main test-matrix test-app test-core lint bench demo package mutate
+.PHONY: venv test test-main test-matrix test-app test-core lint bench demo package mutate docs-images
 
 venv:
 	@./scripts/bootstrap.sh
@@ -29,7 +29,7 @@ test-core: venv
 	$(PY) -m pytest -q tests/core
 
 # Mutation testing of core/solver.py, rigid.py, soft.py, collider.py and framecache.py
-# (README "Mutation testing"): mutmut, pinned in requirements/mutate.txt, one worker under
+# (docs/testing.md "Mutation testing"): mutmut, pinned in requirements/mutate.txt, one worker under
 # nice. Every mutant takes many hours on 2 cores; ARGS="--sample 60" (60 drawn mutants per
 # file) about 30 min, ARGS="--files core/framecache.py" 4 min. Results in mutants/.
 mutate: venv
@@ -51,3 +51,9 @@ demo: venv
 
 package: venv
 	$(PY) scripts/package.py
+
+# The documentation's screenshots (docs/img/*.png), made by the real Blender application:
+# the app lane's chroot (Debian's Blender 4.3 under Xvfb; needs root, built once) walks the
+# README's quick start on the demo scene (tests/app/docs_driver.py). About 5 minutes.
+docs-images: venv
+	$(PY) scripts/docs_images.py

@@ -135,7 +135,7 @@ def run_lane(lane: str, extra: list[str]) -> dict:
     elif row["failed"] == 0 and rc == 0:
         row["ok"] = True
     elif row["failed"] == 0 and rc in (-11, 139) and lane == "4.2":
-        # bpy 4.2's teardown crash at interpreter exit (README, Tests): every test
+        # bpy 4.2's teardown crash at interpreter exit (docs/testing.md, The lanes): every test
         # passed according to pytest's own report, written before the exit.
         row["ok"] = True
         row["note"] = f"pytest passed; the process then crashed at exit (rc {rc}, bpy 4.2)"
