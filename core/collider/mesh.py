@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import tolerances as tol
 from ..errors import ColliderError
+from ..mesh import degenerate_faces
 from ..meshfix import Tidy, tidy
 from ..rotations import dot as rot_dot
 
@@ -99,19 +100,6 @@ def check_faces(F, n, name):
             f"range (the mesh has {n} vertices)"
         )
     return F.astype(np.int32)
-
-
-def degenerate_faces(V, F):
-    """(m,) bool: zero-area faces (a repeated vertex, or an area at most
-    ``tolerances.DEGENERATE_AREA_REL`` times the squared bounding-box diagonal),
-    computed in float64 from the float32 vertices."""
-    if len(F) == 0:
-        return np.zeros(0, bool)
-    V64 = V.astype(np.float64)
-    diag = float(np.linalg.norm(V64.max(0) - V64.min(0))) or 1.0
-    a = np.cross(V64[F[:, 1]] - V64[F[:, 0]], V64[F[:, 2]] - V64[F[:, 0]])
-    area2 = np.einsum("ij,ij->i", a, a)  # (0 for a repeated vertex)
-    return area2 <= (2 * tol.DEGENERATE_AREA_REL * diag**2) ** 2
 
 
 class PerShape:
