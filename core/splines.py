@@ -468,11 +468,12 @@ def _ramp(counts):
 
 
 # --------------------------------------------------------- through a solve
-def turn_allowance(settings, nseg) -> tuple[np.ndarray, float]:
+def turn_allowance(settings, nseg) -> tuple[np.ndarray, np.ndarray]:
     """How much two segments ``m`` apart in one curve can turn against each other in
     a solve: per curve the angle ``phi`` (C,) between neighbouring segments
-    (radians, at most pi), and the largest difference of Shrink scales between
-    neighbours per radian of that angle.
+    (radians, at most pi), and per curve (C,) the largest difference of Shrink scales
+    between neighbours per radian of that angle (``max_angle`` and ``scale_minimum``
+    may be per-curve arrays: parameter maps).
 
     * Stiff turns the whole curve rigidly: 0 (Shrink then scales every segment
       alike).
@@ -483,15 +484,17 @@ def turn_allowance(settings, nseg) -> tuple[np.ndarray, float]:
     * Soft turns each segment on its own: pi (any angle); lengths are kept.
     """
     nseg = np.maximum(np.asarray(nseg, np.float64), 1.0)
+    C = len(nseg)
     if settings.mode == "stiff":
-        phi = np.zeros(len(nseg))
+        phi = np.zeros(C)
     elif settings.mode == "bend":
-        phi = np.minimum(np.deg2rad(settings.max_angle) / nseg, np.pi)
+        phi = np.minimum(np.deg2rad(np.asarray(settings.max_angle, np.float64)) / nseg, np.pi)
     else:
-        phi = np.full(len(nseg), np.pi)
-    shrink = 0.0
+        phi = np.full(C, np.pi)
+    shrink = np.zeros(C)
     if settings.shrink and settings.mode == "bend":
-        shrink = (1.0 - settings.scale_minimum) / np.deg2rad(settings.scale_angle)
+        shrink = shrink + (1.0 - np.asarray(settings.scale_minimum, np.float64)) / np.deg2rad(
+            settings.scale_angle)
     return phi, shrink
 
 
@@ -569,7 +572,7 @@ def _clearance_margin(splines: Splines, points, offsets, settings, enabled=None)
     nurbs = (types == NURBS) & open_c
     if nurbs.any():
         def coef(curves, m):
-            return _turn_coefficient(phi_c[curves], shrink, m)
+            return _turn_coefficient(phi_c[curves], shrink[curves], m)
         out = np.maximum(out, _nurbs_bound(splines, lay, P, d, nurbs, coef))
     out = np.nan_to_num(out, nan=0.0, posinf=0.0)
     # float noise of straight curves is no curvature: no margin below it
@@ -593,7 +596,11 @@ def _catmull_rom_margin(lay, d, seglen, mask, phi_c, shrink, settings):
     A, B, L, start, end = A[j], B[j], seglen[j], lay.first[j], end[j]
     # Shrink may shorten the chord (by scale_minimum at most) while the ends' along
     # terms shrink with it: the along test uses the shortest chord.
-    L_min = L * (settings.scale_minimum if settings.shrink and settings.mode != "soft" else 1.0)
+    if settings.shrink and settings.mode != "soft":
+        smin = np.broadcast_to(np.asarray(settings.scale_minimum, np.float64), (lay.C,))
+        L_min = L * smin[lay.curve[j]]
+    else:
+        L_min = L
     half = -0.5 * L_min
     return _hermite_bound(L_min, np.where(start, 0.0, A), np.where(start, half, -A),
                           np.where(start, half, A), np.where(end, 0.0, B),
@@ -665,8 +672,10 @@ class DrawnMargin:
         arrays = (points, offsets, enabled, sp.types, sp.cyclic, sp.handle_left,
                   sp.handle_right, sp.handle_type_left, sp.handle_type_right, sp.nurbs_order,
                   sp.knots_mode, sp.nurbs_weight)
-        return ((s.mode, s.max_angle, s.shrink, s.scale_minimum, s.scale_angle),
-                *(None if a is None else np.array(a) for a in arrays))
+        # (max_angle and scale_minimum may be per-curve arrays: compared by their bytes)
+        turns = tuple(v.tobytes() if isinstance(v, np.ndarray) else v
+                      for v in (s.mode, s.max_angle, s.shrink, s.scale_minimum, s.scale_angle))
+        return (turns, *(None if a is None else np.array(a) for a in arrays))
 
 
 def _same_key(a, b) -> bool:

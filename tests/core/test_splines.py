@@ -390,3 +390,27 @@ def test_vector_handles_are_blenders():
     splines.vector_handles(P, np.array([0, 3]), hl, hr, t, t)
     np.testing.assert_allclose(hl, [[0, 0, -1], [0, 0, 2], [2, 0, 3]])
     np.testing.assert_allclose(hr, [[0, 0, 1], [1, 0, 3], [4, 0, 3]])
+
+
+@pytest.mark.parametrize("kind", [CATMULL_ROM, NURBS])
+def test_per_curve_settings_give_each_curve_its_own_margin(kind):
+    """Parameter maps: Max Angle and Scale Minimum as (C,) arrays. A uniform array gives
+    the number's margins; a mixed one gives each curve the margin of its own value."""
+    rng = np.random.default_rng(5)
+    P, offs = _groom(rng, wiggle=2.0)
+    C = len(offs) - 1
+    sp = splines.Splines(np.full(C, kind, np.int8))
+    base = dict(mode="bend", shrink=True, scale_angle=60.0)
+    lo = Settings(max_angle=40.0, scale_minimum=0.8, **base)
+    hi = Settings(max_angle=150.0, scale_minimum=0.3, **base)
+    m_lo = splines.clearance_margin(sp, P, offs, lo)
+    m_hi = splines.clearance_margin(sp, P, offs, hi)
+    uniform = Settings(max_angle=np.full(C, 40.0), scale_minimum=np.full(C, 0.8), **base)
+    np.testing.assert_array_equal(splines.clearance_margin(sp, P, offs, uniform), m_lo)
+    pick = np.arange(C) % 2 == 0
+    mixed = Settings(max_angle=np.where(pick, 150.0, 40.0),
+                     scale_minimum=np.where(pick, 0.3, 0.8), **base)
+    got = splines.clearance_margin(sp, P, offs, mixed)
+    np.testing.assert_allclose(got, np.where(pick, m_hi, m_lo), rtol=1e-12)
+    drawn = splines.DrawnMargin()
+    np.testing.assert_array_equal(drawn(sp, P, offs, mixed), drawn(sp, P, offs, mixed))
