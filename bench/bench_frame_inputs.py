@@ -57,16 +57,16 @@ def run(n_frames: int, repeat: int, deforming: bool):
         ball = next(o for o in scene.objects if o.type == "MESH")
         if deforming:
             ball.modifiers.new("Displace", "DISPLACE").strength = 0.01
-            ops.registry.clear_runtime(hair)
+            ops.store.registry.clear_runtime(hair)
         print(f"{len(hair.data.curves)} curves, {len(hair.data.points)} points, collider "
               f"{n_tris} triangles, {'deforming' if deforming else 'rigid'}")
         for f in range(1, n_frames + 2):  # solve (not measured)
             scene.frame_set(f)
-        rt = ops.registry.get_runtime(hair)
+        rt = ops.store.registry.get_runtime(hair)
         assert len(rt.memory) == n_frames + 1, len(rt.memory)
 
         checks, handler = [], []
-        rules = ops.frame_rules
+        rules = ops.frame.rules
         real_check, real_eval = rules.cached_frame_change, rules.evaluate
         rules.cached_frame_change = _clock(real_check, checks)
         rules.evaluate = _clock(real_eval, handler)
@@ -74,7 +74,7 @@ def run(n_frames: int, repeat: int, deforming: bool):
             for _ in range(repeat):
                 for f in range(1, n_frames + 2):
                     scene.frame_set(f)
-                    assert ops.registry.stats_for(hair).get("source") == "cache", f
+                    assert ops.store.registry.stats_for(hair).get("source") == "cache", f
         finally:
             rules.cached_frame_change, rules.evaluate = real_check, real_eval
         wall, cpu = np.median(np.array(checks), axis=0)
@@ -85,16 +85,16 @@ def run(n_frames: int, repeat: int, deforming: bool):
 
         # its parts, on the last frame
         dg = bpy.context.evaluated_depsgraph_get()
-        setup = ops.setup.Setup(hair, scene, dg)
-        inp = ops.frame_inputs.read_inputs(setup)
-        ref = ops.colliders.collider_objects(hair, scene)[0]
+        setup = ops.frame.setup.Setup(hair, scene, dg)
+        inp = ops.frame.inputs.read_inputs(setup)
+        ref = ops.frame.colliders.collider_objects(hair, scene)[0]
         parts = {
             "source digest (positions + offsets)": lambda: cache.digest(inp.raw, inp.offsets),
-            "collider read + digests": lambda: ops.colliders.read_collider_inputs(
+            "collider read + digests": lambda: ops.frame.colliders.read_collider_inputs(
                 ref.object, dg, ref.matrix(dg)),
-            "settings signature": lambda: ops.setup.signature(hair, scene=scene,
-                                                              identities=False),
-            "whole record (current_inputs)": lambda: ops.frame_inputs.current_inputs(setup, inp),
+            "settings signature": lambda: ops.settings.fingerprints.signature(
+                hair, scene=scene, identities=False),
+            "whole record (current_inputs)": lambda: ops.frame.record.current_inputs(setup, inp),
         }
         for name, fn in parts.items():
             print(f"  {name:38s} {_best(fn):.3f} ms")

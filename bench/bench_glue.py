@@ -97,7 +97,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
               f"collider {n_tris} triangles")
         core_mod = sys.modules[ADDON + ".core"]
         spent, in_core = [], []  # (wall ms, main-thread CPU ms) per call
-        real, real_step = ops.frame_rules.evaluate, core_mod.Solver.step
+        real, real_step = ops.frame.rules.evaluate, core_mod.Solver.step
 
         def clocked(fn, into):
             def wrapper(*args, **kw):
@@ -108,7 +108,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
                     into.append(((time.perf_counter() - t) * 1e3, (time.thread_time() - c) * 1e3))
             return wrapper
 
-        ops.frame_rules.evaluate = clocked(real, spent)
+        ops.frame.rules.evaluate = clocked(real, spent)
         core_mod.Solver.step = clocked(real_step, in_core)
         prof = None
         if profile:
@@ -117,7 +117,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
             prof = cProfile.Profile()
         best = {}
         for _ in range(repeat):  # the best of each frame filters out a busy machine
-            ops.registry.clear_runtime(hair)  # solve again, do not replay the cache
+            ops.store.registry.clear_runtime(hair)  # solve again, do not replay the cache
             scene.frame_set(1)  # reset frame (not measured as a step)
             for f in range(2, n_frames + 2):
                 spent.clear()
@@ -132,7 +132,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
                 handler, handler_cpu = np.sum(spent, axis=0)
                 core, core_cpu = np.sum(in_core, axis=0)
                 row = (f, total, handler, core, handler - core, handler_cpu - core_cpu,
-                       ops.registry.stats_for(hair).get("colliding", 0))
+                       ops.store.registry.stats_for(hair).get("colliding", 0))
                 if f not in best or row[4] < best[f][4]:
                     best[f] = row
         rows = [best[f] for f in sorted(best)]
@@ -141,9 +141,9 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
             for f in range(2, n_frames + 2):
                 spent.clear()
                 scene.frame_set(f)
-                assert ops.registry.stats_for(hair).get("source") == "cache"
+                assert ops.store.registry.stats_for(hair).get("source") == "cache"
                 cached.append(spent[0][0])
-        ops.frame_rules.evaluate, core_mod.Solver.step = real, real_step
+        ops.frame.rules.evaluate, core_mod.Solver.step = real, real_step
         print(f"{'frame':>5} {'frame_set':>10} {'handler':>8} {'core':>8} {'glue':>7} "
               f"{'glue CPU':>8} {'colliding':>9}")
         for r in rows:

@@ -151,7 +151,7 @@ def run(side, n_frames, limit, trace, top, sink=None, mode="stiff"):
         s0 = snap()
         assert bpy.ops.furcollide.add() == {"FINISHED"}
         hair.furcollide.memory_limit = limit
-        rt = ops.registry.get_runtime(hair)
+        rt = ops.store.registry.get_runtime(hair)
         added = row("after Add", rt)
         s1 = snap()
         rows, snaps, full_at = [], {}, None

@@ -131,7 +131,7 @@ def run(user, argv=None):
     print(f"  pipeline set up in {time.perf_counter() - t0:.1f} s (sampler, attach bind, "
           "groom bind)", flush=True)
 
-    registry = sys.modules[pkg + ".operators.registry"]
+    registry = sys.modules[pkg + ".operators.store.registry"]
     framecache = sys.modules[pkg + ".core.framecache"]
     guides = pipe.guides
     scene = scn.scene
@@ -238,7 +238,7 @@ def _output_evaluations(bpy, out, play):
 
 def children_figure(bpy, pkg, density, frames=8):
     """The children stack's evaluations per played frame (module docstring)."""
-    compat = sys.modules[pkg + ".operators.compat"]
+    compat = sys.modules[pkg + ".operators.blender.compat"]
     path = compat.find_datafile(compat.hair_asset_candidates())
     if not path:
         print("\n  no hair node assets in this Blender: no children figure")
@@ -273,7 +273,7 @@ def children_figure(bpy, pkg, density, frames=8):
                    Density=float(density))
     _hair_modifier(bpy, compat, out, "Clump Hair Curves", path, Factor=0.8)
     _hair_modifier(bpy, compat, out, "Frizz Hair Curves", path)
-    registry = sys.modules[pkg + ".operators.registry"]
+    registry = sys.modules[pkg + ".operators.store.registry"]
     for cleared in (True, False):
         hair.furcollide.children.use_children = cleared
         scene.frame_set(1)

@@ -692,7 +692,7 @@ def attached_guides(bpy, demo, pipe):
     import demo_scene as ds
     import numpy as np
 
-    fur_attach = importlib.import_module(ADDON + ".operators.fur_attach")
+    fur_attach = importlib.import_module(ADDON + ".operators.frame.attach")
     g = pipe.guides
     offs = ds.curve_offsets(g)
     pts = fur_attach.attached_points(g, bpy.context.evaluated_depsgraph_get(), offs)

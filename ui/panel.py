@@ -4,10 +4,12 @@ import bpy
 from bpy.types import Panel, UIList
 
 from ..core import framecache
-from ..operators import ops_bake, registry, rest_position
-from ..operators.clock import STAGES
-from ..operators.colliders import collider_lines, in_scene
-from ..operators.ops_common import active_setup, backend_message
+from ..operators.frame import topology
+from ..operators.frame.clock import STAGES
+from ..operators.frame.colliders import collider_lines, in_scene
+from ..operators.ops import bake as bake_ops
+from ..operators.ops.common import active_setup, backend_message
+from ..operators.store import registry
 
 #: List icon per collider object type (a mesh, or what Blender turns into one).
 _TYPE_ICONS = {"CURVE": "CURVE_DATA", "SURFACE": "SURFACE_DATA", "FONT": "FONT_DATA",
@@ -106,7 +108,7 @@ class FURCOLLIDE_PT_main(Panel):
             box = layout.box()
             for i, line in enumerate(_wrap(message, _line_chars(context))):
                 box.label(text=line, icon=icon if i == 0 else "BLANK1")
-            if rest_position.BUTTON in message:  # (the fix the message names)
+            if topology.BUTTON in message:  # (the fix the message names)
                 box.operator("furcollide.use_rest_position", icon="MOD_MESHDEFORM")
         if not context.scene.render.use_lock_interface:
             box = layout.box()
@@ -248,7 +250,7 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         col.enabled = not s.is_baked and foreign is None
         col.prop(s, "cache_directory", text="Directory")
         col.prop(s, "memory_limit", text="Memory (MB)")
-        running = ops_bake.PROGRESS.get(context.scene.name)
+        running = bake_ops.PROGRESS.get(context.scene.name)
         if running and hasattr(layout, "progress"):
             done, of = running
             layout.progress(factor=done / of, type="BAR", text=f"Baking {done} / {of} (Esc)")

@@ -4,11 +4,11 @@ the render groom."""
 
 from bpy.types import Panel
 
-from ..operators.children_stage import owns_children, stack_modifiers
-from ..operators.fur_attach import has_binding
-from ..operators.groom_stage import BIND_AGAIN, advice
-from ..operators.ops_common import active_setup
-from ..operators.ops_sampler import NO_SURFACE_HAIR
+from ..operators.frame.attach import has_binding
+from ..operators.frame.children import owns_children, stack_modifiers
+from ..operators.frame.groom import BIND_AGAIN, advice
+from ..operators.ops.common import active_setup
+from ..operators.ops.sampler import NO_SURFACE_HAIR
 from .panel import FURCOLLIDE_PT_main
 
 

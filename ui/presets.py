@@ -13,8 +13,8 @@ from bl_operators.presets import AddPresetBase
 from bl_ui.utils import PresetPanel
 from bpy.types import Menu, Operator, Panel
 
-from ..operators.ops_common import SetupOperator
-from ..operators.properties import SOLVER_PROPERTIES
+from ..operators.ops.common import SetupOperator
+from ..operators.settings.properties import SOLVER_PROPERTIES
 
 PRESET_SUBDIR = "furcollide"
 SHIPPED_DIR = os.path.join(os.path.dirname(__file__), "preset_files")

@@ -207,9 +207,9 @@ def run():
     if not enabled:
         raise RuntimeError("the add-on is not enabled after package_install_files")
     pkg = sys.modules[ADDON]
-    registry = sys.modules[ADDON + ".operators.registry"]
-    bake = sys.modules[ADDON + ".operators.bake"]
-    ops_bake = sys.modules[ADDON + ".operators.ops_bake"]  # the modal bake's PROGRESS
+    registry = sys.modules[ADDON + ".operators.store.registry"]
+    bake = sys.modules[ADDON + ".operators.store.bake"]
+    ops_bake = sys.modules[ADDON + ".operators.ops.bake"]  # the modal bake's PROGRESS
     core = sys.modules[ADDON + ".core"]
     step("backend", embree_available=bool(core.embree_available()),
          embree_error=core.embree_error(), addon_version=getattr(pkg, "__name__", ""))
@@ -365,7 +365,7 @@ def run():
             children = {"return": sorted(ret)}
         except RuntimeError as exc:
             children = {"error": str(exc)}
-    pipeline = sys.modules[ADDON + ".operators.pipeline"]
+    pipeline = sys.modules[ADDON + ".operators.ops.pipeline"]
     children["assets"] = pipeline.hair_assets_path()
     step("children", children=children)
     bpy.ops.wm.save_mainfile()

@@ -161,7 +161,7 @@ def resample_group(mode=None, count=16, source=None):
 def trim_group():
     """Blender's Trim Hair Curves, or None where this Blender ships no hair assets
     (Debian's package has none)."""
-    path = sys.modules[ADDON + ".operators.pipeline"].hair_assets_path()
+    path = sys.modules[ADDON + ".operators.ops.pipeline"].hair_assets_path()
     if not path:
         return None
     with bpy.data.libraries.load(path, link=False) as (_s, dst):
@@ -170,7 +170,7 @@ def trim_group():
 
 
 def stack(ob, groups):
-    compat = sys.modules[ADDON + ".operators.compat"]
+    compat = sys.modules[ADDON + ".operators.blender.compat"]
     for ng in groups:
         mod = ob.modifiers.new(ng.name, "NODES")
         mod.node_group = ng
@@ -191,7 +191,7 @@ def evaluated(ob):
 def fresh(out, groups):
     """The output's curves copied into new data (no cache shared with the output's)
     with the same modifiers."""
-    bridge = sys.modules[ADDON + ".operators.bridge"]
+    bridge = sys.modules[ADDON + ".operators.blender.bridge"]
     hc = bpy.data.hair_curves.new("Fresh")
     bridge.copy_topology(out.data, hc)
     ob = bpy.data.objects.new("Fresh", hc)

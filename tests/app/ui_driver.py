@@ -138,7 +138,7 @@ def run():
     step("install", install_return=sorted(ret), enabled=enabled)
     if not enabled:
         raise RuntimeError("the add-on is not enabled after package_install_files")
-    registry = sys.modules[ADDON + ".operators.registry"]
+    registry = sys.modules[ADDON + ".operators.store.registry"]
     step("instrumented", ui_classes=instrument_ui())
 
     scene = bpy.context.scene

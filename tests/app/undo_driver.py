@@ -566,8 +566,9 @@ def run():
     if ADDON not in bpy.context.preferences.addons:
         raise RuntimeError("the add-on is not enabled after package_install_files")
     result["install_return"] = sorted(ret)
-    for name in ("registry", "ops_bake", "bake", "fur_attach"):
-        M[name] = sys.modules[f"{ADDON}.operators.{name}"]
+    for name, module in (("registry", "store.registry"), ("ops_bake", "ops.bake"),
+                         ("bake", "store.bake"), ("fur_attach", "frame.attach")):
+        M[name] = sys.modules[f"{ADDON}.operators.{module}"]
     instrument_ui()
     build()
     yield from show_sidebar()

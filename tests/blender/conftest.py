@@ -65,26 +65,25 @@ def clean_scene(furcollide_addon):
     yield
 
 
-#: The add-on's modules the tests reach (``fc.<name>``), in ``operators`` unless named.
-_MODULES = ("bake", "bridge", "cli", "colliders", "dependencies", "frame_inputs",
-            "frame_outputs", "frame_rules", "frame_solve", "fur_attach", "groom_stage",
-            "invalidation", "motion", "properties", "property_helpers", "registry")
+#: The rooms of the add-on's glue (``operators/<room>/``) the tests reach as ``fc.<room>``:
+#: ``fc.frame.rules``, ``fc.store.registry``, ``fc.settings.keyed``, ``fc.ops.cli``,
+#: ``fc.blender.bridge``.
+_ROOMS = ("frame", "settings", "ops", "store", "blender")
 
 
 @pytest.fixture
 def fc():
-    """The add-on's modules (``fc.registry``, ``fc.frame_rules``, ``fc.cache`` (the core's
-    frame cache) ...), ``fc.Setup`` and scene helpers."""
+    """The add-on's glue by room (``fc.store.registry``, ``fc.frame.rules`` ...), the
+    core (``fc.core``, ``fc.cache``: its frame cache), ``fc.Setup`` and scene helpers."""
     pkg = ADDON
     ns = types.SimpleNamespace(
         cache=sys.modules[pkg + ".core.framecache"],
         core=sys.modules[pkg + ".core"],
         package=sys.modules[pkg],
-        Setup=sys.modules[pkg + ".operators.setup"].Setup,
-        setup_module=sys.modules[pkg + ".operators.setup"],
+        Setup=sys.modules[pkg + ".operators.frame.setup"].Setup,
         make_scene=helpers.make_scene,
         positions=helpers.positions,
         setup=helpers.setup,
-        **{name: sys.modules[f"{pkg}.operators.{name}"] for name in _MODULES},
+        **{room: sys.modules[f"{pkg}.operators.{room}"] for room in _ROOMS},
     )
     return ns

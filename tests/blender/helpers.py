@@ -157,7 +157,7 @@ def positions(ob):
 def bake_crashing_at(fc, monkeypatch, frame, match="simulated crash"):
     """Run furcollide.bake with a simulated crash in ``frame`` (the frames before
     it are kept on disk); the error message must match ``match``."""
-    real = fc.bake.bake_frame
+    real = fc.store.bake.bake_frame
 
     def crashing(setup, directory, trust_solver):
         if setup.frame == frame:
@@ -165,7 +165,7 @@ def bake_crashing_at(fc, monkeypatch, frame, match="simulated crash"):
         return real(setup, directory, trust_solver)
 
     with monkeypatch.context() as m:
-        m.setattr(fc.bake, "bake_frame", crashing)
+        m.setattr(fc.store.bake, "bake_frame", crashing)
         with pytest.raises(RuntimeError, match=match):
             bpy.ops.furcollide.bake()
 
@@ -626,7 +626,7 @@ def render_spy(fc, tmp_path, hair, out, tag, record=None):
     seen = {}
     if record is None:
         def record():
-            return (world(out).copy(), fc.registry.status_for(hair),
+            return (world(out).copy(), fc.store.registry.status_for(hair),
                     hair.furcollide.is_outdated)
 
     def spy(sc, depsgraph):
@@ -1415,7 +1415,7 @@ def hair_asset_group(name):
     for ng in bpy.data.node_groups:
         if ng.get("test_hair_asset") == name:
             return ng
-    compat = sys.modules[ADDON + ".operators.compat"]
+    compat = sys.modules[ADDON + ".operators.blender.compat"]
     path = compat.find_datafile(compat.hair_asset_candidates())
     assert path, "Blender's hair node assets are missing from this Blender"
     with bpy.data.libraries.load(path, link=False) as (src, dst):
@@ -1430,7 +1430,7 @@ def add_hair_asset(ob, group, at=None, **inputs):
     """A Geometry Nodes modifier running Blender's hair node group ``group`` on hair
     ``ob`` (at stack position ``at``, default last), its ``inputs`` set by the keys of
     :data:`HAIR_INPUTS`. ``surface`` and ``uv_map`` also go to the hair data."""
-    compat = sys.modules[ADDON + ".operators.compat"]
+    compat = sys.modules[ADDON + ".operators.blender.compat"]
     mod = ob.modifiers.new(group, "NODES")
     mod.node_group = hair_asset_group(group)
     ids = compat.group_inputs(mod.node_group)

@@ -95,7 +95,7 @@ def test_play_steps_every_frame_then_replays_from_the_cache(fc):
     'not cached'. Now it steps every frame; played again, every frame comes from the
     cache, bit for bit."""
     scene, hair, out, colliders = shot(fc)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     scene.frame_set(1)
     first = play_like_the_app(scene, hair, out, colliders, range(1, 11))
     assert sorted(rt.memory.frames) == list(range(1, 11))
@@ -124,7 +124,7 @@ def test_the_colliders_really_collide_in_that_shot(fc):
 
 def test_play_from_the_middle_of_the_shot(fc):
     scene, hair, out, colliders = shot(fc)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     for f in range(1, 6):
         scene.frame_set(f)
     play_like_the_app(scene, hair, out, colliders, range(5, 11))
@@ -136,7 +136,7 @@ def test_arrow_keys_and_the_start_frame_keep_the_cache(fc):
     and back, shows each frame from the cache: nothing is dropped (a depsgraph update
     at frame 0 used to drop every frame, as 'before the start')."""
     scene, hair, out, colliders = shot(fc)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     ref = {}
     for f in range(1, 11):
         scene.frame_set(f)
@@ -156,7 +156,7 @@ def test_a_collider_moved_by_hand_during_a_pause_still_drops_the_cache(fc):
     reports the same kind of update, but frame 5's inputs changed: the playback cache
     is dropped and the status says so; following it gives a clean play."""
     scene, hair, out, colliders = shot(fc)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     for f in range(1, 11):
         scene.frame_set(f)
     arrow_key(scene, 5)
@@ -172,7 +172,7 @@ def test_a_collider_moved_by_hand_during_a_pause_still_drops_the_cache(fc):
         s.status_message)
     scene.frame_set(1)  # the advice
     got = play_like_the_app(scene, hair, out, colliders, range(1, 11))
-    rt2 = fc.registry.get_runtime(hair)
+    rt2 = fc.store.registry.get_runtime(hair)
     assert sorted(rt2.memory.frames) == list(range(1, 11))
     # what a clean session gives with the ball there from the start
     hair_name = hair.name
@@ -199,7 +199,7 @@ def test_the_depsgraph_check_never_raises(fc, monkeypatch, capsys):
     def broken(*_a, **_k):
         raise RuntimeError("simulated failure")
 
-    monkeypatch.setattr(fc.invalidation, "edit_seen", broken)
+    monkeypatch.setattr(fc.store.invalidation, "edit_seen", broken)
     colliders[0].location.z = 0.45
     bpy.context.view_layer.update()  # must not raise
     assert "depsgraph update check failed: simulated failure" in capsys.readouterr().out

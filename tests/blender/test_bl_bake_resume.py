@@ -97,7 +97,7 @@ def _partial_bake(fc, tmp_path, monkeypatch):
 
 def _cli_fails_naming(fc, capsys, path, target):
     capsys.readouterr()
-    assert fc.cli.run(["bake", path]) == 1
+    assert fc.ops.cli.run(["bake", path]) == 1
     cap = capsys.readouterr()
     err = cap.err + cap.out
     assert "furcollide: bake failed: 'Fur' frame 4" in cap.err, cap.err
@@ -126,7 +126,7 @@ def test_bake_matches_playback_and_free(fc, tmp_path, capsys):
     assert "frame 12 (12/12)" in capsys.readouterr().out
     assert bpy.context.scene.frame_current == 4
     # a baked setup only reads: identical frames, in any order
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     for f in (12, 3, 7, 1, 12):
         bpy.context.scene.frame_set(f)
         assert np.array_equal(out_positions(out), live[f]), f
@@ -211,7 +211,7 @@ def test_changed_settings_do_not_resume(fc, tmp_path, monkeypatch, capsys):
     capsys.readouterr()
     assert bpy.ops.furcollide.bake() == {"FINISHED"}
     assert "resuming" not in capsys.readouterr().out
-    new_fp = fc.bake.settings_fingerprint(hair)
+    new_fp = fc.store.bake.settings_fingerprint(hair)
     assert new_fp == old_fp  # (Recovery Rate is a value of each frame)
     for f in range(1, 13):
         assert _fingerprint(fc, d, f) == new_fp, f
@@ -331,7 +331,7 @@ def test_a_damaged_baked_frame_says_which_file_and_what_to_do(fc, tmp_path, caps
     bpy.context.scene.frame_set(5)
     capsys.readouterr()
     bpy.context.scene.frame_set(6)
-    level, message = fc.registry.status_for(hair)
+    level, message = fc.store.registry.status_for(hair)
     assert level == "ERROR", message
     assert message == s.status_message
     assert "Frame 6 of the bake cannot be read" in s.status_message
@@ -340,7 +340,7 @@ def test_a_damaged_baked_frame_says_which_file_and_what_to_do(fc, tmp_path, caps
     no_traceback(capsys)
     bpy.context.scene.frame_set(7)
     assert np.array_equal(out_positions(out), baked[7])
-    assert fc.registry.status_for(hair)[0] != "ERROR", s.status_message
+    assert fc.store.registry.status_for(hair)[0] != "ERROR", s.status_message
 
 
 def test_save_reload_keeps_settings_and_bake(fc, tmp_path):
@@ -440,7 +440,7 @@ def test_setting_change_on_a_bake_then_free_and_bake_again(fc, tmp_path):
     assert ("prop", "mode", True) in log  # editable again
     for f in (6, 7):
         scene.frame_set(f)
-        assert s.is_outdated and fc.registry.status_for(hair)[0] == "WARNING"
+        assert s.is_outdated and fc.store.registry.status_for(hair)[0] == "WARNING"
         assert "not cached" in s.status_message
     assert ("label", "Outdated: play from the start frame or bake", True) in draw_enabled(
         bpy.types.FURCOLLIDE_PT_cache)
@@ -471,7 +471,7 @@ def test_interrupted_bake_does_not_resume_over_an_edited_collider(fc, tmp_path, 
     hair, box, out = small_setup(fc)
     save_in(tmp_path)
     bake_crashing_at(fc, monkeypatch, 5)
-    d = fc.bake.bake_directory(hair)
+    d = fc.store.bake.bake_directory(hair)
     assert fc.cache.list_frames(d) == [1, 2, 3, 4]
     for v in box.data.vertices:  # the artist makes the collider bigger
         v.co *= 1.5
@@ -497,7 +497,7 @@ def test_sub_range_bake_before_inside_after(fc, tmp_path):
     for f in range(1, 11):
         scene.frame_set(f)
         live[f] = fc.positions(out).copy()
-        assert fc.registry.status_for(hair)[0] == "INFO", (f, s.status_message)
+        assert fc.store.registry.status_for(hair)[0] == "INFO", (f, s.status_message)
         assert not s.is_outdated, f
     for f in (1, 2, 3):
         np.testing.assert_array_equal(live[f], source, err_msg=f"frame {f}")
@@ -514,7 +514,7 @@ def test_sub_range_bake_before_inside_after(fc, tmp_path):
     for f in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 9, 2, 6, 10, 4, 3):
         scene.frame_set(f)
         P = fc.positions(out)
-        level, msg = fc.registry.status_for(hair)
+        level, msg = fc.store.registry.status_for(hair)
         assert level == "INFO", (f, msg)
         if f < 4:  # README: before Frame Start the output follows the source
             np.testing.assert_array_equal(P, source, err_msg=f"frame {f}")
@@ -571,7 +571,7 @@ def test_read_only_bake_directory(fc, tmp_path, monkeypatch, capsys):
                 os.path.join(d, "probe"), "wb")
         _cli_fails_naming(fc, capsys, path, os.path.join(d, "frame_000004.npz"))
         assert bake_files(d)[:3] == [f"frame_{f:06d}.npz" for f in (1, 2, 3)]
-    assert fc.cli.run(["bake", path]) == 0
+    assert fc.ops.cli.run(["bake", path]) == 0
     assert "resuming after frame 3" in capsys.readouterr().out
     assert len(bake_files(d)) == 6
 
@@ -588,7 +588,7 @@ def test_unwritable_frame_path_keeps_finished_frames(fc, tmp_path, monkeypatch, 
     reopen(path)
     assert not bpy.data.objects["Fur"].furcollide.is_baked
     os.rmdir(blocker)
-    assert fc.cli.run(["bake", path]) == 0
+    assert fc.ops.cli.run(["bake", path]) == 0
     assert "resuming after frame 3" in capsys.readouterr().out
     assert [f for f in bake_files(d) if f.endswith(".npz")] == \
         [f"frame_{f:06d}.npz" for f in range(1, 7)]
@@ -601,7 +601,7 @@ def test_file_where_the_bake_directory_should_be(fc, tmp_path, capsys):
     hair.furcollide.cache_directory = str(blocker) + os.sep
     path = save_as(tmp_path / "blocked.blend")
     capsys.readouterr()
-    assert fc.cli.run(["bake", path]) == 1
+    assert fc.ops.cli.run(["bake", path]) == 1
     cap = capsys.readouterr()
     assert "furcollide: bake failed: 'Fur' frame 1" in cap.err, cap.err
     assert str(blocker) in cap.err and "Traceback" not in cap.err + cap.out

@@ -201,11 +201,11 @@ def test_the_baked_render_groom_is_read_not_computed(fc, tmp_path, monkeypatch):
     frame shows them (bit for bit the frame baked) without deforming or clearing the
     groom; freed, the groom is computed again, the same."""
     guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
-    calls = _counted(monkeypatch, fc.groom_stage.GroomBinding, "deform")
+    calls = _counted(monkeypatch, fc.frame.groom.GroomBinding, "deform")
     _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 3, 6), outdated=False)
     assert calls == []
     assert any((baked[f][2] == 1).any() for f in FRAMES)  # the clearance pass was baked
-    stats = fc.registry.stats_for(guides)
+    stats = fc.store.registry.stats_for(guides)
     assert stats["groom_ms"] == 0.0 and stats["clearance_ms"] == 0.0
     activate(guides)
     assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
@@ -246,7 +246,7 @@ def test_a_baked_frame_shown_does_not_attach_and_still_sees_the_surface_move(
     checked without moving the curves; the Surface moved after baking still makes the
     frame outdated, the status naming it."""
     guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
-    calls = _counted(monkeypatch, fc.fur_attach.Binding, "apply")  # (Fur Attach)
+    calls = _counted(monkeypatch, fc.frame.attach.Binding, "apply")  # (Fur Attach)
     _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 3, 6), outdated=False)
     assert calls == []
     surf = guides.data.surface
@@ -264,7 +264,7 @@ def test_a_baked_frame_shown_does_not_attach_and_still_sees_the_surface_move(
     assert calls == []
     # a vertex no bound triangle uses (away from the roots) cannot move the curves:
     # not a change; one of a bound triangle is
-    used = fc.fur_attach.load_binding(guides)[0].used_vertices
+    used = fc.frame.attach.load_binding(guides)[0].used_vertices
     free = np.setdiff1d(np.arange(len(surf.data.vertices)), used)
     assert len(free)
     surf.data.vertices[int(free[0])].co.z += 0.3
@@ -289,7 +289,7 @@ def _old_style_records(fc, guides, directory, wrong=()):
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
         offs = arrays["offsets"]
-        pts = np.asarray(fc.fur_attach.attached_points(
+        pts = np.asarray(fc.frame.attach.attached_points(
             guides, bpy.context.evaluated_depsgraph_get(), offs), np.float32)
         record = fc.cache.decode_inputs(arrays[key])
         assert "source" not in record
@@ -308,7 +308,7 @@ def test_a_bake_from_before_the_attached_part_is_checked_as_before(fc, tmp_path,
     guides, out, gout, baked = _baked_pipeline(fc, tmp_path)
     directory = bpy.path.abspath(guides.furcollide.bake_path)
     _old_style_records(fc, guides, directory, wrong=(3,))
-    calls = _counted(monkeypatch, fc.fur_attach.Binding, "apply")  # (Fur Attach)
+    calls = _counted(monkeypatch, fc.frame.attach.Binding, "apply")  # (Fur Attach)
     _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 6), outdated=False)
     assert len(calls) == 3
     bpy.context.scene.frame_set(3)

@@ -364,7 +364,7 @@ def test_stack_edits_show_on_the_next_frame(fc):
     head, hat, hair, out = _groomed_head(fc, rigged=False)
     scene.frame_set(1)
     n = hair.furcollide.children.stat_children
-    compat = fc.package.operators.compat
+    compat = fc.package.operators.blender.compat
     mod = out.modifiers["Interpolate Hair Curves"]
     ident = compat.group_inputs(mod.node_group)[("Density", "NodeSocketFloat")]
     compat.set_modifier_input(mod, ident, 75.0)
@@ -505,7 +505,7 @@ def test_source_whose_count_changes_every_frame(fc, tmp_path, capsys):
     with pytest.raises(RuntimeError, match="Press Use Rest Position"):
         bpy.ops.furcollide.bake()
     assert not hair.furcollide.is_baked
-    d = bpy.path.abspath(fc.bake.directory_from_settings(hair))
+    d = bpy.path.abspath(fc.store.bake.directory_from_settings(hair))
     assert not os.path.isdir(d) or not os.listdir(d)
     assert bpy.ops.furcollide.use_rest_position() == {"FINISHED"}
     counts = set()

@@ -51,41 +51,41 @@ def _setup_state(path, name):
 
 
 def test_cli_bake_exit_codes(fc, tmp_path, capsys):
-    assert fc.cli._handle is not None  # registered with bpy.utils.register_cli_command
+    assert fc.ops.cli._handle is not None  # registered with bpy.utils.register_cli_command
     path = _saved(fc, tmp_path)
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    assert fc.cli.run(["bake", path, "--frames", "1-4"]) == 0
+    assert fc.ops.cli.run(["bake", path, "--frames", "1-4"]) == 0
     out = capsys.readouterr().out
     assert "frame 4 (4/4)" in out and "baked Fur" in out
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     bpy.ops.wm.open_mainfile(filepath=path)
     s = bpy.data.objects["Fur"].furcollide
     assert s.is_baked and (s.frame_start, s.frame_end) == (1, 4)
-    assert fc.cli.run(["info", path]) == 0
+    assert fc.ops.cli.run(["info", path]) == 0
     assert "baked" in capsys.readouterr().out
     # already baked: success, nothing to do; --force re-bakes
-    assert fc.cli.run(["bake", path]) == 0
-    assert fc.cli.run(["bake", path, "--force", "--no-save"]) == 0
-    assert fc.cli.run(["free", path]) == 0
+    assert fc.ops.cli.run(["bake", path]) == 0
+    assert fc.ops.cli.run(["bake", path, "--force", "--no-save"]) == 0
+    assert fc.ops.cli.run(["free", path]) == 0
     bpy.ops.wm.open_mainfile(filepath=path)
     assert not bpy.data.objects["Fur"].furcollide.is_baked
 
 
 def test_cli_failures(fc, tmp_path):
-    assert fc.cli.run(["bake", str(tmp_path / "missing.blend")]) == 2
-    assert fc.cli.run(["explode"]) == 2
+    assert fc.ops.cli.run(["bake", str(tmp_path / "missing.blend")]) == 2
+    assert fc.ops.cli.run(["explode"]) == 2
     path = _saved(fc, tmp_path)
-    assert fc.cli.run(["bake", path, "--frames", "9-3"]) == 2
-    assert fc.cli.run(["bake", path, "--object", "Nope"]) == 2
+    assert fc.ops.cli.run(["bake", path, "--frames", "9-3"]) == 2
+    assert fc.ops.cli.run(["bake", path, "--object", "Nope"]) == 2
     # a broken setup (its output object was deleted) fails with exit code 1
     bpy.ops.wm.open_mainfile(filepath=path)
     bpy.data.objects.remove(bpy.data.objects["Fur FurCollide"])
     bpy.ops.wm.save_mainfile()
-    assert fc.cli.run(["bake", path]) == 1
+    assert fc.ops.cli.run(["bake", path]) == 1
     empty = str(tmp_path / "empty.blend")
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     bpy.ops.wm.save_as_mainfile(filepath=empty)
-    assert fc.cli.run(["bake", empty]) == 2
+    assert fc.ops.cli.run(["bake", empty]) == 2
 
 
 def test_python_expr_bake_all(fc, tmp_path):
@@ -100,7 +100,7 @@ def test_python_expr_bake_all(fc, tmp_path):
 def test_cli_scene_option_bakes_a_non_active_scene(fc, tmp_path, capsys):
     path = _two_scene_file(fc, tmp_path)
     capsys.readouterr()
-    code = fc.cli.run(["bake", path, "--scene", "A"])
+    code = fc.ops.cli.run(["bake", path, "--scene", "A"])
     err = capsys.readouterr().err
     assert code == 0, err
     reopen(path)
@@ -114,7 +114,7 @@ def test_cli_scene_option_bakes_a_non_active_scene(fc, tmp_path, capsys):
 def test_cli_frames_accepted(fc, tmp_path, capsys, text, frames):
     path = _two_setups_file(fc, tmp_path)
     # out of the scene's range is fine too: --frames overrides the baked range
-    assert fc.cli.run(["bake", path, f"--frames={text}", "--object", "FurA"]) == 0
+    assert fc.ops.cli.run(["bake", path, f"--frames={text}", "--object", "FurA"]) == 0
     out = capsys.readouterr().out
     n = frames[1] - frames[0] + 1
     assert f"frame {frames[1]} ({n}/{n})" in out and "baked FurA" in out
@@ -136,7 +136,7 @@ def test_cli_frames_accepted(fc, tmp_path, capsys, text, frames):
 def test_cli_frames_rejected(fc, tmp_path, capsys, text, message):
     path = _two_setups_file(fc, tmp_path)
     before = os.path.getmtime(path)
-    assert fc.cli.run(["bake", path, f"--frames={text}"]) == 2
+    assert fc.ops.cli.run(["bake", path, f"--frames={text}"]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert os.path.getmtime(path) == before  # never opened nor saved
@@ -147,27 +147,27 @@ def test_cli_frames_rejected(fc, tmp_path, capsys, text, message):
 def test_cli_info_lists_both_setups_and_object_bakes_one(fc, tmp_path, capsys):
     path = _two_setups_file(fc, tmp_path)
     capsys.readouterr()
-    assert fc.cli.run(["info", path]) == 0
+    assert fc.ops.cli.run(["info", path]) == 0
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("Fur")]
     assert sorted(ln.split(":")[0] for ln in lines) == ["FurA", "FurB"]
     assert all("frames 1-6, not baked, 0 files" in ln for ln in lines), lines
     assert any("colliders BoxA" in ln for ln in lines)
     assert any("colliders BoxB" in ln for ln in lines)
 
-    assert fc.cli.run(["bake", path, "--object", "FurB", "--frames", "2-5"]) == 0
+    assert fc.ops.cli.run(["bake", path, "--object", "FurB", "--frames", "2-5"]) == 0
     out = capsys.readouterr().out
     assert "baked FurB" in out and "FurCollide bake 'FurA'" not in out
     reopen(path)
     a, b = bpy.data.objects["FurA"].furcollide, bpy.data.objects["FurB"].furcollide
     assert b.is_baked and (b.frame_start, b.frame_end) == (2, 5)
     assert not a.is_baked and a.bake_path == "" and (a.frame_start, a.frame_end) == (1, 6)
-    assert not os.path.exists(fc.bake.bake_directory(bpy.data.objects["FurA"]))
-    assert fc.cli.run(["info", path]) == 0
+    assert not os.path.exists(fc.store.bake.bake_directory(bpy.data.objects["FurA"]))
+    assert fc.ops.cli.run(["info", path]) == 0
     info = capsys.readouterr().out
     assert "FurA: frames 1-6, not baked, 0 files" in info
     assert "FurB: frames 2-5, baked, 4 files" in info
     # --object on the other one bakes it; B is already baked and untouched
-    assert fc.cli.run(["bake", path, "--object", "FurA"]) == 0
+    assert fc.ops.cli.run(["bake", path, "--object", "FurA"]) == 0
     assert "baked FurA" in capsys.readouterr().out
     assert _setup_state(path, "FurA") == (True, (1, 6))
     assert _setup_state(path, "FurB") == (True, (2, 5))

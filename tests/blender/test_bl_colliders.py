@@ -215,7 +215,7 @@ def test_rope_curve_with_a_bevel_collides(fc):
     met = 0
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.registry.status_for(hair) == ("INFO", "")
         V, F = evaluated_world_mesh(rope)
         assert len(F) > 50  # the bevel's tube and caps
         assert crossing_free_curves(out, V, F).size == 0, f
@@ -234,19 +234,19 @@ def test_rope_moving_as_a_whole_never_rebuilds(fc):
     scene = bpy.context.scene
     hair, rope = rope_scene()
     setup_with(hair, rope)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     for f in range(1, 9):
         scene.frame_set(f)
     col = rt.colliders[rope.session_uid].collider
     assert col.build_count == 1
-    assert fc.colliders.is_deforming(rope, scene) is False
+    assert fc.frame.colliders.is_deforming(rope, scene) is False
     scene.frame_set(1)
     rope.data.bevel_depth = 0.05
     rope.data.keyframe_insert("bevel_depth", frame=1)
     rope.data.bevel_depth = 0.15
     rope.data.keyframe_insert("bevel_depth", frame=8)
     bpy.context.view_layer.update()
-    assert fc.colliders.is_deforming(rope, scene) is True
+    assert fc.frame.colliders.is_deforming(rope, scene) is True
     out = hair.furcollide.output
     for f in range(1, 9):
         scene.frame_set(f)
@@ -265,7 +265,7 @@ def test_curve_without_a_surface_is_an_empty_collider(fc):
     out = setup_with(hair, rope)
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.registry.status_for(hair) == ("INFO", "")
         np.testing.assert_allclose(world(out), world(hair), atol=1e-6)
     scene.frame_set(1)  # (an edit keeps the frames before the current one)
     rope.data.bevel_depth = 0.08
@@ -306,12 +306,12 @@ def test_text_and_surface_in_a_collider_collection(fc):
     out = setup_with(hair)
     hair.furcollide.collider_collection = coll
     coll.objects.link(hair)  # the source itself never collides with itself
-    names = {r.name for r in fc.colliders.collider_objects(hair, scene)}
+    names = {r.name for r in fc.frame.colliders.collider_objects(hair, scene)}
     assert names == {"Sign", ball.name}
     moved = 0
     for f in range(1, 7):
         scene.frame_set(f)
-        assert fc.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.registry.status_for(hair) == ("INFO", "")
         for ob in (txt, ball):
             V, F = evaluated_world_mesh(ob)
             assert len(F) > 0
@@ -334,12 +334,12 @@ def test_add_collider_and_pointer_accept_curves_not_hair(fc):
     assert bpy.ops.furcollide.collider_add() == {"FINISHED"}
     assert [c.object for c in hair.furcollide.colliders] == [box, rope]
     # the list's poll (what the eyedropper and search offer)
-    poll = fc.property_helpers.poll_collider
+    poll = fc.settings.property_helpers.poll_collider
     assert [poll(None, o) for o in (box, rope, empty, other, hair)] == [
         True, True, False, False, False]
     # a hair object put in the list from Python is skipped, never solved against
     hair.furcollide.colliders.add().object = other
-    names = [r.name for r in fc.colliders.collider_objects(hair)]
+    names = [r.name for r in fc.frame.colliders.collider_objects(hair)]
     assert names == [box.name, rope.name]
     assert out is not None
 
@@ -388,13 +388,13 @@ def test_collection_instance_collides_where_blender_places_it(fc):
     scene.frame_set(1)
     out = setup_with(hair, empty)
     assert [c.object for c in hair.furcollide.colliders] == [empty]
-    refs = fc.colliders.collider_objects(hair, scene)
+    refs = fc.frame.colliders.collider_objects(hair, scene)
     assert sorted(r.name for r in refs) == ["PropInstance › PropBox", "PropInstance › PropRope"]
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     moved = 0
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.registry.status_for(hair) == ("INFO", "")
         meshes = instance_meshes(empty)
         assert len(meshes) == 2
         for V, F in meshes:
@@ -433,13 +433,13 @@ def test_nested_instances_in_the_collider_collection_and_edits(fc):
     scene.collection.objects.unlink(empty)
     holder.objects.link(empty)
     hair.furcollide.collider_collection = holder
-    names = sorted(r.name for r in fc.colliders.collider_objects(hair, scene))
+    names = sorted(r.name for r in fc.frame.colliders.collider_objects(hair, scene))
     assert names == ["OuterInstance › Nested › InnerBox", "OuterInstance › Nested › InnerRope"]
 
     def check():
         for f in range(1, 7):
             scene.frame_set(f)
-            assert fc.registry.status_for(hair) == ("INFO", "")
+            assert fc.store.registry.status_for(hair) == ("INFO", "")
             meshes = instance_meshes(empty)  # nested: the outermost parent is reported
             assert len(meshes) == 2
             for V, F in meshes:
@@ -452,7 +452,7 @@ def test_nested_instances_in_the_collider_collection_and_edits(fc):
     box.data.update()
     bpy.context.view_layer.update()
     check()
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     e = next(e for k, e in rt.colliders.items()
              if isinstance(k, tuple) and k[-1] == box.session_uid)
     assert np.abs(e.collider.vertices).max() > 0.29  # the grown box (half size 0.3)
@@ -481,7 +481,7 @@ def test_render_with_the_rope_and_the_instance_hidden(fc, tmp_path):
 def test_rigid_collider_never_rebuilds_deforming_does(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     positions_per_frame(out, range(1, 13))
     col = rt.colliders[box.session_uid].collider
     assert col.build_count == 1
@@ -516,7 +516,7 @@ def test_double_sided_sheet_and_own_offset(fc):
     c.collision_offset = 0.05
     bpy.context.scene.frame_set(1)
     assert s.status_message == "" and s.stat_colliding == len(hair.data.curves)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     col = rt.colliders[sheet.session_uid].collider
     assert col.double_sided and col.offset == pytest.approx(0.05)
 
@@ -533,7 +533,7 @@ def test_deforming_colliders_get_the_fast_bvh_build(fc):
     box.shape_key_add(name="Squash").value = 0.5
     fc.setup(hair, [box, still])
     bpy.context.scene.frame_set(2)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     flags = {e.collider.name: e.collider.deforming for e in rt.colliders.values()}
     assert flags == {"Box": True, "Still": False}
 
@@ -549,7 +549,7 @@ def test_two_setups_share_a_deforming_collider(fc):
     wall = make_box("Wall", size=0.5, location=(0.0, 0.45, 0.6))  # rigid, B only
     out_a = fc.setup(hair_a, [blob])
     out_b = fc.setup(hair_b, [blob, wall])
-    rt_a, rt_b = fc.registry.get_runtime(hair_a), fc.registry.get_runtime(hair_b)
+    rt_a, rt_b = fc.store.registry.get_runtime(hair_a), fc.store.registry.get_runtime(hair_b)
     contact = {hair_a.name: 0, hair_b.name: 0}
     alone = {}
     for f in range(1, 7):
@@ -568,7 +568,8 @@ def test_two_setups_share_a_deforming_collider(fc):
     flags_a = {e.collider.name: e.collider.deforming for e in rt_a.colliders.values()}
     flags_b = {e.collider.name: e.collider.deforming for e in rt_b.colliders.values()}
     assert flags_a == {"Blob": True} and flags_b == {"Blob": True, "Wall": False}
-    assert fc.colliders.is_deforming(blob, scene) and not fc.colliders.is_deforming(wall, scene)
+    is_deforming = fc.frame.colliders.is_deforming
+    assert is_deforming(blob, scene) and not is_deforming(wall, scene)
     # each setup owns its core collider; A's result does not depend on B
     assert rt_a.colliders[blob.session_uid].collider is not \
         rt_b.colliders[blob.session_uid].collider
@@ -728,7 +729,7 @@ def test_linked_duplicate_colliders_both_collide(fc):
     P = fc.positions(out)
     moved = np.linalg.norm(P - rest, axis=1) > 1e-4
     assert moved[rest[:, 0] < 0].any() and moved[rest[:, 0] > 0].any()
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     assert {e.collider.name for e in rt.colliders.values()} == {"Left", "Right"}
     assert hair.furcollide.stat_colliding > 0
 
@@ -822,5 +823,5 @@ def test_collider_collection_holding_everything(fc):
         bpy.context.scene.frame_set(f)
         assert hair.furcollide.status_message == ""
     assert hair.furcollide.stat_colliding > 0
-    names = {r.name for r in fc.colliders.collider_objects(hair)}
+    names = {r.name for r in fc.frame.colliders.collider_objects(hair)}
     assert names == {"Box"}

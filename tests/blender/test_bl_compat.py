@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from helpers import make_box, make_hair, make_surface
 
-COMPAT = "bl_ext.fcdev.furcollide.operators.compat"
-PIPELINE = "bl_ext.fcdev.furcollide.operators.pipeline"
+COMPAT = "bl_ext.fcdev.furcollide.operators.blender.compat"
+PIPELINE = "bl_ext.fcdev.furcollide.operators.ops.pipeline"
 
 
 @pytest.fixture

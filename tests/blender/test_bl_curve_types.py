@@ -259,7 +259,7 @@ def _resample_group(count=16):
 
 
 def _trim_group(fc):
-    path = fc.package.operators.pipeline.hair_assets_path()
+    path = fc.package.operators.ops.pipeline.hair_assets_path()
     with bpy.data.libraries.load(path, link=False) as (_src, dst):
         dst.node_groups = ["Trim Hair Curves"]
     return dst.node_groups[0]
@@ -267,7 +267,7 @@ def _trim_group(fc):
 
 def _stack(fc, ob, groups):
     """Resample Curve, then Trim Hair Curves to 0.6 long, on ``ob``."""
-    compat = fc.package.operators.compat
+    compat = fc.package.operators.blender.compat
     for ng in groups:
         mod = ob.modifiers.new(ng.name, "NODES")
         mod.node_group = ng
@@ -289,7 +289,7 @@ def _fresh(fc, out, groups):
     """A new object with a copy of the output's curves built from scratch (no cache
     of Blender's shared with the output's) and the same modifiers."""
     hc = bpy.data.hair_curves.new("Fresh")
-    fc.bridge.copy_topology(out.data, hc)
+    fc.blender.bridge.copy_topology(out.data, hc)
     ob = bpy.data.objects.new("Fresh", hc)
     bpy.context.scene.collection.objects.link(ob)
     ob.matrix_world = out.matrix_world

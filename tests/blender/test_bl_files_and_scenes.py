@@ -87,7 +87,7 @@ def test_an_edit_in_a_scene_the_window_does_not_show_is_seen_at_its_own_frame(fc
     fc.setup(hair, [box])
     for f in range(1, 7):
         sc_b.frame_set(f)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     assert sorted(rt.memory.frames) == [1, 2, 3, 4, 5, 6]
     win.scene = sc_a
     sc_a.frame_set(2)
@@ -135,7 +135,7 @@ def test_moved_blend_with_its_bake_and_without(fc, tmp_path, capsys):
     s = hair.furcollide
     for f in (3, 4):
         bpy.context.scene.frame_set(f)
-        level, msg = fc.registry.status_for(hair)
+        level, msg = fc.store.registry.status_for(hair)
         assert level == "ERROR" and "missing" in msg, msg
         assert str(c / "furcollide_cache") in msg  # where they were looked for
         assert s.is_outdated
@@ -162,17 +162,17 @@ def test_two_scenes_keep_their_setups_and_outputs_apart(fc, tmp_path):
     sc_b = bpy.data.scenes.new("B")
     win.scene = sc_b
     hair_b, _box_b, out_b = build_setup(fc, "B")
-    assert fc.registry.setups(sc_a) == [hair_a] and fc.registry.setups(sc_b) == [hair_b]
+    assert fc.store.registry.setups(sc_a) == [hair_a] and fc.store.registry.setups(sc_b) == [hair_b]
     path = save_as(tmp_path / "two.blend")
 
     # playing B never evaluates A
     rest_a = fc.positions(out_a).copy()
-    rt_a = fc.registry.get_runtime(hair_a)
+    rt_a = fc.store.registry.get_runtime(hair_a)
     frames_a = sorted(rt_a.memory.frames)  # the add operator solved frame 1
     for f in range(1, 7):
         sc_b.frame_set(f)
         assert hair_b.furcollide.status_message == "", (f, hair_b.furcollide.status_message)
-    assert len(fc.registry.get_runtime(hair_b).memory) == 6
+    assert len(fc.store.registry.get_runtime(hair_b).memory) == 6
     assert sorted(rt_a.memory.frames) == frames_a and sc_a.frame_current == 1
     np.testing.assert_array_equal(fc.positions(out_a), rest_a)
     moved_b = fc.positions(out_b).copy()
@@ -184,7 +184,7 @@ def test_two_scenes_keep_their_setups_and_outputs_apart(fc, tmp_path):
     assert hair_a.furcollide.bake_path == ""
     dir_b = bpy.path.abspath(hair_b.furcollide.bake_path)
     assert len(bake_files(dir_b)) == 6
-    assert not os.path.exists(fc.bake.bake_directory(hair_a))
+    assert not os.path.exists(fc.store.bake.bake_directory(hair_a))
     np.testing.assert_array_equal(fc.positions(out_a), rest_a)
 
     # now bake A from A: B's frame, bake and output stay as they were
@@ -206,11 +206,11 @@ def test_two_scenes_keep_their_setups_and_outputs_apart(fc, tmp_path):
     # the CLI bakes the file's active scene only (like Bake All)
     reopen(path)  # saved with B active and nothing baked
     assert bpy.context.scene.name == "B"
-    assert fc.cli.run(["bake", path]) == 0
+    assert fc.ops.cli.run(["bake", path]) == 0
     reopen(path)
     a, b = bpy.data.objects["AFur"].furcollide, bpy.data.objects["BFur"].furcollide
     assert b.is_baked and not a.is_baked and a.bake_path == ""
-    assert fc.cli.run(["info", path, "--scene", "Nope"]) == 2
+    assert fc.ops.cli.run(["info", path, "--scene", "Nope"]) == 2
 
 
 def test_addon_disable_enable_with_operators_registers_handlers_once(fc):
@@ -256,15 +256,15 @@ def test_scene_copy_plays_in_both_scenes_or_shows_the_source(fc, kind, capsys):
     scene_b = bpy.context.scene
     assert scene_b != scene_a
     if kind == "FULL_COPY":
-        (hair_b,) = fc.registry.setups(scene_b)
+        (hair_b,) = fc.store.registry.setups(scene_b)
         assert hair_b != hair and hair_b.furcollide.output not in (None, out)
         assert hair_b.furcollide.output.furcollide.source == hair_b
         assert [c.object.name for c in hair_b.furcollide.colliders] == ["Box.001"]
         same_frames(play_checked(scene_b, hair_b), ref)
         assert hair_b.furcollide.owner_scene == scene_b.name
     else:
-        assert fc.registry.setups(scene_b) == []
-        assert fc.registry.setups(scene_b, owned=False) == [hair]  # the same objects
+        assert fc.store.registry.setups(scene_b) == []
+        assert fc.store.registry.setups(scene_b, owned=False) == [hair]  # the same objects
         for f in range(1, 7):
             scene_b.frame_set(f)
             np.testing.assert_array_equal(positions(out), positions(hair), err_msg=f"{f}")
@@ -562,13 +562,13 @@ def _file_bits(d):
 
 def _counting_solves(fc, monkeypatch):
     calls = []
-    real = fc.frame_solve.solve_frame
+    real = fc.frame.solve.solve_frame
 
     def counting(setup, inp):
         calls.append((setup.scene.name, setup.frame))
         return real(setup, inp)
 
-    monkeypatch.setattr(fc.frame_solve, "solve_frame", counting)
+    monkeypatch.setattr(fc.frame.solve, "solve_frame", counting)
     return calls
 
 
@@ -595,7 +595,7 @@ def test_playing_another_shot_never_touches_the_setup(fc, monkeypatch, capsys):
     played = play_checked(sc_a, hair)
     assert any(not np.array_equal(p, positions(hair)) for p in played.values())
     sc_a.frame_set(4)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     before = _cache_bits(rt)
     assert sorted(before) == list(range(1, 7))
     solves = _counting_solves(fc, monkeypatch)
@@ -606,7 +606,8 @@ def test_playing_another_shot_never_touches_the_setup(fc, monkeypatch, capsys):
     assert msg.startswith("'Fur' is set up in scene 'A' (a hair can be set up in one scene "
                           "only): here it shows its source as groomed, without collisions")
     assert "Free" not in msg and not hair.furcollide.is_outdated
-    assert fc.registry.setups(sc_b) == [] and fc.registry.setups(sc_b, owned=False) == [hair]
+    setups = fc.store.registry.setups
+    assert setups(sc_b) == [] and setups(sc_b, owned=False) == [hair]
     activate(hair)
     for name in SETUP_OPERATORS:
         why = _refusal(getattr(bpy.ops.furcollide, name))
@@ -672,7 +673,7 @@ def test_a_bake_of_one_shot_is_neither_shown_nor_freed_in_another(fc, tmp_path, 
     for args in (["bake", path], ["bake", path, "--scene", "B", "--force"],
                  ["free", path, "--scene", "B"], ["free", path, "--object", "Fur"]):
         capsys.readouterr()
-        assert fc.cli.run(args) == 2, args
+        assert fc.ops.cli.run(args) == 2, args
         err = capsys.readouterr().err
         assert "'Fur' is set up in scene 'A', not 'B'" in err and "--scene 'A'" in err, err
         assert _file_bits(d) == files, args

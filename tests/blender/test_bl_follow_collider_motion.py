@@ -46,7 +46,7 @@ def _play(scene, hair, ball, out):
 
 def _lean(fc, hair, P):
     """Mean cosine between each moved blade's tip displacement (on the ground) and +x."""
-    offs = fc.bridge.curve_offsets(hair.data)
+    offs = fc.blender.bridge.curve_offsets(hair.data)
     tips = offs[1:] - 1
     d = (P[tips] - positions(hair)[tips])[:, :2]
     n = np.linalg.norm(d, axis=1)
@@ -82,7 +82,7 @@ def test_scrub_bake_and_resume_equal_playback(fc, monkeypatch, tmp_path):
     played = _play(scene, hair, ball, out)
     # Scrubbed: frames 7.. dropped by a key there, then solved again from cached frame 6
     # after the scene was shown at frame 12 (the colliders were read there last).
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     rt.drop_frames_after(6, 1)
     scene.frame_set(6)
     for f in range(7, 13):

@@ -137,7 +137,7 @@ def test_add_on_an_unkeyed_pose_then_the_start_frame_is_solved_again(fc, tmp_pat
     scene.frame_set(1)
     box.location = (3.0, 0.0, 0.6)  # explored after keying: far from the fur
     out = fc.setup(hair, [box])
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     assert 1 in rt.memory and hair.furcollide.stat_colliding == 0  # solved un-keyed
 
     scene.frame_set(1)
@@ -153,7 +153,7 @@ def test_add_on_an_unkeyed_pose_then_the_start_frame_is_solved_again(fc, tmp_pat
 
 def test_collider_moved_without_keying_on_a_cached_frame(fc, tmp_path):
     scene, hair, box, out = shot(fc, tmp_path)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     before = play(scene, hair, out, range(1, 9), [box])
     scene.frame_set(5)
     box.location.z = 0.45  # z is not keyed: the move stays on every frame
@@ -260,8 +260,8 @@ def test_bake_resumes_only_when_the_inputs_still_hold(fc, tmp_path, monkeypatch)
     baked = bake(fc, hair)
     assert all(os.stat(fc.cache.frame_path(d, f)).st_mtime_ns != before[f] for f in before)
     setup = fc.Setup(hair, scene, bpy.context.evaluated_depsgraph_get())
-    inputs = fc.frame_inputs.read_inputs(setup)
-    assert fc.frame_inputs.baked_frame_change(
+    inputs = fc.frame.inputs.read_inputs(setup)
+    assert fc.frame.record.baked_frame_change(
         setup, inputs, fc.cache.read_inputs(d, scene.frame_current)) == ""
     activate(hair)
     assert bpy.ops.furcollide.free_bake() == {"FINISHED"}

@@ -101,13 +101,13 @@ def output_world(fc, out):
 
 def check_follows(fc, hair, surf, out, frames):
     """Every frame: roots exactly at their bound barycentric points, rigid curves."""
-    binding, _key = fc.fur_attach.load_binding(hair)
+    binding, _key = fc.frame.attach.load_binding(hair)
     offs = offsets_of(out)
     ref = seg_lengths(output_world(fc, out), offs)
     moved = 0.0
     for f in frames:
         bpy.context.scene.frame_set(f)
-        assert fc.registry.status_for(hair)[0] == "INFO", fc.registry.status_for(hair)
+        assert fc.store.registry.status_for(hair)[0] == "INFO", fc.store.registry.status_for(hair)
         V = surface_world(surf)
         P = output_world(fc, out)
         np.testing.assert_allclose(P[offs[:-1]], binding.roots(V), atol=1e-5)
@@ -208,7 +208,7 @@ def test_bind_at_another_reference_frame_restores_the_frame(fc):
     scene.frame_set(1)
     bind(hair, frame=5)
     assert scene.frame_current == 1
-    binding, _ = fc.fur_attach.load_binding(hair)
+    binding, _ = fc.frame.attach.load_binding(hair)
     assert binding.root_distance.max() < 1e-5
     for f in range(1, 6):  # play up to the reference frame
         scene.frame_set(f)
@@ -227,11 +227,11 @@ def test_attached_curves_still_collide(fc):
     bpy.context.scene.frame_set(1)
     bind(hair)
     offs = offsets_of(out)
-    binding, _ = fc.fur_attach.load_binding(hair)
+    binding, _ = fc.frame.attach.load_binding(hair)
     penetrating_input = 0
     for f in range(1, 9):
         bpy.context.scene.frame_set(f)
-        assert fc.registry.status_for(hair)[0] != "ERROR", fc.registry.status_for(hair)
+        assert fc.store.registry.status_for(hair)[0] != "ERROR", fc.store.registry.status_for(hair)
         V = surface_world(surf)
         P = output_world(fc, out)
         np.testing.assert_allclose(P[offs[:-1]], binding.roots(V), atol=1e-5)
@@ -248,14 +248,14 @@ def test_option_off_is_the_previous_behaviour(fc):
     box.keyframe_insert("location", frame=8)
     linear(box)
     hair, surf, out = attached_scene(fc, colliders=[box], before_setup=animate_transform)
-    sig = fc.setup_module.signature(hair)
+    sig = fc.settings.fingerprints.signature(hair)
     before = played_list(fc, out, range(1, 9))
     bpy.context.scene.frame_set(1)
     bind(hair)
     attached = played_list(fc, out, range(1, 9))
     assert max(np.abs(a - b).max() for a, b in zip(attached, before, strict=True)) > 0.1
     hair.furcollide.use_fur_attach = False
-    assert fc.setup_module.signature(hair) == sig
+    assert fc.settings.fingerprints.signature(hair) == sig
     after = played_list(fc, out, range(1, 9))
     for a, b in zip(after, before, strict=True):
         np.testing.assert_array_equal(a, b)
@@ -266,13 +266,13 @@ def test_save_reload_keeps_the_binding(fc, tmp_path):
     animate_shape_key(surf)
     bpy.context.scene.frame_set(1)
     bind(hair)
-    expected = fc.fur_attach.load_binding(hair)[0].arrays()
+    expected = fc.frame.attach.load_binding(hair)[0].arrays()
     path = str(tmp_path / "attach.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
     hair = bpy.data.objects["Fur"]
-    assert hair.furcollide.use_fur_attach and fc.fur_attach.has_binding(hair)
-    got = fc.fur_attach.load_binding(hair)[0].arrays()
+    assert hair.furcollide.use_fur_attach and fc.frame.attach.has_binding(hair)
+    got = fc.frame.attach.load_binding(hair)[0].arrays()
     for k, v in expected.items():
         np.testing.assert_array_equal(got[k], v)
     check_follows(fc, hair, bpy.data.objects["Skin"], hair.furcollide.output, range(1, 9))
@@ -290,7 +290,7 @@ def test_poll_and_errors(fc):
     # option on without a binding: a clear error, the output keeps its result
     hair.furcollide.use_fur_attach = True
     bpy.context.scene.frame_set(2)
-    level, msg = fc.registry.status_for(hair)
+    level, msg = fc.store.registry.status_for(hair)
     assert level == "ERROR" and "press Bind" in msg
 
 
@@ -303,7 +303,7 @@ def test_surface_topology_change_is_an_error(fc):
     held = fc.positions(out).copy()
     surf.modifiers.new("Subdivide", "SUBSURF").levels = 1
     bpy.context.scene.frame_set(3)
-    level, msg = fc.registry.status_for(hair)
+    level, msg = fc.store.registry.status_for(hair)
     assert level == "ERROR" and "changed topology" in msg and "Bind again" in msg
     np.testing.assert_array_equal(fc.positions(out), held)  # holds the last result
     # binding again on the new topology works
@@ -317,7 +317,7 @@ def test_panel_draws_attach(fc):
     hair, surf, out = attached_scene(fc)
     s = hair.furcollide
     assert s.use_fur_attach is False and s.attach_reference_frame == 1  # off by default
-    assert not fc.fur_attach.has_binding(hair)
+    assert not fc.frame.attach.has_binding(hair)
     panel = bpy.types.FURCOLLIDE_PT_pipeline
     activate(hair)
     log = draw_panel(panel)
@@ -362,11 +362,11 @@ def test_rebinding_without_callback_drops_the_cache(fc):
     hair, surf, out = attached_scene(fc, before_setup=animate_transform)
     bind(hair)
     played_list(fc, out, range(1, 6))
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     assert len(rt.memory) == 5
     hair.furcollide.attach_id = "rebound elsewhere"  # hidden: no update callback
     bpy.context.scene.frame_set(5)
-    assert len(rt.memory) == 0 and fc.registry.is_outdated(hair)
+    assert len(rt.memory) == 0 and fc.store.registry.is_outdated(hair)
     check_follows(fc, hair, surf, out, range(1, 9))
 
 
@@ -386,7 +386,7 @@ def test_fur_attach_unbind(fc):
     assert abs(world(out)[0, 2] - 1.0) < 1e-5
     assert bpy.ops.furcollide.fur_attach_unbind() == {"FINISHED"}
     assert not hair.furcollide.use_fur_attach
-    assert not fc.fur_attach.has_binding(hair)
+    assert not fc.frame.attach.has_binding(hair)
     scene.frame_set(1)
     assert abs(world(out)[0, 2]) < 1e-6  # back to the source's own curves
 
@@ -403,9 +403,9 @@ def test_attach_bind_refuses_surfaces_it_cannot_use(fc):
         activate(hair)
         with pytest.raises(RuntimeError, match=why):
             bpy.ops.furcollide.fur_attach_bind()
-        assert not s.use_fur_attach and not fc.fur_attach.has_binding(hair)
+        assert not s.use_fur_attach and not fc.frame.attach.has_binding(hair)
     play(scene, range(1, 4))  # the setup still solves its source's own curves
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")
     np.testing.assert_allclose(world(out), world(hair), atol=1e-6)
     # not a mesh: the operator is not even offered
     ctrl = bpy.data.objects.new("Ctrl", None)
@@ -428,7 +428,7 @@ def test_attach_bind_far_from_the_surface_snaps_with_a_warning(fc, capsys):
     assert "9 roots were not on the Surface at frame 1 (up to 50 away)" in log, log
     assert "Traceback" not in log
     play(scene, range(1, 4))
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")
     P, offs = world(out), offsets_of(out)
     np.testing.assert_allclose(P[offs[:-1], 2], -50.0, atol=1e-5)  # roots on the Surface
     # the curves were translated whole: same shape
@@ -457,7 +457,7 @@ def test_attach_surface_edited_after_bind(fc, capsys, edit):
     capsys.readouterr()
     for f in (3, 4, 1):
         scene.frame_set(f)
-        level, msg = fc.registry.status_for(hair)
+        level, msg = fc.store.registry.status_for(hair)
         assert level == "ERROR", (f, msg)
         assert "Surface 'Skin' changed topology since binding" in msg and want in msg, msg
         assert "press Bind again" in msg
@@ -469,7 +469,7 @@ def test_attach_surface_edited_after_bind(fc, capsys, edit):
     activate(hair)
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(scene, range(1, 4))
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")
 
 
 def test_attach_surface_vertex_order_change_is_reported(fc):
@@ -485,7 +485,7 @@ def test_attach_surface_vertex_order_change_is_reported(fc):
     me.from_pydata(V[perm].tolist(), [], [tuple(int(inv[i]) for i in f) for f in F])
     me.update()
     scene.frame_set(3)
-    level, msg = fc.registry.status_for(hair)
+    level, msg = fc.store.registry.status_for(hair)
     # either the change is reported, or the hair stays where the (same) surface is
     assert level == "ERROR" or np.abs(fc.positions(out) - before).max() < 1e-5, msg
 
@@ -496,12 +496,12 @@ def test_attach_bind_again_then_reopen_keeps_the_binding(fc, tmp_path):
     surf.data.update()
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(bpy.context.scene, range(1, 3))
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")
     path = save_in(tmp_path)
     bpy.ops.wm.open_mainfile(filepath=path)
     hair = bpy.data.objects["Fur"]
     play(bpy.context.scene, range(1, 3))
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")
 
 
 @pytest.mark.parametrize("surface_first", [True, False])
@@ -535,7 +535,7 @@ def test_attach_surface_edited_on_a_baked_setup_says_free_bake_first(fc, tmp_pat
     surf.data.update()
     scene.frame_set(2)
     np.testing.assert_array_equal(fc.positions(out), baked2)  # the bake is still shown
-    level, msg = fc.registry.status_for(hair)
+    level, msg = fc.store.registry.status_for(hair)
     assert "changed topology since binding" in msg, msg
     assert "press Free Bake, then Bind again" in msg, msg
     activate(hair)
@@ -546,7 +546,7 @@ def test_attach_surface_edited_on_a_baked_setup_says_free_bake_first(fc, tmp_pat
     activate(hair)
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(scene, range(1, 4))
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")
 
 
 def test_an_edit_away_from_the_roots_keeps_the_playback_cache(fc):
@@ -555,10 +555,10 @@ def test_an_edit_away_from_the_roots_keeps_the_playback_cache(fc):
     frames are cached, changes nothing (the cache and the frame stay); a bound one
     is an edit that names the Surface."""
     scene, hair, out, surf = _attach_bound(fc)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     play(scene, range(1, 5))
     assert sorted(rt.memory.frames) == [1, 2, 3, 4]
-    used = fc.fur_attach.load_binding(hair)[0].used_vertices
+    used = fc.frame.attach.load_binding(hair)[0].used_vertices
     free = np.setdiff1d(np.arange(len(surf.data.vertices)), used)
     assert len(free)
     surf.data.vertices[int(free[0])].co.z += 0.3
@@ -566,13 +566,13 @@ def test_an_edit_away_from_the_roots_keeps_the_playback_cache(fc):
     bpy.context.view_layer.update()  # (the depsgraph check runs)
     assert sorted(rt.memory.frames) == [1, 2, 3, 4]
     scene.frame_set(3)
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")
     assert rt.stats["source"] == "cache"
     surf.data.vertices[int(used[0])].co.z += 0.3
     surf.data.update()
     bpy.context.view_layer.update()
     assert len(rt.memory) == 0
-    level, msg = fc.registry.status_for(hair)
+    level, msg = fc.store.registry.status_for(hair)
     assert f"the Surface '{surf.name}' the curves are attached to" in msg, msg
 
 

@@ -43,13 +43,13 @@ def _no_handler_error(capfd):
 
 #: What the depsgraph check calls, by the module name it looks it up in.
 DEPSGRAPH_CALLS = [
-    ("registry", "prune"),
-    ("registry", "setups"),
-    ("registry", "get_runtime"),
-    ("handlers", "dependencies_stale"),
-    ("handlers", "collider_objects"),
-    ("handlers", "structure"),
-    ("invalidation", "invalidate"),
+    ("store.registry", "prune"),
+    ("store.registry", "setups"),
+    ("store.registry", "get_runtime"),
+    ("frame.handlers", "dependencies_stale"),
+    ("frame.handlers", "collider_objects"),
+    ("frame.handlers", "structure"),
+    ("store.invalidation", "invalidate"),
 ]
 
 
@@ -77,18 +77,18 @@ def test_depsgraph_check_never_raises(fc, capfd, monkeypatch, module, name):
     # called directly, with a depsgraph listing the edit, it returns normally too
     dg = types.SimpleNamespace(mode="VIEWPORT", updates=[types.SimpleNamespace(
         id=box, is_updated_geometry=True, is_updated_transform=True)])
-    assert _module("handlers").on_depsgraph_update_post(scene, dg) is None
+    assert _module("frame.handlers").on_depsgraph_update_post(scene, dg) is None
 
 
 def test_a_depsgraph_check_error_becomes_the_setups_status(fc, capfd, monkeypatch):
     scene = bpy.context.scene
     hair, box, out = small_setup(fc)
     play(scene, range(1, 5))
-    monkeypatch.setattr(_module("invalidation"), "invalidate", _raiser)
+    monkeypatch.setattr(_module("store.invalidation"), "invalidate", _raiser)
     box.scale.x *= 1.2
     bpy.context.view_layer.update()
     _no_handler_error(capfd)
-    level, message = fc.registry.status_for(hair)
+    level, message = fc.store.registry.status_for(hair)
     assert level == "ERROR" and "injected fault" in message, (level, message)
 
 
@@ -112,7 +112,7 @@ def timers(monkeypatch):
     """Make :func:`invalidation.schedule_refresh` schedule as in the UI: ``bpy`` as the
     module sees it has ``app.background`` False and a ``timers.register`` that keeps
     the functions (Blender calls them later; here the test does)."""
-    inv = _module("invalidation")
+    inv = _module("store.invalidation")
     registered = []
     app = types.SimpleNamespace(
         background=False,
@@ -130,22 +130,21 @@ def test_refresh_timer_refreshes_the_current_frame(fc, timers, monkeypatch):
     scene = bpy.context.scene
     hair, box, out = small_setup(fc)
     play(scene, range(1, 4))
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")
     hair.furcollide.recovery_rate = 0.9  # a setting: drops frames, schedules a refresh
     assert len(timers) == 1
     # the setting's update already says so (the playback cache was dropped) ...
-    assert fc.registry.status_for(hair)[1].startswith("Frame 3 is outdated: Recovery Rate")
-    fc.registry.set_status(hair, "INFO", "")
-    inv = _module("invalidation")
+    assert fc.store.registry.status_for(hair)[1].startswith("Frame 3 is outdated: Recovery Rate")
+    fc.store.registry.set_status(hair, "INFO", "")
     seen = []
-    evaluate = inv.frame_rules.evaluate
-    monkeypatch.setattr(inv.frame_rules, "evaluate",
+    evaluate = fc.frame.rules.evaluate
+    monkeypatch.setattr(fc.frame.rules, "evaluate",
                         lambda setup: seen.append((setup.ob.name, setup.frame)) or
                         evaluate(setup))
     assert timers[0]() is None  # done: not rescheduled
     # ... and the timer evaluated the current frame again, which says it once more
     assert seen == [(hair.name, 3)], seen
-    level, message = fc.registry.status_for(hair)
+    level, message = fc.store.registry.status_for(hair)
     assert level == "WARNING" and message.startswith("Frame 3 is outdated: Recovery Rate "
                                                      "changed"), message
 
@@ -157,22 +156,22 @@ def test_refresh_timer_never_raises(fc, capfd, monkeypatch, timers, fault):
     play(scene, range(1, 4))
     hair.furcollide.recovery_rate = 0.9
     (refresh,) = timers
-    inv = _module("invalidation")
+    inv = _module("store.invalidation")
     capfd.readouterr()
     if fault == "evaluate":
-        monkeypatch.setattr(inv.frame_rules, "evaluate", _raiser)
+        monkeypatch.setattr(fc.frame.rules, "evaluate", _raiser)
     elif fault == "Setup":
-        monkeypatch.setattr(inv.scenes, "Setup", _raiser)  # (the refresh goes through it)
+        monkeypatch.setattr(fc.frame.scenes, "Setup", _raiser)  # (the refresh goes through it)
     elif fault == "deleted":
         bpy.data.objects.remove(hair)
     else:
         monkeypatch.setattr(inv.registry, "busy", lambda: True)
         assert refresh() == pytest.approx(0.1)  # the frame handler runs: try again soon
         monkeypatch.setattr(inv.registry, "busy", lambda: False)
-        monkeypatch.setattr(inv.frame_rules, "evaluate", _raiser)
+        monkeypatch.setattr(fc.frame.rules, "evaluate", _raiser)
     assert refresh() is None
     text = _no_handler_error(capfd)
     if fault != "deleted":
-        level, message = fc.registry.status_for(hair)
+        level, message = fc.store.registry.status_for(hair)
         assert level == "ERROR" and "injected fault" in message, (level, message)
         assert sum("injected fault" in ln for ln in text.splitlines()) == 1, text

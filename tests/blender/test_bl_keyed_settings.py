@@ -101,13 +101,13 @@ KEYED = {
 def solves(fc, monkeypatch):
     """Count the frames solved (frame -> times)."""
     counts = {}
-    real = fc.frame_solve.solve_frame
+    real = fc.frame.solve.solve_frame
 
     def spy(setup, inp):
         counts[setup.frame] = counts.get(setup.frame, 0) + 1
         return real(setup, inp)
 
-    monkeypatch.setattr(fc.frame_solve, "solve_frame", spy)
+    monkeypatch.setattr(fc.frame.solve, "solve_frame", spy)
     return counts
 
 
@@ -175,7 +175,7 @@ def test_bake_equals_a_script_stepping_the_core_with_each_frames_values(fc):
     _keyed_plasticity(hair.furcollide, hair)
     frames = range(FRAMES[0], FRAMES[1] + 1)
     played = _play(scene, hair, out, box, frames)
-    offs = fc.bridge.curve_offsets(hair.data)
+    offs = fc.blender.bridge.curve_offsets(hair.data)
     solver = None
     for f in frames:
         scene.frame_set(f)
@@ -215,7 +215,7 @@ def test_editing_a_key_keeps_every_frame_before_the_first_changed_value(fc, solv
     fcu.update()
     hair.update_tag()
     bpy.context.view_layer.update()
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     assert sorted(rt.memory.frames) == list(range(1, 9)), sorted(rt.memory.frames)
     scene.frame_set(14)
     assert "Recovery Rate" in s.status_message and "frame 9" in s.status_message, (
@@ -230,7 +230,7 @@ def test_an_unkeyed_edit_drops_the_whole_playback_cache(fc):
     _keyed_recovery(hair.furcollide, hair)
     _play(scene, hair, out, box, range(1, 8))
     hair.furcollide.plasticity = 0.5  # the same value on every frame: every frame changed
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     assert len(rt.memory) == 0
 
 

@@ -94,7 +94,7 @@ def test_playback_memory_is_flat_once_the_cache_is_full(fc, traced):
     s = hair.furcollide
     s.memory_limit = LIMIT_MB
     scene.frame_set(1)  # solved again: the limit applies from the start frame on
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     limit = LIMIT_MB * MB
     f, full_at = 1, None
     per_frame = []
@@ -141,7 +141,7 @@ def test_memory_limit_at_real_size(fc):
     s.memory_limit = 16
     reset_cache(hair)
     play_demo(demo.scene, hair, out)
-    rt = fc.registry.get_runtime(hair, create=False)
+    rt = fc.store.registry.get_runtime(hair, create=False)
     kept = sorted(rt.memory.frames)
     with_state = [f for f in kept if rt.memory.state(f) is not None]
     assert len(kept) < REAL_LAST or len(with_state) < len(kept), (kept, with_state)

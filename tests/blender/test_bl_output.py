@@ -25,8 +25,8 @@ def _turned_setup(fc):
 
 def _world_result(fc, hair):
     """This frame's solved world positions, as the memory cache rebuilds them."""
-    rt = fc.registry.get_runtime(hair)
-    inp = fc.frame_inputs.read_inputs(
+    rt = fc.store.registry.get_runtime(hair)
+    inp = fc.frame.inputs.read_inputs(
         fc.Setup(hair, bpy.context.scene, bpy.context.evaluated_depsgraph_get()))
     points, status_of, _stats = rt.memory.get(bpy.context.scene.frame_current, inp.points,
                                             inp.offsets)
@@ -51,7 +51,7 @@ def test_moved_output_gets_every_point_transformed(fc):
     hair, out = _turned_setup(fc)
     out.location = (2.0, 0.0, 0.0)  # the artist moves the output away
     bpy.context.view_layer.update()
-    fc.registry.clear_runtime(hair)
+    fc.store.registry.clear_runtime(hair)
     play(bpy.context.scene, range(1, 7))
     inp, world = _world_result(fc, hair)
     assert inp.local is None
@@ -66,11 +66,11 @@ def test_status_colours_updated_in_place_match_a_full_recolour(fc):
     sizes = rng.integers(2, 9, 300)
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32)
     before = rng.integers(0, 6, 300).astype(np.int8)
-    colors = fc.bridge.status_colors(before, offsets)
+    colors = fc.blender.bridge.status_colors(before, offsets)
     after = before.copy()
     after[rng.choice(300, 40, replace=False)] = rng.integers(0, 6, 40)
-    got = fc.bridge.status_colors(after, offsets, before, colors.copy())
-    assert np.array_equal(got, fc.bridge.status_colors(after, offsets))
+    got = fc.blender.bridge.status_colors(after, offsets, before, colors.copy())
+    assert np.array_equal(got, fc.blender.bridge.status_colors(after, offsets))
     assert got.shape == (offsets[-1], 4) and got.dtype == np.float32
 
 
@@ -78,11 +78,11 @@ def test_status_colour_attribute_follows_the_status(fc):
     hair, out = _turned_setup(fc)
     data = out.data
     status = np.empty(len(data.curves), np.int32)
-    data.attributes[fc.bridge.STATUS_ATTRIBUTE].data.foreach_get("value", status)
+    data.attributes[fc.blender.bridge.STATUS_ATTRIBUTE].data.foreach_get("value", status)
     col = np.empty(len(data.points) * 4, np.float32)
-    data.attributes[fc.bridge.COLOR_ATTRIBUTE].data.foreach_get("color", col)
-    offsets = fc.bridge.curve_offsets(data)
-    want = fc.bridge.status_colors(status.astype(np.int8), offsets)
+    data.attributes[fc.blender.bridge.COLOR_ATTRIBUTE].data.foreach_get("color", col)
+    offsets = fc.blender.bridge.curve_offsets(data)
+    want = fc.blender.bridge.status_colors(status.astype(np.int8), offsets)
     assert (status > 0).any()
     assert np.array_equal(col.reshape(-1, 4), want)
 
@@ -165,7 +165,7 @@ def test_every_status_shows_the_readmes_colour(fc):
 def test_the_palette_has_one_readme_colour_per_status(fc):
     """Every status code's colour is the one the README names (a swap of two colours,
     or a new code without a colour, fails here even if no scene shows it)."""
-    palette = fc.bridge.STATUS_COLORS
+    palette = fc.blender.bridge.STATUS_COLORS
     codes = [int(s) for s in fc.core.Status]
     assert len(palette) == len(codes)
     assert {c: colour_name(palette[c]) for c in codes} == {c: README_COLOURS[c] for c in codes}

@@ -156,7 +156,7 @@ def test_an_error_is_shown_in_the_main_panel(fc):
     hair, box, out = small_setup(fc)
     hair.furcollide.attract_to_growth_surface = True  # needs the hair's Surface: none
     play(scene, range(1, 3))
-    level, message = fc.registry.status_for(hair)
+    level, message = fc.store.registry.status_for(hair)
     assert level == "ERROR" and "Surface" in message
     activate(hair)
     main = draw_everything()["FURCOLLIDE_PT_main"]
@@ -284,7 +284,7 @@ def test_a_running_bake_shows_its_progress(fc):
     scene = bpy.context.scene
     hair, box, out = small_setup(fc)
     activate(hair)
-    progress = sys.modules[ADDON + ".operators.ops_bake"].PROGRESS
+    progress = sys.modules[ADDON + ".operators.ops.bake"].PROGRESS
     progress[scene.name] = (3, 8)
     try:
         cache = draw_everything()["FURCOLLIDE_PT_cache"]

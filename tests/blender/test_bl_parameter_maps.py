@@ -80,7 +80,7 @@ def test_each_curve_uses_its_own_value(fc):
     _attribute(hair, "imprint", w)
     s.plasticity_map = "imprint"
     got = _replay(scene, hair, out, box)
-    offs = fc.bridge.curve_offsets(hair.data)
+    offs = fc.blender.bridge.curve_offsets(hair.data)
     tips = offs[1:] - 1
     moved = np.linalg.norm(got[10][tips] - positions(hair)[tips], axis=1) > 1e-4
     assert moved.any(), "nothing kept an imprint"
@@ -94,7 +94,7 @@ def test_a_point_map_is_read_at_the_root(fc):
     plain = _replay(scene, hair, out, box)
     s.plasticity = 0.8
     P = len(hair.data.points)
-    offs = fc.bridge.curve_offsets(hair.data)
+    offs = fc.blender.bridge.curve_offsets(hair.data)
     v = np.full(P, 9.0, np.float32)  # only each root's value is read
     v[offs[:-1]] = 0.5
     _attribute(hair, "pw", v, domain="POINT")
@@ -181,6 +181,6 @@ def test_the_panel_offers_the_hairs_float_attributes(fc):
     _attribute(hair, "count", np.ones(C), kind="INT")
     prop = hair.furcollide.bl_rna.properties["plasticity_map"]
     assert prop.type == "STRING"
-    maps = fc.frame_inputs.maps
+    maps = fc.frame.inputs.maps
     names = maps.suggestions(hair, bpy.context, "")
     assert "density" in names and "count" not in names, names

@@ -253,8 +253,8 @@ def test_children_from_guides(fc):
     assert bpy.ops.furcollide.children_from_guides(density=100.0) == {"FINISHED"}
     mod = out.modifiers["FurCollide Children"]
     assert mod.type == "NODES" and mod.node_group is not None
-    assert out.modifiers[0].name == fc.dependencies.DEPENDENCY_MODIFIER
-    compat = sys.modules["bl_ext.fcdev.furcollide.operators.compat"]
+    assert out.modifiers[0].name == fc.blender.dependencies.DEPENDENCY_MODIFIER
+    compat = sys.modules["bl_ext.fcdev.furcollide.operators.blender.compat"]
     sockets = compat.interpolate_sockets(mod.node_group)
     if sockets.surface_object is not None:  # 4.2-5.0; 5.2 reads the hair data's Surface
         assert compat.modifier_input(mod, sockets.surface_object) == surf
@@ -283,7 +283,7 @@ def test_children_needs_surface_and_assets(fc, monkeypatch):
     with pytest.raises(RuntimeError, match="no Surface"):
         bpy.ops.furcollide.children_from_guides()
     hair.data.surface = make_surface()
-    mod = sys.modules["bl_ext.fcdev.furcollide.operators.pipeline"]
+    mod = sys.modules["bl_ext.fcdev.furcollide.operators.ops.pipeline"]
     monkeypatch.setattr(mod, "HAIR_ASSETS", ("assets/nodes/missing.blend",))
     with pytest.raises(RuntimeError, match="were not found"):
         bpy.ops.furcollide.children_from_guides()
@@ -374,7 +374,7 @@ def test_children_from_guides_on_odd_setups(fc):
     dg = bpy.context.evaluated_depsgraph_get()
     assert len(out.evaluated_get(dg).data.curves) > 10
     play(scene, range(1, 4))
-    assert fc.registry.status_for(one) == ("INFO", "")
+    assert fc.store.registry.status_for(one) == ("INFO", "")
 
     # a Surface that is not a mesh: refused with the reason, nothing changed
     ctrl = bpy.data.objects.new("Ctrl", None)

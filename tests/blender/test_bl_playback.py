@@ -31,7 +31,7 @@ pytestmark = pytest.mark.blender
 def test_scrub_back_is_exact_and_jump_holds(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     rec = positions_per_frame(out, range(1, 13))
     assert len(rt.memory) == 12
     assert any(not np.array_equal(rec[f], fc.positions(hair)) for f in rec)
@@ -57,7 +57,7 @@ def test_scrub_back_is_exact_and_jump_holds(fc):
 def test_subframes_and_repeats_do_not_step(fc):
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     rec = positions_per_frame(out, range(1, 7))
     sc = bpy.context.scene
     sc.frame_set(6, subframe=0.5)
@@ -75,7 +75,7 @@ def test_setting_change_drops_the_playback_cache(fc):
     outdated and every frame says why until the start frame is played again."""
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     rec = positions_per_frame(out, range(1, 13))
     bpy.context.scene.frame_set(6)
     hair.furcollide.mode = "stiff"
@@ -152,9 +152,9 @@ def test_a_change_without_an_update_callback_is_not_stepped_from(fc, monkeypatch
     start from), frame 7 is not stepped from frame 6's Bend state."""
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     positions_per_frame(out, range(1, 7))
-    monkeypatch.setattr(fc.invalidation, "invalidate", lambda *a, **k: None)
+    monkeypatch.setattr(fc.store.invalidation, "invalidate", lambda *a, **k: None)
     hair.furcollide.mode = "soft"
     if seen == "previous-frame-record":
         rt.signature = None  # (as after a shorter frame range)
@@ -260,7 +260,7 @@ def test_negative_start_frame_plays_scrubs_and_holds(fc):
         check_frame(hair, out, [box])
         rec[f] = (positions(out).copy(), status_of(out).copy())
     assert any(rec[f][1].any() for f in rec)
-    assert sorted(fc.registry.get_runtime(hair).memory.frames) == list(range(-4, 4))
+    assert sorted(fc.store.registry.get_runtime(hair).memory.frames) == list(range(-4, 4))
     assert_same_frames(rec, scene, out, [0, -3, 2, -4, 3], "scrubbed")
     scene.frame_set(5)
     np.testing.assert_array_equal(positions(out), rec[3][0])
@@ -293,7 +293,7 @@ def test_one_solve_serves_playback_and_scripts(fc):
     played = positions_per_frame(out, range(1, 9))  # source and output at the origin
     offsets = offsets_of(hair)
     C = len(offsets) - 1  # (the hair draws its curves as Catmull-Rom, Blender's default)
-    shot = fc.core.pipeline.Shot(offsets, fc.setup_module.core_settings(hair),
+    shot = fc.core.pipeline.Shot(offsets, fc.settings.fingerprints.core_settings(hair),
                                  splines=fc.core.splines.Splines.catmull_rom(C))
     me = box.data
     V = np.empty(len(me.vertices) * 3, np.float32)

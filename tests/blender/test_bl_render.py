@@ -92,7 +92,7 @@ def test_render_animation_sees_result(fc, tmp_path):
         bpy.app.handlers.frame_change_post.remove(spy)
     assert sorted(seen) == [1, 2, 3, 4]
     # every rendered frame got exactly the solved (cached) result
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     assert sorted(rt.memory.frames) == [1, 2, 3, 4]
     for f in range(1, 5):
         bpy.context.scene.frame_set(f)
@@ -307,13 +307,13 @@ def _simplified_ball(fc, frames=(1, 6)):
 def _counting_solves(fc, monkeypatch):
     """Count the frames solved from now on (``frame_solve.solve_frame`` calls)."""
     calls = []
-    real = fc.frame_solve.solve_frame
+    real = fc.frame.solve.solve_frame
 
     def counting(setup, inp):
         calls.append(setup.frame)
         return real(setup, inp)
 
-    monkeypatch.setattr(fc.frame_solve, "solve_frame", counting)
+    monkeypatch.setattr(fc.frame.solve, "solve_frame", counting)
     return calls
 
 
@@ -329,7 +329,7 @@ def test_f12_under_simplify_keeps_the_playback_cache(fc, tmp_path, monkeypatch):
         played[f] = positions(out).copy()
     assert any(not np.array_equal(p, played[1]) for p in played.values())
     scene.frame_set(5)
-    rt = fc.registry.get_runtime(hair, create=False)
+    rt = fc.store.registry.get_runtime(hair, create=False)
     assert sorted(rt.memory.frames) == list(range(1, 7))
     msg = hair.furcollide.status_message
     assert SIMPLIFIED in msg and "renders show them as they are" in msg, msg
@@ -339,7 +339,7 @@ def test_f12_under_simplify_keeps_the_playback_cache(fc, tmp_path, monkeypatch):
 
     def spy(sc, depsgraph):
         if depsgraph is not None and depsgraph.mode == "RENDER":
-            seen[sc.frame_current] = (positions(out).copy(), fc.registry.status_for(hair),
+            seen[sc.frame_current] = (positions(out).copy(), fc.store.registry.status_for(hair),
                                       hair.furcollide.is_outdated)
 
     bpy.app.handlers.frame_change_post.append(spy)
@@ -382,7 +382,7 @@ def test_render_difference_names_each_cause(fc):
     scene = bpy.context.scene
     r = scene.render
     box = make_box()
-    diff = fc.colliders.render_difference
+    diff = fc.frame.colliders.render_difference
     assert diff(box, scene) == ""
     sub = box.modifiers.new("Subdivision", "SUBSURF")  # Blender's defaults: 1 and 2
     assert diff(box, scene) == "'Subdivision' at level 1 in the viewport, 2 in renders"
@@ -393,9 +393,9 @@ def test_render_difference_names_each_cause(fc):
     r.simplify_subdivision, r.simplify_subdivision_render = 0, 3
     assert diff(box, scene) == ("Simplify caps 'Subdivision' at level 0 in the viewport, "
                                 "2 in renders")
-    assert fc.colliders.renders_otherwise(box, scene)
+    assert fc.frame.colliders.renders_otherwise(box, scene)
     r.use_simplify = False
-    assert diff(box, scene) == "" and not fc.colliders.renders_otherwise(box, scene)
+    assert diff(box, scene) == "" and not fc.frame.colliders.renders_otherwise(box, scene)
     sub.show_viewport = False
     assert diff(box, scene) == "modifier 'Subdivision' is on in renders only"
     box.modifiers.remove(sub)
@@ -495,7 +495,7 @@ def test_f12_with_a_subdivided_collider_keeps_the_playback_cache(fc, tmp_path):
     for f in range(1, 7):
         scene.frame_set(f)
     scene.frame_set(5)
-    rt = fc.registry.get_runtime(hair, create=False)
+    rt = fc.store.registry.get_runtime(hair, create=False)
     assert len(rt.memory) == 6
     scene.render.filepath = str(tmp_path / "still.png")
     bpy.ops.render.render(write_still=True)
@@ -523,7 +523,7 @@ def test_frames_solved_in_a_render_of_a_subdivided_collider_are_shown_in_the_vie
     scene, hair, box, out = _played_with_a_subdivided_box(fc)
     for f in range(1, 4):
         scene.frame_set(f)
-    rt = fc.registry.get_runtime(hair, create=False)
+    rt = fc.store.registry.get_runtime(hair, create=False)
     seen, statuses = render_watching(tmp_path, "anim", [out], hair)
     assert [s for s in statuses if s[1] != SUBDIVIDED] == []
     assert len(rt.memory) == 6
@@ -681,7 +681,7 @@ def test_motion_blur_render_of_a_played_setup(fc, tmp_path, position):
             last_whole = f
         else:  # the whole frame being rendered, evaluated just before
             same_frame(got, ref[last_whole], f"{position}: subframe {f}+{sub}")
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     assert sorted(rt.memory.frames) == list(range(1, R_LAST + 1))
     for f in (R_LAST, 3, 9):
         scene.frame_set(f)
@@ -751,6 +751,6 @@ def test_f12_with_motion_blur_in_the_middle_of_playback(fc, tmp_path):
     assert {k for k, _ in seen} >= {(8, 0.0), (7, 0.75), (8, 0.25)}, [k for k, _ in seen]
     for key, got in seen:
         same_frame(got, ref[8], f"F12 at {key}")
-    assert sorted(fc.registry.get_runtime(hair).memory.frames) == list(range(1, 11))
+    assert sorted(fc.store.registry.get_runtime(hair).memory.frames) == list(range(1, 11))
     for f, got in play_demo(scene, hair, out, [9, 10, 11, 12, 2]).items():
         same_frame(got, ref[f], f"after F12, frame {f}")

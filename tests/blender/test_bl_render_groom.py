@@ -164,7 +164,7 @@ def test_render_groom_output_of_an_older_file_gets_its_inputs_on_load(fc, tmp_pa
     guides, groom, box, out = groom_scene(fc)
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     gout = guides.furcollide.groom.output
-    name = fc.dependencies.DEPENDENCY_MODIFIER
+    name = fc.blender.dependencies.DEPENDENCY_MODIFIER
     assert gout.modifiers[0].name == name  # the bind gives it the modifier
     gout.modifiers.remove(gout.modifiers[name])  # as saved by an earlier version
     path = str(tmp_path / "old.blend")
@@ -292,7 +292,7 @@ def test_mesh_linked_into_the_collider_collection_reaches_the_groom_inputs(fc):
     coll.objects.link(new)
     bpy.context.view_layer.update()
     play(bpy.context.scene, range(1, 4))
-    assert new in {r.object for r in fc.colliders.collider_objects(guides)}
+    assert new in {r.object for r in fc.frame.colliders.collider_objects(guides)}
     _same_inputs(out, gout, {guides, box, new})
 
 
@@ -378,7 +378,7 @@ def test_render_groom_ragged_groom(fc, capsys):
     moved = 0.0
     for f in range(1, 8):
         scene.frame_set(f)
-        assert fc.registry.status_for(guides) == ("INFO", ""), f
+        assert fc.store.registry.status_for(guides) == ("INFO", ""), f
         P = world(gout)
         np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]], atol=1e-5)  # roots stay
         np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
@@ -434,7 +434,7 @@ def test_render_groom_on_another_surface_follows_the_guides(fc, capsys):
     np.testing.assert_allclose(world(gout), ref, atol=1e-5)
     for f in range(1, 8):
         scene.frame_set(f)
-        assert fc.registry.status_for(guides) == ("INFO", ""), f
+        assert fc.store.registry.status_for(guides) == ("INFO", ""), f
         assert len(segments_in_box(world(gout), roff, box.matrix_world.translation)) == 0
     assert np.abs(world(gout) - ref).max() > 0.05
     # the other Surface moving does not move the roots (they follow the guides' roots)
@@ -453,19 +453,19 @@ def test_guides_per_curve_changed_after_binding_keeps_the_old_binding(fc):
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     play(scene, range(1, 5))
     before = world(g.output).copy()
-    rt = fc.registry.get_runtime(guides)
-    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 4
+    rt = fc.store.registry.get_runtime(guides)
+    assert fc.frame.groom.groom_binding(guides, rt).weights.index.shape[1] == 4
     g.guides = 1
     scene.frame_set(3)
     scene.frame_set(4)
-    assert fc.registry.status_for(guides) == (
+    assert fc.store.registry.status_for(guides) == (
         "WARNING", "Render groom: Guides per Curve is 1 but the groom was bound with 4: "
         "press Bind Groom again")
-    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 4
+    assert fc.frame.groom.groom_binding(guides, rt).weights.index.shape[1] == 4
     np.testing.assert_array_equal(world(g.output), before)
     g.guides = 4
     scene.frame_set(3)
-    assert fc.registry.status_for(guides) == ("INFO", "")
+    assert fc.store.registry.status_for(guides) == ("INFO", "")
 
 
 def test_bind_groom_again_after_changing_guides_per_curve(fc):
@@ -479,9 +479,10 @@ def test_bind_groom_again_after_changing_guides_per_curve(fc):
     scene.frame_set(1)
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     play(scene, range(1, 6))
-    assert fc.registry.status_for(guides) == ("INFO", ""), fc.registry.status_for(guides)
-    rt = fc.registry.get_runtime(guides)
-    assert fc.groom_stage.groom_binding(guides, rt).weights.index.shape[1] == 1
+    status_for = fc.store.registry.status_for
+    assert status_for(guides) == ("INFO", ""), status_for(guides)
+    rt = fc.store.registry.get_runtime(guides)
+    assert fc.frame.groom.groom_binding(guides, rt).weights.index.shape[1] == 1
 
 
 def test_threads_is_honoured_by_fur_attach_and_the_render_groom(fc, monkeypatch):

@@ -122,7 +122,7 @@ def test_armature_arm_presses_into_fur_played_then_baked(fc, tmp_path):
     rig, arm = _arm_rig([(1, 0.0), (8, -0.8)])
     n_verts = len(arm.data.vertices)
     out = fc.setup(hair, [arm])
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     seen = np.zeros(6, int)
     for f in range(1, 9):
         scene.frame_set(f)
@@ -209,7 +209,7 @@ def test_scrub_back_change_a_setting_then_play_on_with_a_skinned_arm(fc):
     for f in (7, 2, 9, 4):  # scrubbing back and forth over cached frames
         scene.frame_set(f)
     s.recovery_rate = 0.6
-    assert len(fc.registry.get_runtime(hair).memory) == 0
+    assert len(fc.store.registry.get_runtime(hair).memory) == 0
     scene.frame_set(5)
     assert s.is_outdated and "Play from frame 1" in s.status_message, s.status_message
     rec = record(scene, out, range(1, 10))  # the advice
@@ -287,7 +287,7 @@ def test_cloth_collider_played_from_start_then_baked_then_rendered(fc, tmp_path)
     cloth.point_cache.frame_end = 8
     out = fc.setup(hair, [sheet])
     hair.furcollide.colliders[0].double_sided = True
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     z = {}
     played = {}
     for f in range(1, 9):
@@ -344,7 +344,7 @@ def test_shape_key_collider_scrub_back_jump_ahead_then_play_on(fc):
         check_frame(hair, out, [blob])
         clean[f] = (positions(out).copy(), status_of(out).copy())
     assert any((clean[f][1] == COLLIDING).any() for f in clean)
-    assert fc.colliders.is_deforming(blob, scene)
+    assert fc.frame.colliders.is_deforming(blob, scene)
     # start over and play a little, then scrub and jump around
     scene.frame_set(1)
     assert bpy.ops.furcollide.reset() == {"FINISHED"}
@@ -392,7 +392,7 @@ def test_collider_parented_to_an_animated_non_uniformly_scaled_empty(fc, offset)
         s.colliders[0].use_offset = True
         s.colliders[0].collision_offset = offset
     scene.frame_set(1)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     hits = 0
     for f in range(1, 9):
         scene.frame_set(f)
@@ -411,7 +411,7 @@ def test_collider_parented_to_an_animated_non_uniformly_scaled_empty(fc, offset)
             assert d.min() > 0.9 * offset, (f, d.min())
     assert hits > 0
     (entry,) = rt.colliders.values()
-    assert not entry.deforming and not fc.colliders.is_deforming(box, scene)
+    assert not entry.deforming and not fc.frame.colliders.is_deforming(box, scene)
     if not offset:
         assert entry.collider.build_count == 1  # moved and stretched, never rebuilt
 
@@ -478,7 +478,7 @@ def test_animator_edits_the_rig_mid_session(fc, how):
         rig, colliders = ctrl, [box]
     scene.frame_set(1)
     out = fc.setup(hair, colliders)
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     record(scene, out, range(1, 9))
     scene.frame_set(4)
     if how == "key":

@@ -71,10 +71,10 @@ def test_add_creates_output(fc):
     assert hair.hide_render and not out.hide_render
     assert [c.object for c in s.colliders] == [box]
     assert len(out.data.curves) == len(hair.data.curves)
-    assert out.modifiers[0].name == fc.dependencies.DEPENDENCY_MODIFIER
+    assert out.modifiers[0].name == fc.blender.dependencies.DEPENDENCY_MODIFIER
     # evaluated right away at the start frame
     assert s.stat_frame == bpy.context.scene.frame_start
-    st = out.data.attributes[fc.bridge.STATUS_ATTRIBUTE]
+    st = out.data.attributes[fc.blender.bridge.STATUS_ATTRIBUTE]
     assert st.domain == "CURVE" and st.data_type == "INT"
     got = np.empty(n * 2, np.float32)
     out.data.attributes["surface_uv_coordinate"].data.foreach_get("vector", got)
@@ -141,7 +141,7 @@ def test_hidden_setup_is_skipped_quietly(fc):
     sc = bpy.context.scene
     hair.hide_viewport = out.hide_viewport = True
     dg = bpy.context.evaluated_depsgraph_get()
-    assert fc.frame_rules.evaluate(fc.Setup(hair, sc, dg)) == fc.frame_rules.Outcome.HIDDEN
+    assert fc.frame.rules.evaluate(fc.Setup(hair, sc, dg)) == fc.frame.rules.Outcome.HIDDEN
     for f in range(sc.frame_start, sc.frame_start + 4):
         sc.frame_set(f)
         assert hair.furcollide.status_message == ""
@@ -166,10 +166,10 @@ def test_a_deleted_source_drops_its_runtime_and_memory_cache(fc):
     fc.setup(other, [box])
     for f in range(1, 7):
         scene.frame_set(f)
-    rt = fc.registry.get_runtime(hair, create=False)
-    kept = fc.registry.get_runtime(other, create=False)
+    rt = fc.store.registry.get_runtime(hair, create=False)
+    kept = fc.store.registry.get_runtime(other, create=False)
     assert len(rt.memory) == 6 and len(kept.memory) == 6
-    assert len(fc.registry.registry) == 2
+    assert len(fc.store.registry.registry) == 2
 
     hair.furcollide.show_result = False  # the source shows (and can be selected)
     for o in bpy.context.view_layer.objects:
@@ -179,15 +179,15 @@ def test_a_deleted_source_drops_its_runtime_and_memory_cache(fc):
     assert bpy.ops.object.delete() == {"FINISHED"}  # the output's pointer keeps it alive
     assert hair.name in bpy.data.objects and not hair.users_scene
     bpy.context.view_layer.update()  # the depsgraph check
-    assert list(fc.registry.registry.values()) == [kept] and len(kept.memory) == 6
-    assert fc.registry.get_runtime(hair, create=False) is None
+    assert list(fc.store.registry.registry.values()) == [kept] and len(kept.memory) == 6
+    assert fc.store.registry.get_runtime(hair, create=False) is None
 
     other.name = "Renamed"  # a rename is not a deletion
     scene.frame_set(3)
-    assert list(fc.registry.registry.values()) == [kept]
+    assert list(fc.store.registry.registry.values()) == [kept]
     bpy.data.objects.remove(other)  # removed from the file by a script
     scene.frame_set(4)  # the frame handler prunes too
-    assert fc.registry.registry == {}
+    assert fc.store.registry.registry == {}
 
 
 def test_output_keeps_user_modifiers_and_remove_keep_output(fc):
@@ -198,10 +198,10 @@ def test_output_keeps_user_modifiers_and_remove_keep_output(fc):
     bpy.context.scene.frame_set(1)
     bpy.ops.furcollide.reset()
     assert out.modifiers.get("My Smooth") == user
-    assert out.modifiers[0].name == fc.dependencies.DEPENDENCY_MODIFIER
+    assert out.modifiers[0].name == fc.blender.dependencies.DEPENDENCY_MODIFIER
     assert bpy.ops.furcollide.remove(keep_output=True) == {"FINISHED"}
     assert out.name in bpy.data.objects and out.modifiers.get("My Smooth")
-    assert out.modifiers.get(fc.dependencies.DEPENDENCY_MODIFIER) is None
+    assert out.modifiers.get(fc.blender.dependencies.DEPENDENCY_MODIFIER) is None
     assert not out.furcollide.is_output
 
 
@@ -226,12 +226,12 @@ def test_frame_handler_and_update_callbacks_never_raise(fc, monkeypatch, capsys)
     def broken(*_args, **_kw):
         raise RuntimeError("simulated failure")
 
-    monkeypatch.setattr(fc.registry, "setups", broken)
+    monkeypatch.setattr(fc.store.registry, "setups", broken)
     # the handler cannot even list the setups: one line, no raise
     play(bpy.context.scene, range(1, 3))
     assert "frame handler failed: simulated failure" in capsys.readouterr().out
     monkeypatch.undo()
-    monkeypatch.setattr(fc.invalidation, "invalidate", broken)
+    monkeypatch.setattr(fc.store.invalidation, "invalidate", broken)
     hair.furcollide.plasticity = 0.3  # the update callback fails: one line, no raise
     assert "failed: simulated failure" in capsys.readouterr().out
     assert hair.furcollide.plasticity == pytest.approx(0.3)
@@ -251,7 +251,7 @@ def test_duplicated_setup_errors_and_leaves_the_original_alone(fc):
     dup = duplicate(hair, dx=0.3)  # the copy's curves differ from the original's
     for f in range(1, 6):
         scene.frame_set(f)
-        level, msg = fc.registry.status_for(dup)
+        level, msg = fc.store.registry.status_for(dup)
         assert level == "ERROR" and "copy of the setup on 'Fur'" in msg, msg
         assert hair.furcollide.status_message == ""
         np.testing.assert_array_equal(world(out), clean[f], err_msg=f"frame {f}")

@@ -107,7 +107,7 @@ def test_soak_paper_scale_playback_equals_the_bake(fc, tmp_path):
     s = hair.furcollide
     s.memory_limit = LIMIT_MB
     s.cache_directory = str(tmp_path / "bake")
-    rt = fc.registry.get_runtime(hair)
+    rt = fc.store.registry.get_runtime(hair)
     limit = LIMIT_MB * 2**20
 
     shown = {}  # frame -> set of (positions, status) digests shown as current

@@ -220,7 +220,7 @@ def test_preset_round_trip_restores_every_setting_exactly(fc):
     hair, box = fc.make_scene(frames=(1, 4))
     out = fc.setup(hair, [box])
     s = hair.furcollide
-    names = fc.package.operators.properties.SOLVER_PROPERTIES
+    names = fc.package.operators.settings.properties.SOLVER_PROPERTIES
     look = dict(
         mode="soft", rotation_precision=0.7, max_angle=77.7, affected_connected_cvs=4,
         cv_falloff=0.33, attract_to_growth_surface=True, follow_collider_motion=True,
@@ -300,12 +300,12 @@ def test_broken_preset_files_report_clearly(fc, capsys):
         p = preset("nan", "settings.max_angle = float('nan')\n")
         assert _load(p) == {"FINISHED"}
         play(scene, range(1, 3))
-        level, msg = fc.registry.status_for(hair)
+        level, msg = fc.store.registry.status_for(hair)
         assert level == "ERROR" and "max_angle must be finite" in msg, msg
         # a good preset fixes it: the setup solves again from the start frame
         assert _load(os.path.join(folder, "Long_Fur_(Bend).py")) == {"FINISHED"}
         play(scene, range(1, 4))
-        assert fc.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.registry.status_for(hair) == ("INFO", "")
         # no active object: a clear error, not a crash
         bpy.context.view_layer.objects.active = None
         with pytest.raises(RuntimeError, match="Failed to execute the preset.*NoneType"):
@@ -319,14 +319,15 @@ def test_broken_preset_files_report_clearly(fc, capsys):
 
 def test_solver_properties_mirror_core_settings(fc):
 
-    props = fc.properties
+    props = fc.settings.properties
     rna = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
     defaults = fc.core.Settings()
     for name in props.SOLVER_PROPERTIES:
         assert rna.properties[name].default == pytest.approx(getattr(defaults, name)), name
     hair, box = fc.make_scene()
     fc.setup(hair, [box])
-    got = dataclasses.asdict(fc.setup_module.core_settings(hair))  # threads 0 -> None (all CPUs)
+    # (threads 0 -> None: all CPUs)
+    got = dataclasses.asdict(fc.settings.fingerprints.core_settings(hair))
     assert got == pytest.approx(dataclasses.asdict(defaults))  # RNA floats are float32
 
 

@@ -12,7 +12,7 @@ pytestmark = pytest.mark.blender
 
 
 def handlers():
-    return sys.modules[ADDON + ".operators.handlers"]
+    return sys.modules[ADDON + ".operators.frame.handlers"]
 
 
 def test_undo_pre_stops_a_running_bake_and_keeps_its_frames(fc, tmp_path):
@@ -20,11 +20,11 @@ def test_undo_pre_stops_a_running_bake_and_keeps_its_frames(fc, tmp_path):
     first, as Esc does (frames kept, not baked, the setup no longer 'baking'), and the
     frame handler evaluates the setup again. (Without it every later step of the bake
     raised ReferenceError and the setup stayed 'baking': never shown again.)"""
-    ops_bake = sys.modules[ADDON + ".operators.ops_bake"]
+    ops_bake = sys.modules[ADDON + ".operators.ops.bake"]
     hair, _box, _out = build_setup(fc, "")
     save_in(tmp_path)
     scene = bpy.context.scene
-    job = fc.bake.BakeJob(scene, [hair])
+    job = fc.store.bake.BakeJob(scene, [hair])
     job.step()
     job.step()
     ops_bake.RUNNING.add(job)  # (what invoke does)
@@ -33,17 +33,17 @@ def test_undo_pre_stops_a_running_bake_and_keeps_its_frames(fc, tmp_path):
     finally:
         ops_bake.RUNNING.discard(job)
     assert job.stopped == ops_bake.STOPPED_BY_UNDO
-    assert not fc.registry.get_runtime(hair).baking
+    assert not fc.store.registry.get_runtime(hair).baking
     assert not hair.furcollide.is_baked
     assert bake_files_of(hair) == ["frame_000001.npz", "frame_000002.npz"]
     # stopped once: the operator's own end (its next event) finishes nothing again
     job.stop("again")
     assert job.stopped == ops_bake.STOPPED_BY_UNDO
     scene.frame_set(1)  # the frame handler solves the start frame again
-    assert 1 in fc.registry.get_runtime(hair).memory
+    assert 1 in fc.store.registry.get_runtime(hair).memory
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    assert fc.frame_rules.evaluate(fc.Setup(hair, scene, depsgraph)) is (
-        fc.frame_rules.Outcome.CACHE)
+    assert fc.frame.rules.evaluate(fc.Setup(hair, scene, depsgraph)) is (
+        fc.frame.rules.Outcome.CACHE)
 
 
 def test_undo_pre_without_a_bake_does_nothing(fc):
@@ -51,4 +51,4 @@ def test_undo_pre_without_a_bake_does_nothing(fc):
     handlers().on_undo_pre(bpy.context.scene)
     handlers().on_undo_post(bpy.context.scene)  # (headless: no refresh timer)
     bpy.context.scene.frame_set(1)
-    assert fc.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.registry.status_for(hair) == ("INFO", "")

@@ -1,0 +1,12 @@
+"""The setup's settings: Blender properties on the hair object, and reading them.
+
+Modules
+-------
+properties           the settings on the source hair (``Object.furcollide``)
+properties_pipeline  the fur pipeline stages' settings (motion, render groom, children)
+property_helpers     the settings' update callbacks and property factories
+fingerprints         core Settings from the properties; signature, structure, time key
+keyed                keyed and driven settings: their values at any frame
+maps                 parameter maps: per-curve settings read from the evaluated hair
+motion               wind, jiggle, Region of Influence, distance: the core's plain values
+"""

@@ -1,0 +1,423 @@
+"""Bake and resume: solve a frame range in order and write it to disk.
+
+A bake writes ``frame_NNNNNN.npz`` files (see :mod:`..core.framecache`) into the
+setup's folder under its Cache Directory (:func:`bake_directory`). Each frame is solved
+by :func:`bake_frame` through the same :func:`solve.solve_frame` as playback.
+Finished frames survive a cancel or a crash and the next bake resumes after the last
+one whose settings match (:func:`resume_frame`) and whose inputs still hold
+(:func:`resume_inputs_match`). A baked setup only reads its files until Free Bake.
+:class:`BakeJob` bakes several setups of a scene in one pass over the frames; the bake
+operators (:mod:`..ops.bake`) and the command line (:mod:`..ops.cli`) drive it.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+
+import bpy
+import numpy as np
+
+from ...core import framecache
+from ..blender import bridge
+from ..frame import children, groom, output, rules, solve, topology
+from ..frame.clock import clock
+from ..frame.colliders import collider_list, keep_placements, read_for_solve
+from ..frame.inputs import prepare_input, read_inputs
+from ..frame.record import current_inputs, first_change, fixed_change, solved_inputs
+from ..frame.setup import Setup
+from ..settings import keyed, motion
+from ..settings.fingerprints import core_settings, structure
+from . import registry
+
+
+def bake_directory(ob) -> str:
+    """Absolute bake directory of the setup (raises ValueError if unsaved).
+
+    A finished bake is read where it was written (``bake_path``, kept valid by Save
+    As). A partial one (a failed, cancelled or crashed bake) is resumed there only
+    while the Cache Directory still names that folder: once the artist points the
+    Directory elsewhere (a typo fixed, the farm's share), the next Bake goes there.
+    """
+    s = ob.furcollide
+    kept = bpy.path.abspath(s.bake_path) if s.bake_path else ""
+    if kept and s.is_baked:
+        return kept
+    wanted = directory_from_settings(ob)
+    return kept if kept and _same_path(kept, wanted) else wanted
+
+
+def _same_path(a, b) -> bool:
+    """Do the absolute paths ``a`` and ``b`` name the same folder (case as the OS)?"""
+    return os.path.normcase(os.path.abspath(a)) == os.path.normcase(os.path.abspath(b))
+
+
+def directory_from_settings(ob) -> str:
+    """The bake directory the setup's Cache Directory names (raises ValueError if a
+    relative Directory needs an unsaved .blend)."""
+    s = ob.furcollide
+    if not bpy.data.filepath and s.cache_directory.startswith("//"):
+        raise ValueError(
+            "Save the .blend file first: the bake cache is written next to it "
+            f"('{s.cache_directory}')"
+        )
+    root = bpy.path.abspath(s.cache_directory)
+    blend = os.path.splitext(os.path.basename(bpy.data.filepath))[0] or "untitled"
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", ob.name)
+    return os.path.join(root, blend, f"{name}_{registry.ensure_uid(ob)[:8]}")
+
+
+def settings_fingerprint(ob) -> str:
+    """What every frame of a bake shares (:func:`fingerprints.structure`, objects by
+    name): with each frame's keyable values (its record), what a bake file must match
+    to be resumed from."""
+    return structure(ob, stable=True)
+
+
+def bake_frame(setup, directory, trust_solver) -> dict:
+    """Solve the current frame ``f`` of ``setup`` for a bake and write it to ``directory``.
+
+    Parameters
+    ----------
+    setup : setup.Setup
+        The setup in the baked scene, at frame ``f`` (``frame_start`` resets the solver).
+    directory : str
+        Absolute bake directory.
+    trust_solver : bool
+        The solver's state is frame ``f - 1``'s (just solved by this bake);
+        otherwise that state is read from ``f - 1``'s file.
+
+    Returns
+    -------
+    dict
+        The frame's stats (curve counts per status, ``solve_ms``).
+    """
+    rt, f = setup.rt, setup.frame
+    clock.start()
+    inp = read_inputs(setup)
+    if trust_solver and rt.topology is not None and rt.topology != inp.key:
+        # (frames of other curves than the frame before: no playback could show them)
+        raise ValueError(topology.topology_message(setup.ob, rt.topology, inp.key,
+                                                        "baking", setup.s.frame_start))
+    rt.adopt_topology(inp.key)
+    prepare_input(setup, inp)
+    output.sync_output(setup, inp)
+    solver = setup.ensure_solver(inp)
+    if rules.starts_here(setup):  # (the start frame, or enabled again)
+        solver.reset()
+    elif not trust_solver:
+        _p, _st, offsets, stored = framecache.read_frame(directory, f - 1)
+        if not np.array_equal(offsets, inp.offsets):
+            raise ValueError(f"bake frame {f - 1} was made for other curves")
+        solver.state = framecache.decode_state(stored, rt.memory.sparse)
+    read_for_solve(setup, inp, continuous=trust_solver, fresh=rules.starts_here(setup))
+    rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
+    result = solve.solve_frame(setup, inp)
+    rt.solver_frame = f
+    fp = settings_fingerprint(setup.ob)
+    state = solver.state
+    state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
+    rt.stats = dict(result.stats, source="bake")
+    groom_part = _bake_groom(setup, result.points)  # the render groom is baked with its guides
+    # The children are made from the guides written (their stack evaluates the output).
+    output.write(setup, inp, result.points, result.status, result.changed, result.attributes)
+    children_part = children.bake_frame(setup)
+    extra = {groom.BAKE_PART: groom_part, children.BAKE_PART: children_part}
+    framecache.write_frame(directory, f, result.points, result.status, inp.offsets, state,
+                           rt.memory.sparse, result.attributes,
+                           inputs=solved_inputs(setup, inp),
+                           extra={k: v for k, v in extra.items() if v is not None})
+    rt.stats = dict(rt.stats, **clock.stats())
+    rt.invalid_note = rules.invalid_note(result.problems)
+    if rt.invalid_note:
+        setup.set_status(*rt.invalid_note)
+    return rt.stats
+
+
+def _bake_groom(setup, guides_world):
+    """The render groom's arrays for the frame's bake file (None: no render groom, or
+    it failed: then it is computed on every frame shown, and the console says why)."""
+    try:
+        return groom.bake_frame(setup, guides_world)
+    except Exception as exc:  # noqa: BLE001 - the guides are baked all the same
+        print(f"FurCollide bake '{setup.ob.name}': frame {setup.frame}: render groom not "
+              f"baked: {registry.describe(exc)}", flush=True)
+        return None
+
+
+def varying_source(ob, scene) -> str:
+    """The status of a source whose curves differ between Frame Start and the next
+    frame (:func:`topology.topology_message`), '' when they do not. Looked at only
+    when a modifier of the source scatters its curves without the Surface's rest
+    position: Bake refuses such a source before writing a frame playback cannot show."""
+    s = ob.furcollide
+    f0 = s.frame_start
+    if f0 >= s.frame_end or not topology.unrested(ob):
+        return ""
+    back = (scene.frame_current, scene.frame_subframe)
+    keys = []
+    with registry.handlers_held():  # (a look at two frames: nothing solved)
+        for f in (f0, f0 + 1):
+            scene.frame_set(f)
+            oe = ob.evaluated_get(scene_depsgraph(scene))
+            keys.append(framecache.topology_key(bridge.curve_offsets(oe.data)))
+    if keys[0] == keys[1]:
+        return ""
+    scene.frame_set(back[0], subframe=back[1])  # (the frame shown again, as it was)
+    return topology.topology_message(ob, keys[0], keys[1], "baking", f0)
+
+
+def scene_depsgraph(scene):
+    """The evaluated depsgraph of ``scene`` (the context's one when it is the
+    context scene; else its first view layer's, brought up to date): the CLI's
+    ``--scene`` may name a scene no window shows."""
+    if scene == bpy.context.scene:
+        return bpy.context.evaluated_depsgraph_get()
+    depsgraph = scene.view_layers[0].depsgraph
+    depsgraph.update()
+    return depsgraph
+
+
+def resume_inputs_match(ob, directory, f, scene) -> bool:
+    """Are frame ``f``'s inputs (source, colliders, surface, settings) what the
+    partial bake solved at ``f`` (its frame-inputs record)? An edited collider or
+    source means starting over: the settings fingerprint does not see geometry."""
+    with registry.handlers_held():  # no live solve while looking
+        scene.frame_set(f)
+        setup = Setup(ob, scene, scene_depsgraph(scene))
+        old = framecache.read_inputs(directory, f)
+        if old is None:  # baked before FurCollide stored the record: start over
+            return False
+        now = current_inputs(setup, read_inputs(setup, attach=False), like=old)
+        return first_change(setup, old, now) is None
+
+
+def resume_frame(ob, directory) -> int | None:
+    """Last frame of a contiguous, matching partial bake (None: start over)."""
+    s = ob.furcollide
+    if motion.values(s.motion).needs_history:
+        return None  # jiggle needs the roots of every frame since the start: start over
+    have = set(framecache.list_frames(directory))
+    fp = settings_fingerprint(ob)
+    setup = Setup(ob, bpy.context.scene, None)
+    last = None
+    f = s.frame_start
+    while f in have and f <= s.frame_end:
+        try:
+            with np.load(framecache.frame_path(directory, f), allow_pickle=False) as z:
+                key = next((k for k in z.files if k.endswith("__fingerprint")), None)
+                ok = key is not None and z[key].tobytes().decode() == fp
+            # (the keyable values at f: a key edited since the bake changes them there)
+            ok = ok and not fixed_change(setup, framecache.read_inputs(directory, f), f)
+        except framecache.UNREADABLE:
+            ok = False
+        if not ok:
+            break
+        last = f
+        f += 1
+    return last
+
+
+def _follows(ob) -> bool:
+    """Does the setup use Follow Collider Motion at any frame (on, keyed or driven)?"""
+    return bool(ob.furcollide.follow_collider_motion) or keyed.Animation(ob).animates(
+        "furcollide.follow_collider_motion")
+
+
+class BakeError(RuntimeError):
+    """A bake could not start or a frame failed (message is user-facing)."""
+
+
+class BakeJob:
+    """Bake several setups of one scene in a single pass over the frames.
+
+    Parameters
+    ----------
+    scene : bpy.types.Scene
+    sources : list of bpy.types.Object
+        Setup source objects (not baked yet).
+    verbose : bool
+        Print one line per frame (background runs).
+    """
+
+    def __init__(self, scene, sources, verbose=False):
+        self.scene = scene
+        self.verbose = verbose
+        self.jobs = []  # [source, directory, next_frame, last_solved]
+        self.orig_frame = (scene.frame_current, scene.frame_subframe)
+        self.errors = []
+        self.frames_done = 0
+        self.skipped = []
+        #: Why the bake was stopped from outside (:meth:`stop`: an undo), '' while not.
+        self.stopped = ""
+        #: The setups' runtimes (session objects, valid when Blender's data is not:
+        #: :meth:`finish` clears their ``baking`` flag through them).
+        self.runtimes = []
+        for ob in sources:
+            s = ob.furcollide
+            if not registry.belongs(ob, scene):  # (its hair is in this scene too)
+                raise BakeError(registry.refusal_in(ob, scene)
+                                or f"'{ob.name}' is not in scene '{scene.name}'")
+            if s.output is None:
+                raise BakeError(f"'{ob.name}': the output hair object is missing")
+            try:
+                core_settings(ob)
+            except ValueError as exc:
+                raise BakeError(f"'{ob.name}': {exc}") from None
+            try:
+                directory = bake_directory(ob)
+            except ValueError as exc:
+                raise BakeError(str(exc)) from None
+            old = bpy.path.abspath(s.bake_path) if s.bake_path else ""
+            if old and not _same_path(old, directory) and verbose:
+                print(f"FurCollide bake '{ob.name}': the Cache Directory changed since the "
+                      f"partial bake in '{old}': baking into '{directory}' (the old folder "
+                      "is left as it is)", flush=True)
+            why = varying_source(ob, scene)
+            if why:
+                raise BakeError(f"'{ob.name}': {why}")
+            last = resume_frame(ob, directory)
+            if last is not None and not resume_inputs_match(ob, directory, last, scene):
+                if verbose:
+                    print(
+                        f"FurCollide bake '{ob.name}': the source or a collider changed since "
+                        f"the partial bake (frame {last}): starting over",
+                        flush=True,
+                    )
+                last = None
+            nxt = s.frame_start if last is None else last + 1
+            self.jobs.append([ob, directory, nxt, None])
+        if not self.jobs:
+            raise BakeError("Nothing to bake")
+        self.first = min(j[2] - (j[2] > j[0].furcollide.frame_start and _follows(j[0]))
+                         for j in self.jobs)
+        self.last = max(j[0].furcollide.frame_end for j in self.jobs)
+        self.frame = self.first
+        for ob, directory, nxt, _ in self.jobs:
+            s = ob.furcollide
+            try:
+                s.bake_path = bpy.path.relpath(directory) if bpy.data.filepath else directory
+            except ValueError:  # other drive on Windows
+                s.bake_path = directory
+            if nxt > s.frame_start and self.verbose:
+                print(f"FurCollide bake '{ob.name}': resuming after frame {nxt - 1}", flush=True)
+            registry.adopt(ob, scene)  # (a setup of an older file: baked here, it is ours)
+            rt = registry.get_runtime(ob)
+            rt.baking = True
+            self.runtimes.append(rt)
+
+    @property
+    def total(self) -> int:
+        return max(0, self.last - self.first + 1)
+
+    @property
+    def done(self) -> bool:
+        return self.frame > self.last
+
+    def step(self) -> None:
+        """Bake the next frame of every setup that needs it (raises BakeError)."""
+        f = self.frame
+        self.scene.frame_set(f)
+        depsgraph = scene_depsgraph(self.scene)
+        for job in self.jobs:
+            ob, directory, nxt, last = job
+            s = ob.furcollide
+            if f == nxt - 1 and _follows(ob):
+                # The frame before a resumed one: only where its colliders are (Follow
+                # Collider Motion takes their motion since this frame, as playback does).
+                setup = Setup(ob, self.scene, depsgraph)
+                collider_list(setup)
+                keep_placements(setup)
+                continue
+            if f < nxt or f > s.frame_end:
+                continue
+            try:
+                st = bake_frame(Setup(ob, self.scene, depsgraph), directory,
+                                trust_solver=(last == f - 1))
+            except Exception as exc:  # noqa: BLE001 - becomes a report
+                kept = (f"frames {s.frame_start}-{f - 1} are kept; bake again to resume"
+                        if f > s.frame_start else "no frame was written")
+                raise BakeError(f"'{ob.name}' frame {f}: {registry.describe(exc)} ({kept})"
+                                ) from exc
+            job[3] = f
+            if self.verbose:
+                print(
+                    f"FurCollide bake '{ob.name}': frame {f} "
+                    f"({f - self.first + 1}/{self.total}) colliding {st['colliding']}, "
+                    f"pinched {st['pinched']}, unresolved {st['unresolved']}, "
+                    f"{st['solve_ms']:.1f} ms",
+                    flush=True,
+                )
+        self.frames_done += 1
+        self.frame += 1
+
+    def run(self) -> list:
+        """Bake every frame now; returns the baked sources.
+
+        A failed frame keeps every finished frame (the next bake resumes)
+        and re-raises its :class:`BakeError`.
+        """
+        try:
+            while not self.done:
+                self.step()
+        except BakeError:
+            self.finish(cancelled=True)
+            raise
+        return self.finish()
+
+    def finish(self, cancelled=False, restore_frame=True) -> list:
+        """Mark finished setups baked, restore the frame (``restore_frame``); returns the
+        baked sources."""
+        for rt in self.runtimes:  # first, and without Blender's data: never left baking
+            rt.baking = False
+        baked = []
+        for ob, directory, _nxt, _last in self.jobs:
+            rt = registry.get_runtime(ob)
+            s = ob.furcollide
+            have = set(framecache.list_frames(directory))
+            complete = all(f in have for f in range(s.frame_start, s.frame_end + 1))
+            if complete and not cancelled:
+                s.is_baked = True
+                rt.memory.clear()
+                rt.hold = None
+                baked.append(ob)
+        if restore_frame:
+            f, sub = self.orig_frame
+            self.scene.frame_set(f, subframe=sub)
+        return baked
+
+    def stop(self, why: str) -> None:
+        """Stop the bake now, as Esc does (the finished frames are kept, nothing is
+        marked baked), because of ``why``; the frame is left as it is. An undo calls it
+        before it replaces Blender's data (:func:`ops.bake.stop_for_undo`): the frame
+        it goes back to is the undo step's."""
+        if not self.stopped:
+            self.stopped = why
+            self.finish(cancelled=True, restore_frame=False)
+
+
+def bake_sharers(ob) -> list:
+    """Other setups whose bake is in ``ob``'s bake directory (a copy of a baked
+    setup: Shift-D, a full copy of the scene) by name."""
+    path = ob.furcollide.bake_path
+    if not path:
+        return []
+    d = bpy.path.abspath(path)
+    return [
+        o.name for o in bpy.data.objects
+        if o != ob and getattr(o, "furcollide", None) is not None and o.furcollide.is_setup
+        and o.furcollide.bake_path and _same_path(bpy.path.abspath(o.furcollide.bake_path), d)
+    ]
+
+
+def free_bake(ob) -> int:
+    """Delete the bake files of the setup on ``ob``; returns how many. Files another
+    setup also reads (:func:`bake_sharers`) are kept: only ``ob`` forgets them."""
+    s = ob.furcollide
+    n = 0
+    if s.bake_path and not bake_sharers(ob):
+        n = framecache.remove_frames(bpy.path.abspath(s.bake_path))
+    s.is_baked = False
+    s.bake_path = ""
+    registry.clear_runtime(ob)
+    return n
