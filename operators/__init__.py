@@ -10,12 +10,12 @@ Modules
 handlers             Blender's handlers: thin loops over the setups, never raise
 frame_rules          what a frame does (solve, show cached, hold, pass through): Outcome
 frame_inputs         the evaluated source read into FrameInputs; the frame-inputs record
-frame_solve          solve_frame(setup, inputs) -> FrameResult (playback, bake, CLI, demo)
+frame_solve          solve_frame(setup, inputs) -> FrameResult: core.pipeline.frame's sequence
 frame_outputs        writing the output hair: positions, status, colours, attributes
-groom_stage          the render groom follows the collided guides (+ clearance pass)
+groom_stage          the render groom follows the collided guides (+ clearance pass); its storage
 children_stage       the output's own children stack, cleared live into the children output
 rest_position        a source whose curves change every frame: the message and the fix
-motion               wind, jiggle, Region of Influence, collider distance (no Blender)
+motion               the motion settings read into core.pipeline.frame.Motion
 colliders            which objects collide; their core Colliders kept across frames
 fur_attach           Fur Attach's binding (storage) and the attached input curves
 setup                Setup (one setup as one evaluation sees it), settings, signature
