@@ -29,6 +29,7 @@ from helpers import (
     pipeline_state,
     play,
     play_pipeline,
+    poly,
     positions,
     ragged_groom,
     render_camera,
@@ -112,6 +113,23 @@ def test_render_groom_drawn_as_catmull_rom_clears_the_collider(fc):
         assert drawn_inside(gout, [box]) == (0, 0), f"frame {f}"
         np.testing.assert_allclose(world(gout)[offsets_of(gout)[:-1]], roots, atol=1e-5)
     assert fixed > 0
+
+
+def test_poly_render_groom_is_the_pass_without_a_margin_bit_for_bit(fc, monkeypatch):
+    """A Poly render groom is drawn as its points: its clearance pass is the pass
+    without splines, bit for bit."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    poly(groom)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    frames = range(1, 9)
+    got = [positions(gout).copy() for f in frames if scene.frame_set(f) is None]
+    assert guides.furcollide.stat_groom_fixed > 0
+    monkeypatch.setattr(fc.frame.groom, "world_splines", lambda *a, **k: None)
+    want = [positions(gout).copy() for f in frames if scene.frame_set(f) is None]
+    for f, a, b in zip(frames, got, want, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg=f"frame {f}")
 
 
 def test_render_groom_remove_restores_the_groom(fc):
