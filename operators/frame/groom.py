@@ -263,7 +263,9 @@ def _compute(setup, state, guides_world, remember=True):
         cols = collider_list(setup) if g.use_clearance else []
         entries = list(setup.rt.colliders.values()) if g.use_clearance else []
     guides = np.asarray(guides_world, np.float64)
-    sp = world_splines(g.output, setup.depsgraph) if cols else None
+    sp = None  # (an output with other curves than the bound ones: write_groom says so)
+    if cols and np.array_equal(bridge.curve_offsets(g.output.data), binding.render_offsets):
+        sp = world_splines(g.output, setup.depsgraph)
     key = (
         state.bind_id, settings_key(setup.ob), framecache.digest(guides),
         None if V is None else framecache.digest(V),
