@@ -110,6 +110,26 @@ FOLLOW_SPEED_ULPS = 64
 #: crossing for a float64 test.
 CLEARANCE_ULPS = 4
 
+#: Rigid parts handed over as vertices (a hat skinned to one bone: ``core.collider.pose``).
+#: New vertices that are, every used one to within this many float32 ulps of
+#: the coordinates (of the largest of the collider's extent and its largest
+#: coordinate, rounded up to a power of two, as ``CLEARANCE_ULPS``), the
+#: vertices the collider's structures were built for moved by one rigid
+#: transform keep those structures, placed by the fitted transform: no
+#: rebuild. The shells are then built this much farther out (every face by at
+#: least it, as a Collision Offset moves faces), so the fitted placement never
+#: lets a curve closer to the true vertices than the clearance margin. Float32
+#: skinning (a bone's float32 matrix times float32 vertices) and the rounding
+#: of the vertices handed over leave residuals of 1 to 4 ulps; 16 leaves room
+#: for a chain of float32 bone matrices, while a real deformation of even a
+#: hundred-thousandth of the collider's size is rebuilt.
+RIGID_FIT_ULPS = 16
+
+#: The rigid fit's rotation is fitted to this many vertices spread over the
+#: mesh (then checked on every vertex): a deforming collider is turned down by
+#: the sample alone, for about a tenth of a millisecond.
+RIGID_FIT_SAMPLE = 256
+
 #: Collider vertices closer than this fraction of the mesh's bounding-box
 #: diagonal are one vertex for its topology (closedness, windings): seams an
 #: import left unwelded still close the mesh (``core.meshfix``).

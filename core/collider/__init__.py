@@ -15,7 +15,9 @@
 A collider keeps its triangles in its own (object) space. Rigid motion only
 changes :attr:`Collider.matrix`: rays are moved into the collider's space, the
 BVH is never rebuilt. Deformation sets :attr:`Collider.vertices`, which
-rebuilds the BVH lazily, and only when the vertices really changed.
+rebuilds the BVH lazily, and only when the vertices really changed and did
+not only move rigidly (a hat skinned to one bone: :mod:`.pose` fits the
+motion and places the BVH it has with it).
 :meth:`Collider.place` does both as one update and remembers the placement
 before it (:attr:`Collider.previous`): the surface's velocity at a point
 (:meth:`Collider.velocities`, Follow Collider Motion).
@@ -211,8 +213,9 @@ class Collider:
 
     @property
     def vertices(self) -> np.ndarray:
-        """(n, 3) float32 vertices in the collider's own space (read-only view)."""
-        v = self.mesh.V.view()
+        """(n, 3) float32 vertices in the collider's own space, as last given
+        (read-only view)."""
+        v = self.pose.vertices.view()
         v.flags.writeable = False
         return v
 
@@ -225,7 +228,7 @@ class Collider:
         """Shape version: 0 at construction, +1 each time :attr:`vertices`
         changes. Derived data keyed on it stays valid while the collider only
         moves (see :meth:`derived`)."""
-        return self.mesh.version
+        return self.pose.user_version
 
     def derived(self, name: str, key, build):
         """Data derived from this collider, kept with it under ``name``.
@@ -269,8 +272,8 @@ class Collider:
     # ----------------------------------------------------------- placement
     @property
     def matrix(self) -> np.ndarray:
-        """(4, 4) float64 world transform (a copy)."""
-        return self.pose.M.copy()
+        """(4, 4) float64 world transform, as last given (a copy)."""
+        return self.pose.user_M.copy()
 
     @matrix.setter
     def matrix(self, M):
