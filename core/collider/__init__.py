@@ -115,8 +115,10 @@ class Collider:
         A hint that the vertices change every frame (skinning, shape keys,
         cloth). It changes no result (the BVH is a function of the vertices
         and, with an offset, of the shell alone, so results never depend on
-        the frames played before), only work: the inside test of a deforming
-        collider never builds its fine per-shape grid (see
+        the frames played before; a rigid motion given as vertices is fitted
+        to the rest shape, the vertices the collider was constructed with,
+        never to a shape of a later frame: see :mod:`.pose`), only work: the
+        inside test of a deforming collider never builds its fine per-shape grid (see
         :meth:`contains_grid`), which a second query of the same frame (the
         render groom's clearance pass after the guides) would otherwise build
         every frame for one use.

@@ -11,16 +11,23 @@ Rigid parts handed over as vertices
 -----------------------------------
 A hat, belt or buckle skinned to one bone arrives as new vertices every frame,
 although it only moves rigidly. When new vertices are, to within
-``tol.RIGID_FIT_ULPS`` float32 ulps, the vertices the collider's structures
-were built for moved by one rigid transform (:func:`rigid_fit`), the pose
-keeps those structures (the mesh's shape does not change) and places them
-with the fitted transform: the *effective* matrix :attr:`Pose.M` is the
-user's matrix times the fit. The fit's residual is covered by the shells
-(``Shells``), which are then built that much farther out
-(:attr:`Pose.allowance`); everything else (the occupancy grid, the inside
+``tol.RIGID_FIT_ULPS`` float32 ulps, the collider's *rest shape* (the vertices
+it was constructed with) moved by one rigid transform (:func:`rigid_fit`), the
+pose keeps the structures of the rest shape (the mesh's shape is the rest
+shape again, built once) and places them with the fitted transform: the
+*effective* matrix :attr:`Pose.M` is the user's matrix times the fit. The
+fit's residual is covered by the shells (``Shells``), which are then built
+that much farther out (:attr:`Pose.allowance`); everything else (the occupancy grid, the inside
 test, normals, velocities) works on the fitted placement as on any rigid
 motion. The public placement (:attr:`Pose.user_M`, :attr:`Pose.vertices`,
 :attr:`Pose.previous`) is always what the caller gave.
+
+The fit is always against the rest shape, never against the last shape built:
+a frame's result is a function of the collider's construction vertices and that
+frame's placement, never of the frames played between. It is not bit-identical
+to a collider constructed at that frame's vertices (another BVH), only as safe
+(the allowance) and within the solver's own precision of it (tests/core/
+test_collider_rigid_fit.py). ``Pose.fit_rigid = False`` builds every new shape.
 """
 
 from __future__ import annotations
@@ -66,18 +73,19 @@ def ulps_of(r) -> float:
 def rigid_fit(ref, V, used, lo, hi):
     """A rigid transform ``T`` (4, 4) that moves every used vertex of ``ref`` to
     within ``allowance`` of its place in ``V``: ``(T, allowance)``, or None when
-    there is none within ``tol.RIGID_FIT_ULPS`` float32 ulps.
+    there is none.
 
-    ``allowance`` is the largest distance found, rounded up to a power of two
-    times one float32 ulp (:func:`ulps_of`) of the
-    largest of the extent ``hi - lo`` and the coordinates of the used ``ref``
-    vertices (their bounds ``lo``, ``hi``) and of their fitted places. The
-    rotation is fitted to a spread sample of the used vertices
-    (``tol.RIGID_FIT_SAMPLE``: Horn's quaternion, :func:`rotations.quat_fit`;
-    Kabsch where that is not trusted), then checked on the sample (a collider
-    that deforms is turned down there, at a small cost) and on every used
-    vertex. Only the check decides: the fit need not be the best one, only
-    within the tolerance.
+    ``allowance`` is ``tol.RIGID_FIT_ULPS`` float32 ulps (:func:`ulps_of`) of the
+    largest of the extent ``hi - lo``, the coordinates of the used ``ref``
+    vertices (their bounds ``lo``, ``hi``) and those of their fitted places: a
+    power of two that depends on the placement's binade only, not on the fit's
+    residual, so that the shells it asks for (``Shells``) are built once and
+    kept while the collider moves. The rotation is fitted to a spread sample of
+    the used vertices (``tol.RIGID_FIT_SAMPLE``: Horn's quaternion,
+    :func:`rotations.quat_fit`; Kabsch where that is not trusted), then checked
+    on the sample (a collider that deforms is turned down there, at a small
+    cost) and on every used vertex. Only the check decides: the fit need not be
+    the best one, only within the allowance.
 
     Parameters
     ----------
@@ -142,13 +150,10 @@ def rigid_fit(ref, V, used, lo, hi):
     off = residual(ref, V) if used is None else residual(ref[used], V[used])
     if not off <= limit:
         return None
-    # the allowance: the residual rounded up to a power of two times an ulp, so
-    # that the few shells it asks for are kept while it varies (see Shells)
-    allowance = ulp * float(2.0 ** np.ceil(np.log2(max(off / ulp, 1.0))))
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = t
-    return T, allowance
+    return T, limit
 
 
 @dataclass(frozen=True)
@@ -213,6 +218,9 @@ class Pose:
         self.mesh = mesh
         self.user_M, _ = as_matrix(matrix)
         self.shape = Shape(mesh.V, mesh.V)
+        # The rest shape every fit is against (its bounds kept: the mesh's change)
+        self.rest = mesh.V
+        self.rest_bounds = tuple(b.copy() for b in mesh.bounds())
         self.user_version = 0
         self._nearest_faces = nearest_faces
         self._set_effective()
@@ -273,20 +281,20 @@ class Pose:
         if not np.array_equal(V2, self.shape.vertices):
             self.user_version += 1
             self.shape = self.fitted(V2)
-            if self.shape.ref is not self.mesh.V:
-                self.mesh.set_shape(V2)
+            if self.shape.ref is not self.mesh.V:  # V2, or the rest shape again
+                self.mesh.set_shape(self.shape.ref)
         self._set_effective()
 
     def fitted(self, V2) -> Shape:
-        """The :class:`Shape` of vertices ``V2`` (same topology) against the mesh's
-        current shape: the shape itself, a rigid fit of it, or ``V2`` as a new one
+        """The :class:`Shape` of vertices ``V2`` (same topology) against the rest
+        shape: the rest shape itself, a rigid fit of it, or ``V2`` as a new one
         (its ``ref`` is then ``V2``)."""
         mesh = self.mesh
-        ref = mesh.V
+        ref = self.rest
         if np.array_equal(V2, ref):
             return Shape(ref, ref)
         if self.fit_rigid and tol.RIGID_FIT_ULPS > 0 and len(mesh.F):
-            fit = rigid_fit(ref, V2, None if mesh.all_used else mesh.used, *mesh.bounds())
+            fit = rigid_fit(ref, V2, None if mesh.all_used else mesh.used, *self.rest_bounds)
             if fit is not None:
                 return Shape(V2, ref, *fit)
         return Shape(V2, V2)
