@@ -203,24 +203,27 @@ SPLINE_MARGIN_STEPS = 16
 # (two threads or one, one structure or another): only the time depends on them,
 # never a result (the tests force each way and compare the bits).
 
-#: A step solves its curves in two halves, one per thread, from this many
-#: curves of work (``StepContext.in_halves``): in Soft every curve solved;
-#: in Stiff/Bend, by phase, the unrotated curves near a collider (tested at
-#: their input shape) and the curves searched (rotated ones near a collider,
-#: new contacts). Curves are independent, so each half gives the curves what
-#: the whole would, bit for bit; the halves' numpy passes and ray queries
-#: overlap (both release the GIL). Below it the per-call overhead of twice the
-#: numpy calls costs more than the overlap gains. Measured A/B in one process
-#: (``make bench``, 24 frames): Bend under the orbiting ellipsoid (7,300
-#: tested, 3,000 searched: only the test split) 39.5 ms, 38-39 split at this
-#: threshold, 46 with every phase split; under the hat (15,000 searched)
-#: 83-89 -> 79-84 ms; Soft 87-93 -> 75-78 and 201-210 -> 140-155 ms; the
-#: render groom's clearance pass (a fresh solver: all new contacts) 72 -> 65 ms.
+#: A step solves its curves in parts, one per thread (two halves on two
+#: threads; on more, parts of at least half this many curves: ``core.rays.
+#: split_count``), from this many curves of work (``StepContext.in_halves``):
+#: in Soft every curve solved; in Stiff/Bend, by phase, the unrotated curves
+#: near a collider (tested at their input shape) and the curves searched
+#: (rotated ones near a collider, new contacts). Curves are independent, so
+#: each part gives the curves what the whole would, bit for bit; the parts'
+#: numpy passes and ray queries overlap (both release the GIL). Below it the
+#: per-call overhead of twice the numpy calls costs more than the overlap
+#: gains. Measured A/B in one process (``make bench``, 24 frames): Bend under
+#: the orbiting ellipsoid (7,300 tested, 3,000 searched: only the test split)
+#: 39.5 ms, 38-39 split at this threshold, 46 with every phase split; under the
+#: hat (15,000 searched) 83-89 -> 79-84 ms; Soft 87-93 -> 75-78 and 201-210 ->
+#: 140-155 ms; the render groom's clearance pass (a fresh solver: all new
+#: contacts) 72 -> 65 ms.
 SPLIT_MIN_CURVES = 4096
 
 #: Per-frame stages of the fur pipeline (Fur Attach, the render groom's
-#: deformation, wind) run in two halves on two threads (``core.rays.in_two``)
-#: from this many items (curves, guides). The items are independent, so the
+#: deformation, wind) run in parts, one per thread (two halves on two threads,
+#: parts of at least half this many items on more: ``core.rays.in_two``) from
+#: this many items (curves, guides). The items are independent, so the
 #: halves give what the whole gives, bit for bit; their long numpy passes
 #: release the GIL and overlap. Below it the halves' own overhead (a hand-over
 #: to the ray pool, twice the numpy calls) is more than they save. Measured (2
