@@ -31,6 +31,8 @@ It prints the targets of issue 10 with PASS/MISS; it never asserts them.
     .venv/bin/python bench/bench_core.py --quick    # small smoke run (~10 s)
     .venv/bin/python bench/bench_core.py --scenes sustained --modes bend --only rigid
     .venv/bin/python bench/bench_core.py --profile  # + cProfile of one run
+    .venv/bin/python bench/bench_core.py --threads 8 --scaling  # each phase, 1 vs 8 threads
+    make bench ARGS="--threads 8 --scaling"
 """
 
 from __future__ import annotations
@@ -88,7 +90,9 @@ def parse_args(argv=None):
     ap.add_argument("--cvs", type=int, default=8, help="CVs per curve (default 8)")
     ap.add_argument("--frames", type=int, default=48)
     ap.add_argument("--tris", type=int, default=130_000, help="collider triangles (approx.)")
-    ap.add_argument("--threads", type=int, default=2, help="ray-tracing threads (core + floor)")
+    ap.add_argument("--threads", type=int, default=None,
+                    help="ray-tracing threads (core + floor; default 2); given, each phase's"
+                    " speed-up over one thread is printed too (--scaling)")
     ap.add_argument("--scenes", default="brief,sustained",
                     help="comma-separated: brief, sustained (default both)")
     ap.add_argument("--modes", default="bend,soft",
@@ -128,6 +132,9 @@ def parse_args(argv=None):
         " BLAS, and the untimed input generation's BLAS workers would otherwise spin"
         " into the timed frames)",
     )
+    ap.add_argument("--scaling", action="store_true",
+                    help="also step every frame on one thread (right after, the same"
+                    " collider) and print each phase's speed-up (on with --threads N > 1)")
     ap.add_argument("--no-check", action="store_true", help="skip the untimed crossing check")
     ap.add_argument("--no-maps", action="store_true",
                     help="no twin run with uniform parameter maps beside the rigid runs")
@@ -144,6 +151,9 @@ def parse_args(argv=None):
     for x in a.modes:
         if x not in ("stiff", "bend", "soft"):
             ap.error(f"unknown mode {x!r}")
+    if a.threads is not None and a.threads > 1:
+        a.scaling = True  # make bench --threads N: how each phase scales
+    a.threads = 2 if a.threads is None else a.threads
     a.only = [x for x in (a.only or "rigid,skinned,deforming").split(",") if x]
     for x in a.only:
         if x not in KINDS:
@@ -295,6 +305,12 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         matrix_solver = Solver(fur.offsets, plain)
         matrix_solver.warm_start = solver.warm_start
     matrix_ms = []
+    # --scaling: the same frames on one thread, right after each timed step
+    single = None
+    if args.scaling and args.threads > 1:
+        single = Solver(fur.offsets, plain.replace(threads=1))
+        single.warm_start = solver.warm_start
+    single_ms, single_timings = [], []
 
     def step_matrix(pts, M):
         t0 = time.perf_counter()
@@ -363,6 +379,13 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         main_ms.append(1000 * (m1 - m0))
         if matrix_solver is not None and f % 2 == 0:
             step_matrix(pts, M)
+        if single is not None:
+            t0 = time.perf_counter()
+            r1 = single.step(pts, [col], growth=None)
+            single_ms.append(1000 * (time.perf_counter() - t0))
+            tm1 = getattr(r1, "timings", None)
+            if isinstance(tm1, dict) and f > 0:
+                single_timings.append({k: float(v) for k, v in tm1.items()})
         if maps is not None:
             if twin_res is None:
                 twin_res = step_maps(pts)
@@ -440,6 +463,10 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         steady_maps = maps_ms[1:] if len(maps_ms) > 1 else maps_ms
         out["maps"] = {"frame_ms": ms_stats(steady_maps), "frame_ms_all": maps_ms,
                        "same_bits": bool(maps_same)}
+    if single_ms:
+        out["one_thread"] = {"frame_ms": ms_stats(single_ms[1:] if len(single_ms) > 1
+                                                  else single_ms),
+                             "timings": single_timings}
     if matrix_ms:
         out["as_matrix_ms"] = ms_stats(matrix_ms[1:] if len(matrix_ms) > 1 else matrix_ms)
     if prof is not None:
@@ -573,6 +600,28 @@ def print_side_by_side(results, curves):
     row("crossing after solve", [
         f"{max(r['crossing_after_solve'])} max" if r["crossing_after_solve"] else "-"
         for r in runs])
+
+
+def print_scaling(results, threads):
+    """--scaling: each phase on one thread against ``threads`` (same frames, same
+    run: the speed-up, 1 thread / N threads)."""
+    runs = [r for r in results.values() if "one_thread" in r]
+    if not runs:
+        return
+    print(f"\nScaling (--scaling: medians over frames 2..N; speed-up = 1 thread / {threads}"
+          " threads, the same frames stepped right after each other)")
+    for r in runs:
+        one = r["one_thread"]
+        print(f"  {run_label(r)}:")
+        print(f"    {'phase':<12}{'1 thread':>12}{f'{threads} threads':>12}{'speed-up':>10}")
+        a, b = one["frame_ms"]["median"], r["frame_ms"]["median"]
+        print(f"    {'frame':<12}{a:10.1f} ms{b:10.1f} ms{a / b:9.2f}x")
+        for k in ("setup", "pinch", "frames", "solve", "output"):
+            a = float(np.median([t.get(k, 0.0) for t in one["timings"]])) if one["timings"] \
+                else 0.0
+            b = median_phase(r, k)
+            ratio = f"{a / b:9.2f}x" if b > 0 else "        -"
+            print(f"    {k:<12}{a:10.1f} ms{b:10.1f} ms{ratio}")
 
 
 def print_targets(results):
@@ -736,6 +785,7 @@ def main(argv=None):
             print(f"\n[{' '.join(key)}] floor : {fmt_ms(fl['total'])}   {floor_detail(fl)}")
 
     print_side_by_side(results, args.curves)
+    print_scaling(results, args.threads)
     if results:
         print_targets(results)
 
