@@ -110,22 +110,24 @@ FOLLOW_SPEED_ULPS = 64
 #: crossing for a float64 test.
 CLEARANCE_ULPS = 4
 
-#: Rigid parts handed over as vertices (a hat skinned to one bone: ``core.collider.pose``).
-#: New vertices that are, every used one to within this many float32 ulps of
-#: the coordinates (of the largest of the collider's extent and its largest
-#: coordinate, at rest and as placed, rounded up to a power of two, as
-#: ``CLEARANCE_ULPS``), the collider's rest shape moved by one rigid transform
-#: keep the rest shape's structures, placed by the fitted transform: no
-#: rebuild. The shells are then built this much farther out (every face by
-#: it, as a Collision Offset moves faces), so the fitted placement never lets a
-#: curve closer to the true vertices than the clearance margin; being a
-#: power of two of the placement's binade, not the fit's residual, those
-#: shells are built once and kept while the collider moves. Float32 skinning
-#: (a bone's float32 matrix times float32 vertices) and the rounding of the
-#: vertices handed over leave residuals of 1 to 4 ulps; 16 leaves room for a
-#: chain of float32 bone matrices, while a deformation that moves a vertex by
-#: more than 4e-6 of the largest coordinate (2e-5 is tested) is rebuilt. 0:
-#: no fit (every new shape is built).
+#: Rigid parts handed over as vertices (a hat skinned to one bone:
+#: ``core.collider.pose``). New vertices that are, every used one to within this
+#: many float32 ulps of the coordinates (of the largest of the collider's extent
+#: and its largest coordinate, at rest and as placed, rounded up to a power of two,
+#: as ``CLEARANCE_ULPS``), the collider's rest shape moved by one rigid transform
+#: keep the rest shape's structures, placed by the fitted transform: no rebuild.
+#: The shells are then built this much farther out (every face by it, as a
+#: Collision Offset moves faces), so the fitted placement never lets a curve closer
+#: to the true vertices than the clearance margin. They are grown by the fit's
+#: residual rounded up to a power of two ulps, not by this tolerance: float32
+#: skinning (a bone's float32 matrix times float32 vertices) leaves residuals under
+#: one ulp (measured on make bench's hat, near the origin and 10,000 units away),
+#: so the allowance is one ulp every frame and its shells are built once; growing
+#: them by the whole tolerance (16 ulps, 3 cm 10,000 units away) kept curves
+#: visibly farther than the rebuilt path. 16 leaves room for a chain of float32
+#: bone matrices, while a deformation that moves a vertex by more than 4e-6 of the
+#: largest coordinate (2e-5 is tested) is rebuilt. 0: no fit (every new shape is
+#: built).
 RIGID_FIT_ULPS = 16
 
 #: The rigid fit's rotation is fitted to this many vertices spread over the

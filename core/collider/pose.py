@@ -10,11 +10,13 @@ space centred on the mesh: :meth:`Pose.local_map`).
 Rigid parts handed over as vertices
 -----------------------------------
 A hat, belt or buckle skinned to one bone arrives as new vertices every frame,
-although it only moves rigidly. When new vertices are, to within
-``tol.RIGID_FIT_ULPS`` float32 ulps, the collider's *rest shape* (the vertices
-it was constructed with) moved by one rigid transform (:func:`rigid_fit`), the
-pose keeps the structures of the rest shape (the mesh's shape is the rest
-shape again, built once) and places them with the fitted transform: the
+although it only moves rigidly. A collider given its *rest shape*
+(``Collider(rest=...)``: the undeformed mesh, which its topology and repairs
+are then made of) checks every new set of vertices, the first one included:
+when they are, to within ``tol.RIGID_FIT_ULPS`` float32 ulps, the rest shape
+moved by one rigid transform (:func:`rigid_fit`), the pose keeps the
+structures of the rest shape (the mesh's shape is the rest shape, built once)
+and places them with the fitted transform: the
 *effective* matrix :attr:`Pose.M` is the user's matrix times the fit. The
 fit's residual is covered by the shells (``Shells``), which are then built
 that much farther out (:attr:`Pose.allowance`); everything else (the occupancy grid, the inside
@@ -23,11 +25,11 @@ motion. The public placement (:attr:`Pose.user_M`, :attr:`Pose.vertices`,
 :attr:`Pose.previous`) is always what the caller gave.
 
 The fit is always against the rest shape, never against the last shape built:
-a frame's result is a function of the collider's construction vertices and that
-frame's placement, never of the frames played between. It is not bit-identical
-to a collider constructed at that frame's vertices (another BVH), only as safe
-(the allowance) and within the solver's own precision of it (tests/core/
-test_collider_rigid_fit.py). ``Pose.fit_rigid = False`` builds every new shape.
+a frame's result is a function of the rest shape and that frame's placement,
+whatever frame the collider was constructed at and whatever frames were played
+before. It is not bit-identical to a collider without a rest shape (which
+builds every new shape: another BVH), only as safe (the allowance) and within
+the solver's own precision of it (tests/core/test_collider_rigid_fit.py).
 """
 
 from __future__ import annotations
@@ -75,15 +77,16 @@ def rigid_fit(ref, V, used, lo, hi):
     within ``allowance`` of its place in ``V``: ``(T, allowance)``, or None when
     there is none.
 
-    ``allowance`` is ``tol.RIGID_FIT_ULPS`` float32 ulps (:func:`ulps_of`) of the
-    largest of the extent ``hi - lo``, the coordinates of the used ``ref``
-    vertices (their bounds ``lo``, ``hi``) and those of their fitted places: a
-    power of two that depends on the placement's binade only, not on the fit's
-    residual, so that the shells it asks for (``Shells``) are built once and
-    kept while the collider moves. The rotation is fitted to a spread sample of
-    the used vertices (``tol.RIGID_FIT_SAMPLE``: Horn's quaternion,
-    :func:`rotations.quat_fit`; Kabsch where that is not trusted), then checked
-    on the sample (a collider that deforms is turned down there, at a small
+    ``allowance`` is the largest distance found (the residual) rounded up to a
+    power of two times one float32 ulp (:func:`ulps_of`) of the largest of the
+    extent ``hi - lo``, the coordinates of the used ``ref`` vertices (their
+    bounds ``lo``, ``hi``) and those of their fitted places; at most
+    ``tol.RIGID_FIT_ULPS`` of them. Float32 skinning leaves residuals under one
+    ulp: the allowance is one ulp every frame, and the shells it asks for
+    (``Shells``) are built once and kept while the collider moves. The rotation
+    is fitted to a spread sample of the used vertices (``tol.RIGID_FIT_SAMPLE``:
+    Horn's quaternion, :func:`rotations.quat_fit`; Kabsch where that is not
+    trusted), then checked on the sample (a collider that deforms is turned down there, at a small
     cost) and on every used vertex. Only the check decides: the fit need not be
     the best one, only within the allowance.
 
@@ -150,10 +153,14 @@ def rigid_fit(ref, V, used, lo, hi):
     off = residual(ref, V) if used is None else residual(ref[used], V[used])
     if not off <= limit:
         return None
+    # the allowance: the residual rounded up to a power of two times an ulp
+    # (float32 skinning leaves under one: one ulp, the same every frame), so
+    # that the few shells it asks for are built once and kept (see Shells)
+    allowance = ulp * float(2.0 ** np.ceil(np.log2(max(off / ulp, 1.0))))
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = t
-    return T, limit
+    return T, allowance
 
 
 @dataclass(frozen=True)
@@ -209,17 +216,13 @@ class Pose:
         +1 each time the vertices given change (``Collider.version``).
     """
 
-    #: Reuse the structures of a shape for vertices that moved rigidly (see the
-    #: module docstring). False: every new shape is built (the reference the fitted
-    #: placements are tested against).
-    fit_rigid = True
-
-    def __init__(self, mesh, matrix, nearest_faces):
+    def __init__(self, mesh, matrix, nearest_faces, fit_rest=False):
         self.mesh = mesh
         self.user_M, _ = as_matrix(matrix)
         self.shape = Shape(mesh.V, mesh.V)
-        # The rest shape every fit is against (its bounds kept: the mesh's change)
-        self.rest = mesh.V
+        # The rest shape every fit is against, None without fits (its bounds
+        # kept: the mesh's change); fit_rest: the mesh was made of it.
+        self.rest = mesh.V if fit_rest else None
         self.rest_bounds = tuple(b.copy() for b in mesh.bounds())
         self.user_version = 0
         self._nearest_faces = nearest_faces
@@ -275,6 +278,16 @@ class Pose:
         else:
             self._set_effective()
 
+    def start(self, V2):
+        """The first vertices (checked), of a collider made of its rest shape:
+        placed as any later ones are, with no previous placement and no new
+        version (``Collider.version`` stays 0)."""
+        V2 = self.mesh.check_vertices(V2, "vertices")
+        self.shape = self.fitted(V2)
+        if self.shape.ref is not self.mesh.V:
+            self.mesh.set_shape(self.shape.ref)
+        self._set_effective()
+
     def _set_shape(self, V2):
         """New vertices given (checked): placed by a rigid fit of the mesh's shape,
         or a new shape; the effective matrix follows."""
@@ -288,12 +301,13 @@ class Pose:
     def fitted(self, V2) -> Shape:
         """The :class:`Shape` of vertices ``V2`` (same topology) against the rest
         shape: the rest shape itself, a rigid fit of it, or ``V2`` as a new one
-        (its ``ref`` is then ``V2``)."""
+        (its ``ref`` is then ``V2``); without a rest shape, the mesh's current
+        shape or a new one."""
         mesh = self.mesh
-        ref = self.rest
+        ref = mesh.V if self.rest is None else self.rest
         if np.array_equal(V2, ref):
             return Shape(ref, ref)
-        if self.fit_rigid and tol.RIGID_FIT_ULPS > 0 and len(mesh.F):
+        if self.rest is not None and tol.RIGID_FIT_ULPS > 0 and len(mesh.F):
             fit = rigid_fit(ref, V2, None if mesh.all_used else mesh.used, *self.rest_bounds)
             if fit is not None:
                 return Shape(V2, ref, *fit)

@@ -1,9 +1,10 @@
-"""A collider whose vertices only moved rigidly (a hat, belt or buckle skinned to
-one bone: the motion arrives as vertices) keeps the structures of its rest shape,
-placed by the fitted motion (``core.collider.pose``, ``tol.RIGID_FIT_ULPS``).
+"""A collider given its rest shape (``Collider(rest=...)``) whose vertices only
+moved rigidly from it (a hat, belt or buckle skinned to one bone: the motion
+arrives as vertices) keeps the structures of its rest shape, placed by the fitted
+motion (``core.collider.pose``, ``tol.RIGID_FIT_ULPS``).
 
-What it must give, against the rebuilt path (``Pose.fit_rigid = False``: every
-new shape built, the reference): no curve through the true (given) mesh, and
+What it must give, against the rebuilt path (the same collider without a rest
+shape: every new shape built, the reference): no curve through the true (given) mesh, and
 every curve's segments within one Rotation Precision step of the rebuilt
 path's; a collider that truly deforms, even by a hundred-thousandth of its
 size, is still rebuilt."""
@@ -15,9 +16,9 @@ import numpy as np
 import pytest
 import scenes
 
-from core import Collider, Settings, Solver
+from core import Collider, ColliderError, Settings, Solver
 from core import tolerances as tol
-from core.collider.pose import Pose, rigid_fit, ulps_of
+from core.collider.pose import rigid_fit, ulps_of
 
 
 def _motion(f, far=0.0):
@@ -49,22 +50,18 @@ def _play(kind, mode, fit, frames=6, far=0.0, offset=0.0, deform=None):
     rng = np.random.default_rng(11)
     pts, offs = scenes.fur_on_plane(rng, n_curves=70, curly=0.2, extent=0.6, n_cvs=(3, 8))
     pts = pts + np.array([far, 0.0, 0.0])
-    old = Pose.fit_rigid
-    Pose.fit_rigid = fit
-    try:
-        col = Collider(_skinned(V, _motion(0, far)), F, double_sided=double)
-        solver = Solver(offs, Settings(mode=mode, collision_offset=offset, recovery_rate=0.3))
-        out = []
-        for f in range(frames):
-            Vw = _skinned(V, _motion(f, far))
-            if deform is not None:
-                Vw = deform(Vw, f)
-            col.vertices = Vw
-            res = solver.step(pts, [col])
-            out.append((np.asarray(res.points, np.float64).copy(), np.asarray(res.status).copy(),
-                        Vw, col.build_count))
-    finally:
-        Pose.fit_rigid = old
+    col = Collider(_skinned(V, _motion(0, far)), F, double_sided=double,
+                   rest=V if fit else None)
+    solver = Solver(offs, Settings(mode=mode, collision_offset=offset, recovery_rate=0.3))
+    out = []
+    for f in range(frames):
+        Vw = _skinned(V, _motion(f, far))
+        if deform is not None:
+            Vw = deform(Vw, f)
+        col.vertices = Vw
+        res = solver.step(pts, [col])
+        out.append((np.asarray(res.points, np.float64).copy(), np.asarray(res.status).copy(),
+                    Vw, col.build_count))
     return out, offs, F, col, pts
 
 
@@ -88,7 +85,7 @@ def _segment_angles_deg(p, q, offs):
 ])
 def test_a_skinned_accessory_gives_the_rebuilt_paths_result_without_rebuilding(kind, mode, far,
                                                                               offset):
-    """Rigid motion as vertices: no build after the first moved frame, 0 crossings
+    """Rigid motion as vertices: no build after the first frame, 0 crossings
     against the true mesh every frame, every segment within one Rotation Precision
     step of the rebuilt path (which builds every frame).
 
@@ -99,9 +96,8 @@ def test_a_skinned_accessory_gives_the_rebuilt_paths_result_without_rebuilding(k
     colliding segments, is checked near the origin."""
     fitted, offs, F, col, pts = _play(kind, mode, True, far=far, offset=offset)
     rebuilt, _, _, ref, _ = _play(kind, mode, False, far=far, offset=offset)
-    # the rest shape's shells: plain on frame 0, grown by the fit's allowance on
-    # frame 1, then never again
-    assert fitted[-1][3] == fitted[1][3] <= 2 * fitted[0][3]
+    # the rest shape's shell(s), grown by the fit's allowance, built on frame 0 only
+    assert fitted[-1][3] == fitted[0][3]
     assert ref.build_count >= len(rebuilt)
     step = Settings().rotation_precision
     touched = 0
@@ -115,32 +111,34 @@ def test_a_skinned_accessory_gives_the_rebuilt_paths_result_without_rebuilding(k
 
 
 def test_the_fit_is_against_the_rest_shape_so_history_never_matters():
-    """A frame's result depends on the collider's construction vertices and that
-    frame's placement only: reached by playing every frame, by jumping straight
-    to it, or after a frame that truly deformed, the same bits."""
+    """A frame's result depends on the rest shape and that frame's placement only:
+    reached by playing every frame, by jumping straight to it, after a frame that
+    truly deformed, or with the collider constructed at that very frame, the same
+    bits."""
     V, F, _ = _accessory("ball")
     rng = np.random.default_rng(4)
     pts, offs = scenes.fur_on_plane(rng, n_curves=50, curly=0.2, extent=0.6, n_cvs=(3, 8))
     s = Settings(mode="bend")
-    V5 = _skinned(V, _motion(5))
+    V0, V5 = _skinned(V, _motion(0)), _skinned(V, _motion(5))
 
-    def frame5(path):
-        col = Collider(_skinned(V, _motion(0)), F)
+    def frame5(path, first=V0):
+        col = Collider(first, F, rest=V)
         for Vw in path:
             col.vertices = Vw
         return Solver(offs, s).step(pts, [col]), col
-
 
     played, c1 = frame5([_skinned(V, _motion(f)) for f in range(1, 6)])
     jumped, c2 = frame5([V5])
     squashed = _skinned(V, _motion(3)) * np.float32([1.0, 1.0, 0.9])
     after, c3 = frame5([_skinned(V, _motion(2)), squashed, V5])
-    for r in (jumped, after):
+    built_there, c4 = frame5([], first=V5)
+    for r in (jumped, after, built_there):
         np.testing.assert_array_equal(r.points, played.points)
         np.testing.assert_array_equal(r.status, played.status)
-    assert (c1.build_count, c2.build_count, c3.build_count) == (1, 1, 1)
+    assert [c.build_count for c in (c1, c2, c3, c4)] == [1, 1, 1, 1]
     # the squashed frame a new shape, then the rest shape again (built again once)
-    assert (c1.mesh.version, c3.mesh.version) == (0, 2)
+    assert (c1.mesh.version, c3.mesh.version, c4.mesh.version) == (0, 2, 0)
+    assert c4.version == 0 and c4.previous is None
 
 
 def _two_parts():
@@ -165,23 +163,18 @@ def test_a_part_that_truly_deforms_is_rebuilt_every_frame_with_the_rebuilt_paths
 
     results = {}
     for fit in (True, False):
-        old = Pose.fit_rigid
-        Pose.fit_rigid = fit
-        try:
-            col = Collider(V, F)
-            rng = np.random.default_rng(2)
-            pts, offs = scenes.fur_on_plane(rng, n_curves=40, curly=0.2, extent=1.2, n_cvs=(3, 6))
-            solver = Solver(offs, Settings(mode="bend"))
-            got = []
-            for f in range(1, 5):
-                Vw = deform(_skinned(V, _motion(f)), f)
-                col.vertices = Vw
-                res = solver.step(pts, [col])
-                geom.assert_no_intersection(res.points, offs, res.status, [(Vw, F)])
-                got.append(np.asarray(res.points).copy())
-            results[fit] = (got, col.build_count)
-        finally:
-            Pose.fit_rigid = old
+        col = Collider(V, F, rest=V if fit else None)
+        rng = np.random.default_rng(2)
+        pts, offs = scenes.fur_on_plane(rng, n_curves=40, curly=0.2, extent=1.2, n_cvs=(3, 6))
+        solver = Solver(offs, Settings(mode="bend"))
+        got = []
+        for f in range(1, 5):
+            Vw = deform(_skinned(V, _motion(f)), f)
+            col.vertices = Vw
+            res = solver.step(pts, [col])
+            geom.assert_no_intersection(res.points, offs, res.status, [(Vw, F)])
+            got.append(np.asarray(res.points).copy())
+        results[fit] = (got, col.build_count)
     assert results[True][1] == results[False][1] == 4  # every frame played
     for a, b in zip(results[True][0], results[False][0], strict=True):
         np.testing.assert_array_equal(a, b)
@@ -192,7 +185,7 @@ def test_a_deformation_of_a_fifty_thousandth_of_the_coordinates_is_rebuilt(scale
     """A scale that moves vertices by 2e-5 of the coordinates (more than
     ``tol.RIGID_FIT_ULPS`` float32 ulps of them) is a deformation: a new shape."""
     V, F, _ = _accessory("ball")
-    col = Collider(V, F)
+    col = Collider(V, F, rest=V)
     col.vertices = _skinned(V * np.float32(scale), _motion(2))
     assert col.pose.shape.fit is None and col.pose.allowance == 0.0
     assert col.mesh.version == 1
@@ -222,6 +215,7 @@ def test_the_fit_accepts_residuals_within_the_tolerance_and_refuses_above():
     moved = V.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
     off = np.linalg.norm(moved - small, axis=1).max()
     assert off <= allowance <= tol.RIGID_FIT_ULPS * ulps_of(2.0 * r)
+    assert allowance <= 2.0 * off  # the residual rounded up to a power of two ulps
     np.testing.assert_allclose(T[:3, :3], M[:3, :3], atol=1e-5)
     assert rigid_fit(V, (Vw + 4.0 * limit * d).astype(np.float32), None, lo, hi) is None
 
@@ -237,7 +231,7 @@ def test_velocities_of_a_fitted_placement_are_those_of_the_same_motion_as_a_matr
     """Follow Collider Motion: the surface velocity of a skinned accessory is that
     of the same motion given as a matrix (to float32 precision)."""
     V, F, _ = _accessory("ball")
-    by_vertices = Collider(_skinned(V, _motion(1)), F)
+    by_vertices = Collider(_skinned(V, _motion(1)), F, rest=V)
     by_matrix = Collider(V, F, matrix=_motion(1))
     by_vertices.place(vertices=_skinned(V, _motion(2)))
     by_matrix.place(matrix=_motion(2))
@@ -247,3 +241,15 @@ def test_velocities_of_a_fitted_placement_are_those_of_the_same_motion_as_a_matr
     np.testing.assert_allclose(by_vertices.velocities(p), by_matrix.velocities(p), atol=2e-5)
     np.testing.assert_array_equal(by_vertices.vertices, _skinned(V, _motion(2)))
     np.testing.assert_array_equal(by_vertices.previous.vertices, _skinned(V, _motion(1)))
+
+
+def test_without_a_rest_shape_every_new_shape_is_built():
+    """No rest shape: rigid motion as vertices is built every frame (no fit), as
+    before; the rest shape must have the collider's topology."""
+    V, F, _ = _accessory("ball")
+    col = Collider(_skinned(V, _motion(0)), F)
+    for f in range(1, 4):
+        col.vertices = _skinned(V, _motion(f))
+        assert col.pose.shape.fit is None and col.mesh.version == f
+    with pytest.raises(ColliderError, match="vertices have shape"):
+        Collider(V[:-1], F, rest=V)
