@@ -12,7 +12,8 @@ two such scenes procedurally and deterministically (see ``bench/scene.py``):
 
 Each is solved for 48 frames with a rigid collider (``col.matrix``), the same
 rigid motion handed over as vertices (``col.vertices = V @ M`` in float32, a
-*skinned* accessory: a hat or buckle on an Armature modifier, issue 32) and a
+*skinned* accessory: a hat or buckle on an Armature modifier, given its rest shape,
+``Collider(rest=V)``, issue 32) and a
 deforming one (``col.vertices``), in Bend and in Soft, and printed side by side:
 per-frame times, rays per frame, ms per phase, contact counts, an untimed
 check that no resolved curve still crosses the collider, and the ratio to
@@ -281,7 +282,10 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         Vw0 = (skinned(V, shot.matrix(0, frames)) if kind == "skinned"
                else shot.vertices(V, 0, frames))
         t0 = time.perf_counter()
-        col = Collider(Vw0, F, double_sided=False, matrix=None)
+        # (skinned: given its rest shape, the hat's own vertices, as an Armature
+        # modifier's object has them)
+        col = Collider(Vw0, F, double_sided=False, matrix=None,
+                       rest=V if kind == "skinned" else None)
         setup_ms = 1000 * (time.perf_counter() - t0)
         check_scene = None
         if kind == "skinned":  # its floor: the same motion as a matrix
