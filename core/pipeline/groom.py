@@ -472,7 +472,7 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
         groom's own Fur Attach roots, which stay exactly on the surface).
     threads : int or None, default None
         Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS`` guides or
-        render curves the work runs in two halves on two threads; the result
+        render curves the work runs in parts, one per thread; the result
         is the same bit for bit.
 
     Returns
