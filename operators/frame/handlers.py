@@ -121,8 +121,9 @@ def _check_edits(ob, scene, depsgraph, edited) -> None:
         update_dependencies(ob)  # (a no-op next time: no update loop)
     if rt is None or rt.baking or ob.furcollide.is_baked:
         return
-    if rt.signature is not None and structure(ob, scene=scene) != rt.signature:
-        why = structure_change(rt.signature, structure(ob, scene=scene))
+    now = structure(ob, scene=scene) if rt.signature is not None else None
+    if now is not None and now != rt.signature:
+        why = structure_change(rt.signature, now)
         invalidation.invalidate(ob, scene, reason=why, colliders=True)
         return
     values = keyed.fingerprint(ob)

@@ -1,4 +1,4 @@
-"""A setup's settings as the core takes them, and their fingerprints.
+"""A setup's settings as the core takes them, and their fingerprints, read once a frame.
 
 * :func:`core_settings`: the setup's properties (and a frame's parameter maps) as a
   :class:`core.Settings`.
@@ -7,11 +7,15 @@
   :func:`.keyed.values`). A change of the structure drops the playback cache; a bake
   resumes only where its structure is the setup's (``stable``: objects by name).
 * :func:`time_key`: the frame rate, when the result depends on it (wind, jiggle).
+* :func:`read_settings`: all of it for one evaluation, once (:class:`SettingsRead`): the
+  colliders listed, the keyable values at the frame, the fingerprints. Every step of a
+  frame takes them from there instead of reading the properties again.
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 
 import bpy
 
@@ -28,7 +32,53 @@ def core_settings(ob, maps=None):
     return core.Settings(**dict(kw, **maps) if maps else kw)
 
 
-def signature(ob, stable=False, scene=None, identities=True) -> str:
+@dataclass(frozen=True)
+class SettingsRead:
+    """A setup's settings as one evaluation reads them (:func:`read_settings`).
+
+    Attributes
+    ----------
+    refs : list of colliders.ColliderRef
+        The colliders (:func:`.colliders.collider_objects` in the scene evaluated).
+    animation : keyed.Animation
+        Which values are keyed or driven.
+    values : dict
+        :func:`keyed.values` at the frame shown: part ``values`` of its record.
+    fingerprint : int
+        :func:`keyed.fingerprint`: what decides the values at every frame.
+    structure : str
+        :func:`structure`, objects by session id: a change drops the playback cache.
+    structure_record, signature_record : str
+        :func:`structure` and :func:`signature` without the objects' identities: parts
+        ``structure`` and ``settings`` of a frame-inputs record.
+    time_key : float or None
+        :func:`time_key`.
+    """
+
+    refs: list
+    animation: keyed.Animation
+    values: dict
+    fingerprint: int
+    structure: str
+    structure_record: str
+    signature_record: str
+    time_key: float | None
+
+
+def read_settings(ob, scene) -> SettingsRead:
+    """The settings of the setup on ``ob`` as ``scene`` shows them now, read once."""
+    refs = collider_objects(ob, scene)
+    animation = keyed.Animation(ob)
+    return SettingsRead(
+        refs=refs, animation=animation, values=keyed.values(ob, None, animation),
+        fingerprint=keyed.fingerprint(ob, animation),
+        structure=structure(ob, scene=scene, animation=animation),
+        structure_record=structure(ob, scene=scene, identities=False, animation=animation),
+        signature_record=signature(ob, scene=scene, identities=False, refs=refs),
+        time_key=time_key(ob, scene))
+
+
+def signature(ob, stable=False, scene=None, identities=True, refs=None) -> str:
     """Fingerprint of everything that changes the result except the input.
 
     ``stable=False`` identifies colliders by session id (renames do not
@@ -36,13 +86,14 @@ def signature(ob, stable=False, scene=None, identities=True) -> str:
     (bake files, so a bake resumes in a new session). ``identities=False``
     leaves out which objects the colliders and the surface are (renames never
     count, nor sessions): the frame-inputs record, which digests their
-    geometry instead.
+    geometry instead. ``refs``: the colliders, when listed already.
     """
     s = ob.furcollide
+    refs = collider_objects(ob, scene) if refs is None else refs
     cols = [
         ((r.name if stable else r.uid), r.double_sided, r.offset) if identities
         else (r.double_sided, r.offset)
-        for r in collider_objects(ob, scene)
+        for r in refs
     ]
     kw = s.to_core_kwargs()
     kw.pop("threads", None)
@@ -60,13 +111,14 @@ def signature(ob, stable=False, scene=None, identities=True) -> str:
     return json.dumps(parts)
 
 
-def structure(ob, stable=False, scene=None, identities=True) -> str:
+def structure(ob, stable=False, scene=None, identities=True, animation=None) -> str:
     """Fingerprint of what a setup's frames share, whatever frame they are: everything
     :func:`signature` holds but the values that can be keyed or driven (those are
     inputs of each frame: :func:`keyed.values`). Which objects collide (every entry of
     the list, enabled or not, and the collider collection's members), the Mode, the
     growth surface, the Enable Attribute, the frame the shot starts at, Fur Attach's
-    binding and the frame rate. ``stable`` and ``identities`` as in :func:`signature`.
+    binding and the frame rate. ``stable`` and ``identities`` as in :func:`signature`;
+    ``animation``: the setup's :class:`keyed.Animation`, when made already.
     """
     s = ob.furcollide
     entries = [c.object for c in s.colliders]
@@ -84,7 +136,7 @@ def structure(ob, stable=False, scene=None, identities=True) -> str:
     surface = "" if surf is None else (surf.name if stable else surf.session_uid) if (
         identities) else True
     # (wind and jiggle run on seconds: frame / fps; only then does the fps count)
-    anim = keyed.Animation(ob)
+    anim = keyed.Animation(ob) if animation is None else animation
     timed = s.motion.use_wind or s.motion.use_jiggle or any(
         anim.animates(f"furcollide.motion.{n}") for n in ("use_wind", "use_jiggle"))
     parts = [cols, s.mode, s.enable_attribute, s.frame_start, surface,

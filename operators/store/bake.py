@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import re
+from dataclasses import replace
 
 import bpy
 import numpy as np
@@ -23,11 +24,11 @@ from ..blender import bridge
 from ..frame import children, groom, output, rules, solve, topology
 from ..frame.clock import clock
 from ..frame.colliders import collider_list, keep_placements, read_for_solve
-from ..frame.inputs import prepare_input, read_inputs
+from ..frame.inputs import prepare_input, read_frame, read_inputs
 from ..frame.record import current_inputs, first_change, fixed_change, solved_inputs
 from ..frame.setup import Setup
 from ..settings import keyed, motion
-from ..settings.fingerprints import core_settings, structure
+from ..settings.fingerprints import core_settings, read_settings, structure
 from . import registry
 
 
@@ -94,43 +95,50 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     """
     rt, f = setup.rt, setup.frame
     clock.start()
-    inp = read_inputs(setup)
+    read = read_frame(setup)
+    inp = read.inputs
     if trust_solver and rt.topology is not None and rt.topology != inp.key:
         # (frames of other curves than the frame before: no playback could show them)
         raise ValueError(topology.topology_message(setup.ob, rt.topology, inp.key,
-                                                        "baking", setup.s.frame_start))
+                                                   "baking", setup.s.frame_start))
     rt.adopt_topology(inp.key)
-    prepare_input(setup, inp)
+    inp = prepare_input(setup, inp, read.motion)
     output.sync_output(setup, inp)
-    solver = setup.ensure_solver(inp)
-    if rules.starts_here(setup):  # (the start frame, or enabled again)
+    solver = solve.ensure_solver(setup, inp)
+    fresh = rules.starts_here(setup, read.settings.animation)
+    if fresh:  # (the start frame, or enabled again)
         solver.reset()
     elif not trust_solver:
         _p, _st, offsets, stored = framecache.read_frame(directory, f - 1)
         if not np.array_equal(offsets, inp.offsets):
             raise ValueError(f"bake frame {f - 1} was made for other curves")
         solver.state = framecache.decode_state(stored, rt.memory.sparse)
-    read_for_solve(setup, inp, continuous=trust_solver, fresh=rules.starts_here(setup))
+    cols, growth, _notes = read_for_solve(setup, read.settings.refs, continuous=trust_solver,
+                                          fresh=fresh)
     rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
-    result = solve.solve_frame(setup, inp)
+    result = solve.solve_frame(setup, replace(inp, colliders=cols, growth=growth),
+                               motion=read.motion)
     rt.solver_frame = f
     fp = settings_fingerprint(setup.ob)
     state = solver.state
     state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
-    rt.stats = dict(result.stats, source="bake")
+    stats = dict(result.stats, source="bake")
     groom_part = _bake_groom(setup, result.points)  # the render groom is baked with its guides
     # The children are made from the guides written (their stack evaluates the output).
     output.write(setup, inp, result.points, result.status, result.changed, result.attributes)
     children_part = children.bake_frame(setup)
-    extra = {groom.BAKE_PART: groom_part, children.BAKE_PART: children_part}
+    extra = {}
+    for name, part in ((groom.BAKE_PART, groom_part), (children.BAKE_PART, children_part)):
+        if part is not None:
+            extra[name] = part[0]
+            stats.update(part[1])
     framecache.write_frame(directory, f, result.points, result.status, inp.offsets, state,
                            rt.memory.sparse, result.attributes,
-                           inputs=solved_inputs(setup, inp),
-                           extra={k: v for k, v in extra.items() if v is not None})
-    rt.stats = dict(rt.stats, **clock.stats())
+                           inputs=solved_inputs(setup, inp, read.settings), extra=extra)
+    rt.stats = dict(stats, **clock.stats())
     rt.invalid_note = rules.invalid_note(result.problems)
     if rt.invalid_note:
-        setup.set_status(*rt.invalid_note)
+        registry.set_status(setup.ob, *rt.invalid_note)
     return rt.stats
 
 
@@ -188,8 +196,9 @@ def resume_inputs_match(ob, directory, f, scene) -> bool:
         old = framecache.read_inputs(directory, f)
         if old is None:  # baked before FurCollide stored the record: start over
             return False
-        now = current_inputs(setup, read_inputs(setup, attach=False), like=old)
-        return first_change(setup, old, now) is None
+        read = read_settings(ob, scene)
+        now = current_inputs(setup, read_inputs(setup, attach=False), read, like=old)
+        return first_change(setup, old, now, read.refs) is None
 
 
 def resume_frame(ob, directory) -> int | None:
@@ -200,6 +209,7 @@ def resume_frame(ob, directory) -> int | None:
     have = set(framecache.list_frames(directory))
     fp = settings_fingerprint(ob)
     setup = Setup(ob, bpy.context.scene, None)
+    read = read_settings(ob, setup.scene)
     last = None
     f = s.frame_start
     while f in have and f <= s.frame_end:
@@ -208,7 +218,7 @@ def resume_frame(ob, directory) -> int | None:
                 key = next((k for k in z.files if k.endswith("__fingerprint")), None)
                 ok = key is not None and z[key].tobytes().decode() == fp
             # (the keyable values at f: a key edited since the bake changes them there)
-            ok = ok and not fixed_change(setup, framecache.read_inputs(directory, f), f)
+            ok = ok and not fixed_change(setup, framecache.read_inputs(directory, f), read, f)
         except framecache.UNREADABLE:
             ok = False
         if not ok:

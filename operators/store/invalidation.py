@@ -18,11 +18,13 @@ from ..frame.inputs import read_inputs
 from ..frame.record import (
     STRUCTURE_PART,
     VALUES_PART,
+    change,
     current_inputs,
-    describe_change,
-    first_change,
+    first_changed_frame,
+    saw,
 )
 from ..frame.setup import Setup
+from ..settings.fingerprints import read_settings
 from . import baked, registry
 
 
@@ -80,13 +82,16 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
 def values_changed(setup) -> None:
     """The setup's keyable values may have changed (a key edited, a setting changed):
     drop the cached frames from the first one whose values changed
-    (:func:`rules.drop_changed`), keep the others, and say so when the frame
-    shown is one of the dropped ones; refresh the current frame."""
+    (:func:`..frame.record.first_changed_frame`), keep the others, and say so when the
+    frame shown is one of the dropped ones; refresh the current frame."""
     s, rt, f = setup.s, setup.rt, setup.frame
-    changed = rules.drop_changed(setup)
-    if changed is None or s.is_baked:
+    changed = first_changed_frame(setup, rt.memory.frames, read_settings(setup.ob, setup.scene))
+    if changed is None:
         return
     first, why = changed
+    rt.drop_from(first, why, s.frame_start, f)
+    if s.is_baked:
+        return
     if s.enabled and first <= f and f > s.frame_start:
         rt.outdated = True
         k = rt.memory.newest_before(f)
@@ -112,16 +117,16 @@ def edit_seen(setup) -> str | None:
     key = (setup.scene.name, setup.frame)
     if rt.seen is None or rt.seen[0] != key:
         return None
-    new = current_inputs(setup, read_inputs(setup, attach=False))  # (the record only)
+    read = read_settings(setup.ob, setup.scene)
+    new = current_inputs(setup, read_inputs(setup, attach=False), read)  # (the record only)
     old = rt.seen[1]
-    rt.seen = (key, new)
+    saw(rt, setup.scene, setup.frame, new)
     if VALUES_PART in old:
         # The settings (their values, and what derives from them) are checked by
         # values_changed, frame by frame: only the objects are compared here.
         skip = (STRUCTURE_PART, VALUES_PART, "settings", "colliders")
         old, new = ({k: v for k, v in r.items() if k not in skip} for r in (old, new))
-    part = first_change(setup, old, new)
-    return describe_change(setup.ob, part, setup.scene, old, new) if part else ""
+    return change(setup, old, new, read.refs)
 
 
 def refresh_groom(ob) -> None:
@@ -131,7 +136,6 @@ def refresh_groom(ob) -> None:
         baked.check(ob)
     rt = registry.get_runtime(ob, create=False) if ob is not None else None
     if rt is not None:
-        rt.groom_shown = None
         schedule_refresh(ob.name)
 
 

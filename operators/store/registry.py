@@ -137,6 +137,16 @@ class Runtime:
         self.groom_shown = None
         self.signature = None  # accept the new settings without a second drop
 
+    def restart(self, start: int, limit_mb: float) -> None:
+        """The start frame ``start`` is solved again: the playback cache starts over
+        (with the Memory Limit ``limit_mb``), nothing dropped before is said any more."""
+        self.memory.clear()
+        self.verified.clear()
+        self.trusted.clear()
+        self.dropped = ""
+        self.memory.start = start
+        self.memory.limit = int(limit_mb * 1024 * 1024)
+
     def drop_from(self, first: int, why: str, start: int, frame: int | None = None) -> bool:
         """Drop the cached frames from ``first`` on (every one when ``first`` is the
         start frame ``start`` or before it: :meth:`drop_cache`): ``why`` (a change seen

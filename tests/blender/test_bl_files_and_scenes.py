@@ -564,9 +564,9 @@ def _counting_solves(fc, monkeypatch):
     calls = []
     real = fc.frame.solve.solve_frame
 
-    def counting(setup, inp):
+    def counting(setup, inp, **kw):
         calls.append((setup.scene.name, setup.frame))
-        return real(setup, inp)
+        return real(setup, inp, **kw)
 
     monkeypatch.setattr(fc.frame.solve, "solve_frame", counting)
     return calls

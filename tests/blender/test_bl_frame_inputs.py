@@ -262,7 +262,8 @@ def test_bake_resumes_only_when_the_inputs_still_hold(fc, tmp_path, monkeypatch)
     setup = fc.Setup(hair, scene, bpy.context.evaluated_depsgraph_get())
     inputs = fc.frame.inputs.read_inputs(setup)
     assert fc.frame.record.baked_frame_change(
-        setup, inputs, fc.cache.read_inputs(d, scene.frame_current)) == ""
+        setup, inputs, fc.cache.read_inputs(d, scene.frame_current),
+        fc.settings.fingerprints.read_settings(hair, scene)) == ""
     activate(hair)
     assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
     same(play(scene, hair, out, range(1, 9), [box]), baked)

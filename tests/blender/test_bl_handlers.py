@@ -137,8 +137,8 @@ def test_refresh_timer_refreshes_the_current_frame(fc, timers, monkeypatch):
     assert fc.store.registry.status_for(hair)[1].startswith("Frame 3 is outdated: Recovery Rate")
     fc.store.registry.set_status(hair, "INFO", "")
     seen = []
-    evaluate = fc.frame.rules.evaluate
-    monkeypatch.setattr(fc.frame.rules, "evaluate",
+    evaluate = fc.frame.spine.evaluate
+    monkeypatch.setattr(fc.frame.spine, "evaluate",
                         lambda setup: seen.append((setup.ob.name, setup.frame)) or
                         evaluate(setup))
     assert timers[0]() is None  # done: not rescheduled
@@ -159,7 +159,7 @@ def test_refresh_timer_never_raises(fc, capfd, monkeypatch, timers, fault):
     inv = _module("store.invalidation")
     capfd.readouterr()
     if fault == "evaluate":
-        monkeypatch.setattr(fc.frame.rules, "evaluate", _raiser)
+        monkeypatch.setattr(fc.frame.spine, "evaluate", _raiser)
     elif fault == "Setup":
         monkeypatch.setattr(fc.frame.scenes, "Setup", _raiser)  # (the refresh goes through it)
     elif fault == "deleted":
@@ -168,7 +168,7 @@ def test_refresh_timer_never_raises(fc, capfd, monkeypatch, timers, fault):
         monkeypatch.setattr(inv.registry, "busy", lambda: True)
         assert refresh() == pytest.approx(0.1)  # the frame handler runs: try again soon
         monkeypatch.setattr(inv.registry, "busy", lambda: False)
-        monkeypatch.setattr(fc.frame.rules, "evaluate", _raiser)
+        monkeypatch.setattr(fc.frame.spine, "evaluate", _raiser)
     assert refresh() is None
     text = _no_handler_error(capfd)
     if fault != "deleted":

@@ -103,9 +103,9 @@ def solves(fc, monkeypatch):
     counts = {}
     real = fc.frame.solve.solve_frame
 
-    def spy(setup, inp):
+    def spy(setup, inp, **kw):
         counts[setup.frame] = counts.get(setup.frame, 0) + 1
-        return real(setup, inp)
+        return real(setup, inp, **kw)
 
     monkeypatch.setattr(fc.frame.solve, "solve_frame", spy)
     return counts

@@ -309,9 +309,9 @@ def _counting_solves(fc, monkeypatch):
     calls = []
     real = fc.frame.solve.solve_frame
 
-    def counting(setup, inp):
+    def counting(setup, inp, **kw):
         calls.append(setup.frame)
-        return real(setup, inp)
+        return real(setup, inp, **kw)
 
     monkeypatch.setattr(fc.frame.solve, "solve_frame", counting)
     return calls

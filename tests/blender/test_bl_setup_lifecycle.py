@@ -141,7 +141,7 @@ def test_hidden_setup_is_skipped_quietly(fc):
     sc = bpy.context.scene
     hair.hide_viewport = out.hide_viewport = True
     dg = bpy.context.evaluated_depsgraph_get()
-    assert fc.frame.rules.evaluate(fc.Setup(hair, sc, dg)) == fc.frame.rules.Outcome.HIDDEN
+    assert fc.frame.spine.evaluate(fc.Setup(hair, sc, dg)) == fc.frame.rules.Outcome.HIDDEN
     for f in range(sc.frame_start, sc.frame_start + 4):
         sc.frame_set(f)
         assert hair.furcollide.status_message == ""

@@ -42,7 +42,7 @@ def test_undo_pre_stops_a_running_bake_and_keeps_its_frames(fc, tmp_path):
     scene.frame_set(1)  # the frame handler solves the start frame again
     assert 1 in fc.store.registry.get_runtime(hair).memory
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    assert fc.frame.rules.evaluate(fc.Setup(hair, scene, depsgraph)) is (
+    assert fc.frame.spine.evaluate(fc.Setup(hair, scene, depsgraph)) is (
         fc.frame.rules.Outcome.CACHE)
 
 

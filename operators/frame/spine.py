@@ -1,0 +1,240 @@
+"""The frame's spine: read once, decide, solve, write once, then the stages after.
+
+:func:`evaluate` runs one frame of one setup, top to bottom:
+
+1. **not evaluated** (:func:`.rules.not_evaluated`): a bake of the setup runs, its
+   outputs are hidden from this depsgraph, or a motion-blur subframe (a bake blends);
+2. **read once** (:func:`.inputs.read_frame`): the evaluated source, the settings (the
+   colliders listed, the keyable values, the fingerprints, the time key), the motion
+   settings; what changed since the frame handler last saw the setup
+   (:func:`.rules.since_seen`) drops cached frames; the motion before collision
+   (:func:`.inputs.prepare_input`);
+3. **decide** (:func:`.rules.decide`): what the output shows and why, what to drop; a
+   decision writes nothing, the spine applies it (:func:`_apply`);
+4. **solve** (:func:`_solve`): the solver starts from the groom or frame ``f - 1``
+   (:func:`.solve.prepare`), the colliders are read (:func:`.colliders.read_for_solve`),
+   :func:`.solve.solve_frame` runs the core's frame sequence, the frame is kept
+   (:func:`_keep`);
+5. **write once** (:func:`.output.show`): the output's layout follows the source, the
+   frame shown is written;
+6. **the stages after** (:func:`.groom.run`, :func:`.children.run`), then the frame's
+   status, statistics and outdated mark, once (:func:`.output.publish`).
+
+It raises on errors (the render groom then follows the last good guides and the
+children the output); the handler (:mod:`.handlers`) turns them into the setup's status
+message plus one console line, and the output keeps its last good result.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from . import children, groom, output, rules, solve
+from .clock import clock
+from .colliders import read_for_solve
+from .inputs import prepare_input, read_frame
+from .output import Shown
+from .record import current_inputs, saw, solved_inputs
+from .rules import NOTE, Outcome
+
+#: How many times a frame's rules are asked again after their drops (one is enough:
+#: a drop leaves the frame uncached, or frame f - 1 known; the bound is a guard).
+_AGAIN = 3
+
+
+def evaluate(setup) -> Outcome:
+    """Run the frame of ``setup`` (module docstring); returns what it did.
+
+    Raises
+    ------
+    Exception
+        Any error; the frame handler turns it into the status message. A render groom
+        error only warns (the guides are written).
+    """
+    clock.start()
+    try:
+        outcome, shown = _frame(setup)
+    except Exception:
+        groom.follow_last_guides(setup)  # (never raises)
+        children.run(setup)  # (never raises: the children follow the output)
+        raise
+    _after(setup, outcome, shown)
+    return outcome
+
+
+# ------------------------------------------------------------------ frame
+class _Frame:
+    """What the frame shows so far: passed down the spine, never kept."""
+
+    __slots__ = ("written", "baked", "stats", "status", "outdated", "fresh", "read")
+
+    def __init__(self):
+        self.written = None  # world points written into the output
+        self.baked = None  # (frame, framecache.ShownFrame) of the bake shown
+        self.stats = None  # the frame's statistics (None: unchanged)
+        self.status = None  # (level, message), rules.NOTE or None (unchanged)
+        self.outdated = None
+        self.fresh = ()  # what was said of colliders just built
+        self.read = None  # inputs.FrameRead
+
+
+def _frame(setup):
+    """(Outcome, _Frame) of the frame: steps 1 to 5 of the module docstring."""
+    shown = _Frame()
+    d = rules.not_evaluated(setup)
+    if d is not None:
+        if d.show is not None:  # (a baked subframe: its two frames blended)
+            shown.written = output.show(setup, d.inputs, d.shown)
+        return d.outcome, shown
+    s, rt = setup.s, setup.rt
+    # Fur Attach's points are needed unless the frame shows the bake (baked, and not
+    # passing the source through): that writes the bake, and the record it is checked
+    # against digests the Surface instead.
+    read = read_frame(setup, attach=not s.is_baked or rules.passes_through(setup))
+    shown.read = read
+    changes = rules.since_seen(setup, read)
+    _drop(setup, changes.before)
+    rt.attach_state = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
+    rt.time_state = read.settings.time_key
+    if changes.topology is not None:
+        _show(setup, read, changes.topology, shown)
+        return changes.topology.outcome, shown
+    if rt.adopt_topology(changes.adopt) and not len(rt.memory):
+        rt.hold = None  # (other curves, nothing cached: the held frame is of the old)
+    if read.inputs.points is not None:  # (the jiggle's history and the motion feed a solve)
+        read = replace(read, inputs=prepare_input(setup, read.inputs, read.motion))
+        shown.read = read
+    _drop(setup, changes.after)
+    rt.signature = read.settings.structure
+    rt.values_seen = read.settings.fingerprint  # (the depsgraph check compares it)
+    d, record = rules.decide(setup, read), None
+    for _ in range(_AGAIN):
+        record = d.record if d.record is not None else record
+        if d.then is None:
+            break
+        _drop(setup, d.drops)
+        d = rules.hold(setup) if d.then == "hold" else rules.decide(setup, read, record)
+    if d.show == "solve":
+        held = solve.prepare(setup, read, d.start)
+        if held is not None:  # frame f - 1's state is not known (or not for this mode)
+            d = rules.hold(setup, reason=held)
+    _drop(setup, d.drops)  # (a frame solved from the groom: once its solver is ready)
+    if d.show == "solve":
+        record = _solve(setup, read, d, shown)
+    else:
+        _show(setup, read, d, shown)
+    if d.outcome is not Outcome.BAKE:
+        # What this frame was evaluated from (solved and checked cached frames made it
+        # already): the depsgraph check tells an edit from the animation evaluated
+        # again with it.
+        if record is None:
+            record = current_inputs(setup, read.inputs, read.settings)
+        saw(rt, setup.scene, setup.frame, record)
+    return d.outcome, shown
+
+
+def _drop(setup, drops) -> None:
+    """Apply a decision's drops to the setup's playback cache."""
+    rt, s, f = setup.rt, setup.s, setup.frame
+    for drop in drops:
+        if drop.kind == "cache":
+            rt.drop_cache(drop.why, s.frame_start, f)
+            if drop.since:
+                rt.dropped_why = drop.since
+        elif drop.kind == "from":
+            rt.drop_from(drop.frame, drop.why, s.frame_start, f)
+        elif drop.kind == "after":
+            rt.drop_frames_after(drop.frame, s.frame_start)
+        elif drop.kind == "restart":
+            rt.restart(drop.frame, s.memory_limit)
+        if drop.colliders:
+            rt.colliders.clear()
+
+
+def _show(setup, read, d, shown) -> None:
+    """Write what decision ``d`` shows (once), and set what the frame says."""
+    rt = setup.rt
+    inp = read.inputs
+    what, stats = None, None
+    if d.show == "source":
+        what = Shown(inp.points, np.zeros(len(inp.offsets) - 1, np.int8))
+    elif d.show == "hold":
+        what = Shown(rt.hold[1], rt.hold[2])
+    elif d.show == "memory":
+        points, status, stats = rt.memory.get(d.frame, inp.raw, inp.offsets)
+        what = Shown(points, status, attributes=rt.memory.attributes(d.frame))
+    elif d.show == "baked":
+        b = d.baked
+        what = Shown(b.points, b.status, attributes=b.attributes)
+        shown.baked = (d.frame, b)
+    shown.written = output.show(setup, inp, what, sync=rules.syncs(setup, d.outcome))
+    if d.keep_hold:
+        rt.hold = (d.frame, shown.written, what.status)
+    shown.stats = dict(stats, source="cache") if d.outcome is Outcome.CACHE else d.stats
+    shown.status, shown.outdated = d.status, d.outdated
+
+
+def _solve(setup, read, d, shown) -> dict:
+    """Solve the frame (the solver holds ``f - 1``, or was reset), keep it in the
+    playback cache, show it; returns its inputs record."""
+    rt, f = setup.rt, setup.frame
+    inp = read.inputs
+    continuous = rt.solver_frame == f - 1
+    cols, growth, fresh = read_for_solve(setup, read.settings.refs, continuous=continuous,
+                                         fresh=d.start == "reset")
+    rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
+    result = solve.solve_frame(setup, replace(inp, colliders=cols, growth=growth),
+                               motion=read.motion)
+    rt.solver_frame = f
+    record = solved_inputs(setup, inp, read.settings)
+    rt.verified.add(f)
+    rt.verified &= rt.memory.frames.keys() | {f}  # (frames the budget dropped go)
+    rt.memory.put(
+        f, inp.raw, result.points, result.status, inp.offsets, rt.solver.state, result.stats,
+        result.changed, result.attributes, record,
+    )
+    if rt.hold is None or f >= rt.hold[0]:
+        rt.hold = (f, result.points, result.status)
+    what = Shown(result.points, result.status, result.changed, result.attributes)
+    shown.written = output.show(setup, inp, what, sync=True)
+    rt.error = ""
+    rt.invalid_note = rules.invalid_note(result.problems)
+    shown.stats, shown.status, shown.outdated = result.stats, NOTE, False
+    shown.fresh = tuple(fresh)
+    return record
+
+
+# ------------------------------------------------------------------ after
+def _after(setup, outcome, shown) -> None:
+    """Step 6: the render groom and the children follow what the output shows, then
+    the frame's status, statistics and outdated mark are set, once."""
+    rt = setup.rt
+    groom_stage = children_stage = None
+    groom_error = ""
+    if setup.s.groom.output is not None and (
+        shown.written is not None or outcome in (Outcome.TOPOLOGY, Outcome.OUTDATED)
+    ):  # (None: the groom follows the last good guides)
+        try:
+            groom_stage = groom.run(setup, shown.written, shown.baked)
+        except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
+            groom_error = groom.error_message(exc, setup)
+    if outcome not in (Outcome.HIDDEN, Outcome.BAKING):
+        children_stage = children.run(setup, shown.baked)  # (never raises)
+    stages = [st for st in (groom_stage, children_stage) if st is not None]
+    stats = dict(shown.stats if shown.stats is not None else rt.stats)
+    for st in stages:
+        stats.update(st.stats)
+    stats.update(clock.stats())
+    outdated = True if any(st.outdated for st in stages) else shown.outdated
+    status = shown.status
+    if status == NOTE:
+        fresh = shown.fresh + tuple(n for st in stages for n in st.fresh)
+        status = rules.frame_note(setup, shown.read, stats, fresh)
+    base = status if status is not None else rt.status
+    final = ("WARNING", groom_error) if groom_error else groom.with_note(
+        base, groom_stage, setup.ob)
+    final = children.with_note(final, children_stage)
+    output.publish(setup, final if status is not None or final != base else None,
+                   outdated, stats)
