@@ -27,29 +27,28 @@ class Setup:
     rt : registry.Runtime, optional
         The setup's session state (default: the registry's, created on first use).
 
+    Attributes
+    ----------
+    s : FurCollideSettings
+        The setup's properties (``ob.furcollide``).
+    frame : int
+        The frame evaluated (``scene.frame_current`` when the setup was made).
+    subframe : float
+        Its subframe (``scene.frame_subframe``).
+
     Nothing else is kept on it: the steps of a frame pass what they made on.
     """
 
-    __slots__ = ("ob", "rt", "scene", "depsgraph")
+    __slots__ = ("ob", "rt", "scene", "depsgraph", "s", "frame", "subframe")
 
     def __init__(self, ob, scene, depsgraph, rt=None):
         self.ob = ob
         self.scene = scene
         self.depsgraph = depsgraph
         self.rt = registry.get_runtime(ob) if rt is None else rt
-
-    @property
-    def s(self):
-        """The setup's properties (``ob.furcollide``)."""
-        return self.ob.furcollide
-
-    @property
-    def frame(self) -> int:
-        return self.scene.frame_current
-
-    @property
-    def subframe(self) -> float:
-        return self.scene.frame_subframe
+        self.s = ob.furcollide
+        self.frame = scene.frame_current
+        self.subframe = scene.frame_subframe
 
     @property
     def solver(self):

@@ -69,11 +69,11 @@ def read_settings(ob, scene) -> SettingsRead:
     """The settings of the setup on ``ob`` as ``scene`` shows them now, read once."""
     refs = collider_objects(ob, scene)
     animation = keyed.Animation(ob)
+    with_ids, without_ids = structures(ob, scene=scene, animation=animation)
     return SettingsRead(
         refs=refs, animation=animation, values=keyed.values(ob, None, animation),
-        fingerprint=keyed.fingerprint(ob, animation),
-        structure=structure(ob, scene=scene, animation=animation),
-        structure_record=structure(ob, scene=scene, identities=False, animation=animation),
+        fingerprint=keyed.fingerprint(ob, animation), structure=with_ids,
+        structure_record=without_ids,
         signature_record=signature(ob, scene=scene, identities=False, refs=refs),
         time_key=time_key(ob, scene))
 
@@ -120,32 +120,35 @@ def structure(ob, stable=False, scene=None, identities=True, animation=None) -> 
     binding and the frame rate. ``stable`` and ``identities`` as in :func:`signature`;
     ``animation``: the setup's :class:`keyed.Animation`, when made already.
     """
+    return structures(ob, stable, scene, animation)[0 if identities else 1]
+
+
+def structures(ob, stable=False, scene=None, animation=None) -> tuple[str, str]:
+    """:func:`structure` with and without the objects' identities, read in one pass."""
     s = ob.furcollide
     entries = [c.object for c in s.colliders]
     if s.collider_collection is not None:
         entries.append(s.collider_collection)
-    cols = [
-        (o.name if stable else o.session_uid) if identities else True
-        for o in entries
-        if o is not None and (not isinstance(o, bpy.types.Object) or in_scene(o, scene))
-    ]
-    if identities and s.collider_collection is not None:
+    listed = [o for o in entries
+              if o is not None and (not isinstance(o, bpy.types.Object) or in_scene(o, scene))]
+    cols = [o.name if stable else o.session_uid for o in listed]
+    if s.collider_collection is not None:
         cols.append(sorted(
             (o.name if stable else o.session_uid) for o in s.collider_collection.all_objects))
     surf = ob.data.surface
-    surface = "" if surf is None else (surf.name if stable else surf.session_uid) if (
-        identities) else True
+    surface = "" if surf is None else surf.name if stable else surf.session_uid
     # (wind and jiggle run on seconds: frame / fps; only then does the fps count)
     anim = keyed.Animation(ob) if animation is None else animation
     timed = s.motion.use_wind or s.motion.use_jiggle or any(
         anim.animates(f"furcollide.motion.{n}") for n in ("use_wind", "use_jiggle"))
-    parts = [cols, s.mode, s.enable_attribute, s.frame_start, surface,
-             ["fur_attach", s.attach_id] if s.use_fur_attach else None,
-             motion.fps(scene or bpy.context.scene) if timed else None]
+    rest = [s.mode, s.enable_attribute, s.frame_start]
+    tail = [["fur_attach", s.attach_id] if s.use_fur_attach else None,
+            motion.fps(scene or bpy.context.scene) if timed else None]
     mapped = {k: getattr(s, f"{k}_map") for k in MAPPED if getattr(s, f"{k}_map")}
     if mapped:  # (only when in use: structures without maps are unchanged)
-        parts.append(["maps", mapped])
-    return json.dumps(parts)
+        tail.append(["maps", mapped])
+    return (json.dumps([cols, *rest, surface, *tail]),
+            json.dumps([[True] * len(listed), *rest, surf is not None or "", *tail]))
 
 
 def signature_change(old: str, new: str) -> str:
