@@ -1,8 +1,9 @@
 """Bake and resume: solve a frame range in order and write it to disk.
 
 A bake writes ``frame_NNNNNN.npz`` files (see :mod:`..core.framecache`) into the
-setup's folder under its Cache Directory (:func:`bake_directory`). Each frame is solved
-by :func:`bake_frame` through the same :func:`solve.solve_frame` as playback.
+setup's folder under its Cache Directory (:func:`bake_directory`). Each frame runs
+the frame's spine as playback does (:func:`bake_frame`: :func:`..frame.spine.evaluate`
+into :class:`ToBake`, which writes the frame's file).
 Finished frames survive a cancel or a crash and the next bake resumes after the last
 one whose settings match (:func:`resume_frame`) and whose inputs still hold
 (:func:`resume_inputs_match`). A baked setup only reads its files until Free Bake.
@@ -14,18 +15,17 @@ from __future__ import annotations
 
 import os
 import re
-from dataclasses import replace
 
 import bpy
 import numpy as np
 
 from ...core import framecache
 from ..blender import bridge
-from ..frame import children, groom, output, rules, solve, topology
+from ..frame import children, groom, rules, solve, spine, topology
 from ..frame.clock import clock
-from ..frame.colliders import collider_list, keep_placements, read_for_solve
-from ..frame.inputs import prepare_input, read_frame, read_inputs
-from ..frame.record import current_inputs, first_change, fixed_change, solved_inputs
+from ..frame.colliders import collider_list, keep_placements
+from ..frame.inputs import read_inputs
+from ..frame.record import current_inputs, first_change, fixed_change
 from ..frame.setup import Setup
 from ..settings import keyed, motion
 from ..settings.fingerprints import core_settings, read_settings, structure
@@ -76,7 +76,8 @@ def settings_fingerprint(ob) -> str:
 
 
 def bake_frame(setup, directory, trust_solver) -> dict:
-    """Solve the current frame ``f`` of ``setup`` for a bake and write it to ``directory``.
+    """Solve the current frame ``f`` of ``setup`` for a bake and write it to ``directory``:
+    the frame's spine (:func:`..frame.spine.evaluate`) into the bake (:class:`ToBake`).
 
     Parameters
     ----------
@@ -93,53 +94,91 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     dict
         The frame's stats (curve counts per status, ``solve_ms``).
     """
-    rt, f = setup.rt, setup.frame
-    clock.start()
-    read = read_frame(setup)
-    inp = read.inputs
-    if trust_solver and rt.topology is not None and rt.topology != inp.key:
-        # (frames of other curves than the frame before: no playback could show them)
-        raise ValueError(topology.topology_message(setup.ob, rt.topology, inp.key,
-                                                   "baking", setup.s.frame_start))
-    rt.adopt_topology(inp.key)
-    inp = prepare_input(setup, inp, read.motion)
-    output.sync_output(setup, inp)
-    solver = solve.ensure_solver(setup, inp)
-    fresh = rules.starts_here(setup, read.settings.animation)
-    if fresh:  # (the start frame, or enabled again)
-        solver.reset()
-    elif not trust_solver:
-        _p, _st, offsets, stored = framecache.read_frame(directory, f - 1)
-        if not np.array_equal(offsets, inp.offsets):
-            raise ValueError(f"bake frame {f - 1} was made for other curves")
-        solver.state = framecache.decode_state(stored, rt.memory.sparse)
-    cols, growth, _notes = read_for_solve(setup, read.settings.refs, continuous=trust_solver,
-                                          fresh=fresh)
-    rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
-    result = solve.solve_frame(setup, replace(inp, colliders=cols, growth=growth),
-                               motion=read.motion)
-    rt.solver_frame = f
-    fp = settings_fingerprint(setup.ob)
-    state = solver.state
-    state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
-    stats = dict(result.stats, source="bake")
-    groom_part = _bake_groom(setup, result.points)  # the render groom is baked with its guides
-    # The children are made from the guides written (their stack evaluates the output).
-    output.write(setup, inp, result.points, result.status, result.changed, result.attributes)
-    children_part = children.bake_frame(setup)
-    extra = {}
-    for name, part in ((groom.BAKE_PART, groom_part), (children.BAKE_PART, children_part)):
-        if part is not None:
-            extra[name] = part[0]
-            stats.update(part[1])
-    framecache.write_frame(directory, f, result.points, result.status, inp.offsets, state,
-                           rt.memory.sparse, result.attributes,
-                           inputs=solved_inputs(setup, inp, read.settings), extra=extra)
-    rt.stats = dict(stats, **clock.stats())
-    rt.invalid_note = rules.invalid_note(result.problems)
-    if rt.invalid_note:
-        registry.set_status(setup.ob, *rt.invalid_note)
-    return rt.stats
+    sink = ToBake(directory, trust_solver)
+    spine.evaluate(setup, sink)
+    return sink.stats
+
+
+class ToBake:
+    """The sink of a frame baked (:func:`bake_frame`; the spine's other sink is
+    :class:`..frame.spine.Playback`): every frame is solved, from the groomed shape at
+    the start frame (or enabled again), else from frame ``f - 1``'s state (the solver's,
+    just solved by this bake, or read from ``f - 1``'s file); the frame goes into its
+    bake file with the render groom and the children made from it."""
+
+    #: Not the frame handler's evaluation: nothing is remembered as seen.
+    sees = False
+
+    def __init__(self, directory, trust_solver):
+        self.directory = directory
+        self.trust_solver = trust_solver
+        self.stats = None  # the frame's statistics, once written
+
+    def skip(self, setup):
+        return None  # (a bake evaluates its frames while the frame handler keeps off)
+
+    def attaches(self, setup) -> bool:
+        return True
+
+    def changes(self, setup, read):
+        rt, inp = setup.rt, read.inputs
+        if self.trust_solver and rt.topology is not None and rt.topology != inp.key:
+            # (frames of other curves than the frame before: no playback could show them)
+            raise ValueError(topology.topology_message(setup.ob, rt.topology, inp.key,
+                                                       "baking", setup.s.frame_start))
+        return rules.Changes(adopt=inp.key)
+
+    def decide(self, setup, read):
+        start = "reset" if rules.starts_here(setup, read.settings.animation) else "step"
+        first = setup.frame == setup.s.frame_start
+        return rules.Decision(rules.Outcome.RESET if first else rules.Outcome.STEP,
+                              show="solve", start=start)
+
+    def prepare(self, setup, read, d):
+        rt, f = setup.rt, setup.frame
+        solver = solve.ensure_solver(setup, read.inputs)
+        if d.start == "reset":  # (the start frame, or enabled again)
+            solver.reset()
+        elif not self.trust_solver:
+            _p, _st, offsets, stored = framecache.read_frame(self.directory, f - 1)
+            if not np.array_equal(offsets, read.inputs.offsets):
+                raise ValueError(f"bake frame {f - 1} was made for other curves")
+            solver.state = framecache.decode_state(stored, rt.memory.sparse)
+        return None
+
+    def continuous(self, setup) -> bool:
+        return self.trust_solver
+
+    def keep(self, setup, read, result, record) -> None:
+        pass  # (the bake file is written with the render groom and the children)
+
+    def stages(self, setup, outcome, shown):
+        """The render groom and the children made from the guides just written: their
+        parts of the bake file and statistics (None each: none)."""
+        return _bake_groom(setup, shown.written), children.bake_frame(setup)
+
+    def publish(self, setup, outcome, shown, parts) -> None:
+        """Write the frame's bake file (the solver's state with the settings'
+        fingerprint, the frame-inputs record, the render groom's and the children's
+        parts), its statistics, and the status of INVALID curves."""
+        rt, f, result = setup.rt, setup.frame, shown.result
+        stats = dict(result.stats, source="bake")
+        extra = {}
+        for name, part in zip((groom.BAKE_PART, children.BAKE_PART), parts, strict=True):
+            if part is not None:
+                extra[name] = part[0]
+                stats.update(part[1])
+        state = rt.solver.state
+        state["fingerprint"] = np.frombuffer(settings_fingerprint(setup.ob).encode(), np.uint8)
+        framecache.write_frame(self.directory, f, result.points, result.status,
+                               shown.read.inputs.offsets, state, rt.memory.sparse,
+                               result.attributes, inputs=shown.record, extra=extra)
+        rt.stats = self.stats = dict(stats, **clock.stats())
+        if rt.invalid_note:
+            registry.set_status(setup.ob, *rt.invalid_note)
+
+    def failed(self, setup) -> None:
+        pass  # (the frames baked before are kept; the bake reports the error)
 
 
 def _bake_groom(setup, guides_world):
