@@ -28,7 +28,7 @@ test-app: venv
 test-core: venv
 	$(PY) -m pytest -q tests/core
 
-# Mutation testing of core/solver.py, rigid.py, soft.py, collider.py and framecache.py
+# Mutation testing of core/solver.py, rigid.py, soft.py, collider/ and framecache.py
 # (docs/testing.md "Mutation testing"): mutmut, pinned in requirements/mutate.txt, one worker under
 # nice. Every mutant takes many hours on 2 cores; ARGS="--sample 60" (60 drawn mutants per
 # file) about 30 min, ARGS="--files core/framecache.py" 4 min. Results in mutants/.

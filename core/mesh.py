@@ -1,5 +1,5 @@
-"""Triangle meshes given to the fur pipeline (growth surfaces): checks, areas and the
-rule for degenerate faces that colliders apply too.
+"""Triangle meshes: the checks of the fur pipeline's surfaces, areas, and the one rule
+for degenerate faces (growth surfaces and colliders alike).
 
 Meshes are ``V`` (n, 3) vertices and ``F`` (m, 3) triangles (indices into ``V``).
 """
@@ -54,11 +54,17 @@ def triangle_areas(V, F):
 
 
 def degenerate_faces(V, F):
-    """(m,) bool: degenerate faces, by the colliders' rule (``Collider`` drops the same).
+    """(m,) bool: degenerate faces (colliders drop or refuse them, Fur Attach does not
+    bind to them).
 
-    Repeated vertices, or an area at most ``tolerances.DEGENERATE_AREA_REL``
-    times the squared diagonal of the mesh's bounding box.
+    A repeated vertex, or an area at most ``tolerances.DEGENERATE_AREA_REL`` times
+    the squared diagonal of the mesh's bounding box (computed in float64, from the
+    squared cross product: no square root).
     """
-    diag = float(np.linalg.norm(V.max(0) - V.min(0))) or 1.0
-    rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
-    return rep | (triangle_areas(V, F) <= tol.DEGENERATE_AREA_REL * diag**2)
+    if len(F) == 0:
+        return np.zeros(0, bool)
+    V64 = np.asarray(V).astype(np.float64)
+    diag = float(np.linalg.norm(V64.max(0) - V64.min(0))) or 1.0
+    a = np.cross(V64[F[:, 1]] - V64[F[:, 0]], V64[F[:, 2]] - V64[F[:, 0]])
+    area2 = np.einsum("ij,ij->i", a, a)  # (0 for a repeated vertex)
+    return area2 <= (2 * tol.DEGENERATE_AREA_REL * diag**2) ** 2

@@ -1,12 +1,16 @@
 """Stiff and Bend (paper 3.2.1), Shrink (3.2.2), Recovery and Plasticity (3.2.3-4).
 
 A Stiff or Bend curve carries one angle about one axis (kept in the curve's
-local frame from its first hit until it has recovered); these functions
-update that angle for all curves of a step at once.
+local frame from its first hit until it has recovered); :func:`solve` finds
+that angle for all curves of a step at once and returns every curve's
+rotation as it leaves it (:class:`Turns`, the mode's own while it solves),
+which the step applies (``StepContext.apply``). The step lends its machinery
+(deformation, ray queries, first hits); these functions never write into it.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
@@ -38,25 +42,74 @@ _GUESS_STRIDE = 4
 _BLOCK = 1024
 
 
-def solve(ctx, idx, status):
-    """Stiff and Bend: one angle per curve about its kept axis."""
-    angle = ctx.angle
+@dataclass
+class Turns:
+    """Stiff/Bend's answer for one step: every curve's rotation as the mode leaves it.
+
+    :func:`solve` makes it from the step's rotations (its own copies: the rows
+    of the curves it solves change) and returns it; ``StepContext.apply`` takes
+    it. The halves of a step (``StepContext.in_halves``) share it, each writing
+    only its own curves.
+
+    Attributes
+    ----------
+    angle, angle_max : (C,) float64
+        The rotation (radians) and the largest of the contact.
+    axis : (C, 3) float64
+        The rotation axis, world.
+    active : (C,) bool
+        Has a non-identity state.
+    stiff : (C,) bool
+        A Bend curve solved as Stiff (bending could not clear it).
+    restyled : (C,) bool
+        Started again this step (a new axis) or fallen back to Stiff: the next
+        step's search keeps no memory of its change.
+    status : (C,) int8
+        The outcome of each curve solved (``Status``; FREE elsewhere).
+    guess, guess_stiff : (C,) float64
+        The searches' first probes: tangent-plane estimates of the angle
+        (``StepContext.plane_guess``), as the mode turns and as Stiff.
+    """
+
+    angle: np.ndarray
+    angle_max: np.ndarray
+    axis: np.ndarray
+    active: np.ndarray
+    stiff: np.ndarray
+    restyled: np.ndarray
+    status: np.ndarray
+    guess: np.ndarray
+    guess_stiff: np.ndarray
+
+    @classmethod
+    def of(cls, ctx) -> Turns:
+        """The step's rotations as they are before the solve (copies)."""
+        C = ctx.layout.n_curves
+        return cls(ctx.angle.copy(), ctx.angle_max.copy(), ctx.axis.copy(), ctx.active.copy(),
+                   ctx.stiff.copy(), np.zeros(C, bool), np.zeros(C, np.int8), np.zeros(C),
+                   np.zeros(C))
+
+
+def solve(ctx, idx) -> Turns:
+    """Stiff and Bend: one angle per curve about its kept axis, for curves ``idx``."""
+    t = Turns.of(ctx)
     near = idx[ctx.cand_any[idx]]
     far = idx[~ctx.cand_any[idx]]
-    act = near[ctx.active[near]]  # rotated curves near a collider
-    new = near[~ctx.active[near]]  # unrotated: their segments are the input's
+    act = near[t.active[near]]  # rotated curves near a collider
+    new = near[~t.active[near]]  # unrotated: their segments are the input's
     # 1. Unrotated curves near a collider: tested at their input shape; 2. the
     # searches. Each in two halves on two threads when there are many.
-    ctx.in_halves(_new_contacts, len(new), new)
-    cn = new[ctx.active[new]]
-    ctx.in_halves(_search, len(act) + len(cn), act, cn, status=status)
-    rec = far[ctx.active[far]]  # far from every collider: nothing to check
-    th_far = angle[rec].copy()
-    recover(ctx, rec, th_far, recovery_step(ctx, rec), np.zeros(len(rec), bool), status)
-    release(ctx, idx)
+    ctx.in_halves(_new_contacts, len(new), new, turns=t)
+    cn = new[t.active[new]]
+    ctx.in_halves(_search, len(act) + len(cn), act, cn, turns=t)
+    rec = far[t.active[far]]  # far from every collider: nothing to check
+    th_far = t.angle[rec].copy()
+    recover(t, rec, th_far, recovery_step(ctx, t, rec), np.zeros(len(rec), bool))
+    release(t, idx)
+    return t
 
 
-def _new_contacts(ctx, new):
+def _new_contacts(ctx, new, turns):
     """Test unrotated curves ``new`` at their input shape; the ones that hit
     become active with the axis of their first hit (kept until recovered)."""
     hit_new, seg_hit = ctx.input_hits(new)
@@ -64,20 +117,25 @@ def _new_contacts(ctx, new):
     if len(cn):
         seg_hit = seg_hit[np.repeat(hit_new, ctx.layout.nseg[new])]  # (the same rays)
         o, d, _, rep, starts = ctx.input_rays(cn)
-        ctx.axis[cn] = ctx.new_axes(cn, o, d, rep, starts, seg_hit)
-        ctx.active[cn] = True
+        axis, guess, guess_stiff = ctx.new_axes(cn, o, d, rep, starts, turns.stiff[cn], seg_hit)
+        turns.axis[cn] = axis
+        turns.guess[cn] = guess
+        turns.guess_stiff[cn] = guess_stiff
+        turns.active[cn] = True
 
 
-def _search(ctx, act, cn, status):
+def _search(ctx, act, cn, turns):
     """Angles of the rotated curves ``act`` near a collider and of the new
     contacts ``cn`` (their axes set): collisions, recoveries, restarts and
     Bend's fall back to Stiff. Each curve's answer is its own."""
-    angle = ctx.angle
+    t = turns
+    angle = t.angle
     # One batch for the rotated curves (items 0..len(act)-1) and the new
     # colliding ones, so that every search below is one ray query per round.
-    batch = RigidBatch(ctx, np.concatenate([act, cn]))
+    curves = np.concatenate([act, cn])
+    batch = RigidBatch(ctx, curves, t.axis[curves], t.stiff[curves])
     th0 = angle[act].copy()
-    th1 = recovery_step(ctx, act)
+    th1 = recovery_step(ctx, t, act)
     plan = Plan(ctx, act, th0, th1)
     if ctx.warm_start:
         plan.first_round_warm(batch)
@@ -88,10 +146,11 @@ def _search(ctx, act, cn, status):
     cc = plan.collisions_to_guess()
     if len(cc):
         c = act[cc]
-        o, d, _, rep, starts = ctx.deform(c, angle=angle[c], axis=ctx.axis[c])
+        o, d, _, rep, starts = ctx.deform(c, angle=angle[c], axis=t.axis[c], stiff=t.stiff[c])
         k, point, push = ctx.first_hit_details(c, o, d, rep, starts)
-        g = ctx.plane_guess(c, o + d, rep, starts, point, push, ctx.axis[c])
-        ctx.guess[c] = np.where(k >= 0, g, ctx.guess[c])
+        g, g_stiff = ctx.plane_guess(c, o + d, rep, starts, point, push, t.axis[c], t.stiff[c])
+        t.guess[c] = np.where(k >= 0, g, t.guess[c])
+        t.guess_stiff[c] = g_stiff
     # Every search left, collisions (new and old) and blocked recoveries,
     # in the same rounds (one ray query per round).
     col_items, col_lo, col_hi, col_stride, col_guess = plan.collision_searches()
@@ -100,21 +159,22 @@ def _search(ctx, act, cn, status):
     lo = np.concatenate([col_lo, new_lo])
     hi = np.concatenate([col_hi, new_hi])
     stride = np.concatenate([col_stride, new_stride])
-    guess = np.concatenate([col_guess, new_guess])
+    use_guess = np.concatenate([col_guess, new_guess])
     k_col, k_rec = search_angles(ctx, batch, items, angle[batch.curves[items]], lo, hi, stride,
-                                 guess, plan.recovery_searches())
+                                 use_guess, plan.recovery_searches(),
+                                 guess=t.guess[batch.curves[items]])
     plan.recovery_found(k_rec)
     # Contacts pushed back the other way: a turn further by more than their
     # whole angle; then, after Bend's fall back to Stiff, those still unresolved.
     again = np.zeros(len(items), bool)
-    turns = k_col != NONE
-    again[turns] = restart_contacts(ctx, batch, items[turns], k_col[turns], status)
+    further = k_col != NONE
+    again[further] = restart_contacts(ctx, t, batch, items[further], k_col[further])
     left = items[~again]
-    resolve_collisions(ctx, batch, left, k_col[~again], status)
-    left = left[status[batch.curves[left]] == Status.UNRESOLVED]
-    restart_contacts(ctx, batch, left, np.full_like(left, NONE), status)
+    resolve_collisions(ctx, t, batch, left, k_col[~again])
+    left = left[t.status[batch.curves[left]] == Status.UNRESOLVED]
+    restart_contacts(ctx, t, batch, left, np.full_like(left, NONE))
     rec = plan.recovered_items()
-    recover(ctx, act[rec], th0[rec], plan.recovered_angle(rec), plan.blocked(rec), status)
+    recover(t, act[rec], th0[rec], plan.recovered_angle(rec), plan.blocked(rec))
 
 
 def fresh_searches(n):
@@ -341,7 +401,7 @@ class Plan:
         return (self.k[r] > 0) & self.moving[r]
 
 
-def restart_contacts(ctx, batch, items, k, status):
+def restart_contacts(ctx, turns, batch, items, k):
     """Contacts pushed back the other way start again from the input shape.
 
     A curve keeps the axis of its first hit until it has recovered (paper
@@ -362,30 +422,31 @@ def restart_contacts(ctx, batch, items, k, status):
     Returns
     -------
     (len(items),) bool
-        The items started again (their angle, axis and status are set).
+        The items started again (their angle, axis and status are set in ``turns``).
     """
+    t = turns
     again = np.zeros(len(items), bool)
     if len(items) == 0:
         return again
     p = ctx.prec
     c = batch.curves[items]
-    th0 = ctx.angle[c]
+    th0 = t.angle[c]
     turn = np.where(k != NONE, k * p, np.inf)
     sel = np.flatnonzero((th0 > 0) & (turn > th0 + tol.RESTART_MIN_STEPS * p))
     if len(sel) == 0:
         return again
     cs = c[sel]
-    axis0 = ctx.axis[cs].copy()
-    stiff0 = ctx.state.stiff[cs].copy()
+    axis0 = t.axis[cs]
+    stiff0 = t.stiff[cs]
     # The current shape, and the one turning further would give (the kept axis).
-    now = _ends(ctx, cs, th0[sel], axis0)
+    now = _ends(ctx, cs, th0[sel], axis0, stiff0)
     ok = np.isfinite(turn[sel])
     further = _moved(ctx, cs, now,
-                     _ends(ctx, cs, th0[sel] + np.where(ok, turn[sel], 0.0), axis0))
+                     _ends(ctx, cs, th0[sel] + np.where(ok, turn[sel], 0.0), axis0, stiff0))
     further[~ok] = np.inf
-    # The new contact: a fresh solve of the input shape, as Bend (not Stiff); the
-    # curves' flags and axes are those of the new contact until restored below.
-    ctx.state.stiff[cs] = False
+    # The new contact: a fresh solve of the input shape, as Bend (not Stiff), about
+    # the axis of the input's first hit.
+    bend = np.zeros(len(cs), bool)
     phi = np.zeros(len(cs))
     axis1 = axis0.copy()
     found = np.ones(len(cs), bool)
@@ -395,33 +456,33 @@ def restart_contacts(ctx, batch, items, k, status):
         cb = cs[hb]
         seg_hit = seg_hit[np.repeat(hit0, ctx.layout.nseg[cs])]
         o, d, _, rep, starts = ctx.input_rays(cb)
-        axis1[hb] = ctx.new_axes(cb, o, d, rep, starts, seg_hit)
-        ctx.axis[cb] = axis1[hb]
+        axis1[hb], t.guess[cb], t.guess_stiff[cb] = ctx.new_axes(cb, o, d, rep, starts,
+                                                                 bend[hb], seg_hit)
         n = len(cb)
-        kb, _ = search_angles(ctx, RigidBatch(ctx, cb), np.arange(n), np.zeros(n),
-                              *fresh_searches(n))
+        kb, _ = search_angles(ctx, RigidBatch(ctx, cb, axis1[hb], bend[hb]), np.arange(n),
+                              np.zeros(n), *fresh_searches(n), guess=t.guess[cb])
         found[hb] = kb != NONE
         phi[hb] = np.where(found[hb], np.minimum(kb * p, ctx.max_angle_of(cb)), 0.0)
-    anew = _moved(ctx, cs, now, _ends(ctx, cs, phi, axis1))
-    ctx.state.stiff[cs] = stiff0
-    ctx.axis[cs] = axis0
+    anew = _moved(ctx, cs, now, _ends(ctx, cs, phi, axis1, bend))
     take = found & (anew < tol.RESTART_GAIN * further)
     cr = cs[take]
     if len(cr):
-        ctx.state.stiff[cr] = False
-        ctx.restyled[cr] = True  # a new grid: no memory of the last change
-        ctx.axis[cr] = axis1[take]
-        ctx.angle[cr] = phi[take]
-        ctx.angle_max[cr] = phi[take]
-        status[cr] = np.where(phi[take] > 0, Status.COLLIDING, Status.FREE)
+        t.stiff[cr] = False
+        t.restyled[cr] = True  # a new grid: no memory of the last change
+        t.axis[cr] = axis1[take]
+        t.angle[cr] = phi[take]
+        t.angle_max[cr] = phi[take]
+        t.status[cr] = np.where(phi[take] > 0, Status.COLLIDING, Status.FREE)
         again[sel[take]] = True
     return again
 
 
-def _ends(ctx, idx, angle, axis):
+def _ends(ctx, idx, angle, axis, stiff):
     """(k, 3) segment ends of curves ``idx`` turned by ``angle`` (n,) about
-    ``axis`` (n, 3), in the rows of :meth:`StepContext.deform`."""
-    o, d, _, _, _ = ctx.deform(idx, angle=np.asarray(angle, np.float64), axis=axis)
+    ``axis`` (n, 3) (``stiff`` (n,): Bend curves turned as Stiff), in the rows of
+    :meth:`StepContext.deform`."""
+    o, d, _, _, _ = ctx.deform(idx, angle=np.asarray(angle, np.float64), axis=axis,
+                               stiff=stiff)
     return o + d
 
 
@@ -433,10 +494,11 @@ def _moved(ctx, idx, a, b):
     return np.maximum.reduceat(dist, starts)
 
 
-def resolve_collisions(ctx, batch, items, k, status):
+def resolve_collisions(ctx, turns, batch, items, k):
     """Apply the collision searches' answers ``k`` to ``batch.curves[items]``
     (paper 3.2.1), with Bend's fall back to Stiff and the unresolved fallback."""
-    p, angle = ctx.prec, ctx.angle
+    t = turns
+    p, angle = ctx.prec, t.angle
     c = batch.curves[items]
     if len(items) == 0:
         return
@@ -445,39 +507,41 @@ def resolve_collisions(ctx, batch, items, k, status):
         # Bending turns the root segment by only 1/n of the angle: curves
         # hit near the root that bending cannot clear turn at the root (as
         # Stiff) instead, until they have recovered.
-        retry = np.flatnonzero((k == NONE) & ~ctx.state.stiff[c])
+        retry = np.flatnonzero((k == NONE) & ~t.stiff[c])
         if len(retry):
             cr = c[retry]
             # seed: the Stiff estimate at the current shape (the tangent plane
             # at its first hit, whatever path the search took), plus about
             # the mean bend already taken
-            o, d, _, rep, starts = ctx.deform(cr, angle=angle[cr], axis=ctx.axis[cr])
+            bend = t.stiff[cr]
+            o, d, _, rep, starts = ctx.deform(cr, angle=angle[cr], axis=t.axis[cr], stiff=bend)
             kh, point, push = ctx.first_hit_details(cr, o, d, rep, starts)
-            ctx.plane_guess(cr, o + d, rep, starts, point, push, ctx.axis[cr])
-            ctx.state.stiff[cr] = True
-            ctx.restyled[cr] = True
-            seed = ctx.guess_stiff[cr] + 0.5 * th0[retry]
+            _, t.guess_stiff[cr] = ctx.plane_guess(cr, o + d, rep, starts, point, push,
+                                                   t.axis[cr], bend)
+            t.stiff[cr] = True
+            t.restyled[cr] = True
+            seed = t.guess_stiff[cr] + 0.5 * th0[retry]
             n = len(cr)
-            k2, _ = search_angles(ctx, RigidBatch(ctx, cr), np.arange(n), np.zeros(n),
-                                  *fresh_searches(n), guess=seed)
+            k2, _ = search_angles(ctx, RigidBatch(ctx, cr, t.axis[cr], t.stiff[cr]),
+                                  np.arange(n), np.zeros(n), *fresh_searches(n), guess=seed)
             # (still restyled: they end UNRESOLVED, which the next step does
             # not remember as a contact either way)
             ok2 = k2 != NONE
-            ctx.state.stiff[cr[~ok2]] = False
+            t.stiff[cr[~ok2]] = False
             k[retry[ok2]] = k2[ok2]
             th0[retry[ok2]] = 0.0
     ok = k != NONE
     res = c[ok]
     angle[res] = np.minimum(th0[ok] + k[ok] * p, ctx.max_angle_of(res))
-    ctx.angle_max[res] = np.maximum(ctx.angle_max[res], angle[res])
-    status[res] = Status.COLLIDING
+    t.angle_max[res] = np.maximum(t.angle_max[res], angle[res])
+    t.status[res] = Status.COLLIDING
     bad = c[~ok]
-    status[bad] = Status.UNRESOLVED
+    t.status[bad] = Status.UNRESOLVED
     # Fallback: the state of the previous frame (last collision-free).
     angle[bad] = th0[~ok]  # (a new contact left at 0 is released by release())
 
 
-def recovery_step(ctx, rec):
+def recovery_step(ctx, turns, rec):
     """This frame's recovery angle of curves ``rec`` (paper 3.2.3-4).
 
     The angle moves toward the target ``plasticity * largest angle`` (or
@@ -486,26 +550,26 @@ def recovery_step(ctx, rec):
     target, and below half a step on exactly zero.
     """
     p = ctx.prec
-    th0 = ctx.angle[rec]
+    th0 = turns.angle[rec]
     frac = ctx.target_fraction(rec)
-    target = np.where(np.isnan(frac), th0, np.nan_to_num(frac) * ctx.angle_max[rec])
+    target = np.where(np.isnan(frac), th0, np.nan_to_num(frac) * turns.angle_max[rec])
     target = np.minimum(target, th0)
     th1 = th0 - ctx.s.per_curve("recovery_rate", rec) * (th0 - target)
     th1 = np.where(th1 - target < tol.SNAP_FRACTION * p, target, th1)
     return np.where(th1 < tol.SNAP_FRACTION * p, 0.0, th1)
 
 
-def recover(ctx, rec, th0, th1, blocked, status):
+def recover(turns, rec, th0, th1, blocked):
     """Turn clear curves ``rec`` from ``th0`` to ``th1`` (their recovery step,
     or where that step collides, ``blocked``, the smallest clearing angle
     above it found by the search: recovery stops before contact)."""
     if len(rec) == 0:
         return
-    ctx.angle[rec] = th1
+    turns.angle[rec] = th1
     # Back at exactly the input shape counts as FREE, not RECOVERING.
     st = np.where((th1 < th0) & (th1 > 0), Status.RECOVERING, Status.FREE)
     st[blocked] = Status.COLLIDING
-    status[rec] = np.maximum(status[rec], st)
+    turns.status[rec] = np.maximum(turns.status[rec], st)
 
 
 def collision_steps(ctx, th0, curves):
@@ -523,9 +587,9 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
     ``lo`` is a known blocked step, ``hi`` a known clearing one (``NONE``:
     none yet), ``stride`` the first gallop stride (:func:`fresh_searches`:
     searches from scratch). Items with ``use_guess`` (and nothing known)
-    start from an estimate of the increment, ``guess`` (default ``ctx.guess``
-    of the curves: the tangent-plane estimate of
-    :meth:`StepContext.plane_guess`): one round probes ``_GUESS_FACTOR`` times
+    start from an estimate of the increment, ``guess`` (n,) (needed when any
+    item uses it: e.g. the tangent-plane estimate of
+    :meth:`StepContext.plane_guess`, ``Turns.guess``): one round probes ``_GUESS_FACTOR`` times
     it (1.3), and the search continues from the bracket that gives
     (bisection) or from its top (gallop, stride ``estimate / _GUESS_STRIDE``).
 
@@ -561,7 +625,7 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
     if len(it):
         # One probe at the guess (scaled: it is low); it leaves a bracket to
         # bisect, or a floor to gallop on from with a guess-sized stride.
-        g = ctx.guess[batch.curves[items[it]]] if guess is None else guess[it]
+        g = guess[it]
         kg = np.clip(np.rint(g / p).astype(np.int64), 1, kmax[it])
         kp = np.clip(np.rint(kg * _GUESS_FACTOR).astype(np.int64), 1, kmax[it])
         good = test(it, kp)
@@ -584,15 +648,14 @@ def search_angles(ctx, batch, items, th0, lo, hi, stride, use_guess, bisect=None
     return k[:n], k[n:n + m]
 
 
-def release(ctx, idx):
+def release(turns, idx):
     """Curves back at exactly their input shape drop their local state."""
-    if ctx.soft:
-        return
-    done = idx[ctx.active[idx] & (ctx.angle[idx] == 0)]
-    ctx.active[done] = False
-    ctx.state.stiff[done] = False
-    ctx.axis[done] = 0.0
-    ctx.angle_max[done] = 0.0
+    t = turns
+    done = idx[t.active[idx] & (t.angle[idx] == 0)]
+    t.active[done] = False
+    t.stiff[done] = False
+    t.axis[done] = 0.0
+    t.angle_max[done] = 0.0
 
 
 def _stages(ns):
@@ -623,7 +686,9 @@ class RigidBatch:
     Rays are grown by ``tol.RAY_EXTEND_ULPS`` as in :meth:`core.step.StepContext.hits`.
     """
 
-    def __init__(self, ctx, curves):
+    def __init__(self, ctx, curves, axis, stiff):
+        """``axis`` (n, 3): each curve's rotation axis (world); ``stiff`` (n,) bool:
+        Bend curves turned as Stiff."""
         self.ctx = ctx
         self.curves = curves
         self.cnt = ctx.layout.nseg[curves]
@@ -631,17 +696,17 @@ class RigidBatch:
         # see :meth:`_hits_uniform`.
         self.ns = ctx.layout.ns if len(curves) else 0
         if self.ns:
-            self._init_uniform(ctx, curves)
+            self._init_uniform(ctx, curves, axis, stiff)
             return
         seg, rep, starts = ctx.segments(curves)
         self.starts = starts
         v = ctx.seg_in(seg)
-        ax = ctx.axis[curves][rep]
+        ax = axis[rep]
         Y = ax * rot.dot(ax, v)[:, None]
         X = np.cross(ax, v)
         V0 = v - Y
         if ctx.s.mode == "bend":
-            self.w = np.where(ctx.state.stiff[curves][rep], 1.0, ctx.layout.w_bend[seg])
+            self.w = np.where(stiff[rep], 1.0, ctx.layout.w_bend[seg])
         else:
             self.w = np.ones(len(seg))
         self.length = np.sqrt(rot.dot(v, v))
@@ -655,11 +720,11 @@ class RigidBatch:
             terms = [rot.apply(A, x) for x in (Y, V0, X)]
             self.per_col.append((c, off, m, rot.apply(A, ctx.roots[curves]) + b, *terms))
 
-    def _init_uniform(self, ctx, curves):
+    def _init_uniform(self, ctx, curves, axis, stiff):
         """The terms as (3, ns, n) component arrays (same arithmetic as the
         rows of 3 of the general case, so the same rays bit for bit)."""
         v = ctx.seg_soa(curves)
-        ax = np.ascontiguousarray(ctx.axis[curves].T)  # components as contiguous rows
+        ax = np.ascontiguousarray(axis.T)  # components as contiguous rows
         a0, a1, a2 = ax
         along = v[0] * a0
         along += v[1] * a1
@@ -671,7 +736,7 @@ class RigidBatch:
             np.multiply(p, v[q], out=X[i])
             X[i] -= r[0] * v[r[1]]
         V0 = np.subtract(v, Y)
-        self.w = np.broadcast_to(ctx.bend_weights(curves), (self.ns, len(curves)))
+        self.w = np.broadcast_to(ctx.bend_weights(stiff), (self.ns, len(curves)))
         sq = v[0] * v[0]
         sq += v[1] * v[1]
         sq += v[2] * v[2]

@@ -1,6 +1,13 @@
-"""Soft mode (paper 3.2.1): per-segment rotations with Affected Connected CVs and CV FallOff."""
+"""Soft mode (paper 3.2.1): per-segment rotations with Affected Connected CVs and CV FallOff.
+
+:func:`solve` finds the rotations of a step's curves and returns them (:class:`Turns`:
+every segment's quaternion as the mode leaves it, the mode's own while it solves),
+which the step applies (``StepContext.apply``); it never writes into the step.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -8,6 +15,55 @@ from . import rotations as rot
 from . import tolerances as tol
 from .search import gallop_bisect, scan_bisect
 from .status import Status
+
+
+@dataclass
+class Turns:
+    """Soft's answer for one step: every segment's rotation as the mode leaves it.
+
+    :func:`solve` makes it from the step's rotations (its own copies: the rows of
+    the curves it solves change) and returns it; ``StepContext.apply`` takes it.
+    The halves of a step (``StepContext.in_halves``) share it, each writing only
+    its own curves.
+
+    Attributes
+    ----------
+    quat : (S, 4) float64
+        Each segment's rotation (world).
+    quat_max : list of (rows (k,), quaternions (k, 4), grow)
+        The changes of the largest rotations, in order: with ``grow`` each row
+        takes its quaternion where that turns further than its largest so far,
+        else it is set (back to the identity).
+    active : (C,) bool
+    soft_level : (C,) float64
+        The fraction of the recovery step a blocked curve took.
+    status : (C,) int8
+        The outcome of each curve solved (``Status``; FREE elsewhere).
+    """
+
+    quat: np.ndarray
+    active: np.ndarray
+    soft_level: np.ndarray
+    status: np.ndarray
+    quat_max: list = field(default_factory=list)
+
+    @classmethod
+    def of(cls, ctx) -> Turns:
+        """The step's rotations as they are before the solve (copies)."""
+        C = ctx.layout.n_curves
+        return cls(ctx.quat.copy(), ctx.active.copy(), np.zeros(C), np.zeros(C, np.int8))
+
+
+def solve(ctx, idx) -> Turns:
+    """Soft on curves ``idx`` (in two halves on two threads when there are many)."""
+    t = Turns.of(ctx)
+    ctx.in_halves(_solve, len(idx), idx, turns=t)
+    return t
+
+
+def _solve(ctx, idx, turns):
+    """Soft on curves ``idx``: :meth:`StepContext.in_halves`'s ``fn``."""
+    SoftSolve(ctx, turns).run(idx)
 
 
 class SoftSolve:
@@ -23,17 +79,17 @@ class SoftSolve:
     per segment.
     """
 
-    def __init__(self, ctx):
-        self.ctx = ctx
+    def __init__(self, ctx, turns):
+        self.ctx, self.t = ctx, turns
         s = ctx.s
         A = s.affected_connected_cvs
         self.weights = (1.0 - s.cv_falloff) ** np.arange(1, A + 1)  # (A,): empty for 0
 
-    def run(self, idx, status):
-        ctx, p = self.ctx, self.ctx.prec
+    def run(self, idx):
+        ctx, t, p = self.ctx, self.t, self.ctx.prec
         near = idx[ctx.cand_any[idx]]
         far = idx[~ctx.cand_any[idx]]
-        q0 = ctx.quat.copy()  # world, state at the start of the step
+        # (ctx.quat: the rotations at the start of the step, world)
         unresolved = np.zeros(ctx.layout.n_curves, bool)
         touched = np.zeros(ctx.layout.n_curves, bool)
         todo = near
@@ -41,7 +97,7 @@ class SoftSolve:
             # Most curves near a collider are clear in their current state:
             # find the ones that are not on component arrays first (the first
             # round's details need rows).
-            q = ctx.quat.reshape(-1, ctx.layout.ns, 4)[todo]
+            q = t.quat.reshape(-1, ctx.layout.ns, 4)[todo]
             qs = np.empty((4, ctx.layout.ns, len(todo)))
             for i in range(4):
                 qs[i] = q[..., i].T
@@ -50,7 +106,7 @@ class SoftSolve:
             if len(todo) == 0:
                 break
             seg, rep, starts = ctx.segments(todo)
-            o, d, _, rep, starts = ctx.deform(todo, quat=ctx.quat[seg])
+            o, d, _, rep, starts = ctx.deform(todo, quat=t.quat[seg])
             follow = ctx.s.follow_collider_motion
             if follow:
                 k, point, push, vel = ctx.first_hit_details(todo, o, d, rep, starts, motion=True)
@@ -61,7 +117,7 @@ class SoftSolve:
             if len(todo) == 0:
                 break
             touched[todo] = True
-            ctx.active[todo] = True
+            t.active[todo] = True
             seg_hit = seg[k]  # global segment id of the first hitting segment
             if ctx.s.attract_to_growth_surface:
                 mid = ctx.midpoints(todo, o, d, starts[hit])
@@ -89,27 +145,25 @@ class SoftSolve:
             if ok.any():
                 w = np.flatnonzero(ok)
                 _, sel, q = self._rotated(seg_hit[w], last[w], axis[w], kk[w] * p)
-                ctx.quat[sel] = q
-                grow = rot.quat_angle(q) > rot.quat_angle(ctx.quat_max[sel])
-                ctx.quat_max[sel[grow]] = q[grow]
+                t.quat[sel] = q
+                t.quat_max.append((sel, q, True))
             unresolved[todo[~ok]] = True
             todo = todo[ok]
         # Unresolvable curves fall back to their state at the start of the step.
         bad = np.flatnonzero(unresolved)
         if len(bad):
             seg, _, _ = ctx.segments(bad)
-            ctx.quat[seg] = q0[seg]
-            ctx.active[bad] = self.ctx.state.active[bad]
-            status[bad] = Status.UNRESOLVED
-        status[touched & ~unresolved] = Status.COLLIDING
+            t.quat[seg] = ctx.quat[seg]
+            t.active[bad] = ctx.state.active[bad]
+            t.status[bad] = Status.UNRESOLVED
+        t.status[touched & ~unresolved] = Status.COLLIDING
         rec = np.sort(np.concatenate([near, far]))
-        rec = rec[~touched[rec] & ctx.active[rec]]
+        rec = rec[~touched[rec] & t.active[rec]]
         if len(rec):
-            self.recover(rec, status)
+            self.recover(rec)
 
     def _rotated(self, seg_hit, last, axis, phi):
         """(owner, segment ids, composed quaternions) after turning ``seg_hit`` by ``phi``."""
-        ctx = self.ctx
         n = len(seg_hit)
         span = np.minimum(len(self.weights) + 1, last - seg_hit)  # segments affected
         rep = np.repeat(np.arange(n), span)
@@ -118,9 +172,9 @@ class SoftSolve:
         sel = seg_hit[rep] + i
         w = np.concatenate([[1.0], self.weights])[i]
         r = rot.quat_from_axis_angle(axis[rep], phi[rep] * w)
-        return rep, sel, rot.quat_canonical(rot.quat_mul(r, ctx.quat[sel]))
+        return rep, sel, rot.quat_canonical(rot.quat_mul(r, self.t.quat[sel]))
 
-    def recover(self, rec, status):
+    def recover(self, rec):
         """Slerp every segment toward its target; stop before contact.
 
         The step is ``recovery_rate`` of the way to the target; where it
@@ -132,11 +186,11 @@ class SoftSolve:
         of bisected. Where clearance is monotone in the fraction both give
         the same level.
         """
-        ctx, p = self.ctx, self.ctx.prec
+        ctx, t, p = self.ctx, self.t, self.ctx.prec
         levels = _LEVELS
         rate = ctx.s.per_curve("recovery_rate", rec)  # a number, or per curve of rec
         seg, rep, starts = ctx.segments(rec)
-        q0 = ctx.quat[seg]
+        q0 = t.quat[seg]
         ident = np.zeros_like(q0)
         ident[:, 0] = 1.0
         frac = ctx.target_fraction(rec)
@@ -215,19 +269,19 @@ class SoftSolve:
             r = rate if np.ndim(rate) == 0 else rate[b]
             lam = np.repeat(level[b] / levels * r, ctx.layout.nseg[rec[b]])
             q1[pos] = path(lam, pos)
-        ctx.quat[seg] = q1
-        ctx.soft_level[rec[b]] = level[b] / levels
+        t.quat[seg] = q1
+        t.soft_level[rec[b]] = level[b] / levels
         changed = np.logical_or.reduceat(~np.all(q1 == q0, axis=1), starts)
         identity = np.logical_and.reduceat(np.all(q1 == ident, axis=1), starts)
         st = np.where(
             blocked, Status.COLLIDING, np.where(changed & ~identity, Status.RECOVERING, Status.FREE)
         )
-        status[rec] = np.maximum(status[rec], st)
+        t.status[rec] = np.maximum(t.status[rec], st)
         # Back exactly at the input shape: drop the state.
         done = rec[identity]
-        ctx.active[rec] &= ~identity
+        t.active[rec] &= ~identity
         dseg, _, _ = ctx.segments(done)
-        ctx.quat_max[dseg] = ident[: len(dseg)]
+        t.quat_max.append((dseg, ident[: len(dseg)], False))
 
 
 class _SegmentTurn:

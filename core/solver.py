@@ -41,11 +41,14 @@ are; the rule for the curves the solver leaves as they are, INVALID),
 :mod:`.step` (a step's shared machinery: candidates, local frames,
 deformation, batched ray queries, first hits, Put to Growth Surface),
 :mod:`.rigid` (Stiff, Bend, the warm-start search, Shrink, Recovery,
-Plasticity), :mod:`.soft` (Soft, Affected Connected CVs, CV FallOff),
+Plasticity), :mod:`.soft` (Soft, Affected Connected CVs, CV FallOff): each
+returns its curves' rotations, which ``StepContext.apply`` takes,
 :mod:`.search` (Rotation Precision: the batched gallop-and-bisect and the
-scan for Soft), :mod:`.collider` (detection, clearance margin, pinch),
+scan for Soft), :mod:`.collider` (the Collider facade and its parts: mesh,
+pose, occupancy grid, offset shells and hits, inside test),
 :mod:`.meshfix` (welded seams, duplicated faces, outward windings),
-:mod:`.rays` (the embree adapter).
+:mod:`.rays` (the embree adapter); :mod:`.pipeline.frame` runs a frame's
+stages around the step (``Shot``).
 """
 
 from __future__ import annotations

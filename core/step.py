@@ -4,7 +4,9 @@
 world space while the step runs: candidate selection, local frames,
 deformation, batched ray queries, first hits and push directions, Put to
 Growth Surface, and writing the output. The modes live in :mod:`.rigid`
-(Stiff, Bend) and :mod:`.soft`.
+(Stiff, Bend) and :mod:`.soft`: each returns its curves' rotations
+(``rigid.Turns``, ``soft.Turns``) and :meth:`StepContext.apply` takes them,
+the one place a solve changes the step's per-curve state.
 """
 
 from __future__ import annotations
@@ -14,11 +16,10 @@ from functools import partial
 
 import numpy as np
 
-from . import curves, rigid
+from . import curves, rigid, soft
 from . import rotations as rot
 from . import tolerances as tol
 from .rays import both, default_threads
-from .soft import SoftSolve
 from .status import Status
 
 
@@ -201,8 +202,7 @@ class StepContext:
         # that shape collides.
         self.angle = np.minimum(self.state.angle, self.max_angle)
         self.angle_max = np.minimum(self.state.angle_max, self.max_angle)
-        self.guess = np.zeros(self.layout.n_curves)  # first probe of the angle search
-        self.guess_stiff = np.zeros(self.layout.n_curves)
+        self.stiff = self.state.stiff.copy()  # Bend curves solved as Stiff
         self.axis = np.zeros((self.layout.n_curves, 3))
         if self.soft:
             self.quat = self.state.quat.copy()
@@ -316,6 +316,7 @@ class StepContext:
         B = self.B
         self.state.angle = self.angle
         self.state.angle_max = self.angle_max
+        self.state.stiff = self.stiff
         self.state.active = self.active
         axis_lo = np.zeros_like(self.axis)
         if len(idx):
@@ -343,30 +344,35 @@ class StepContext:
         """Segments of curves ``idx``: (seg ids, owner position in idx, starts)."""
         return self.layout.segments(idx)
 
-    def rigid_rotations(self, idx, angle, axis, seg, rep):
-        """Per-segment (angle, axis) of stiff/bend curves ``idx``."""
+    def rigid_rotations(self, idx, angle, axis, seg, rep, stiff):
+        """Per-segment (angle, axis) of stiff/bend curves ``idx`` (``stiff`` (n,):
+        Bend curves turned as Stiff)."""
         if self.s.mode == "bend":
-            w = np.where(self.state.stiff[idx][rep], 1.0, self.layout.w_bend[seg])
+            w = np.where(stiff[rep], 1.0, self.layout.w_bend[seg])
         else:
             w = 1.0
         return angle[rep] * w, axis[rep]
 
-    def deform(self, idx, angle=None, axis=None, quat=None):
-        """Deformed segments of curves ``idx``.
+    def deform(self, idx, angle=None, axis=None, quat=None, stiff=None):
+        """Deformed segments of curves ``idx``: turned by ``angle`` (n,) about
+        ``axis`` (n, 3), Bend curves ``stiff`` (n,) bool as Stiff (default: the
+        step's), or by per-segment quaternions ``quat`` (Soft).
 
         Returns
         -------
         o, d : (k, 3) segment starts and vectors, world space
         seg, rep, starts : see :meth:`segments`
         """
+        if quat is None and stiff is None:
+            stiff = self.stiff[idx]
         if self.layout.ns:
-            return self._deform_uniform(idx, angle, axis, quat)
+            return self._deform_uniform(idx, angle, axis, quat, stiff)
         seg, rep, starts = self.segments(idx)
         v = self.seg_in(seg)
         if quat is not None:
             v = rot.quat_rotate(quat, v)
         else:
-            a_seg, ax_seg = self.rigid_rotations(idx, angle, axis, seg, rep)
+            a_seg, ax_seg = self.rigid_rotations(idx, angle, axis, seg, rep, stiff)
             v = rot.rotate(v, ax_seg, a_seg)
             scale = self.shrink_scale(a_seg, idx[rep])
             if scale is not None:
@@ -380,7 +386,7 @@ class StepContext:
         o[starts] = self.roots[idx]
         return o, end - o, seg, rep, starts
 
-    def _deform_uniform(self, idx, angle, axis, quat):
+    def _deform_uniform(self, idx, angle, axis, quat, stiff):
         """:meth:`deform` for curves that all have ``ns`` segments (blocks).
 
         Stiff/Bend work on component arrays (3, ns, n) (see
@@ -391,7 +397,7 @@ class StepContext:
         if quat is not None:
             end = self._ends_quat_soa(idx, quat).astype(np.float64)
         else:
-            end = self._ends_soa(idx, angle, axis).astype(np.float64)
+            end = self._ends_soa(idx, angle, axis, stiff).astype(np.float64)
         o = np.empty_like(end)
         o[:, 0] = root.T
         o[:, 1:] = end[:, :-1]
@@ -401,10 +407,10 @@ class StepContext:
         rep = np.repeat(np.arange(n), ns)
         return o.reshape(-1, 3), d.reshape(-1, 3), seg, rep, np.arange(n) * ns
 
-    def _ends_soa(self, idx, angle, axis):
+    def _ends_soa(self, idx, angle, axis, stiff):
         """Segment ends of the Stiff/Bend deformed uniform curves ``idx``,
         (3, ns, n) components in the output dtype (as :meth:`deform`)."""
-        a = self.bend_weights(idx) * angle
+        a = self.bend_weights(stiff) * angle
         v = rot.rotate_soa(self.seg_soa(idx), axis, a)
         scale = self.shrink_scale(a, idx)
         if scale is not None:
@@ -425,12 +431,13 @@ class StepContext:
         end += self.roots[idx].T[:, None, :]
         return end.astype(self.out_dtype)
 
-    def bend_weights(self, idx):
+    def bend_weights(self, stiff):
         """(ns, n) fraction of a curve's angle turning each segment (uniform
-        curves): Bend ``(j + 1) / ns`` (1 for curves solved as Stiff), Stiff 1."""
+        curves; ``stiff`` (n,): those solved as Stiff): Bend ``(j + 1) / ns`` (1
+        for curves solved as Stiff), Stiff 1."""
         ns = self.layout.ns
         if self.s.mode == "bend":
-            return np.where(self.state.stiff[idx], 1.0, ((np.arange(ns) + 1.0) / ns)[:, None])
+            return np.where(stiff, 1.0, ((np.arange(ns) + 1.0) / ns)[:, None])
         return np.ones((ns, 1))
 
     def shrink_scale(self, a, curves):
@@ -649,11 +656,31 @@ class StepContext:
         return self.max_angle
 
     def solve(self, idx, status):
-        """Solve curves ``idx`` in this step's mode."""
+        """Solve curves ``idx`` in this step's mode (their status into ``status``)."""
+        self.apply(soft.solve(self, idx) if self.soft else rigid.solve(self, idx), idx, status)
+
+    def apply(self, turns, idx, status):
+        """Take a mode's answer for curves ``idx`` (``rigid.Turns`` or ``soft.Turns``:
+        every curve's rotation as the mode left it) and their statuses: the one
+        place a solve changes the step's per-curve state."""
         if self.soft:
-            self.in_halves(_solve_soft, len(idx), idx, status=status)
+            self.quat = turns.quat
+            for rows, q, grow in turns.quat_max:
+                if grow:
+                    self._grow_quat_max(rows, q)
+                else:
+                    self.quat_max[rows] = q
+            self.active, self.soft_level = turns.active, turns.soft_level
         else:
-            rigid.solve(self, idx, status)
+            self.angle, self.angle_max, self.axis = turns.angle, turns.angle_max, turns.axis
+            self.active, self.stiff, self.restyled = turns.active, turns.stiff, turns.restyled
+        status[idx] = turns.status[idx]
+
+    def _grow_quat_max(self, rows, q):
+        """Segments ``rows`` turned by ``q`` (k, 4): each keeps the larger of it and
+        its largest rotation so far (Plasticity's reference)."""
+        grow = rot.quat_angle(q) > rot.quat_angle(self.quat_max[rows])
+        self.quat_max[rows[grow]] = q[grow]
 
     def in_halves(self, fn, work, *parts, **kw):
         """``fn(self, *parts, **kw)``; with ``work`` of at least
@@ -675,16 +702,23 @@ class StepContext:
              partial(fn, halves[1], *(p[1::2] for p in parts), **kw), self.threads)
         self.n_rays += halves[0].n_rays + halves[1].n_rays
 
-    def new_axes(self, idx, o, d, rep, starts, hit=None):
+    def new_axes(self, idx, o, d, rep, starts, stiff, hit=None):
         """Rotation axes for curves starting a contact (paper 3.2.1).
 
         The paper's: turning the hit point away along the push direction, or
         toward the growth surface (Attract to Growth Surface); with Follow
         Collider Motion, where the collider moves at the hit
         (:meth:`follow_directions`), turning the tip along that motion.
-        Also sets ``self.guess`` for them: the rotation that lifts every CV
-        above the collider's tangent plane at the hit (a first probe for the
-        angle search, nothing more). ``hit``: see :meth:`first_hit_details`.
+        ``stiff`` (n,): Bend curves turned as Stiff. ``hit``: see
+        :meth:`first_hit_details`.
+
+        Returns
+        -------
+        axis : (n, 3)
+        guess, guess_stiff : (n,)
+            The rotation that lifts every CV above the collider's tangent plane
+            at the hit (a first probe for the angle search, nothing more), as the
+            mode turns and as Stiff (:meth:`plane_guess`).
         """
         follow = self.s.follow_collider_motion
         if follow:
@@ -712,26 +746,29 @@ class StepContext:
             way, ok = self.follow_directions(idx, d[np.maximum(k, 0)], vel, chord)
             if ok.any():
                 axis[ok] = rot.rotation_axis(chord[ok], way[ok])
-        self.guess[idx] = self.plane_guess(idx, o + d, rep, starts, point, normal, axis)
-        return axis
+        guess, guess_stiff = self.plane_guess(idx, o + d, rep, starts, point, normal, axis,
+                                              stiff)
+        return axis, guess, guess_stiff
 
-    def plane_guess(self, idx, ends, rep, starts, point, normal, axis):
-        """Angle lifting each curve's CVs above the plane (point, normal)."""
+    def plane_guess(self, idx, ends, rep, starts, point, normal, axis, stiff):
+        """Angles lifting each curve's CVs above the plane (point, normal): as the
+        mode turns the curves ``idx`` (``stiff`` (n,): Bend curves turned as
+        Stiff), and as Stiff (turned at the root: Bend's fall back to Stiff).
+        Returns ``(guess (n,), guess_stiff (n,))``."""
         depth = -rot.dot(ends - point[rep], normal[rep])
         v = ends - self.roots[idx][rep]
         ax = axis[rep]
         radius = np.linalg.norm(v - ax * rot.dot(v, ax)[:, None], axis=1)
         lift = np.arcsin(np.clip(depth / np.maximum(radius, 1e-300), 0.0, 1.0))
         if len(lift) == 0:
-            return lift
-        # As Stiff (turned at the root): kept for Bend's fall back to Stiff.
-        self.guess_stiff[idx] = np.maximum.reduceat(lift, starts)
+            return lift, lift
+        as_stiff = np.maximum.reduceat(lift, starts)
         if self.s.mode == "bend":  # a CV turns by about the mean weight up to it
             j = np.arange(len(rep)) - starts[rep]
             n = self.layout.nseg[idx][rep]
-            w = np.where(self.state.stiff[idx][rep], 1.0, (j + 2) / (2.0 * n))
+            w = np.where(stiff[rep], 1.0, (j + 2) / (2.0 * n))
             lift = lift / w
-        return np.maximum.reduceat(lift, starts)
+        return np.maximum.reduceat(lift, starts), as_stiff
 
     def midpoints(self, idx, o, d, starts):
         nseg = self.layout.nseg[idx]
@@ -836,8 +873,7 @@ class StepContext:
             seg, rep, _ = self.segments(idx)
             q = rot.quat_from_axis_angle(axis[rep], angle[rep])
             self.quat[seg] = q
-            grow = rot.quat_angle(q) > rot.quat_angle(self.quat_max[seg])
-            self.quat_max[seg[grow]] = q[grow]
+            self._grow_quat_max(seg, q)
         else:
             self.angle[idx] = angle
             self.axis[idx] = axis
@@ -856,7 +892,7 @@ class StepContext:
             if self.soft:
                 end = self._ends_quat_soa(idx, self.quat.reshape(-1, ns, 4)[idx])
             else:
-                end = self._ends_soa(idx, self.angle[idx], self.axis[idx])
+                end = self._ends_soa(idx, self.angle[idx], self.axis[idx], self.stiff[idx])
             out3[idx, 1:] = rot.aos(end)
         elif len(idx):
             if self.soft:
@@ -890,7 +926,3 @@ class StepContext:
             return self._Dflat[seg + seg // ns].astype(np.float64)
         return self.Dseg[seg].astype(np.float64)
 
-
-def _solve_soft(ctx, idx, status):
-    """Soft (paper 3.2.1) on curves ``idx``: :meth:`StepContext.in_halves`'s ``fn``."""
-    SoftSolve(ctx).run(idx, status)

@@ -128,13 +128,13 @@ def test_bend_warm_start_differs_only_where_clearance_is_not_monotone(fc, monkey
     searches, batches = [], []
     real_search, real_init = rigid._search, rigid.RigidBatch.__init__
 
-    def init(self, ctx, curves):
-        real_init(self, ctx, curves)
+    def init(self, ctx, curves, axis, stiff):
+        real_init(self, ctx, curves, axis, stiff)
         batches.append(self)
 
-    def search(ctx, act, cn, status):
-        th0, n = ctx.angle[act].copy(), len(batches)
-        real_search(ctx, act, cn, status)
+    def search(ctx, act, cn, turns):
+        th0, n = turns.angle[act].copy(), len(batches)
+        real_search(ctx, act, cn, turns)
         main = next(b for b in batches[n:] if np.array_equal(b.curves[: len(act)], act))
         searches.append((act.copy(), th0, main, ctx))
 

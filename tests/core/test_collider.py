@@ -10,6 +10,7 @@ import pytest
 import scenes
 
 from core import Collider, Settings, Solver, Status
+from core.collider.inside import Inside
 
 
 def test_closed_flag():
@@ -271,7 +272,7 @@ def test_a_failing_step_leaves_no_build_running():
         pass
     else:  # pragma: no cover
         raise AssertionError("the step should have raised")
-    assert not col._build_lock.locked() and col.build_count == 2
+    assert not col.shells.lock.locked() and col.build_count == 2
     del col.grid_coords
     r = solver.step(pts, [col])  # and the solver goes on
     assert col.build_count == 2 and np.isfinite(r.points).all()
@@ -294,7 +295,7 @@ def test_inside_cell_cache_gives_the_answer_of_tracing_every_point():
         for off in (0.0, 0.05):
             for _ in range(2):
                 got = col.contains(P, off)
-                traced = col._parity(P, off)
+                traced = col.inside.parity(P, off)
                 np.testing.assert_array_equal(got, traced)
             assert got.any() and not got.all()
 
@@ -349,7 +350,7 @@ def test_inside_overlapping_closed_parts_is_inside():
     assert inside.sum() > 500 and (~inside).sum() > 500
     assert ((dist[clear] < 1.0).all(axis=1)).sum() > 50  # in both parts
     np.testing.assert_array_equal(col.contains(p), inside)
-    np.testing.assert_array_equal(col._parity(p, 0.0), inside)
+    np.testing.assert_array_equal(col.inside.parity(p, 0.0), inside)
     # and the solver pinches exactly the curves rooted inside
     roots = p[:400]
     curves = [scenes.straight_curve(x, [0, 0, 1], 0.3, 3) for x in roots]
@@ -387,7 +388,7 @@ def test_the_third_parity_vote_decides_when_the_first_two_disagree(monkeypatch):
     p = rng.normal(size=(400, 3)) * 0.3
     r = np.linalg.norm(p, axis=1)
     p, inside = p[np.abs(r - 0.5) > 0.03], r[np.abs(r - 0.5) > 0.03] < 0.5
-    be, _ = col._backend(0.0)
+    be, _ = col.shells.backend(0.0)
     real = be.hit_details
     first = np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0)  # the first vote's direction
 
@@ -399,7 +400,7 @@ def test_the_third_parity_vote_decides_when_the_first_two_disagree(monkeypatch):
         return (prim, t, *rest)
 
     monkeypatch.setattr(be, "hit_details", grazing)
-    np.testing.assert_array_equal(col._parity(p, 0.0), inside)
+    np.testing.assert_array_equal(col.inside.parity(p, 0.0), inside)
 
 
 def test_a_face_collapsed_by_a_deformation_keeps_the_offset_shell_whole():
@@ -436,13 +437,13 @@ def test_a_deforming_collider_queried_twice_a_frame_builds_no_fine_grid(monkeypa
     rng = np.random.default_rng(5)
     p = rng.uniform(-1.3, 1.3, (4000, 3))
     built = []
-    surface_cells = Collider._surface_cells
+    surface_cells = Inside.surface_cells
 
     def spy(self, *a, **k):
         built.append(self)
         return surface_cells(self, *a, **k)
 
-    monkeypatch.setattr(Collider, "_surface_cells", spy)
+    monkeypatch.setattr(Inside, "surface_cells", spy)
     answers, cols = {}, {}
     for flag in (True, None):
         col = cols[flag] = Collider(V, F, deforming=flag)
@@ -451,8 +452,8 @@ def test_a_deforming_collider_queried_twice_a_frame_builds_no_fine_grid(monkeypa
             col.vertices = V * np.float32(1.0 + 0.02 * f)
             got.append([col.contains(p), col.contains(p)])  # two queries per frame
         answers[flag] = got
-    assert not any(c is cols[True] for c in built)  # the hinted collider never built it
-    assert any(c is cols[None] for c in built)  # (the heuristic alone does, on the second query)
+    assert not any(c is cols[True].inside for c in built)  # the hinted collider never built it
+    assert any(c is cols[None].inside for c in built)  # (the heuristic alone, 2nd query)
     for f in range(3):
         r = np.linalg.norm(p, axis=1)
         scale = 1.0 + 0.02 * f

@@ -8,14 +8,14 @@ from __future__ import annotations
 import numpy as np
 import scenes
 
-import core.collider as collider_mod
 from core import Collider
+from core.collider import grid, inside, mesh
 
 
 def test_the_grids_are_built_once_per_shape(monkeypatch):
     calls = {"occupancy": 0, "cells": 0}
-    build_occ = Collider._build_occupancy
-    mark = collider_mod.mark_boxes
+    build_occ = grid.Occupancy.build
+    mark = inside.mark_boxes
 
     def counted_occ(self):
         calls["occupancy"] += 1
@@ -25,8 +25,8 @@ def test_the_grids_are_built_once_per_shape(monkeypatch):
         calls["cells"] += 1
         return mark(*a, **k)
 
-    monkeypatch.setattr(Collider, "_build_occupancy", counted_occ)
-    monkeypatch.setattr(collider_mod, "mark_boxes", counted_mark)
+    monkeypatch.setattr(grid.Occupancy, "build", counted_occ)
+    monkeypatch.setattr(inside, "mark_boxes", counted_mark)
     V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 0.5, 24, 12)
     col = Collider(V, F)
     rng = np.random.default_rng(5)
@@ -50,13 +50,13 @@ def test_the_grids_are_built_once_per_shape(monkeypatch):
 def _sphere_counting_normals(monkeypatch):
     """A UV sphere collider, and the sizes of the normal batches it computes."""
     sizes = []
-    of = Collider._face_normals_of
+    of = mesh.ColliderMesh.face_normals_of
 
     def counted(self, prim):
         sizes.append(len(prim))
         return of(self, prim)
 
-    monkeypatch.setattr(Collider, "_face_normals_of", counted)
+    monkeypatch.setattr(mesh.ColliderMesh, "face_normals_of", counted)
     V, F = scenes.uv_sphere([0.0, 0.0, 0.0], 0.5, 32, 16)
     return Collider(V, F), sizes
 
@@ -92,7 +92,7 @@ def test_the_corner_order_is_sorted_once_per_topology(monkeypatch):
         calls.append(len(a))
         return argsort(a, *args, **kw)
 
-    monkeypatch.setattr(collider_mod.np, "argsort", counted)
+    monkeypatch.setattr(mesh.np, "argsort", counted)
     rng = np.random.default_rng(9)
     o, d = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
     for k in range(4):
@@ -122,13 +122,13 @@ def test_an_open_sheets_rim_faces_are_found_once_per_topology(monkeypatch):
     col = Collider(V, F)
     assert not col.closed
     calls = []
-    keys = collider_mod._edge_keys
+    keys = mesh.edge_keys
 
     def counted(*a):
         calls.append(1)
         return keys(*a)
 
-    monkeypatch.setattr(collider_mod, "_edge_keys", counted)
+    monkeypatch.setattr(mesh, "edge_keys", counted)
     rng = np.random.default_rng(10)
     o, d = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
     for k in range(4):

@@ -11,6 +11,7 @@ import pytest
 import scenes
 
 from core import Collider, ColliderError
+from core.collider.inside import Inside
 
 
 @pytest.mark.parametrize(("matrix", "words"), [
@@ -147,13 +148,13 @@ def test_only_points_next_to_the_surface_are_traced(monkeypatch, off):
     col.contains(P, off)
     first = col.contains(P, off)  # the fine grid: its cells' answers now known
     traced = []
-    parity = Collider._parity
+    parity = Inside.parity
 
     def spy(self, p_wo, offset_wo):
         traced.append(np.array(p_wo))
         return parity(self, p_wo, offset_wo)
 
-    monkeypatch.setattr(Collider, "_parity", spy)
+    monkeypatch.setattr(Inside, "parity", spy)
     got = col.contains(P, off)
     np.testing.assert_array_equal(got, first)
     far = np.abs(r - 0.5) > 0.02 + 4 * off
@@ -319,8 +320,8 @@ def test_inside_an_offset_shell_that_folds_is_its_winding_number(off):
     V, F = scenes.bumpy_sphere(amplitude=0.5, lobes=4)
     col = Collider(V, F, backend="numpy")
     assert col.repairs.parts == 1
-    be, _ = col._backend(off)
-    T = np.stack([be._v0, be._v0 + be._e1, be._v0 + be._e2], axis=1) + col._center
+    be, _ = col.shells.backend(off)
+    T = np.stack([be._v0, be._v0 + be._e1, be._v0 + be._e2], axis=1) + col.mesh.center
     P = np.random.default_rng(0).uniform(-2.5, 2.5, (3000, 3))
     w = oracle.winding_number(P, T)
     clear = np.abs(w - np.round(w)) < 0.01  # not on the shell
@@ -391,7 +392,7 @@ def test_the_clearance_margin_moves_each_vertex_outward():
     V, F = scenes.uv_sphere([0.2, 0.0, -0.1], 1.0, 24, 12)
     radial = (V - [0.2, 0.0, -0.1]) / np.linalg.norm(V - [0.2, 0.0, -0.1], axis=1,
                                                       keepdims=True)
-    got = Collider(V, F)._margin_directions()
+    got = Collider(V, F).mesh.margin_directions()
     np.testing.assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-12)
     assert np.einsum("ij,ij->i", got, radial).min() > 0.99
 

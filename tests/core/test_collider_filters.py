@@ -88,12 +88,12 @@ def test_cached_inside_test_equals_parity(M, M2, ax, cloud, offset):
     V_wo = V @ M[:3, :3].T + M[:3, 3]
     for _ in range(3):  # repeated calls hit the per-cell cache
         p = V_wo.mean(0) + rng.normal(size=(300, 3)) * 0.8
-        assert np.array_equal(col.contains(p, offset), col._parity(p, offset))
+        assert np.array_equal(col.contains(p, offset), col.inside.parity(p, offset))
     col.matrix = M2  # rigid motion keeps the (local) cache valid
     p = rng.normal(size=(300, 3)) * 3
-    assert np.array_equal(col.contains(p, offset), col._parity(p, offset))
+    assert np.array_equal(col.contains(p, offset), col.inside.parity(p, offset))
     col.vertices = V * 1.1  # deformation invalidates it
-    assert np.array_equal(col.contains(p, offset), col._parity(p, offset))
+    assert np.array_equal(col.contains(p, offset), col.inside.parity(p, offset))
 
 
 @FAST
@@ -149,7 +149,7 @@ def test_cached_inside_test_next_to_an_offset_shell_under_a_scaling_matrix():
     p_lo = p_lo[(np.abs(p_lo) < 0.98).all(axis=1)][:1500]  # on the grid
     assert len(p_lo) > 500
     p = p_lo @ M[:3, :3].T + M[:3, 3]
-    want = col._parity(p, offset)
+    want = col.inside.parity(p, offset)
     assert want.any() and (~want).any()  # the band straddles the shell
     for _ in range(2):  # the second call is the cached (static) path
         np.testing.assert_array_equal(col.contains(p, offset), want)

@@ -103,8 +103,8 @@ def test_deforming_collider_results_do_not_depend_on_history():
     V2 = V + rng.normal(scale=0.05, size=V.shape)
 
     def hits(col):
-        be, _ = col._backend(0.0)
-        return be.hit_details(o - col._center.astype(np.float32), d, 1.0)
+        be, _ = col.shells.backend(0.0)
+        return be.hit_details(o - col.mesh.center.astype(np.float32), d, 1.0)
 
     col = Collider(V, F, drop_degenerate=True)
     first = hits(col)

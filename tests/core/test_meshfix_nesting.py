@@ -120,7 +120,7 @@ def test_one_closed_part_first_crossing_decides_as_the_full_walk(shape):
     fast = Collider(V.astype(np.float32), F)
     assert fast.repairs.parts == 1
     walk = Collider(V.astype(np.float32), F)
-    walk.repairs = dataclasses.replace(walk.repairs, parts=2)  # (forces the walk)
+    walk.mesh.repairs = dataclasses.replace(walk.repairs, parts=2)  # (forces the walk)
     a, b = fast.contains(P), walk.contains(P)
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(a, oracle.points_inside_closed_mesh(

@@ -89,18 +89,18 @@ def test_a_batch_of_exactly_two_blocks_is_traced_in_two_halves(monkeypatch):
 
 # ------------------------------------------------------------ a step in two halves
 #: The phases a step may run in two halves: (module, function).
-_PHASES = (("rigid", "_new_contacts"), ("rigid", "_search"), ("step", "_solve_soft"))
+_PHASES = (("rigid", "_new_contacts"), ("rigid", "_search"), ("soft", "_solve"))
 
 
 def _phases(monkeypatch, split_from):
     """Record (phase, thread, curve arrays, ctx.threads) of every call of the
     phases a step may split, the threshold set to ``split_from`` curves of work."""
-    from core import rigid, step, tolerances
+    from core import rigid, soft, tolerances
 
     monkeypatch.setattr(tolerances, "SPLIT_MIN_CURVES", split_from)
     seen = []
     for mod_name, name in _PHASES:
-        mod = rigid if mod_name == "rigid" else step
+        mod = rigid if mod_name == "rigid" else soft
         fn = getattr(mod, name)
 
         def spy(ctx, *parts, fn=fn, name=name, **kw):
@@ -145,7 +145,7 @@ def test_a_step_with_much_work_is_solved_in_two_halves_one_thread_each(monkeypat
     seen = _phases(monkeypatch, 100)
     pts, offs, col = _pressed_grid(20)
     solver = Solver(offs, Settings(mode=mode, threads=2))
-    names = ["_new_contacts", "_search"] if mode == "bend" else ["_solve_soft"]
+    names = ["_new_contacts", "_search"] if mode == "bend" else ["_solve"]
     got, split = [], set()
     for _ in range(2):
         seen.clear()
@@ -190,10 +190,10 @@ def test_an_error_in_the_other_half_reaches_the_caller(monkeypatch):
     search = rigid._search
     finished = []
 
-    def spy(ctx, act, cn, status):
+    def spy(ctx, act, cn, turns):
         if threading.get_ident() != main:
             raise MemoryError("the pool thread's half")
-        search(ctx, act, cn, status)
+        search(ctx, act, cn, turns)
         finished.append(len(act))
 
     monkeypatch.setattr(rigid, "_search", spy)

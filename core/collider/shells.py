@@ -1,0 +1,251 @@
+"""A collider's offset shells, their BVHs and segment hits.
+
+Curves are tested against a *shell* of the collider: the mesh moved out along
+its vertex normals by the clearance margin (``Collider.margin``) plus, when
+there is one, a Collision Offset (a per-curve clearance gives a few offset
+levels, each a shell). :class:`Shells` owns the BVH of each shell in use
+(a few kept, newest last, built on a ray thread ahead of need:
+:meth:`Shells.prefetch`), answers segment queries and gives the normal at a
+hit. A shell depends on the shape and, with an offset, on the matrix's
+stretch: rigid motion never rebuilds it.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from .. import tolerances as tol
+from ..closest import barycentric
+from ..rays import beside, make_backend, triangle_rows
+from ..rotations import apply, det3
+from ..rotations import dot as rot_dot
+from .mesh import PerShape, angle_weighted, unit
+
+
+@dataclass(frozen=True)
+class ShellFaces:
+    """Which face of the collider each triangle of a built shell is.
+
+    ``real`` (k,) int: the collider face; ``flip`` (k,) bool: the triangle
+    faces the other way (the inner shell of an open or double-sided mesh).
+    """
+
+    real: np.ndarray
+    flip: np.ndarray
+
+
+class Shells:
+    """The BVHs of a collider's shells (see the module docstring).
+
+    Parameters
+    ----------
+    mesh : ColliderMesh
+    pose : Pose
+    double_sided : bool
+        A thin two-sided shell: shells on both sides (as an open mesh gets).
+    backend : {None, 'embree', 'numpy'}
+        Ray tracer (None: embree).
+    """
+
+    def __init__(self, mesh, pose, double_sided=False, backend=None):
+        self.mesh, self.pose = mesh, pose
+        self.double_sided = double_sided
+        self.backend_name = backend
+        self.built = []  # [(key, backend, ShellFaces)], newest last
+        # Builds may run on a ray thread (see prefetch).
+        self.lock = threading.Lock()
+        self._prefetching = None  # shell key of the last prefetch started
+        self._key_memo = (None, -1, {})  # (matrix, version, offset -> key): shell_key
+        self._rows = {}  # shell layout -> prepared triangles (see rows)
+        self._offset_dirs = PerShape()
+        #: BVHs built so far (every shell, every shape).
+        self.build_count = 0
+
+    def shell_key(self, offset_wo):
+        """What a shell depends on: the vertices, the offset and, for an offset,
+        the matrix's rotation-invariant stretch ``M^T M`` (quantized, so float32
+        jitter of a rigid transform never triggers a rebuild)."""
+        version = self.mesh.version
+        if offset_wo <= 0:
+            return (version, 0.0)
+        # Every ray query asks: remembered per matrix (assigning one replaces the
+        # array, never writes into it) and shape.
+        M = self.pose.M
+        memo = self._key_memo
+        if memo[0] is not M or memo[1] != version:
+            memo = self._key_memo = (M, version, {})
+        key = memo[2].get(offset_wo)
+        if key is None:
+            S = M[:3, :3]
+            G = np.einsum("ki,kj->ij", S, S)
+            g = float(np.trace(G)) / 3.0
+            q = tuple(np.round(G / g, 6).ravel()) + (float(f"{g:.6g}"),)
+            key = memo[2][offset_wo] = (version, float(f"{offset_wo:.9g}"), q)
+        return key
+
+    def backend(self, offset_wo: float):
+        """``(ray backend, ShellFaces)`` of the shell at ``offset_wo`` (built when
+        missing). A few shells are kept (several solvers may share one collider
+        with different offsets, per-curve clearances use up to
+        ``tol.OFFSET_LEVELS``), newest last."""
+        with self.lock:
+            return self._backend_locked(offset_wo)
+
+    def prefetch(self, offset_wo: float, threads: int):
+        """Start building the BVH that queries at ``offset_wo`` need on a ray
+        thread, when the vertices or the offset changed (see ``Collider.prefetch``).
+        Returns a callable that waits for it, or None when nothing was started."""
+        if threads <= 1 or len(self.mesh.F) == 0:
+            return None
+        key = self.shell_key(offset_wo)
+        if key == self._prefetching or any(b[0] == key for b in self.built):
+            return None
+        self._prefetching = key
+        return beside(partial(self.backend, offset_wo), threads)
+
+    def _backend_locked(self, offset_wo: float):
+        key = self.shell_key(offset_wo)
+        for k, be, faces in self.built:
+            if k == key:
+                return be, faces
+        mesh = self.mesh
+        V = mesh.local_vertices()
+        F = mesh.F
+        m, n = len(F), len(mesh.V)
+        # Every shell keeps the clearance margin (see Collider.margin), plus the
+        # Collision Offset when there is one.
+        disp = mesh.margin * mesh.margin_directions()
+        if offset_wo > 0:
+            disp = disp + offset_wo * self.offset_directions()
+        # Face blocks: [outer shell, (inner shell, surface)]. A closed
+        # single-sided solid is only kept at a distance from outside (inside
+        # is a pinch). Anything else (open sheets, double-sided meshes) gets
+        # shells on both sides, the inner one facing inward, and keeps its
+        # real surface too, so a curve slipping in between the shells from a
+        # rim still collides: all of it with an offset, its rim faces only
+        # for the bare margin (a curve can only slip in within it of a rim).
+        blocks_V, blocks_F = [V + disp], [F]
+        real, flip = [np.arange(m)], [np.zeros(m, bool)]
+        if self.double_sided or not mesh.closed:
+            keep = np.arange(m) if offset_wo > 0 else mesh.rim_faces()
+            blocks_V += [V - disp, V]
+            blocks_F += [F[:, ::-1] + n, F[keep] + 2 * n]
+            real += [np.arange(m), keep]
+            flip += [np.ones(m, bool), np.zeros(len(keep), bool)]
+        V = np.concatenate(blocks_V)
+        F = np.concatenate(blocks_F)
+        faces = ShellFaces(np.concatenate(real), np.concatenate(flip))
+        backend = make_backend(self.backend_name, V, F, rows=self.rows(F))
+        self.build_count += 1
+        # (room for every level of per-curve clearances, tol.OFFSET_LEVELS,
+        # beside a few other offsets: several solvers may share a collider)
+        self.built = [b for b in self.built
+                      if b[0][0] == mesh.version][-(tol.OFFSET_LEVELS + 3):]
+        self.built.append((key, backend, faces))
+        return backend, faces
+
+    def rows(self, F):
+        """:func:`core.rays.triangle_rows` of the shell faces ``F`` (a topology
+        property: prepared once per layout, reused by every rebuild)."""
+        if self.backend_name == "numpy":
+            return None
+        key = len(F)  # the layout: 1 to 3 blocks of this collider's faces
+        if key not in self._rows:
+            self._rows[key] = triangle_rows(F)
+        return self._rows[key]
+
+    def offset_directions(self):
+        """:meth:`offset_directions_of` the current shape and matrix, kept for the
+        shells of other offsets (per-curve clearance levels) of the same."""
+        key = (self.mesh.version, self.pose.M[:3, :3].tobytes())
+        return self._offset_dirs.get(key, self.offset_directions_of)
+
+    def offset_directions_of(self):
+        """Local displacement of each vertex for a world offset of 1, (n, 3).
+
+        Computed in world metric (the matrix's scale and shear included), so
+        the shell keeps the offset in world units whatever the matrix. Each
+        vertex moves along its angle-weighted normal (each face's normal
+        weighted by its corner angle at the vertex: the same direction however
+        the faces are triangulated), lengthened so that every face around it
+        moves by the full offset: a box keeps the offset on its faces, not
+        offset / sqrt(3), nor twice it at a corner split into two triangles.
+        The lengthening is capped at ``tol.OFFSET_MAX_STRETCH`` (needle-sharp
+        vertices).
+        """
+        mesh, pose = self.mesh, self.pose
+        S = pose.M[:3, :3]
+        Vw = apply(S, mesh.local_vertices())
+        F = mesh.F
+        fa = np.cross(Vw[F[:, 1]] - Vw[F[:, 0]], Vw[F[:, 2]] - Vw[F[:, 0]])
+        if det3(S) < 0:  # a mirroring matrix flips the winding: keep normals outward
+            fa = -fa
+        fn = unit(fa, np.linalg.norm(fa, axis=1, keepdims=True))
+        n = len(mesh.V)
+        vn = angle_weighted(Vw, F, fn)
+        # smallest cos(vertex normal, face normal) over the faces around each vertex
+        cos = np.concatenate([rot_dot(vn[F[:, k]], fn) for k in range(3)])
+        order, _, first, verts = mesh.corners()
+        lowest = np.ones(n)
+        lowest[verts] = np.minimum.reduceat(cos[order], first)
+        stretch = 1.0 / np.clip(lowest, 1.0 / tol.OFFSET_MAX_STRETCH, 1.0)
+        return apply(pose.Minv[:3, :3], vn * stretch[:, None])
+
+    # ------------------------------------------------------------- queries
+    def hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1) -> np.ndarray:
+        """Which segments ``o + t d``, ``t`` in [0, 1], already in the local space,
+        hit the shell at ``offset_wo``: (k,) bool."""
+        be, _ = self.backend(offset_wo)
+        return be.any_hit(o_lo, d_lo, 1.0 + tol.T_SLACK, threads)
+
+    def hit_details(self, o_wo, d_wo, offset_wo=0.0, faces=False):
+        """First hit of each segment: ``(hit, t, n_wo[, face])``, see
+        ``Collider.segment_hit_details`` (segments given in world space)."""
+        k = len(o_wo)
+        be, shell = self.backend(offset_wo)
+        o_lo, d_lo = self.pose.to_local(o_wo, d_wo)
+        prim, t = be.hit_details(o_lo, d_lo, 1.0 + tol.T_SLACK)
+        hit = prim >= 0
+        t = np.where(hit, np.minimum(t, 1.0), np.inf)  # (a hit in the slack: at the end)
+        n_wo = np.zeros((k, 3))
+        if hit.any():
+            n_wo[hit] = self.normals_world(prim[hit], shell)
+            if len(shell.real) == len(self.mesh.F):  # the mesh itself (no offset shell)
+                self.vertex_pushes(n_wo, hit, prim, o_lo, d_lo, t)
+        if not faces:
+            return hit, t, n_wo
+        face = np.full(k, -1, np.int64)
+        face[hit] = shell.real[prim[hit]]
+        return hit, t, n_wo, face
+
+    def normals_world(self, prim, faces):
+        """Unit world normals of shell triangles ``prim`` (:class:`ShellFaces`
+        ``faces``), oriented as their shell (the inner one faces inward)."""
+        idx, flip = faces.real[prim], faces.flip[prim]
+        n_lo = self.mesh.face_normals(idx) * np.where(flip, -1.0, 1.0)[:, None]
+        n_wo = apply(self.pose.Minv[:3, :3].T, n_lo)  # inverse-transpose for normals
+        return unit(n_wo, np.linalg.norm(n_wo, axis=1, keepdims=True))
+
+    def vertex_pushes(self, n_wo, hit, prim, o_lo, d_lo, t):
+        """Hits that land on a vertex (``tol.VERTEX_HIT_BARY``) push along the vertex's
+        angle-weighted normal: the faces around a vertex all contain the hit, and which
+        one the tracer reports is decided by rounding (a curve through a UV sphere's
+        pole would take its rotation axis from it). ``n_wo`` is updated in place."""
+        mesh = self.mesh
+        w = np.flatnonzero(hit)
+        tri = mesh.V[mesh.F[prim[w]]] - mesh.center  # (h, 3, 3), as local_vertices
+        p = o_lo[w] + t[w, None] * d_lo[w]
+        bary = barycentric(p, tri[:, 0], tri[:, 1], tri[:, 2])  # (0 rows: degenerate)
+        corner = np.argmax(bary, axis=1)
+        at = bary[np.arange(len(w)), corner] > 1.0 - tol.VERTEX_HIT_BARY
+        if not at.any():
+            return
+        vn = apply(self.pose.Minv[:3, :3].T,
+                   mesh.vertex_normals()[mesh.F[prim[w[at]], corner[at]]])
+        vn = unit(vn, np.linalg.norm(vn, axis=1, keepdims=True))
+        good = vn.any(axis=1)  # (a vertex whose face normals cancel keeps its face's)
+        n_wo[w[at][good]] = vn[good]
