@@ -63,7 +63,7 @@ def run(n_frames: int, repeat: int, deforming: bool):
         for f in range(1, n_frames + 2):  # solve (not measured)
             scene.frame_set(f)
         rt = ops.store.registry.get_runtime(hair)
-        assert len(rt.memory) == n_frames + 1, len(rt.memory)
+        assert len(rt.cache.memory) == n_frames + 1, len(rt.cache.memory)
 
         checks, handler = [], []
         rules, spine = ops.frame.rules, ops.frame.spine
@@ -74,7 +74,7 @@ def run(n_frames: int, repeat: int, deforming: bool):
             for _ in range(repeat):
                 for f in range(1, n_frames + 2):
                     scene.frame_set(f)
-                    assert ops.store.registry.stats_for(hair).get("source") == "cache", f
+                    assert ops.store.report.stats_for(hair).get("source") == "cache", f
         finally:
             rules.cached_frame_change, spine.evaluate = real_check, real_eval
         wall, cpu = np.median(np.array(checks), axis=0)

@@ -132,7 +132,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
                 handler, handler_cpu = np.sum(spent, axis=0)
                 core, core_cpu = np.sum(in_core, axis=0)
                 row = (f, total, handler, core, handler - core, handler_cpu - core_cpu,
-                       ops.store.registry.stats_for(hair).get("colliding", 0))
+                       ops.store.report.stats_for(hair).get("colliding", 0))
                 if f not in best or row[4] < best[f][4]:
                     best[f] = row
         rows = [best[f] for f in sorted(best)]
@@ -141,7 +141,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
             for f in range(2, n_frames + 2):
                 spent.clear()
                 scene.frame_set(f)
-                assert ops.store.registry.stats_for(hair).get("source") == "cache"
+                assert ops.store.report.stats_for(hair).get("source") == "cache"
                 cached.append(spent[0][0])
         ops.frame.spine.evaluate, core_mod.Solver.step = real, real_step
         print(f"{'frame':>5} {'frame_set':>10} {'handler':>8} {'core':>8} {'glue':>7} "

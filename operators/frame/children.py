@@ -47,7 +47,7 @@ from ...core import Status, framecache, pipeline
 from ...core.curves import subset
 from ..blender import bridge, compat
 from ..blender.dependencies import DEPENDENCY_MODIFIER
-from ..store import registry
+from ..store import registry, report
 from .clock import clock
 from .colliders import collider_list, in_scene
 from .groom import clearance_settings
@@ -231,7 +231,7 @@ def remove_children_output(src) -> None:
     rt = registry.get_runtime(src, create=False)
     if rt is not None:
         rt.children = None
-        rt.stats = {k: v for k, v in rt.stats.items() if not k.startswith("children")}
+        report.drop_stats(rt, "children")
 
 
 def apply_visibility(src) -> None:
@@ -290,7 +290,7 @@ def run(setup, baked=None) -> Stage | None:
             return None
         return _run(setup, baked)[0]
     except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
-        return Stage({}, f"Children: {registry.describe(exc)}")
+        return Stage({}, f"Children: {report.describe(exc)}")
 
 
 def with_note(status, stage) -> tuple[str, str]:
@@ -452,7 +452,7 @@ def _clear(setup, state, offsets, world):
     s = setup.s
     with clock.timing("clearance"):
         cols, fresh = collider_list(setup)
-        entries = list(setup.rt.colliders.values())
+        entries = list(setup.rt.colliders.entries.values())
     key = (settings_key(setup.ob), framecache.digest(offsets),
            framecache.digest(world), tuple((e.inputs, e.double_sided, e.offset)
                                            for e in entries))

@@ -4,8 +4,9 @@
   enabled entries, then the collider collection's objects; collection instances (linked
   assets) are followed. The source and its growth Surface never collide.
 * :func:`sync_collider` keeps one core ``Collider`` per collider across frames
-  (:class:`ColliderEntry`, in the setup's runtime): a rigid collider only updates its
-  matrix and never rebuilds its BVH; a new topology or option builds a new one.
+  (:class:`ColliderEntry`, in the setup's runtime's :class:`ColliderState`, changed only
+  here): a rigid collider only updates its matrix and never rebuilds its BVH; a new
+  topology or option builds a new one.
 * :func:`read_for_solve` reads the colliders (and growth surface) a frame is solved
   against.
 * :func:`collider_inputs` is a collider's part of the frame-inputs record (its matrix
@@ -14,7 +15,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
@@ -139,6 +140,25 @@ def surface_as_collider(ob) -> str:
 
 
 @dataclass
+class ColliderState:
+    """The part of a setup's runtime with its colliders, changed only here."""
+
+    entries: dict = field(default_factory=dict)  # collider uid -> ColliderEntry
+    growth: object = None  # ColliderEntry of the growth surface
+    #: Follow Collider Motion: frame -> {collider uid: core Placement} of cached frames.
+    placements: dict = field(default_factory=dict)
+    #: Collider uid -> what was said about it once (:func:`_tell`).
+    told: dict = field(default_factory=dict)
+
+
+def forget(rt) -> None:
+    """Forget the core Colliders of the setup's runtime ``rt`` (which objects collide,
+    or the curves they collide with, changed): the next frame builds them again."""
+    rt.colliders.entries.clear()
+    rt.colliders.growth = None
+
+
+@dataclass
 class ColliderEntry:
     """A collider's core ``Collider`` as the last frame left it, with what decides
     whether the next frame can update it (topology key, options, deforming) and its
@@ -232,12 +252,12 @@ def collider_list(setup, refs=None) -> tuple[list, list]:
     refs = collider_objects(setup.ob, depsgraph.scene) if refs is None else refs
     cols, notes = {}, []
     for r in refs:
-        old = rt.colliders.get(r.uid)
+        old = rt.colliders.entries.get(r.uid)
         cols[r.uid] = sync_collider(old, r.object, depsgraph, r.double_sided, r.offset,
                                     r.matrix(depsgraph), r.name)
         if cols[r.uid] is not old:
             notes += _tell(setup, r.uid, cols[r.uid].collider, r.object.type == "MESH")
-    rt.colliders = cols  # forgets deleted colliders
+    rt.colliders.entries = cols  # forgets deleted colliders
     return [e.collider for e in cols.values()], notes
 
 
@@ -266,7 +286,7 @@ def _tell(setup, uid, col, mesh) -> list[str]:
     notes returned) what was repaired in it when it is a ``mesh`` object (a curve, text
     or surface is always tessellated with seams: nothing the artist could fix), and
     once that it detects no pinch when it is an open mesh."""
-    said = setup.rt.told.setdefault(uid, set())
+    said = setup.rt.colliders.told.setdefault(uid, set())
     notes = []
     for kind, text in (("repaired", repaired(col) if mesh else ""), ("open", open_mesh(col))):
         if text and kind not in said:
@@ -283,7 +303,7 @@ def collider_note(rt, scene, refs, fresh=()) -> str:
     (while they are colliders), and the colliders (``refs``) renders of ``scene`` see
     with other geometry than the viewport (:func:`render_note`)."""
     notes = list(fresh)
-    for e in rt.colliders.values():
+    for e in rt.colliders.entries.values():
         text = open_mesh(e.collider)
         if text and text not in notes:
             notes.append(text)
@@ -297,7 +317,7 @@ def collider_lines(rt, obj) -> list[str]:
     if rt is None or obj is None:
         return []
     lines = []
-    for e in rt.colliders.values():
+    for e in rt.colliders.entries.values():
         name = e.collider.name
         if name != obj.name and not name.startswith(obj.name + " › "):
             continue
@@ -324,8 +344,9 @@ def growth_collider(setup, settings):
             f"the hair's Surface '{surf.name}' is a {surf.type.lower()} object, not a mesh: "
             "Attract to Growth Surface / Put to Growth Surface need a mesh Surface"
         )
-    rt.growth = sync_collider(rt.growth, surf, setup.depsgraph)
-    return rt.growth.collider
+    part = rt.colliders
+    part.growth = sync_collider(part.growth, surf, setup.depsgraph)
+    return part.growth.collider
 
 
 def read_for_solve(setup, refs, continuous=True, fresh=False) -> tuple[list, object, list]:
@@ -345,8 +366,8 @@ def read_for_solve(setup, refs, continuous=True, fresh=False) -> tuple[list, obj
         return cols, growth, notes
     rt, f = setup.rt, setup.frame
     if fresh or not continuous:
-        kept = {} if fresh else rt.placements.get(f - 1, {})
-        for uid, e in rt.colliders.items():
+        kept = {} if fresh else rt.colliders.placements.get(f - 1, {})
+        for uid, e in rt.colliders.entries.items():
             p = kept.get(uid)
             if p is None:
                 e.collider.forget_previous()
@@ -361,10 +382,11 @@ def keep_placements(setup) -> None:
     later from this one's cached state takes its colliders' motion since here), for the
     cached frames only."""
     rt = setup.rt
-    rt.placements = {k: v for k, v in rt.placements.items() if k in rt.memory.frames}
-    rt.placements[setup.frame] = {
+    part = rt.colliders
+    part.placements = {k: v for k, v in part.placements.items() if k in rt.cache.memory.frames}
+    part.placements[setup.frame] = {
         uid: Placement(e.collider.matrix, e.collider.vertices)
-        for uid, e in rt.colliders.items()}
+        for uid, e in part.entries.items()}
 
 
 # ------------------------------------------------------- frame-inputs record

@@ -40,7 +40,7 @@ from ... import core
 from ...core import Status, framecache, pipeline
 from ...core.pipeline import GroomBinding
 from ..blender import bridge
-from ..store import registry
+from ..store import report
 from ..store.registry import get_runtime
 from .clock import clock
 from .colliders import collider_list, in_scene
@@ -136,7 +136,7 @@ def forget_written(rt) -> None:
 def error_message(exc, setup=None) -> str:
     """The status of an error of this stage: "Render groom: ...", said once, its
     advice one that works on ``setup`` (:func:`advice`)."""
-    text = registry.describe(exc)
+    text = report.describe(exc)
     text = text if text.startswith("Render groom:") else f"Render groom: {text}"
     return text if setup is None else advice(setup.ob, text)
 
@@ -219,7 +219,6 @@ def groom_state(ob, rt) -> GroomState:
     g = ob.furcollide.groom
     if not isinstance(rt.groom, GroomState) or rt.groom.bind_id != g.bind_id:
         rt.groom = GroomState(g.bind_id, load_groom(g.output))
-        rt.groom_shown = None
     return rt.groom
 
 
@@ -233,7 +232,7 @@ def remove_groom(src) -> None:
         hide_in_viewport(g.groom, False, render=False)
     rt = get_runtime(src, create=False)
     if rt is not None:
-        rt.groom = rt.groom_shown = None
+        rt.groom = None
 
 
 class GroomState:
@@ -285,7 +284,7 @@ def _compute(setup, state, guides_world, remember=True):
     state.note = state.note or surface_note
     with clock.timing("clearance"):  # (its colliders, read at this frame)
         cols, fresh = collider_list(setup) if g.use_clearance else ([], [])
-        entries = list(setup.rt.colliders.values()) if g.use_clearance else []
+        entries = list(setup.rt.colliders.entries.values()) if g.use_clearance else []
     state.fresh += fresh
     guides = np.asarray(guides_world, np.float64)
     key = (

@@ -19,6 +19,7 @@ from ...core.pipeline.frame import Motion, before_collision
 from ..blender import bridge
 from ..settings import maps, motion
 from ..settings.fingerprints import SettingsRead, read_settings
+from . import solve
 from .attach import attach_input
 from .clock import clock
 
@@ -155,13 +156,13 @@ def prepare_input(setup, inp, m) -> FrameInputs:
     """``inp`` after the motion that runs before collision
     (:func:`core.pipeline.frame.before_collision`, ``m``: the motion settings as
     :func:`..settings.motion.values` reads them), the roots recorded for jiggle first."""
-    f, rt = inp.frame, setup.rt
+    f = inp.frame
     if m.needs_history and f >= setup.s.frame_start:
         # (before the start frame the hair counts as at rest: frames viewed there
         # must not change a bake, which starts at the start frame)
-        rt.history.record(f, inp.points[inp.offsets[:-1]])
+        solve.record_roots(setup.rt, f, inp.points[inp.offsets[:-1]])
     with clock.timing("motion"):
-        moved = before_collision(m, inp.points, inp.offsets, f, setup.fps, rt.history,
+        moved = before_collision(m, inp.points, inp.offsets, f, setup.fps, setup.history,
                                  setup.s.core_threads)
     return inp if moved is None else replace(inp, points=moved, local=None)
 

@@ -19,8 +19,7 @@ import numpy as np
 
 from ...core import framecache, splines
 from ..blender import bridge, compat
-from ..store import registry
-from ..store.registry import source_of
+from ..store import registry, report
 from .clock import clock
 
 
@@ -65,14 +64,26 @@ def show(setup, inputs, shown, sync=False):
 
 def publish(setup, status, outdated=None, stats=None) -> None:
     """The frame's status ``(level, message)``, outdated mark and statistics (each
-    None: unchanged), set once at the end of the frame."""
-    rt = setup.rt
-    if outdated is not None:
-        rt.outdated = outdated
-    if stats is not None:
-        rt.stats = stats
-    if status is not None:
-        registry.set_status(setup.ob, *status)
+    None: unchanged), set once at the end of the frame (:func:`..store.report.publish`)."""
+    report.publish(setup.ob, setup.rt, status, outdated, stats)
+
+
+@dataclass
+class Written:
+    """The part of a setup's runtime with what its output got last, changed only here
+    (the status colours are written again only where a status changed)."""
+
+    status: tuple | None = None  # (data session uid, status, colours) last written
+    #: What the output last got of the evaluated source's attributes
+    #: (``bridge.attribute_state``; None: nothing yet, copy them on the next frame).
+    attributes: tuple | None = None
+
+
+def forget_written(rt) -> None:
+    """Another runtime wrote into the output (the setup shown in another scene): the
+    next write of ``rt``'s writes the status, colours and attributes in full."""
+    rt.output.status = None
+    rt.output.attributes = None
 
 
 def write(setup, inputs, points_world, status, changed=None, attributes=None) -> np.ndarray:
@@ -111,7 +122,7 @@ def _write(setup, inputs, points_world, status, changed, attributes) -> np.ndarr
     if attributes:
         write_attributes(data, attributes)
     attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
-    last = rt.written_status  # (data, status, colours) written last
+    last = rt.output.status  # (data, status, colours) written last
     if last is not None and (
         attr is None or last[0] != data.session_uid or len(attr.data) != len(status)
     ):
@@ -120,7 +131,7 @@ def _write(setup, inputs, points_world, status, changed, attributes) -> np.ndarr
         previous, colors = (last[1], last[2]) if last is not None else (None, None)
         colors = bridge.status_colors(status, inputs.offsets, previous, colors)
         bridge.write_status(data, status, inputs.offsets, colors)
-        rt.written_status = (data.session_uid, status.copy(), colors)
+        rt.output.status = (data.session_uid, status.copy(), colors)
     return points_world
 
 
@@ -219,7 +230,7 @@ def sync_output(setup, inputs) -> None:
     src = ob.evaluated_get(setup.depsgraph).data
     names, radius = bridge.attribute_state(src)
     rt = setup.rt
-    old = rt.output_attributes
+    old = rt.output.attributes
     same = (old is not None and old[0] == names
             and (radius is None) == (old[1] is None)
             and (radius is None or np.array_equal(radius, old[1])))
@@ -227,13 +238,13 @@ def sync_output(setup, inputs) -> None:
         bridge.copy_topology(src, compat.emptied_curves(out))
     elif not same:  # (the output's points stay: a held frame is still shown)
         bridge.copy_attributes(src, out.data)
-    rt.output_attributes = (names, radius)
+    rt.output.attributes = (names, radius)
 
 
 # ---------------------------------------------------------------- viewport
 def apply_visibility(ob) -> None:
     """Show source or output in the viewport according to ``show_result``."""
-    ob = source_of(ob)
+    ob = registry.source_of(ob)
     if ob is None:
         return
     s = ob.furcollide

@@ -16,6 +16,8 @@ animation evaluated again by comparing the scene with it
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ...core import framecache
@@ -103,8 +105,9 @@ def solved_inputs(setup, inp, read) -> dict:
     :class:`..settings.fingerprints.SettingsRead`), from the colliders as the solve
     read them."""
     rt = setup.rt
-    growth = rt.growth if rt.growth is not None and uses_growth(rt.solver.settings) else None
-    entries = list(rt.colliders.values())
+    growth = rt.colliders.growth
+    growth = growth if growth is not None and uses_growth(rt.solve.solver.settings) else None
+    entries = list(rt.colliders.entries.values())
     return _tagged(setup, frame_inputs(
         inp, read.signature_record, [e.inputs for e in entries],
         [(e.double_sided, e.offset) for e in entries],
@@ -159,10 +162,64 @@ def current_inputs(setup, inp, read, like=None) -> dict:
                                        structure=read.structure_record, values=read.values))
 
 
+@dataclass
+class Seen:
+    """The part of a setup's runtime with what the frame handler saw last, changed
+    only here: changes made since without an update callback drop cached frames
+    (:func:`.rules.since_seen`), and the depsgraph check tells an edit from the
+    animation evaluated again (:func:`..store.invalidation.edit_seen`)."""
+
+    #: What every frame of the shot shares (``fingerprints.structure``: which objects
+    #: collide, Mode, ...); a change drops the playback cache.
+    structure: str | None = None
+    #: ``keyed.fingerprint``: the depsgraph check looks for changed values only when it
+    #: changed (keys edited, a setting changed without an update).
+    values: int | None = None
+    attach: tuple | None = None  # (use_fur_attach, attach_id)
+    time: float | None = None  # fingerprints.time_key
+    #: ((scene name, frame), frame-inputs record) of the frame last evaluated: an update
+    #: that changes nothing the frame was solved or shown from is the animation
+    #: evaluated again, not an edit.
+    record: tuple | None = None
+
+
 def saw(rt, scene, frame, record) -> None:
     """Remember ``record`` as the inputs the frame handler saw at ``frame`` of
-    ``scene`` (``Runtime.seen``: the depsgraph check compares the scene with it)."""
-    rt.seen = ((scene.name, frame), record)
+    ``scene`` (the depsgraph check compares the scene with it)."""
+    rt.seen.record = ((scene.name, frame), record)
+
+
+def last_seen(rt, scene, frame) -> dict | None:
+    """The record the frame handler saw at ``frame`` of ``scene``; None when it has not
+    evaluated that frame last."""
+    seen = rt.seen.record
+    return seen[1] if seen is not None and seen[0] == (scene.name, frame) else None
+
+
+def saw_settings(rt, s, read) -> None:
+    """Remember Fur Attach (of the setup's properties ``s``) and the time key of the
+    settings ``read`` once: a change of either drops every cached frame."""
+    rt.seen.attach = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
+    rt.seen.time = read.time_key
+
+
+def saw_structure(rt, read) -> None:
+    """Remember what every frame shares and the values' fingerprint of the settings
+    ``read`` once."""
+    rt.seen.structure = read.structure
+    rt.seen.values = read.fingerprint
+
+
+def saw_values(rt, fingerprint) -> None:
+    """Remember the values' fingerprint (the depsgraph check looked at it; None: look
+    at the values again next time)."""
+    rt.seen.values = fingerprint
+
+
+def forget_structure(rt) -> None:
+    """Accept the next structure seen without dropping cached frames (they were just
+    dropped)."""
+    rt.seen.structure = None
 
 
 def fixed_change(setup, old, read, frame=None) -> str:
@@ -210,7 +267,7 @@ def first_changed_frame(setup, frames, read) -> tuple[int, str] | None:
     """(the first of the cached ``frames`` whose settings record no longer holds, why),
     or None: the frames before it stay valid, it and every later one must be solved
     again (:func:`fixed_change`; ``read`` as there)."""
-    memory = setup.rt.memory
+    memory = setup.rt.cache.memory
     for f in sorted(frames):
         why = fixed_change(setup, memory.inputs(f), read, f)
         if why:
@@ -286,7 +343,7 @@ def describe_change(ob, part, scene, old=None, new=None, refs=None) -> str:
 def cached_frame_change(setup, inp, f, read) -> tuple[str, dict | None]:
     """(why memory-cached frame ``f`` no longer matches the current inputs, '' when it
     does; the current record, None when ``f`` was stored without a record)."""
-    old = setup.rt.memory.inputs(f)
+    old = setup.rt.cache.memory.inputs(f)
     if old is None:
         return "", None
     new = current_inputs(setup, inp, read)

@@ -242,14 +242,14 @@ def since_seen(setup, read) -> Changes:
     before = []
     if not s.is_baked:
         att = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
-        if rt.attach_state is not None and att != rt.attach_state:
+        if rt.seen.attach is not None and att != rt.seen.attach:
             before.append(Drop("cache", why="Fur Attach changed"))
         tk = sr.time_key
-        if None not in (tk, rt.time_state) and tk != rt.time_state:
+        if None not in (tk, rt.seen.time) and tk != rt.seen.time:
             before.append(Drop("cache", why="the frame rate changed"))
     adopt, decision = _topology(setup, inp)
     after = []
-    signature = None if before else rt.signature  # (a drop accepts the new structure)
+    signature = None if before else rt.seen.structure  # (a drop accepts the new structure)
     if signature is not None and sr.structure != signature and not s.is_baked:
         after.append(Drop("cache", why=structure_change(signature, sr.structure),
                           colliders=True))
@@ -263,11 +263,11 @@ def _topology(setup, inp):
     otherwise the status says what changed and what to press, and the output follows
     the source (a bake's frame stays)."""
     rt, s = setup.rt, setup.s
-    if rt.topology is None or rt.topology == inp.key:
+    if rt.solve.topology is None or rt.solve.topology == inp.key:
         return inp.key, None
-    if len(rt.memory) == 0 and not s.is_baked:
+    if len(rt.cache.memory) == 0 and not s.is_baked:
         return inp.key, None
-    old, new = rt.topology, inp.key
+    old, new = rt.solve.topology, inp.key
     if bridge.is_render(setup.depsgraph):
         # The viewport still has the curves the frames were solved for: a modifier
         # evaluates the source otherwise for renders. Reset would change nothing.
@@ -305,18 +305,18 @@ def decide(setup, read, record=None) -> Decision:
         return _baked(setup, read, note)
     if f > s.frame_end:
         return _after_the_end(setup, read, note)
-    if f in rt.memory:
+    if f in rt.cache.memory:
         d = _cached(setup, read, note)
         if d is not None:
             return d
     start = "reset" if starts_here(setup, read.settings.animation) else "step"
     if start == "step":
-        if (f - 1) not in rt.memory:
+        if (f - 1) not in rt.cache.memory:
             return hold(setup)
         # Frame f - 1 cannot be evaluated again from here: at least its settings
         # (what every frame shares, and the keyable values at f - 1) must be what it
         # was solved with.
-        if fixed_change(setup, rt.memory.inputs(f - 1), read.settings, f - 1):
+        if fixed_change(setup, rt.cache.memory.inputs(f - 1), read.settings, f - 1):
             return Decision(Outcome.OUTDATED, drops=_changed(setup, read), then="hold")
     drops = ()
     if f == s.frame_start:
@@ -340,7 +340,7 @@ def input_warning(setup, inp) -> tuple[str, str]:
 def _after_the_end(setup, read, note):
     """After the end frame: hold the end frame (or, not cached, the newest cached one)."""
     rt, end = setup.rt, setup.s.frame_end
-    if rt.hold is not None and rt.hold[0] == end:
+    if rt.cache.hold is not None and rt.cache.hold[0] == end:
         level, msg = note
         return Decision(Outcome.HOLD, show="hold", frame=end,
                         status=(level, msg or f"After the end frame: holding frame {end}"))
@@ -354,17 +354,17 @@ def _cached(setup, read, note):
     rt, f, start = setup.rt, setup.frame, setup.s.frame_start
     why, record = cached_frame_change(setup, read.inputs, f, read.settings)
     if not why:
-        newest = rt.hold is None and f == max(rt.memory.frames)
+        newest = rt.cache.hold is None and f == max(rt.cache.memory.frames)
         return Decision(Outcome.CACHE, show="memory", frame=f, keep_hold=newest,
                         outdated=False, status=NOTE, record=record)
     if f == start:
         return None  # solved again (which drops every cached frame)
-    changed = first_changed_frame(setup, rt.memory.frames, read.settings)
+    changed = first_changed_frame(setup, rt.cache.memory.frames, read.settings)
     if changed is not None and changed[0] <= f:
         # A setting's value changed at a cached frame (a key edited): the frames
         # before it hold; f is solved again from f - 1 when that is one of them.
         drops = (Drop("from", changed[0], why=changed[1]),)
-        then = "decide" if changed[0] == f and (f - 1) in rt.memory else "hold"
+        then = "decide" if changed[0] == f and (f - 1) in rt.cache.memory else "hold"
         return Decision(Outcome.OUTDATED, drops=drops, then=then, record=record)
     if changed is None and _key_moved_ahead(setup, read, record):
         # Only the frames from f on were solved from other inputs (a key moved after
@@ -380,28 +380,28 @@ def _cached(setup, read, note):
 
 def _key_moved_ahead(setup, read, record) -> bool:
     """Did frame ``f``'s inputs change only in objects the depsgraph reported while the
-    frame it was seen at still held (``Runtime.trusted``), and is ``f - 1`` a frame
-    known to hold since (``Runtime.verified``), with its solver state and today's
+    frame it was seen at still held (``PlaybackCache.trusted``), and is ``f - 1`` a frame
+    known to hold since (``PlaybackCache.verified``), with its solver state and today's
     settings? Then f is solved again from f - 1 (an animator moved a key ahead of the
     frame shown); anything else drops the playback cache. ``record``: f's inputs
     record now."""
     rt, f = setup.rt, setup.frame
-    fr = rt.memory.frames.get(f - 1)
-    if fr is None or (f - 1) not in rt.verified or not rt.trusted:
+    fr = rt.cache.memory.frames.get(f - 1)
+    if fr is None or (f - 1) not in rt.cache.verified or not rt.cache.trusted:
         return False
-    if fr.state is None and rt.solver_frame != f - 1:
+    if fr.state is None and rt.solve.frame != f - 1:
         return False
     if fixed_change(setup, fr.inputs, read.settings, f - 1):
         return False
-    objects = changed_objects(setup, rt.memory.inputs(f), record, read.settings.refs)
-    return objects is not None and objects <= rt.trusted
+    objects = changed_objects(setup, rt.cache.memory.inputs(f), record, read.settings.refs)
+    return objects is not None and objects <= rt.cache.trusted
 
 
 def _changed(setup, read) -> tuple:
     """The drop of the cached frames from the first one whose settings record no
     longer holds (:func:`.record.first_changed_frame`: a key edited, a setting
     changed), or () when every cached frame holds."""
-    changed = first_changed_frame(setup, setup.rt.memory.frames, read.settings)
+    changed = first_changed_frame(setup, setup.rt.cache.memory.frames, read.settings)
     return () if changed is None else (Drop("from", changed[0], why=changed[1]),)
 
 
@@ -409,28 +409,28 @@ def hold(setup, reason="") -> Decision:
     """Jump ahead past the cache (or its solver state unknown, ``reason``): hold the
     newest cached frame, mark outdated."""
     rt, f = setup.rt, setup.frame
-    here = not reason and rt.dropped and rt.dropped_at == f  # the change was seen here
-    reason = reason or rt.dropped
-    k = rt.memory.newest_before(f)
-    if rt.hold is not None and rt.hold[0] == k:
+    here = not reason and rt.cache.dropped and rt.cache.dropped_at == f  # the change was seen here
+    reason = reason or rt.cache.dropped
+    k = rt.cache.memory.newest_before(f)
+    if rt.cache.hold is not None and rt.cache.hold[0] == k:
         show, held = "hold", f"holding frame {k}"
-    elif k is not None and k in rt.memory:  # (whatever frame was shown before the jump)
+    elif k is not None and k in rt.cache.memory:  # (whatever frame was shown before the jump)
         show, held = "memory", f"holding frame {k}"
     else:
         show, held = None, "showing the last result"
     d = dict(show=show, frame=k, keep_hold=show == "memory", outdated=True)
     start = setup.s.frame_start
-    if rt.error:
+    if rt.report.error:
         return Decision(Outcome.OUTDATED, status=(
-            "ERROR", f"{rt.error} (frame {f} not solved: fix it, then go back to frame "
+            "ERROR", f"{rt.report.error} (frame {f} not solved: fix it, then go back to frame "
             f"{start})"), **d)
     if here:
         # Only the frames from the change on were dropped: playing on from the newest
         # one kept (its state known) solves the rest.
-        resume = k if rt.dropped_from > start and k is not None and (
-            rt.memory.frames[k].state is not None) else None
+        resume = k if rt.cache.dropped_from > start and k is not None and (
+            rt.cache.memory.frames[k].state is not None) else None
         return Decision(Outcome.OUTDATED, status=(
-            "WARNING", dropped_message(f, rt.dropped_why, start, resume)), **d)
+            "WARNING", dropped_message(f, rt.cache.dropped_why, start, resume)), **d)
     why = f" ({reason})" if reason else ""
     return Decision(Outcome.OUTDATED, status=(
         "WARNING", f"Frame {f} is not cached{why}: {held}. Play from frame {start} or bake."),
@@ -470,7 +470,7 @@ def frame_note(setup, read, stats, fresh=()) -> tuple[str, str]:
             return note
         about = collider_note(setup.rt, setup.scene, read.settings.refs, fresh)
         return ("INFO", about) if about else note
-    return setup.rt.invalid_note or (
+    return setup.rt.report.invalid_note or (
         "WARNING", f"Source hair: {n} curves have a zero-length segment or a non-finite "
         "point. They are shown as they are, in yellow; the other curves are solved")
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..store import registry
+from ..store import registry, report
 from . import groom, output, rules, spine
 from .inputs import read_inputs, shown
 from .output import Shown
@@ -46,7 +46,7 @@ def evaluate(ob, scene, depsgraph):
     try:
         show_source(ob, scene, depsgraph)
     except Exception as exc:  # noqa: BLE001 - the setup is not this scene's: only say it
-        text = registry.describe(exc)
+        text = report.describe(exc)
         if _said.get(ob.name) != text:
             _said[ob.name] = text
             print(f"FurCollide '{ob.name}' in scene '{scene.name}': the source hair could "
@@ -76,8 +76,7 @@ def show_source(ob, scene, depsgraph) -> bool:
     own = registry.get_runtime(ob, create=False)
     for r in (rt, own):  # both write into the same output data
         if r is not None:
-            r.written_status = None
-            r.output_attributes = None
+            output.forget_written(r)
             groom.forget_written(r)
     written = output.show(setup, inp, Shown(inp.points, np.zeros(len(inp.offsets) - 1, np.int8)),
                           sync=True)

@@ -53,12 +53,12 @@ class Setup:
     @property
     def solver(self):
         """The core Solver (:func:`.solve.ensure_solver` builds it)."""
-        return self.rt.solver
+        return self.rt.solve.solver
 
     @property
     def history(self) -> RootHistory:
         """The roots of the frames seen (jiggle)."""
-        return self.rt.history
+        return self.rt.solve.history
 
     @property
     def motion(self):

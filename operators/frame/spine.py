@@ -34,12 +34,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import children, groom, output, rules, solve
+from ..store import playback, report
+from . import children, colliders, groom, output, record, rules, solve
 from .clock import clock
-from .colliders import read_for_solve
 from .inputs import prepare_input, read_frame
 from .output import Shown
-from .record import current_inputs, saw, solved_inputs
 from .rules import NOTE, Outcome
 
 #: How many times a frame's rules are asked again after their drops (one is enough:
@@ -69,34 +68,25 @@ class Playback:
         return rules.since_seen(setup, read)
 
     def decide(self, setup, read):
-        d, record = rules.decide(setup, read), None
+        d, seen = rules.decide(setup, read), None
         for _ in range(_AGAIN):
-            record = d.record if d.record is not None else record
+            seen = d.record if d.record is not None else seen
             if d.then is None:
                 break
             _drop(setup, d.drops)
-            d = rules.hold(setup) if d.then == "hold" else rules.decide(setup, read, record)
-        return replace(d, record=record)
+            d = rules.hold(setup) if d.then == "hold" else rules.decide(setup, read, seen)
+        return replace(d, record=seen)
 
     def prepare(self, setup, read, d):
         return solve.prepare(setup, read, d.start)
 
     def continuous(self, setup) -> bool:
-        return setup.rt.solver_frame == setup.frame - 1
+        return setup.rt.solve.frame == setup.frame - 1
 
-    def keep(self, setup, read, result, record) -> None:
+    def keep(self, setup, read, result, inputs_record) -> None:
         """The frame solved goes into the playback cache (with its inputs record), and
         is held after the end and on a jump ahead when it is the newest."""
-        rt, f, inp = setup.rt, setup.frame, read.inputs
-        rt.verified.add(f)
-        rt.verified &= rt.memory.frames.keys() | {f}  # (frames the budget dropped go)
-        rt.memory.put(
-            f, inp.raw, result.points, result.status, inp.offsets, rt.solver.state,
-            result.stats, result.changed, result.attributes, record,
-        )
-        if rt.hold is None or f >= rt.hold[0]:
-            rt.hold = (f, result.points, result.status)
-        rt.error = ""
+        playback.keep(setup.rt, setup.frame, read.inputs, result, inputs_record)
 
     def stages(self, setup, outcome, shown):
         """The render groom and the children follow what the output shows: (their
@@ -120,7 +110,7 @@ class Playback:
         rt = setup.rt
         groom_stage, children_stage, groom_error = stages
         done = [st for st in (groom_stage, children_stage) if st is not None]
-        stats = dict(shown.stats if shown.stats is not None else rt.stats)
+        stats = dict(shown.stats if shown.stats is not None else rt.report.stats)
         for st in done:
             stats.update(st.stats)
         stats.update(clock.stats())
@@ -129,7 +119,7 @@ class Playback:
         if status == NOTE:
             fresh = shown.fresh + tuple(n for st in done for n in st.fresh)
             status = rules.frame_note(setup, shown.read, stats, fresh)
-        base = status if status is not None else rt.status
+        base = status if status is not None else rt.report.status
         final = ("WARNING", groom_error) if groom_error else groom.with_note(
             base, groom_stage, setup.ob)
         final = children.with_note(final, children_stage)
@@ -198,77 +188,73 @@ def _frame(setup, sink):
     changes = sink.changes(setup, read)
     _drop(setup, changes.before)
     if sink.sees:
-        rt.attach_state = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
-        rt.time_state = read.settings.time_key
+        record.saw_settings(rt, s, read.settings)
     if changes.topology is not None:
         _show(setup, read, changes.topology, shown)
         return changes.topology.outcome, shown
-    if rt.adopt_topology(changes.adopt) and not len(rt.memory):
-        rt.hold = None  # (other curves, nothing cached: the held frame is of the old)
+    if solve.adopt_topology(rt, changes.adopt) and not len(rt.cache.memory):
+        playback.forget_hold(rt)  # (other curves, nothing cached: the held frame is of the old)
     if read.inputs.points is not None:  # (the jiggle's history and the motion feed a solve)
         read = shown.read = replace(read, inputs=prepare_input(setup, read.inputs, read.motion))
     _drop(setup, changes.after)
     if sink.sees:
-        rt.signature = read.settings.structure
-        rt.values_seen = read.settings.fingerprint  # (the depsgraph check compares it)
+        record.saw_structure(rt, read.settings)  # (the depsgraph check compares them)
     d = sink.decide(setup, read)
     if d.show == "solve":
         held = sink.prepare(setup, read, d)
         if held is not None:  # frame f - 1's state is not known (or not for this mode)
             d = rules.hold(setup, reason=held)
     _drop(setup, d.drops)  # (a frame solved from the groom: once its solver is ready)
-    record = d.record
+    seen = d.record
     if d.show == "solve":
-        record = _solve(setup, read, d, shown, sink)
+        seen = _solve(setup, read, d, shown, sink)
     else:
         _show(setup, read, d, shown)
     if sink.sees and d.outcome is not Outcome.BAKE:
         # What this frame was evaluated from (solved and checked cached frames made it
         # already): the depsgraph check tells an edit from the animation evaluated
         # again with it.
-        if record is None:
-            record = current_inputs(setup, read.inputs, read.settings)
-        saw(rt, setup.scene, setup.frame, record)
+        if seen is None:
+            seen = record.current_inputs(setup, read.inputs, read.settings)
+        record.saw(rt, setup.scene, setup.frame, seen)
     return d.outcome, shown
 
 
 def _drop(setup, drops) -> None:
-    """Apply a decision's drops to the setup's playback cache."""
+    """Apply a decision's drops to the setup's playback cache (:mod:`..store.playback`)."""
     rt, s, f = setup.rt, setup.s, setup.frame
     for drop in drops:
         if drop.kind == "cache":
-            rt.drop_cache(drop.why, s.frame_start, f)
-            if drop.since:
-                rt.dropped_why = drop.since
+            playback.drop_cache(rt, drop.why, s.frame_start, f, drop.since)
         elif drop.kind == "from":
-            rt.drop_from(drop.frame, drop.why, s.frame_start, f)
+            playback.drop_from(rt, drop.frame, drop.why, s.frame_start, f)
         elif drop.kind == "after":
-            rt.drop_frames_after(drop.frame, s.frame_start)
+            playback.drop_after(rt, drop.frame, s.frame_start)
         elif drop.kind == "restart":
-            rt.restart(drop.frame, s.memory_limit)
+            playback.restart(rt, drop.frame, s.memory_limit)
         if drop.colliders:
-            rt.colliders.clear()
+            colliders.forget(rt)
 
 
 def _show(setup, read, d, shown) -> None:
     """Write what decision ``d`` shows (once), and note what the frame says."""
-    rt = setup.rt
+    cache = setup.rt.cache
     inp = read.inputs
     what, stats = None, None
     if d.show == "source":
         what = Shown(inp.points, np.zeros(len(inp.offsets) - 1, np.int8))
     elif d.show == "hold":
-        what = Shown(rt.hold[1], rt.hold[2])
+        what = Shown(cache.hold[1], cache.hold[2])
     elif d.show == "memory":
-        points, status, stats = rt.memory.get(d.frame, inp.raw, inp.offsets)
-        what = Shown(points, status, attributes=rt.memory.attributes(d.frame))
+        points, status, stats = cache.memory.get(d.frame, inp.raw, inp.offsets)
+        what = Shown(points, status, attributes=cache.memory.attributes(d.frame))
     elif d.show == "baked":
         b = d.baked
         what = Shown(b.points, b.status, attributes=b.attributes)
         shown.baked = (d.frame, b)
     shown.written = output.show(setup, inp, what, sync=rules.syncs(setup, d.outcome))
     if d.keep_hold:
-        rt.hold = (d.frame, shown.written, what.status)
+        playback.hold(setup.rt, d.frame, shown.written, what.status)
     shown.stats = dict(stats, source="cache") if d.outcome is Outcome.CACHE else d.stats
     shown.status, shown.outdated = d.status, d.outdated
 
@@ -276,20 +262,17 @@ def _show(setup, read, d, shown) -> None:
 def _solve(setup, read, d, shown, sink) -> dict:
     """Solve the frame (its solver prepared: reset, or holding ``f - 1``), have the sink
     keep it, show it; returns its inputs record."""
-    rt, f = setup.rt, setup.frame
     inp = read.inputs
-    cols, growth, fresh = read_for_solve(setup, read.settings.refs,
-                                         continuous=sink.continuous(setup),
-                                         fresh=d.start == "reset")
-    rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
+    cols, growth, fresh = colliders.read_for_solve(setup, read.settings.refs,
+                                                   continuous=sink.continuous(setup),
+                                                   fresh=d.start == "reset")
     result = solve.solve_frame(setup, replace(inp, colliders=cols, growth=growth),
                                motion=read.motion)
-    rt.solver_frame = f
-    record = solved_inputs(setup, inp, read.settings)
-    sink.keep(setup, read, result, record)
+    solved = record.solved_inputs(setup, inp, read.settings)
+    sink.keep(setup, read, result, solved)
     what = Shown(result.points, result.status, result.changed, result.attributes)
     shown.written = output.show(setup, inp, what, sync=True)
-    rt.invalid_note = rules.invalid_note(result.problems)
+    report.solved(setup.rt, rules.invalid_note(result.problems))
     shown.stats, shown.status, shown.outdated = result.stats, NOTE, False
-    shown.fresh, shown.result, shown.record = tuple(fresh), result, record
-    return record
+    shown.fresh, shown.result, shown.record = tuple(fresh), result, solved
+    return solved

@@ -29,7 +29,7 @@ from ..frame.record import current_inputs, first_change, fixed_change
 from ..frame.setup import Setup
 from ..settings import keyed, motion
 from ..settings.fingerprints import core_settings, read_settings, structure
-from . import registry
+from . import playback, registry, report
 
 
 def bake_directory(ob) -> str:
@@ -122,9 +122,10 @@ class ToBake:
 
     def changes(self, setup, read):
         rt, inp = setup.rt, read.inputs
-        if self.trust_solver and rt.topology is not None and rt.topology != inp.key:
+        layout = rt.solve.topology
+        if self.trust_solver and layout is not None and layout != inp.key:
             # (frames of other curves than the frame before: no playback could show them)
-            raise ValueError(topology.topology_message(setup.ob, rt.topology, inp.key,
+            raise ValueError(topology.topology_message(setup.ob, layout, inp.key,
                                                        "baking", setup.s.frame_start))
         return rules.Changes(adopt=inp.key)
 
@@ -143,7 +144,7 @@ class ToBake:
             _p, _st, offsets, stored = framecache.read_frame(self.directory, f - 1)
             if not np.array_equal(offsets, read.inputs.offsets):
                 raise ValueError(f"bake frame {f - 1} was made for other curves")
-            solver.state = framecache.decode_state(stored, rt.memory.sparse)
+            solve.restore(setup, framecache.decode_state(stored, rt.cache.memory.sparse))
         return None
 
     def continuous(self, setup) -> bool:
@@ -168,14 +169,14 @@ class ToBake:
             if part is not None:
                 extra[name] = part[0]
                 stats.update(part[1])
-        state = rt.solver.state
+        state = rt.solve.solver.state
         state["fingerprint"] = np.frombuffer(settings_fingerprint(setup.ob).encode(), np.uint8)
         framecache.write_frame(self.directory, f, result.points, result.status,
-                               shown.read.inputs.offsets, state, rt.memory.sparse,
+                               shown.read.inputs.offsets, state, rt.cache.memory.sparse,
                                result.attributes, inputs=shown.record, extra=extra)
-        rt.stats = self.stats = dict(stats, **clock.stats())
-        if rt.invalid_note:
-            registry.set_status(setup.ob, *rt.invalid_note)
+        self.stats = dict(stats, **clock.stats())
+        invalid = rt.report.invalid_note
+        report.publish(setup.ob, rt, invalid, stats=self.stats)
 
     def failed(self, setup) -> None:
         pass  # (the frames baked before are kept; the bake reports the error)
@@ -188,7 +189,7 @@ def _bake_groom(setup, guides_world):
         return groom.bake_frame(setup, guides_world)
     except Exception as exc:  # noqa: BLE001 - the guides are baked all the same
         print(f"FurCollide bake '{setup.ob.name}': frame {setup.frame}: render groom not "
-              f"baked: {registry.describe(exc)}", flush=True)
+              f"baked: {report.describe(exc)}", flush=True)
         return None
 
 
@@ -386,7 +387,7 @@ class BakeJob:
             except Exception as exc:  # noqa: BLE001 - becomes a report
                 kept = (f"frames {s.frame_start}-{f - 1} are kept; bake again to resume"
                         if f > s.frame_start else "no frame was written")
-                raise BakeError(f"'{ob.name}' frame {f}: {registry.describe(exc)} ({kept})"
+                raise BakeError(f"'{ob.name}' frame {f}: {report.describe(exc)} ({kept})"
                                 ) from exc
             job[3] = f
             if self.verbose:
@@ -427,8 +428,7 @@ class BakeJob:
             complete = all(f in have for f in range(s.frame_start, s.frame_end + 1))
             if complete and not cancelled:
                 s.is_baked = True
-                rt.memory.clear()
-                rt.hold = None
+                playback.forget(rt)
                 baked.append(ob)
         if restore_frame:
             f, sub = self.orig_frame

@@ -24,7 +24,7 @@ from ..frame import groom
 from ..frame.record import VALUES_PART, fixed_change
 from ..frame.setup import Setup
 from ..settings.fingerprints import read_settings
-from . import registry
+from . import registry, report
 
 #: What a baked setup whose settings are not the bake's says (:func:`message`).
 MESSAGE = "baked with other settings"
@@ -128,10 +128,10 @@ def check(ob, scene=None) -> bool:
     if rt is None:
         return bool(what)
     if what:
-        rt.outdated = True
-        registry.set_status(ob, "WARNING",
-                            f"This setup was {message(what)} (the frames shown are the bake's)")
-    elif MESSAGE in rt.status[1]:
-        rt.outdated = False
-        registry.set_status(ob, "INFO", "")
+        report.mark_outdated(rt)
+        report.set_status(ob, "WARNING",
+                          f"This setup was {message(what)} (the frames shown are the bake's)")
+    elif MESSAGE in rt.report.status[1]:
+        report.mark_outdated(rt, False)
+        report.set_status(ob, "INFO", "")
     return bool(what)
