@@ -305,7 +305,7 @@ def _simplified_ball(fc, frames=(1, 6)):
 
 
 def _counting_solves(fc, monkeypatch):
-    """Count the frames solved from now on (``frame_solve.solve_frame`` calls)."""
+    """Count the frames solved from now on (``frame.solve.solve_frame`` calls)."""
     calls = []
     real = fc.frame.solve.solve_frame
 
