@@ -257,6 +257,8 @@ def wants_children(setup) -> bool:
 class ChildrenState:
     """What the children stage keeps between frames (in the setup's runtime)."""
 
+    __slots__ = ("key", "result")
+
     def __init__(self):
         self.key = None  # digests of the inputs of ``result``
         self.result = None  # (points (P, 3) float32 world, status (C,), n_fixed)

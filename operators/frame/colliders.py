@@ -139,7 +139,7 @@ def surface_as_collider(ob) -> str:
     return ""
 
 
-@dataclass
+@dataclass(slots=True)
 class ColliderState:
     """The part of a setup's runtime with its colliders, changed only here."""
 

@@ -238,6 +238,9 @@ def remove_groom(src) -> None:
 class GroomState:
     """What the render groom stage keeps between frames (in the setup's runtime)."""
 
+    __slots__ = ("bind_id", "binding", "key", "result", "written", "last_guides", "carried",
+                 "note", "fresh")
+
     def __init__(self, bind_id, binding):
         self.bind_id = bind_id
         self.binding = binding

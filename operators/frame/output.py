@@ -68,7 +68,7 @@ def publish(setup, status, outdated=None, stats=None) -> None:
     report.publish(setup.ob, setup.rt, status, outdated, stats)
 
 
-@dataclass
+@dataclass(slots=True)
 class Written:
     """The part of a setup's runtime with what its output got last, changed only here
     (the status colours are written again only where a status changed)."""

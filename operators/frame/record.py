@@ -162,7 +162,7 @@ def current_inputs(setup, inp, read, like=None) -> dict:
                                        structure=read.structure_record, values=read.values))
 
 
-@dataclass
+@dataclass(slots=True)
 class Seen:
     """The part of a setup's runtime with what the frame handler saw last, changed
     only here: changes made since without an update callback drop cached frames

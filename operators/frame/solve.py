@@ -31,7 +31,7 @@ from . import colliders
 from .clock import clock
 
 
-@dataclass
+@dataclass(slots=True)
 class SolveState:
     """The part of a setup's runtime with its solver."""
 

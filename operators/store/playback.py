@@ -24,7 +24,7 @@ from ..frame import record, solve
 NOT_SAVED = "the playback cache is not saved with the file: bake to keep the frames"
 
 
-@dataclass
+@dataclass(slots=True)
 class PlaybackCache:
     """The part of a setup's runtime with its cached frames."""
 

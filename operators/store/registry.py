@@ -31,10 +31,11 @@ import bpy
 from ...core import framecache
 
 
-@dataclass
+@dataclass(slots=True)
 class Runtime:
     """Session-only state of one setup: one part per job, each changed only by the
-    functions of the module that owns it (others read it)."""
+    functions of the module that owns it (others read it). The runtime and its parts
+    have slots: no module can leave an attribute on them for another to find."""
 
     uid: str
     #: The frames cached in this session, and what was dropped

@@ -21,7 +21,7 @@ from ..blender import bridge
 from . import registry
 
 
-@dataclass
+@dataclass(slots=True)
 class Report:
     """The part of a setup's runtime the panel shows."""
 
