@@ -457,7 +457,7 @@ def test_resample_on_the_output_sees_the_guides_written(fc):
         moved += int(np.abs(G - world(hair)).max() > 0.01)
         if np.abs(P[offs[1:] - 1] - G[goffs[1:] - 1]).max() > 1e-5:
             # Blender keeps the output's evaluated positions from before the write
-            # (issue 29 item 2, fixed in bridge.py / frame_outputs.py by another branch)
+            # (issue 29 item 2, fixed in bridge.py / frame/output.py by another branch)
             pytest.xfail(f"frame {f}: the stack saw positions from before the write "
                          "(issue 29)")
     assert moved
