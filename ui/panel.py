@@ -170,7 +170,7 @@ class FURCOLLIDE_PT_resolution(_Sub, Panel):
         col.prop(s, "max_angle")
         _map(col, s, "max_angle")
         sub = col.column()
-        sub.active = s.mode == "soft"
+        sub.active = s.mode == "SOFT"
         sub.prop(s, "affected_connected_cvs")
         sub.prop(s, "cv_falloff")
         col.prop(s, "attract_to_growth_surface")
@@ -191,11 +191,11 @@ class FURCOLLIDE_PT_shrink(_Sub, Panel):
     def draw(self, context):
         layout, s = self.prepare(context)
         col = layout.column()
-        col.active = s.shrink and s.mode != "soft"
+        col.active = s.shrink and s.mode != "SOFT"
         col.prop(s, "scale_minimum")
         _map(col, s, "scale_minimum")
         col.prop(s, "scale_angle")
-        if s.mode == "soft":
+        if s.mode == "SOFT":
             layout.label(text="Shrink works in Stiff and Bend modes", icon="INFO")
 
 

@@ -11,6 +11,7 @@ from ..blender import bridge, dependencies
 from ..frame import children, output
 from ..frame.colliders import instanced_collection
 from ..frame.groom import remove_groom
+from ..settings.properties import CURRENT_VERSION
 from ..store import registry
 from ..store.invalidation import invalidate
 from .common import (
@@ -93,6 +94,7 @@ class FURCOLLIDE_OT_add(Operator):
         s.uid = ""
         registry.ensure_uid(src)
         s.is_setup = True
+        s.settings_version = CURRENT_VERSION  # (keys made from now on: radians)
         s.output = out
         registry.adopt(src, scene)  # the setup belongs to this scene (registry.owner)
         s.frame_start = scene.frame_start
