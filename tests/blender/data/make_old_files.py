@@ -25,8 +25,8 @@ import tempfile
 from pathlib import Path
 
 os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="fc_old_user_")
-import bpy  # noqa: E402  (first: it provides addon_utils)
-import addon_utils  # noqa: E402, I001
+import bpy  # noqa: E402, I001  (first: it puts addon_utils on the path)
+import addon_utils  # noqa: E402
 import numpy as np  # noqa: E402
 
 OLD, OUT = Path(sys.argv[1]).resolve(), Path(sys.argv[2]).resolve()
