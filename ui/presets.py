@@ -145,7 +145,7 @@ def _choice(value):
     return value.upper() if isinstance(value, str) else value
 
 
-class FURCOLLIDE_OT_preset_apply(Operator):
+class FURCOLLIDE_OT_preset_apply(SetupOperator, Operator):
     """Apply a FurCollide preset to the active setup's solver settings (a preset saved
     by an earlier version too: its angles in degrees and its choices are read as they
     were meant)"""
@@ -164,8 +164,9 @@ class FURCOLLIDE_OT_preset_apply(Operator):
     )
 
     @classmethod
-    def poll(cls, context):
-        return True  # (the preset itself says what is wrong: no active object...)
+    def refusal(cls, context, src):
+        return ("The setup is baked: Free Bake first (its settings are the bake's)"
+                if src.furcollide.is_baked else "")
 
     def execute(self, context):
         menu = getattr(bpy.types, self.menu_idname, None)

@@ -81,6 +81,6 @@ def test_undo_and_redo_of_add_and_of_a_setting(session):
     assert red["is_setup"] is True and red["output"] is True and red["reset"] == ["FINISHED"]
     assert red["moved"] > 0.01, red  # the box pushed the hair: it was solved again
     assert red["status"][0] == "INFO", red
-    assert r["undo_mode_after"] == "bend"
+    assert r["undo_mode_after"] == "BEND"
     assert r["undo_final_status"][0] == "INFO", r["undo_final_status"]
     assert r["undo_handler_errors"] == [] and r["undo_draw_errors"] == []

@@ -261,7 +261,7 @@ def run():
     bpy.context.scene.frame_set(1)
     with override():
         bpy.ops.ed.undo_push(message="before stiff")
-    fur2.furcollide.mode = "stiff"
+    fur2.furcollide.mode = "STIFF"
     with override():
         bpy.ops.ed.undo_push(message="stiff")
     for f in range(1, 4):

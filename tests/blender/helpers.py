@@ -120,6 +120,13 @@ def activate(ob, *selected):
     bpy.context.view_layer.objects.active = ob
 
 
+def set_core(s, **values):
+    """Set setup properties ``s`` from :class:`core.Settings` names and values: angles in
+    degrees, choices as the core spells them (``set_core(s, mode="bend",
+    max_angle=120.0)``; the add-on's ``core_values.set_core_values``)."""
+    sys.modules[ADDON + ".operators.settings.core_values"].set_core_values(s, **values)
+
+
 def setup(hair, colliders):
     """Run furcollide.add with ``hair`` active and ``colliders`` selected."""
     activate(hair, *colliders)
@@ -1136,7 +1143,8 @@ def toggle_collider(kind, ob, guides, off):
 
 
 # ------------------------------------------------------------ the demo's scene
-#: The demo's "fur" settings (scripts/demo.py SETTINGS["fur"]).
+#: The demo's "fur" settings (scripts/demo.py SETTINGS["fur"]), in the core's names and
+#: units (:func:`set_core`).
 DEMO_FUR = dict(
     mode="bend",
     rotation_precision=0.5,
@@ -1185,8 +1193,7 @@ def demo_fur(n_fur, last, mode="bend", grass=50, scene_end=None, polygons=False,
     activate(demo.fur, demo.pusher, demo.cloth)
     assert bpy.ops.furcollide.add() == {"FINISHED"}
     s = demo.fur.furcollide
-    for k, v in dict(DEMO_FUR, mode=mode, **settings).items():
-        setattr(s, k, v)
+    set_core(s, **dict(DEMO_FUR, mode=mode, **settings))
     s.frame_start, s.frame_end = 1, last
     if scene_end is None:
         demo.scene.frame_start, demo.scene.frame_end = 1, last
@@ -1222,8 +1229,7 @@ def demo_pipeline(n_fur, last, motion, fraction=0.25, scene_range=True,
     activate(guides, demo.pusher, demo.cloth)
     assert bpy.ops.furcollide.add() == {"FINISHED"}
     s = guides.furcollide
-    for k, v in DEMO_FUR.items():
-        setattr(s, k, v)
+    set_core(s, **DEMO_FUR)
     s.frame_start, s.frame_end = 1, last
     if collider_offsets:
         for c in s.colliders:
