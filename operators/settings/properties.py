@@ -172,7 +172,7 @@ class FurCollideSettings(PropertyGroup):
         update_settings,
     )
     affected_connected_cvs: IntProperty(
-        name="Connected CVs",
+        name="Affected CVs",
         default=2,
         min=0,
         max=10000,
@@ -327,12 +327,12 @@ class FurCollideSettings(PropertyGroup):
     use_fur_attach: toggle(
         "Fur Attach", False,
         fixed("Move the source's curves rigidly with the evaluated growth surface from the "
-              "reference frame, instead of using the source's own animation (press Bind "
+              "Bind Frame on, instead of using the source's own animation (press Bind "
               "first)", "it changes every frame's input curves at once"),
         update=update_attach, animatable=False,
     )
     attach_reference_frame: IntProperty(
-        name="Reference Frame",
+        name="Bind Frame",
         default=1,
         options=NOT_ANIMATABLE,
         description=fixed("Frame whose surface and curves Bind uses: each curve is tied to "

@@ -400,15 +400,29 @@ class RnaLayout:
     * ``template_list`` draws each item with the list class's ``draw_item``.
 
     Each call is logged as a dict (``kind``, ``name``, ``text``, ``icon``, and the
-    effective ``enabled``, ``active`` and ``alert`` of the layout it was drawn in).
+    effective ``enabled``, ``active`` and ``alert`` of the layout it was drawn in, its
+    ``split`` and ``decorate`` (``use_property_split`` / ``_decorate``, as inherited),
+    ``boxes`` (how many boxes it is in) and ``in_split`` (in a ``split()``)).
     """
 
-    def __init__(self, log, context, parent=None):
+    def __init__(self, log, context, parent=None, kind=None):
         object.__setattr__(self, "_log", log)
         object.__setattr__(self, "_context", context)
         object.__setattr__(self, "_parent", parent)
         object.__setattr__(self, "_attrs", {"enabled": True, "active": True, "alert": False})
         object.__setattr__(self, "_item", getattr(parent, "_item", None))
+        object.__setattr__(self, "_kind", kind)
+
+    def _inherited(self, key):
+        """``use_property_split`` / ``_decorate`` as the layout has it (set here, or on
+        the nearest layout it is in)."""
+        if key in self._attrs:
+            return bool(self._attrs[key])
+        return self._parent._inherited(key) if self._parent is not None else False
+
+    def _count(self, kind):
+        up = self._parent._count(kind) if self._parent is not None else 0
+        return up + (self._kind == kind)
 
     # attributes: only UILayout's, with values of their type
     def __setattr__(self, name, value):
@@ -450,12 +464,16 @@ class RnaLayout:
                 _check_value(f"layout.{name}", p, given[p.identifier])
         entry = {"kind": name, "text": given.get("text"), "icon": given.get("icon"),
                  "enabled": self._state("enabled"), "active": self._state("active"),
-                 "alert": self._state("alert"), "list_item": self._item}
+                 "alert": self._state("alert"), "list_item": self._item,
+                 "split": self._inherited("use_property_split"),
+                 "decorate": self._inherited("use_property_decorate"),
+                 "boxes": self._count("box"), "in_split": self._count("split") > 0,
+                 "layout": id(self), "layout_kind": self._kind}
         handler = getattr(self, "_do_" + name, None)
         result = handler(given, entry) if handler else None
         self._log.append(entry)
         if name in ("row", "column", "box", "split", "column_flow", "grid_flow"):
-            return RnaLayout(self._log, self._context, self)
+            return RnaLayout(self._log, self._context, self, kind=name)
         return result
 
     def _do_prop(self, g, entry):
@@ -464,6 +482,7 @@ class RnaLayout:
         entry["data"] = g["data"]
 
     _do_prop_menu_enum = _do_prop
+    _do_prop_decorator = _do_prop
 
     def _do_prop_search(self, g, entry):
         _rna_property(g["data"], g["property"], "layout.prop_search")

@@ -444,7 +444,7 @@ def test_setting_change_on_a_bake_then_free_and_bake_again(fc, tmp_path):
         scene.frame_set(f)
         assert s.is_outdated and fc.store.registry.status_for(hair)[0] == "WARNING"
         assert "not cached" in s.status_message
-    assert ("label", "Outdated: play from the start frame or bake", True) in draw_enabled(
+    assert ("label", "Outdated: play from the start or bake", True) in draw_enabled(
         bpy.types.FURCOLLIDE_PT_cache)
 
     # play from the start: the new settings' result
