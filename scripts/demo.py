@@ -70,15 +70,20 @@ SETTINGS = {
         recovery_rate=0.3,
         pinch_resolution="growth_surface",
     ),
-    # Grass trampling: bend, recover slowly, keep part of the imprint.
+    # Grass trampling: bend, recover slowly, keep part of the imprint (more of it along
+    # the painted path: MAPS), laid along the ball's roll.
     "grass": dict(
         mode="bend",
         rotation_precision=0.5,
         collision_offset=0.004,
         recovery_rate=0.06,
-        plasticity=0.5,
+        plasticity=0.8,
+        follow_collider_motion=True,
     ),
 }
+#: Parameter maps per setup: setting -> the hair's float attribute that scales it per
+#: curve (the add-on's ``<setting>_map``; the core path multiplies them in itself).
+MAPS = {"grass": {"plasticity": "trampled_path"}}
 
 #: The statistics' columns: col/rec/pin/unres.
 COUNTED = (Status.COLLIDING, Status.RECOVERING, Status.PINCHED, Status.UNRESOLVED)
@@ -172,6 +177,21 @@ def enable_addon(bpy, base_dir):
 def has_operators(bpy) -> bool:
     names = set(dir(bpy.ops.furcollide))
     return {"add", "bake_all"} <= names
+
+
+def mapped(hair, settings: dict, maps: dict) -> dict:
+    """``settings`` with each mapped one times its map (the hair's per-curve float
+    attribute), as the add-on applies a parameter map (clamped to 0..1: the maps here are
+    Plasticity's and Recovery Rate's)."""
+    import numpy as np
+
+    out = dict(settings)
+    for name, attr in maps.items():
+        a = hair.data.attributes[attr]
+        values = np.empty(len(a.data), np.float32)
+        a.data.foreach_get("value", values)
+        out[name] = np.clip(settings[name] * values.astype(np.float64), 0.0, 1.0)
+    return out
 
 
 def apply_addon_settings(ob, values: dict) -> list[str]:
@@ -273,7 +293,7 @@ def collide_with_core(bpy, demo, frame_end):
             growth = Collider(V, F, matrix=np.array(surf.matrix_world), name=surf.name)
         offsets = ds.curve_offsets(hair)
         # (the hair draws as Catmull-Rom, Blender's default: the drawn curves are kept clear)
-        shot = Shot(offsets, Settings(**SETTINGS[kind]),
+        shot = Shot(offsets, Settings(**mapped(hair, SETTINGS[kind], MAPS.get(kind, {}))),
                     splines=Splines.catmull_rom(len(offsets) - 1))
         setups.append((hair, out, colliders, cols, growth, shot))
 
@@ -365,6 +385,8 @@ def add_setup(bpy, scene, hair, colliders, kind):
     if len(new) != 1:
         raise RuntimeError(f"furcollide.add on {hair.name!r} made {len(new)} hair outputs")
     set_ = apply_addon_settings(hair, SETTINGS[kind])
+    set_ += apply_addon_settings(
+        hair, {f"{k}_map": v for k, v in MAPS.get(kind, {}).items()})
     missed = sorted(set(SETTINGS[kind]) - {x.split("=")[0] for x in set_})
     if missed:
         log(f"warning: the add-on has no setting(s) {missed}; its defaults are used")

@@ -27,6 +27,10 @@ from mathutils import Euler, Vector
 FRAME_START = 1
 FRAME_END = 48
 STILL_FRAME = 28  # pusher deepest, cloth resting, ball over the grass
+#: The grass's painted path (a per-blade float attribute, 1 on the ball's track, 0.35
+#: away from it) and its half-width (m): the grass setup's Plasticity map.
+PATH_ATTRIBUTE = "trampled_path"
+PATH_WIDTH = 0.12
 
 BODY_CENTER = Vector((-0.8, 0.35, 0.85))
 BODY_RADIUS = 0.52
@@ -410,13 +414,18 @@ def build(fur_count=3500, grass_count=2500, seed=7, n_cv=8) -> DemoScene:
     glen = rng.uniform(*GRASS_LENGTH, grass_count)
     gpts = _grow(groots, gnormals, gcomb, glen, n_cv, bend=0.4, rng=rng, jitter=0.1)
     grass = make_hair("Grass", ground, gpts, n_cv, guvs, 0.009, 0.002, mats["grass_before"])
+    # A painted path along the ball's track (as an artist would weight-paint it and store
+    # it per blade): the grass there keeps more of its imprint (a Plasticity map).
+    yb = GRASS_CENTER.y - 0.1
+    path = 0.35 + 0.65 * np.exp(-(((groots[:, 1] - yb) / PATH_WIDTH) ** 2))
+    grass.data.attributes.new(PATH_ATTRIBUTE, "FLOAT", "CURVE").data.foreach_set(
+        "value", path.astype(np.float32))
 
     ball = uv_sphere("Ball", BALL_RADIUS, 32, 16)
     ball.data.materials.append(mats["ball"])
     x0 = GRASS_CENTER.x - GRASS_SIZE[0] / 2 - BALL_RADIUS - 0.1
     x1 = GRASS_CENTER.x + GRASS_SIZE[0] / 2 + BALL_RADIUS + 0.05
     zb = BALL_RADIUS + 0.025
-    yb = GRASS_CENTER.y - 0.1
     _key_location(ball, [(1, (x0, yb, zb)), (BALL_END, (x1, yb, zb))], "LINEAR")
     for f, xx in ((1, x0), (BALL_END, x1)):
         ball.rotation_euler = (0.0, (xx - x0) / BALL_RADIUS, 0.0)
