@@ -310,7 +310,11 @@ def test_playback_sync_other_than_every_frame_is_one_line_with_its_fix(fc):
         main = draw_everything()["FURCOLLIDE_PT_main"]
         assert _warning_rows(main) == [(pm.SYNC_WARNING, "furcollide.play_every_frame",
                                         "Play Every Frame")], sync
-    assert bpy.ops.furcollide.play_every_frame() == {"FINISHED"}
+    # the button beside the warning, pressed: Sync is Play Every Frame and playback
+    # solves every frame again
+    ((_, idname, _),) = _warning_rows(main)
+    mod, _, op = idname.partition(".")
+    assert getattr(getattr(bpy.ops, mod), op)() == {"FINISHED"}
     assert scene.sync_mode == "NONE"
     assert _warning_rows(draw_everything()["FURCOLLIDE_PT_main"]) == []
     with pytest.raises(RuntimeError, match="already"):  # (nothing to fix: greyed)
@@ -546,6 +550,65 @@ def test_object_menu_entry_comes_and_goes_with_the_add_on(fc):
         assert bpy.ops.preferences.addon_enable(module=ADDON) == {"FINISHED"}
     menu_module = sys.modules[ADDON + ".ui.menu"]
     assert menu_module.draw_object_menu in bpy.types.VIEW3D_MT_object.draw._draw_funcs
+
+
+def test_object_menu_entries_run_on_the_active_hair(fc, tmp_path):
+    """Object > FurCollide, each entry pressed in turn as a user would (the hair active,
+    its collider selected): Add sets it up, Bake bakes, Free Bake frees, Remove (once
+    confirmed) removes the setup and its output."""
+    hair, box = fc.make_scene(frames=(1, 6), nx=4, ny=4)
+    activate(hair, box)
+    save_in(tmp_path)
+    sub = draw_rna(bpy.types.FURCOLLIDE_MT_object, header=False)
+    add, bake, free, remove = (e["name"] for e in sub if e["kind"] == "operator")
+
+    def press(idname, **kw):
+        mod, _, op = idname.partition(".")
+        return getattr(getattr(bpy.ops, mod), op)("EXEC_DEFAULT", **kw)
+
+    assert press(add) == {"FINISHED"}
+    s = hair.furcollide
+    out_name = s.output.name
+    assert s.is_setup and [c.object for c in s.colliders] == [box]
+    assert press(bake) == {"FINISHED"} and s.is_baked
+    assert press(free) == {"FINISHED"} and not s.is_baked
+    assert press(remove) == {"FINISHED"}  # (a click confirms first: test_remove_asks_first)
+    assert not s.is_setup and out_name not in bpy.data.objects
+
+
+def _meaning(prop_id):
+    """A setting's meaning: its identifier, without the owner it sits under (Wind's and
+    Jiggle's Falloff, Stage and Seed are the same setting of each motion; the Collider
+    Collection's Double Sided is a collider's); each setting's Map (the line under it)
+    is one meaning: the parameter map of the setting above."""
+    if prop_id.endswith("_map"):
+        return "map"
+    for owner in ("wind_", "jiggle_", "collection_"):
+        if prop_id.startswith(owner):
+            return prop_id[len(owner):]
+    return prop_id
+
+
+def test_every_drawn_name_means_one_thing(fc, tmp_path):
+    """In every state, a name drawn for a setting names one setting (the same setting of
+    another owner, e.g. a collider's own Offset, is the same meaning), and no setting is
+    named like a section ("Resolution" was both the section and Pinch's method)."""
+    panels, _, _ = _ui_classes()
+    titles = {c.bl_label for c in panels}
+    meanings = {}
+    for logs in _all_states(fc, tmp_path):
+        for log in logs.values():
+            for e in log or []:
+                if e["kind"] not in ("prop", "prop_search") or e.get("list_item") is not None:
+                    continue
+                prop = e["data"].bl_rna.properties[e["name"]]
+                text = prop.name if e["text"] is None else e["text"]
+                if text:
+                    meanings.setdefault(text, set()).add(_meaning(e["name"]))
+    shared = {k: v for k, v in meanings.items() if len(v) > 1}
+    assert not shared, shared
+    # (Colliders lists the colliders; Shrink's header is the Shrink checkbox)
+    assert set(meanings) & titles <= {"Colliders", "Shrink"}, set(meanings) & titles
 
 
 def test_missing_ray_tracer_is_explained_in_the_panel(fc, monkeypatch):
