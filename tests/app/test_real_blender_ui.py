@@ -3,8 +3,10 @@
 ``ui_driver.py`` runs in one session of Debian's Blender 4.3 with its UI under Xvfb (the
 chroot of ``scripts/blender_chroot.sh``, as ``test_real_blender.py``): it re-registers the
 add-on's panels open, counts every ``draw`` Blender itself calls per state (no setup, a
-fresh setup, played, an error, outdated, Lock Interface on, baked, an outdated bake, no
-output) and keeps any exception raised while drawing; then it undoes and redoes Add
+fresh setup, played, an error, outdated, the scene's warnings (Lock Interface off,
+Sync dropping frames: a label and its button on one line, measured with Blender's font
+at the real sidebar's width), Lock Interface on, baked, an outdated bake, no output)
+and keeps any exception raised while drawing; then it undoes and redoes Add
 FurCollide and a setting change, playing frames after each. The headless ``bpy`` lanes
 cannot do either: panels are not drawn there and undo needs a window
 (``tests/blender/test_bl_panels.py`` draws them into an RNA-checking recorder instead).
@@ -15,8 +17,8 @@ import pytest
 from app_session import ROOT, run_session
 
 WORK = ROOT / "out" / "app_ui"
-STATES = ("no_setup", "setup", "played", "error", "outdated", "lock_interface_on", "baked",
-          "baked_outdated", "no_output")
+STATES = ("no_setup", "setup", "played", "error", "outdated", "scene_warnings",
+          "lock_interface_on", "baked", "baked_outdated", "no_output")
 #: Panels drawn once a setup exists (their poll needs one).
 SETUP_PANELS = ("FURCOLLIDE_PT_colliders", "FURCOLLIDE_PT_resolution", "FURCOLLIDE_PT_shrink",
                 "FURCOLLIDE_PT_recovery", "FURCOLLIDE_PT_pinch", "FURCOLLIDE_PT_enable",

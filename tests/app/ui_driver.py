@@ -181,7 +181,10 @@ def run():
     result["outdated"] = bool(fur.furcollide.is_outdated)
     yield from show("outdated")
     ball.rotation_euler.z -= 0.4
-    scene.render.use_lock_interface = True
+    # renders unlocked and Sync dropping frames: one line each with its button
+    scene.render.use_lock_interface, scene.sync_mode = False, "AUDIO_SYNC"
+    yield from show("scene_warnings")
+    scene.render.use_lock_interface, scene.sync_mode = True, "NONE"
     yield from show("lock_interface_on")
     bpy.ops.wm.save_as_mainfile(filepath=os.path.join(WORK, "ui.blend"))
     with override():

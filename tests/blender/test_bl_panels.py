@@ -527,6 +527,10 @@ def test_remove_asks_first(fc):
     (kw,) = asked
     assert kw["title"] == op_cls.CONFIRM and kw["confirm_text"] == "Remove"
     assert out.name in kw["message"] and kw["icon"] == "WARNING"
+    # the keywords and the icon are those Blender's own invoke_confirm takes
+    params = bpy.types.WindowManager.bl_rna.functions["invoke_confirm"].parameters
+    assert set(kw) <= set(params.keys()), set(kw) - set(params.keys())
+    assert kw["icon"] in params["icon"].enum_items.keys()
 
 
 def test_object_menu_entry_comes_and_goes_with_the_add_on(fc):
