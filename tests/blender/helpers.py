@@ -607,7 +607,7 @@ class EnabledLayout:
     def _child(self, *args, **kw):
         return EnabledLayout(self.log, self)
 
-    box = row = column = _child
+    box = row = column = split = _child
 
     def prop(self, data, name, **kw):
         assert hasattr(data, name), name
@@ -625,6 +625,9 @@ class EnabledLayout:
 
     def separator(self, **kw):
         pass
+
+    def prop_decorator(self, data, name, **kw):  # (a setting's keyframe dot)
+        assert hasattr(data, name), name
 
 
 def draw_enabled(panel):
