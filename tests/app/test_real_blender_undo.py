@@ -170,9 +170,11 @@ def test_collider_add_and_remove_undone_and_redone(session):
 
 
 def test_remove_undone_brings_back_the_baked_setup(session):
-    """Remove FurCollide keeps the bake files; Ctrl+Z brings back the setup, its output
-    and its bake (it came back unbaked: the bake had pushed no undo step)."""
+    """Remove FurCollide asks first (confirmed with Return), keeps the bake files; Ctrl+Z
+    brings back the setup, its output and its bake (it came back unbaked: the bake had
+    pushed no undo step)."""
     baked = one(session, "remove", "baked")
+    assert session["result"]["remove_asked"] is True  # the button asks first
     assert session["result"]["removed"] == {"is_setup": False, "output": False, "files": 8}
     undone = one(session, "remove", "undone")
     assert undone["is_setup"] and undone["output"] == "Fur FurCollide"

@@ -433,14 +433,18 @@ def sc_colliders():
 
 
 def sc_remove():
-    """Remove FurCollide on a baked setup (the files are kept), undo (setup, output
-    and bake back), redo."""
+    """Remove FurCollide on a baked setup (it asks first: confirmed with Return; the files
+    are kept), undo (setup, output and bake back), redo."""
     yield from fresh("remove")
     op("bake")
     yield from wait_bake()
     snap("baked")
-    result["remove"] = op("remove")
-    yield 0.3
+    result["remove"] = op("remove")  # the button: Blender asks first
+    yield 0.5
+    result["remove_asked"] = ob("Fur").furcollide.is_setup  # (nothing removed yet)
+    # the dialog's Remove: Return, with the mouse where the click left it
+    subprocess.run(["xdotool", "key", "Return"], capture_output=True)
+    yield 0.8
     result["removed"] = {"is_setup": ob("Fur").furcollide.is_setup,
                          "output": ob("Fur FurCollide") is not None,
                          "files": len(bake_files())}
