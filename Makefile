@@ -40,7 +40,7 @@ lint: venv
 	$(PY) -m ruff check .
 
 bench: venv
-	$(PY) bench/bench_core.py
+	$(PY) bench/bench_core.py $(ARGS)
 
 .PHONY: bench-pipeline
 bench-pipeline: venv

@@ -10,7 +10,10 @@ two such scenes procedurally and deterministically (see ``bench/scene.py``):
   lasts: about 10,000 curves colliding every frame, 4.5 % of the roots
   inside the hat's wall).
 
-Each is solved for 48 frames with a rigid collider (``col.matrix``) and a
+Each is solved for 48 frames with a rigid collider (``col.matrix``), the same
+rigid motion handed over as vertices (``col.vertices = V @ M`` in float32, a
+*skinned* accessory: a hat or buckle on an Armature modifier, given its rest shape,
+``Collider(rest=V)``, issue 32) and a
 deforming one (``col.vertices``), in Bend and in Soft, and printed side by side:
 per-frame times, rays per frame, ms per phase, contact counts, an untimed
 check that no resolved curve still crosses the collider, and the ratio to
@@ -29,6 +32,8 @@ It prints the targets of issue 10 with PASS/MISS; it never asserts them.
     .venv/bin/python bench/bench_core.py --quick    # small smoke run (~10 s)
     .venv/bin/python bench/bench_core.py --scenes sustained --modes bend --only rigid
     .venv/bin/python bench/bench_core.py --profile  # + cProfile of one run
+    .venv/bin/python bench/bench_core.py --threads 8 --scaling  # each phase, 1 vs 8 threads
+    make bench ARGS="--threads 8 --scaling"
 """
 
 from __future__ import annotations
@@ -67,6 +72,11 @@ TARGET_DEFORM_VS_RIGID = 1.3  # deforming within 1.3x the rigid time (same scene
 TARGET_SOFT_UNRESOLVED = 0.01  # Soft, sustained: at most 1 % unresolved
 TARGET_SOFT_VS_BEND = 2.0  # Soft at most 2x Bend's time per frame
 TARGET_FPS = 30.0  # the long-run goal, paper scale on 2 cores
+# Issue 32's target (same run): rigid motion as vertices within 1.1x the same motion as a matrix
+TARGET_SKINNED_VS_RIGID = 1.1
+
+# Collider kinds: the motion as a matrix, the same rigid motion as vertices, a deformation
+KINDS = ("rigid", "skinned", "deforming")
 
 # res.timings entries that are counts, not milliseconds
 COUNT_KEYS = {"rays"}
@@ -81,7 +91,9 @@ def parse_args(argv=None):
     ap.add_argument("--cvs", type=int, default=8, help="CVs per curve (default 8)")
     ap.add_argument("--frames", type=int, default=48)
     ap.add_argument("--tris", type=int, default=130_000, help="collider triangles (approx.)")
-    ap.add_argument("--threads", type=int, default=2, help="ray-tracing threads (core + floor)")
+    ap.add_argument("--threads", type=int, default=None,
+                    help="ray-tracing threads (core + floor; default 2); given, each phase's"
+                    " speed-up over one thread is printed too (--scaling)")
     ap.add_argument("--scenes", default="brief,sustained",
                     help="comma-separated: brief, sustained (default both)")
     ap.add_argument("--modes", default="bend,soft",
@@ -99,7 +111,8 @@ def parse_args(argv=None):
         help="like --profile but timing the main thread's CPU time (robust on a busy machine;"
         " waits for worker threads then count ~0)",
     )
-    ap.add_argument("--only", choices=("rigid", "deforming"), help="one collider kind")
+    ap.add_argument("--only", help="comma-separated collider kinds: rigid, skinned, deforming"
+                    " (default all three)")
     ap.add_argument("--full-search", action="store_true",
                     help="Stiff/Bend: the full angle search (Solver.warm_start = False)")
     ap.add_argument("--floor-only", action="store_true", help="scenes + floors, no core")
@@ -120,6 +133,9 @@ def parse_args(argv=None):
         " BLAS, and the untimed input generation's BLAS workers would otherwise spin"
         " into the timed frames)",
     )
+    ap.add_argument("--scaling", action="store_true",
+                    help="also step every frame on one thread (right after, the same"
+                    " collider) and print each phase's speed-up (on with --threads N > 1)")
     ap.add_argument("--no-check", action="store_true", help="skip the untimed crossing check")
     ap.add_argument("--no-maps", action="store_true",
                     help="no twin run with uniform parameter maps beside the rigid runs")
@@ -136,6 +152,13 @@ def parse_args(argv=None):
     for x in a.modes:
         if x not in ("stiff", "bend", "soft"):
             ap.error(f"unknown mode {x!r}")
+    if a.threads is not None and a.threads > 1:
+        a.scaling = True  # make bench --threads N: how each phase scales
+    a.threads = 2 if a.threads is None else a.threads
+    a.only = [x for x in (a.only or "rigid,skinned,deforming").split(",") if x]
+    for x in a.only:
+        if x not in KINDS:
+            ap.error(f"unknown collider kind {x!r}")
     if a.quick:
         a.curves, a.frames, a.tris = min(a.curves, 5_000), min(a.frames, 12), min(a.tris, 20_000)
     return a
@@ -226,6 +249,13 @@ def verdict(ok):
 # ----------------------------------------------------------------------------- runs
 
 
+def skinned(V, M):
+    """What an Armature modifier hands over for a part skinned rigidly to one bone:
+    the float32 vertices moved by the float32 matrix (world space, float32)."""
+    M32 = np.asarray(M, np.float32)
+    return np.ascontiguousarray(V.astype(np.float32) @ M32[:3, :3].T + M32[:3, 3])
+
+
 def uniform_maps(Settings, settings, C):
     """``settings`` with every per-curve field a (C,) array of its value."""
     names = ("max_angle", "scale_minimum", "recovery_rate", "plasticity", "collision_offset",
@@ -249,11 +279,18 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         check_scene = floor.build_scene(V, F)
         floor.trace(check_scene, *floor.setup_rays(fur.rest, seg0, None), CHECK_POOL)  # commit
     else:
-        Vw0 = shot.vertices(V, 0, frames)
+        Vw0 = (skinned(V, shot.matrix(0, frames)) if kind == "skinned"
+               else shot.vertices(V, 0, frames))
         t0 = time.perf_counter()
-        col = Collider(Vw0, F, double_sided=False, matrix=None)
+        # (skinned: given its rest shape, the hat's own vertices, as an Armature
+        # modifier's object has them)
+        col = Collider(Vw0, F, double_sided=False, matrix=None,
+                       rest=V if kind == "skinned" else None)
         setup_ms = 1000 * (time.perf_counter() - t0)
         check_scene = None
+        if kind == "skinned":  # its floor: the same motion as a matrix
+            rigid_scene = floor.build_scene(V, F)
+            floor.trace(rigid_scene, *floor.setup_rays(fur.rest, seg0, None), CHECK_POOL)
 
     plain = Settings(mode=mode, threads=args.threads)
     solver = Solver(fur.offsets, plain)
@@ -263,6 +300,27 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         maps = Solver(fur.offsets, uniform_maps(Settings, plain, fur.curves))
         maps.warm_start = solver.warm_start
     maps_ms, maps_same = [], True
+    # A skinned run steps the same motion as a matrix beside it, interleaved (each
+    # frame before or after the skinned step, alternating): its ratio under the same
+    # load, which a busy machine makes the only fair one.
+    matrix_col = matrix_solver = None
+    if kind == "skinned":
+        matrix_col = Collider(V, F, double_sided=False, matrix=shot.matrix(0, frames))
+        matrix_solver = Solver(fur.offsets, plain)
+        matrix_solver.warm_start = solver.warm_start
+    matrix_ms = []
+    # --scaling: the same frames on one thread, right after each timed step
+    single = None
+    if args.scaling and args.threads > 1:
+        single = Solver(fur.offsets, plain.replace(threads=1))
+        single.warm_start = solver.warm_start
+    single_ms, single_timings = [], []
+
+    def step_matrix(pts, M):
+        t0 = time.perf_counter()
+        matrix_col.matrix = M
+        matrix_solver.step(pts, [matrix_col], growth=None)
+        matrix_ms.append(1000 * (time.perf_counter() - t0))
 
     def step_maps(pts):
         t0 = time.perf_counter()
@@ -285,10 +343,15 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         pts = shot.points(f, frames)
         if kind == "rigid":
             M = shot.matrix(f, frames)
+        elif kind == "skinned":
+            M = shot.matrix(f, frames)
+            Vw = skinned(V, M)
         else:
             Vw = shot.vertices(V, f, frames)
         # --- the twin with uniform maps first on odd frames (after on even ones) ---
         twin_res = None
+        if matrix_solver is not None and f % 2 == 1:
+            step_matrix(pts, M)
         if maps is not None and f % 2 == 1:
             col.matrix = M
             twin_res = step_maps(pts)
@@ -318,6 +381,15 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         frame_ms.append(1000 * (t1 - t0))
         cpu_ms.append(1000 * (c1 - c0))
         main_ms.append(1000 * (m1 - m0))
+        if matrix_solver is not None and f % 2 == 0:
+            step_matrix(pts, M)
+        if single is not None:
+            t0 = time.perf_counter()
+            r1 = single.step(pts, [col], growth=None)
+            single_ms.append(1000 * (time.perf_counter() - t0))
+            tm1 = getattr(r1, "timings", None)
+            if isinstance(tm1, dict) and f > 0:
+                single_timings.append({k: float(v) for k, v in tm1.items()})
         if maps is not None:
             if twin_res is None:
                 twin_res = step_maps(pts)
@@ -347,11 +419,17 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
             t0 = time.perf_counter()
             if kind == "rigid":
                 inv = np.linalg.inv(M)
+            elif kind == "skinned":  # the floor of the same motion as a matrix
+                floor.trace(rigid_scene, *floor.setup_rays(pts, seg0, np.linalg.inv(M)),
+                            CHECK_POOL)
             else:
                 check_scene = floor.build_scene(Vw, F)
                 inv = None
-            floor.trace(check_scene, *floor.setup_rays(pts, seg0, inv), CHECK_POOL)
+            if kind != "skinned":
+                floor.trace(check_scene, *floor.setup_rays(pts, seg0, inv), CHECK_POOL)
             floor_ms.append(1000 * (time.perf_counter() - t0))
+        if kind == "skinned" and not args.no_check:  # untimed: the true (given) vertices
+            check_scene, inv = floor.build_scene(Vw, F), None
 
         if not args.no_check:  # untimed: no resolved curve may still cross
             out = np.asarray(res.points, dtype=np.float32)
@@ -383,11 +461,18 @@ def run_solver(shot, kind, mode, args, core, pool_idents, profile=False, twin=Fa
         "timings": timings,
         "crossing_after_solve": crossing,
         "crossing_offenders": offenders,
+        "builds": int(col.build_count),
     }
     if maps is not None:
         steady_maps = maps_ms[1:] if len(maps_ms) > 1 else maps_ms
         out["maps"] = {"frame_ms": ms_stats(steady_maps), "frame_ms_all": maps_ms,
                        "same_bits": bool(maps_same)}
+    if single_ms:
+        out["one_thread"] = {"frame_ms": ms_stats(single_ms[1:] if len(single_ms) > 1
+                                                  else single_ms),
+                             "timings": single_timings}
+    if matrix_ms:
+        out["as_matrix_ms"] = ms_stats(matrix_ms[1:] if len(matrix_ms) > 1 else matrix_ms)
     if prof is not None:
         out["profile"] = prof
     return out
@@ -500,20 +585,52 @@ def print_side_by_side(results, curves):
     row("frames / s", [f"{r['fps']:.1f}" for r in runs])
     row("floor ms", [f"{r['floor_ms']:.1f}" for r in runs])
     row("ratio to floor", [f"{r['frame_ms']['median'] / r['floor_ms']:.2f}" for r in runs])
+
+    def to_rigid(r):
+        rr = results.get((r["scene"], "rigid", r["mode"]))
+        return f"{r['frame_ms']['median'] / rr['frame_ms']['median']:.2f}" if rr else "-"
+
+    row("ratio to rigid (same run)", [to_rigid(r) for r in runs])
+    row("  to matrix, interleaved", [
+        f"{r['frame_ms']['median'] / r['as_matrix_ms']['median']:.2f}" if "as_matrix_ms" in r
+        else "-" for r in runs])
     row("CPU ms (all threads)", [f"{r['cpu_ms']:.1f}" for r in runs])
     row("rays / frame", [f"{median_phase(r, 'rays'):,.0f}" for r in runs])
     for k in ("setup", "pinch", "frames", "solve", "output"):
         row(f"  {k} ms", [f"{median_phase(r, k):.1f}" for r in runs])
     for k in ("colliding", "recovering", "pinched", "unresolved"):
         row(f"curves {k}", [f"{int(np.median([c[k] for c in r['counts']])):,}" for r in runs])
+    row("BVH builds", [f"{r.get('builds', 0)}" for r in runs])
     row("crossing after solve", [
         f"{max(r['crossing_after_solve'])} max" if r["crossing_after_solve"] else "-"
         for r in runs])
 
 
+def print_scaling(results, threads):
+    """--scaling: each phase on one thread against ``threads`` (same frames, same
+    run: the speed-up, 1 thread / N threads)."""
+    runs = [r for r in results.values() if "one_thread" in r]
+    if not runs:
+        return
+    print(f"\nScaling (--scaling: medians over frames 2..N; speed-up = 1 thread / {threads}"
+          " threads, the same frames stepped right after each other)")
+    for r in runs:
+        one = r["one_thread"]
+        print(f"  {run_label(r)}:")
+        print(f"    {'phase':<12}{'1 thread':>12}{f'{threads} threads':>12}{'speed-up':>10}")
+        a, b = one["frame_ms"]["median"], r["frame_ms"]["median"]
+        print(f"    {'frame':<12}{a:10.1f} ms{b:10.1f} ms{a / b:9.2f}x")
+        for k in ("setup", "pinch", "frames", "solve", "output"):
+            a = float(np.median([t.get(k, 0.0) for t in one["timings"]])) if one["timings"] \
+                else 0.0
+            b = median_phase(r, k)
+            ratio = f"{a / b:9.2f}x" if b > 0 else "        -"
+            print(f"    {k:<12}{a:10.1f} ms{b:10.1f} ms{ratio}")
+
+
 def print_targets(results):
     """Issue 10's targets (printed, never asserted)."""
-    print("\nTargets (issue 10, 2 cores; PASS/MISS, never asserted):")
+    print("\nTargets (issues 10 and 32, 2 cores; PASS/MISS, never asserted):")
 
     def get(scene_, kind, mode):
         return results.get((scene_, kind, mode))
@@ -532,6 +649,11 @@ def print_targets(results):
             lines.append((f"brief rigid {mode} <= {TARGET_BRIEF_RATIO:.0f}x floor",
                           f"{ratio(r):.2f}", ratio(r) <= TARGET_BRIEF_RATIO))
         for sc in ("sustained", "brief"):
+            rs = get(sc, "skinned", mode)
+            if rs and "as_matrix_ms" in rs:  # interleaved: the fair ratio on a busy machine
+                q = rs["frame_ms"]["median"] / rs["as_matrix_ms"]["median"]
+                lines.append((f"{sc} skinned {mode} <= {TARGET_SKINNED_VS_RIGID}x as matrix",
+                              f"{q:.2f}", q <= TARGET_SKINNED_VS_RIGID))
             rr, rd = get(sc, "rigid", mode), get(sc, "deforming", mode)
             if rr and rd:
                 q = rd["frame_ms"]["median"] / rr["frame_ms"]["median"]
@@ -607,6 +729,7 @@ def main(argv=None):
             pts_mid = sh.points(mid, args.frames)
             floors[(sh.name, "rigid")] = floor.measure_rigid(
                 pts_mid, sh.fur.offsets, sh.V, sh.F, sh.matrix(mid, args.frames), pool)
+            floors[(sh.name, "skinned")] = floors[(sh.name, "rigid")]
             floors[(sh.name, "deforming")] = floor.measure_deforming(
                 pts_mid, sh.fur.offsets, sh.vertices(sh.V, mid, args.frames), sh.F, pool)
 
@@ -623,7 +746,7 @@ def main(argv=None):
             print(f"\n  core not usable ({type(e).__name__}: {e}); measuring the floor only")
 
     results = {}
-    kinds = [args.only] if args.only else ["rigid", "deforming"]
+    kinds = args.only
     if core is not None:
         for sh in shots:
             for mode in args.modes:
@@ -644,6 +767,11 @@ def main(argv=None):
                           f" {median_phase(r, 'rays'):9,.0f}  crossing"
                           f" {sum(cr) if cr else '-'}",
                           flush=True)
+                    if "as_matrix_ms" in r:
+                        am = r["as_matrix_ms"]["median"]
+                        print(f"  [{run_label(r) + ' as matrix':<26}] median {am:7.1f} ms"
+                              f"  (the same motion as a matrix, interleaved; skinned / matrix"
+                              f" {fm['median'] / am:.2f})", flush=True)
                     if "maps" in r:
                         mp = r["maps"]
                         print(f"  [{run_label(r) + ' maps':<26}] median"
@@ -651,8 +779,9 @@ def main(argv=None):
                               f" same frames; plain {fm['median']:.1f} ms; same bits:"
                               f" {'yes' if mp['same_bits'] else 'NO'})", flush=True)
                     if args.verbose:
-                        how = "moved by col.matrix" if kind == "rigid" else (
-                            "deformed via col.vertices")
+                        how = {"rigid": "moved by col.matrix",
+                               "skinned": "moved rigidly via col.vertices"}.get(
+                                   kind, "deformed via col.vertices")
                         print(f"\n[{run_label(r)}] collider {how}")
                         print_run(r, floors[(sh.name, kind)], sh.fur.curves)
     else:
@@ -660,12 +789,13 @@ def main(argv=None):
             print(f"\n[{' '.join(key)}] floor : {fmt_ms(fl['total'])}   {floor_detail(fl)}")
 
     print_side_by_side(results, args.curves)
+    print_scaling(results, args.threads)
     if results:
         print_targets(results)
 
     if (args.profile or args.profile_cpu) and core is not None:
         how = "cpu" if args.profile_cpu else "wall"
-        kind = args.only or "rigid"
+        kind = args.only[0]
         r = run_solver(shots[0], kind, args.modes[0], args, core, pool_idents, profile=how)
         note = (
             "timer: main-thread CPU time (waits on worker threads count ~0)"

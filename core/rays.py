@@ -19,6 +19,7 @@ import numbers
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 
 import numpy as np
 
@@ -127,20 +128,63 @@ def both(first, second, threads: int):
     return done(), b
 
 
+def split_count(n: int, threads: int, min_n: int) -> int:
+    """How many parts :func:`in_two` cuts ``n`` items into: 1 with one thread or
+    fewer than ``min_n`` items, else one per thread, each of at least
+    ``min_n / 2`` items (two from ``min_n`` on, as the halves always were) and
+    of one at least."""
+    if threads <= 1 or n < min_n or n < 2:
+        return 1
+    return int(min(threads, n, max(2, (2 * n) // max(min_n, 1))))
+
+
+def run_parts(calls, threads: int) -> list:
+    """``[c() for c in calls]``, each call on its own thread: all but the last on
+    ray-pool threads while the caller runs the last (one call, or on a pool
+    thread: inline, in order; waiting there for the pool could deadlock).
+
+    Every call has ended when this returns or raises. An error of the caller's
+    own call is the one raised, else the first of the others' (in order).
+    """
+    if len(calls) <= 1 or threads <= 1 or getattr(_local, "in_pool", False):
+        return [c() for c in calls]
+    pool = _executor(max(threads, len(calls)))
+    futs = [pool.submit(c) for c in calls[:-1]]
+    try:
+        last = calls[-1]()
+    except BaseException:
+        for f in futs:  # never leave a part running; this error is the one raised
+            f.exception()
+        raise
+    out, error = [], None
+    for f in futs:
+        exc = f.exception()
+        if exc is not None and error is None:
+            error = exc
+        out.append(None if exc is not None else f.result())
+    if error is not None:
+        raise error
+    return out + [last]
+
+
 def in_two(fn, n: int, threads: int, min_n: int) -> None:
-    """``fn(0, n)``; with ``threads > 1`` and ``n >= min_n``, ``fn(0, h)`` and
-    ``fn(h, n)`` (``h = n // 2``) on two threads (:func:`both`).
+    """``fn(0, n)``; with ``threads > 1`` and ``n >= min_n``, ``fn(a, b)`` over
+    :func:`split_count` consecutive ranges of about equal size, each on its own
+    thread (:func:`run_parts`; two halves on two threads, one part per thread on
+    more).
 
     For per-item work whose items are independent (curves, guides, segments)
-    and which writes disjoint slices of its outputs: each half computes what
-    the whole would, bit for bit, and numpy's long loops release the GIL, so
-    the halves overlap.
+    and which writes disjoint slices of its outputs: each part computes what
+    the whole would, bit for bit, whatever the number of parts, and numpy's
+    long loops release the GIL, so the parts overlap.
     """
-    if threads <= 1 or n < min_n:
+    p = split_count(n, threads, min_n)
+    if p == 1:
         fn(0, n)
         return
-    h = n // 2
-    both(lambda: fn(0, h), lambda: fn(h, n), threads)
+    bounds = np.linspace(0, n, p + 1).astype(np.int64)
+    run_parts([partial(fn, int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:],
+                                                             strict=True)], threads)
 
 
 def triangle_rows(F) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 
 from . import rotations as rot
 from . import tolerances as tol
-from .rays import beside
+from .rays import run_parts
 from .search import NONE, gallop_bisect
 from .status import Status
 
@@ -98,7 +98,7 @@ def solve(ctx, idx) -> Turns:
     act = near[t.active[near]]  # rotated curves near a collider
     new = near[~t.active[near]]  # unrotated: their segments are the input's
     # 1. Unrotated curves near a collider: tested at their input shape; 2. the
-    # searches. Each in two halves on two threads when there are many.
+    # searches. Each in parts, one per thread, when there are many.
     ctx.in_halves(_new_contacts, len(new), new, turns=t)
     cn = new[t.active[new]]
     ctx.in_halves(_search, len(act) + len(cn), act, cn, turns=t)
@@ -845,15 +845,18 @@ class RigidBatch:
                 return h, n_rays
 
             if ctx.threads > 1 and k >= 2 * _BLOCK:
-                # Two halves, each built and traced by one thread: numpy and
-                # embree release the GIL, so both halves' work overlaps. Cut at
-                # a block boundary: the blocks, and so their arithmetic, are
-                # those of one thread.
-                half = (k // 2) // _BLOCK * _BLOCK
-                first = beside(partial(part, 0, half, 1), ctx.threads)
-                (h2, n2) = part(half, k, 1)
-                (h1, n1) = first()
-                h, n_rays = np.concatenate([h1, h2]), n1 + n2
+                # One part per thread (of at least a block each), each built and
+                # traced by its thread: numpy and embree release the GIL, so the
+                # parts' work overlaps. Cut at block boundaries: the blocks, and
+                # so their arithmetic, are those of one thread.
+                p = min(ctx.threads, k // _BLOCK)
+                cut = (np.linspace(0, k // _BLOCK, p + 1).astype(np.int64) * _BLOCK).tolist()
+                cut[-1] = k
+                got = run_parts([partial(part, a, b, 1) for a, b in zip(cut[:-1], cut[1:],
+                                                                         strict=True)],
+                                ctx.threads)
+                h = np.concatenate([g[0] for g in got])
+                n_rays = sum(g[1] for g in got)
             else:
                 h, n_rays = part(0, k, ctx.threads)
             ctx.n_rays += n_rays

@@ -421,6 +421,22 @@ def quat_from_matrix(R):
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
+def quat_matrix(q):
+    """Rotation matrices (k, 3, 3) of unit quaternions ``q`` (k, 4) ``(w, x, y, z)``."""
+    w, x, y, z = np.asarray(q, np.float64).T
+    R = np.empty((len(w), 3, 3))
+    R[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[:, 0, 1] = 2.0 * (x * y - w * z)
+    R[:, 0, 2] = 2.0 * (x * z + w * y)
+    R[:, 1, 0] = 2.0 * (x * y + w * z)
+    R[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[:, 1, 2] = 2.0 * (y * z - w * x)
+    R[:, 2, 0] = 2.0 * (x * z - w * y)
+    R[:, 2, 1] = 2.0 * (y * z + w * x)
+    R[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return R
+
+
 def _minors_sym4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):
     """The 2x2 minors of the top (``s``) and bottom (``c``) row pairs of symmetric
     4x4 matrices given by their upper-triangle component arrays (g,) (Laplace)."""

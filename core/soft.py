@@ -55,7 +55,7 @@ class Turns:
 
 
 def solve(ctx, idx) -> Turns:
-    """Soft on curves ``idx`` (in two halves on two threads when there are many)."""
+    """Soft on curves ``idx`` (in parts, one per thread, when there are many)."""
     t = Turns.of(ctx)
     ctx.in_halves(_solve, len(idx), idx, turns=t)
     return t

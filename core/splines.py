@@ -48,6 +48,7 @@ from math import comb
 import numpy as np
 
 from . import tolerances as tol
+from .curves import subset
 from .rotations import stable_perpendicular
 
 #: ``curve_type`` codes (``CurveType`` in DNA_curves_types.h).
@@ -108,6 +109,21 @@ class Splines:
         return Splines(self.types, self.cyclic, handle_left, handle_right,
                        self.handle_type_left, self.handle_type_right, self.nurbs_order,
                        self.knots_mode, self.nurbs_weight)
+
+    def take(self, curves, offsets) -> Splines:
+        """The splines of the curves ``curves`` ((C,) bool) of the layout ``offsets``
+        (C+1,), as a curve set of their own (``core.curves.subset``)."""
+        curves = np.asarray(curves, bool)
+        rows, _ = subset(np.asarray(offsets, np.int64), curves)
+
+        def per(a, idx):
+            return None if a is None else np.asarray(a)[idx]
+
+        return Splines(per(self.types, curves), per(self.cyclic, curves),
+                       per(self.handle_left, rows), per(self.handle_right, rows),
+                       per(self.handle_type_left, rows), per(self.handle_type_right, rows),
+                       per(self.nurbs_order, curves), per(self.knots_mode, curves),
+                       per(self.nurbs_weight, rows))
 
 
 # ------------------------------------------------------------------ layout

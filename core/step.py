@@ -19,7 +19,7 @@ import numpy as np
 from . import curves, rigid, soft
 from . import rotations as rot
 from . import tolerances as tol
-from .rays import both, default_threads
+from .rays import default_threads, run_parts, split_count
 from .status import Status
 
 
@@ -684,23 +684,27 @@ class StepContext:
 
     def in_halves(self, fn, work, *parts, **kw):
         """``fn(self, *parts, **kw)``; with ``work`` of at least
-        :data:`tolerances.SPLIT_MIN_CURVES` curves and two threads or more, as two calls on
-        two threads, each with every other curve of each of ``parts`` (curve
-        index arrays) and a shallow copy of this context: the per-curve arrays
-        are shared (the halves write disjoint curves in place), the ray count
-        and the thread count (one each: the halves are the parallelism) their
-        own. ``fn`` must give each curve what it gives it in the whole."""
-        if self.threads < 2 or work < tol.SPLIT_MIN_CURVES:
+        :data:`tolerances.SPLIT_MIN_CURVES` curves and two threads or more, as
+        :func:`core.rays.split_count` calls (two halves on two threads, one call
+        per thread on more), each on its own thread, call ``i`` of ``p`` with
+        every ``p``-th curve of each of ``parts`` (curve index arrays) from the
+        ``i``-th, and a shallow copy of this context: the per-curve arrays are
+        shared (the calls write disjoint curves in place), the ray count and the
+        thread count (one each: the calls are the parallelism) their own. ``fn``
+        must give each curve what it gives it in the whole, so the result has
+        the same bits for any thread count."""
+        p = split_count(work, self.threads, tol.SPLIT_MIN_CURVES)
+        if p == 1:
             fn(self, *parts, **kw)
             return
-        halves = [copy.copy(self) for _ in range(2)]
-        for h in halves:
+        shares = [copy.copy(self) for _ in range(p)]
+        for h in shares:
             h.threads, h.n_rays = 1, 0
-        # Interleaved, so that both halves get as much contact wherever the
+        # Interleaved, so that every call gets as much contact wherever the
         # groom's curve order puts it.
-        both(partial(fn, halves[0], *(p[0::2] for p in parts), **kw),
-             partial(fn, halves[1], *(p[1::2] for p in parts), **kw), self.threads)
-        self.n_rays += halves[0].n_rays + halves[1].n_rays
+        run_parts([partial(fn, shares[i], *(x[i::p] for x in parts), **kw) for i in range(p)],
+                  self.threads)
+        self.n_rays += sum(h.n_rays for h in shares)
 
     def new_axes(self, idx, o, d, rep, starts, stiff, hit=None):
         """Rotation axes for curves starting a contact (paper 3.2.1).

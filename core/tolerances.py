@@ -110,6 +110,31 @@ FOLLOW_SPEED_ULPS = 64
 #: crossing for a float64 test.
 CLEARANCE_ULPS = 4
 
+#: Rigid parts handed over as vertices (a hat skinned to one bone:
+#: ``core.collider.pose``). New vertices that are, every used one to within this
+#: many float32 ulps of the coordinates (of the largest of the collider's extent
+#: and its largest coordinate, at rest and as placed, rounded up to a power of two,
+#: as ``CLEARANCE_ULPS``), the collider's rest shape moved by one rigid transform
+#: keep the rest shape's structures, placed by the fitted transform: no rebuild.
+#: The shells are then built this much farther out (every face by it, as a
+#: Collision Offset moves faces), so the fitted placement never lets a curve closer
+#: to the true vertices than the clearance margin. They are grown by the fit's
+#: residual rounded up to a power of two ulps, not by this tolerance: float32
+#: skinning (a bone's float32 matrix times float32 vertices) leaves residuals under
+#: one ulp (measured on make bench's hat, near the origin and 10,000 units away),
+#: so the allowance is one ulp every frame and its shells are built once; growing
+#: them by the whole tolerance (16 ulps, 3 cm 10,000 units away) kept curves
+#: visibly farther than the rebuilt path. 16 leaves room for a chain of float32
+#: bone matrices, while a deformation that moves a vertex by more than 4e-6 of the
+#: largest coordinate (2e-5 is tested) is rebuilt. 0: no fit (every new shape is
+#: built).
+RIGID_FIT_ULPS = 16
+
+#: The rigid fit's rotation is fitted to this many vertices spread over the
+#: mesh (then checked on every vertex): a deforming collider is turned down by
+#: the sample alone, for about a tenth of a millisecond.
+RIGID_FIT_SAMPLE = 256
+
 #: Collider vertices closer than this fraction of the mesh's bounding-box
 #: diagonal are one vertex for its topology (closedness, windings): seams an
 #: import left unwelded still close the mesh (``core.meshfix``).
@@ -180,24 +205,27 @@ SPLINE_MARGIN_STEPS = 16
 # (two threads or one, one structure or another): only the time depends on them,
 # never a result (the tests force each way and compare the bits).
 
-#: A step solves its curves in two halves, one per thread, from this many
-#: curves of work (``StepContext.in_halves``): in Soft every curve solved;
-#: in Stiff/Bend, by phase, the unrotated curves near a collider (tested at
-#: their input shape) and the curves searched (rotated ones near a collider,
-#: new contacts). Curves are independent, so each half gives the curves what
-#: the whole would, bit for bit; the halves' numpy passes and ray queries
-#: overlap (both release the GIL). Below it the per-call overhead of twice the
-#: numpy calls costs more than the overlap gains. Measured A/B in one process
-#: (``make bench``, 24 frames): Bend under the orbiting ellipsoid (7,300
-#: tested, 3,000 searched: only the test split) 39.5 ms, 38-39 split at this
-#: threshold, 46 with every phase split; under the hat (15,000 searched)
-#: 83-89 -> 79-84 ms; Soft 87-93 -> 75-78 and 201-210 -> 140-155 ms; the
-#: render groom's clearance pass (a fresh solver: all new contacts) 72 -> 65 ms.
+#: A step solves its curves in parts, one per thread (two halves on two
+#: threads; on more, parts of at least half this many curves: ``core.rays.
+#: split_count``), from this many curves of work (``StepContext.in_halves``):
+#: in Soft every curve solved; in Stiff/Bend, by phase, the unrotated curves
+#: near a collider (tested at their input shape) and the curves searched
+#: (rotated ones near a collider, new contacts). Curves are independent, so
+#: each part gives the curves what the whole would, bit for bit; the parts'
+#: numpy passes and ray queries overlap (both release the GIL). Below it the
+#: per-call overhead of twice the numpy calls costs more than the overlap
+#: gains. Measured A/B in one process (``make bench``, 24 frames): Bend under
+#: the orbiting ellipsoid (7,300 tested, 3,000 searched: only the test split)
+#: 39.5 ms, 38-39 split at this threshold, 46 with every phase split; under the
+#: hat (15,000 searched) 83-89 -> 79-84 ms; Soft 87-93 -> 75-78 and 201-210 ->
+#: 140-155 ms; the render groom's clearance pass (a fresh solver: all new
+#: contacts) 72 -> 65 ms.
 SPLIT_MIN_CURVES = 4096
 
 #: Per-frame stages of the fur pipeline (Fur Attach, the render groom's
-#: deformation, wind) run in two halves on two threads (``core.rays.in_two``)
-#: from this many items (curves, guides). The items are independent, so the
+#: deformation, wind) run in parts, one per thread (two halves on two threads,
+#: parts of at least half this many items on more: ``core.rays.in_two``) from
+#: this many items (curves, guides). The items are independent, so the
 #: halves give what the whole gives, bit for bit; their long numpy passes
 #: release the GIL and overlap. Below it the halves' own overhead (a hand-over
 #: to the ray pool, twice the numpy calls) is more than they save. Measured (2

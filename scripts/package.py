@@ -232,7 +232,11 @@ def download_wheels(wheels: list[Wheel], wheels_dir: Path, allow_download: bool 
                 )
             if not wheel_ok(Path(tmp) / w.filename):
                 raise PackageError(f"downloaded {w.filename} is not a valid wheel")
-            shutil.move(os.path.join(tmp, w.filename), wheels_dir / w.filename)
+            # Into place by a rename: test lanes running at once may fetch the same wheel,
+            # and none may see a half-copied file.
+            part = wheels_dir / f".{w.filename}.{os.getpid()}.part"
+            shutil.move(os.path.join(tmp, w.filename), part)
+            os.replace(part, wheels_dir / w.filename)
 
 
 # --------------------------------------------------------------------------- Blender CLI

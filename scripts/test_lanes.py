@@ -27,10 +27,15 @@ lane runs them on Python 3.13 and numpy 2.
 (**) Tests marked ``slow`` (the demo's scene at real and demo size:
 ``tests/blender/test_bl_demo_scale.py`` and ``test_bl_warm_start.py``, and single tests of
 ``test_bl_playback.py``, ``test_bl_save_mid_playback.py``, ``test_bl_bake_resume.py``,
-``test_bl_memory.py`` and ``test_bl_baked_pipeline.py``; the off-centre motion-blur shutters
-of ``test_bl_render.py``; about two and a half minutes) play the same frames on every
-Blender: they run in the main lane only, which keeps ``make test`` within its 15 minutes;
+``test_bl_memory.py``, ``test_bl_soak.py`` and ``test_bl_baked_pipeline.py``; the off-centre
+motion-blur shutters of ``test_bl_render.py``) play the same frames on every Blender: they run
+in the main lane only, which keeps ``make test`` within its 20 minutes;
 every other Blender-side test runs in every ``bpy`` lane.
+
+The environments are prepared one at a time, then the lanes' pytest runs go side by side,
+one per core (``FURCOLLIDE_TEST_JOBS`` overrides it); a lane that runs the bpy-free suites
+runs them as a second job (``5.0 core``, ``5.2 core``). Each run's output is printed when it
+ends (whole when it failed).
 
 Each lane is judged by pytest's own JUnit report (counts of passed, failed, errors):
 a lane that cannot be prepared, collects no test, or reports a failure fails the run,
@@ -43,8 +48,10 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import xml.etree.ElementTree as ET
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -57,8 +64,23 @@ SAME_CORE_AS_MAIN = ("4.2", "4.5")
 SLOW_LANE = "5.0"
 
 
+#: Serialises what the lanes running at once print.
+PRINT = threading.Lock()
+
+
 def log(msg: str) -> None:
-    print(f"test_lanes: {msg}", flush=True)
+    with PRINT:
+        print(f"test_lanes: {msg}", flush=True)
+
+
+def test_jobs() -> int:
+    """How many pytest runs go at once: ``FURCOLLIDE_TEST_JOBS``, else one per core (at
+    most 4: each Blender process holds a few hundred MB). Tests assert behaviour, never
+    timings, and every run has its own temporary directories, so lanes may share cores."""
+    env = os.environ.get("FURCOLLIDE_TEST_JOBS", "")
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    return max(1, min(os.cpu_count() or 1, 4))
 
 
 def prepare(lane: str) -> tuple[str | None, str]:
@@ -89,59 +111,67 @@ def junit_counts(path: Path) -> dict | None:
     return c
 
 
-def run_lane(lane: str, extra: list[str]) -> dict:
+def jobs_for(lane: str) -> list[tuple[str, list[str]]]:
+    """The pytest runs of ``lane``: (name, targets). A lane that runs both the bpy-free
+    suites and the Blender side runs them as two jobs, so two cores share the work."""
+    if lane == "app":
+        return [("app", ["tests/app"])]
+    marks = [] if lane == SLOW_LANE else ["-m", "not slow"]
+    blender_side = ["tests", *[f"--ignore={d}" for d in BPY_FREE], *marks]
+    if lane in SAME_CORE_AS_MAIN:
+        return [(lane, blender_side)]
+    return [(lane, blender_side), (f"{lane} core", [*BPY_FREE, *marks])]
+
+
+def run_job(name: str, lane: str, py: str, target: list[str], extra: list[str],
+            tmp: Path) -> dict:
+    """Run one pytest job of ``lane`` with interpreter ``py``; its output goes to a log
+    printed when it ends (whole when it failed, its last lines when it passed)."""
     t0 = time.time()
-    cpu0 = os.times()
-    py, why = prepare(lane)
-    row = {"lane": lane, "passed": 0, "failed": 0, "skipped": 0, "ok": False, "note": ""}
-    if py is None:
-        row["note"] = f"cannot be prepared: {why}"
-        row["failed"] = 1
-        return row
-    prep = time.time() - t0
+    row = {"lane": name, "passed": 0, "failed": 0, "skipped": 0, "ok": False, "note": ""}
     env = dict(os.environ)
-    target = ["tests"]
     if lane == "app":
         env["FURCOLLIDE_APP"] = "1"
-        target = ["tests/app"]
     else:
         env.pop("FURCOLLIDE_APP", None)
-    if lane in SAME_CORE_AS_MAIN:
-        target += [f"--ignore={d}" for d in BPY_FREE]
-    if lane not in (SLOW_LANE, "app"):
-        target += ["-m", "not slow"]
-    with tempfile.TemporaryDirectory(prefix=f"furcollide_lane_{lane}_") as tmp:
-        xml = Path(tmp) / "junit.xml"
-        cmd = [py, "-m", "pytest", "-q", *target, "-p", "no:cacheprovider",
-               f"--junitxml={xml}", *extra]
-        log(f"lane {lane}: {' '.join(cmd[:1])} -m pytest -q {' '.join(target)}")
-        proc = subprocess.run(cmd, cwd=str(ROOT), env=env)
-        counts = junit_counts(xml)
-    cpu1 = os.times()
+    slug = name.replace(" ", "_")
+    xml, out = tmp / f"junit_{slug}.xml", tmp / f"pytest_{slug}.log"
+    base = tmp / f"base_{slug}"
+    base.mkdir()
+    cmd = [py, "-m", "pytest", "-q", *target, "-p", "no:cacheprovider",
+           f"--junitxml={xml}", f"--basetemp={base}", *extra]
+    log(f"lane {name}: started ({' '.join(cmd[:1])} -m pytest -q {' '.join(target)})")
+    with open(out, "w") as fh:
+        proc = subprocess.Popen(cmd, cwd=str(ROOT), env=env, stdout=fh, stderr=subprocess.STDOUT)
+        _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = rc = os.waitstatus_to_exitcode(status)
+    counts = junit_counts(xml)
     row["wall_s"] = round(time.time() - t0, 1)
-    row["prep_s"] = round(prep, 1)
-    row["cpu_s"] = round((cpu1.children_user - cpu0.children_user)
-                         + (cpu1.children_system - cpu0.children_system), 1)
+    row["cpu_s"] = round(usage.ru_utime + usage.ru_stime, 1)
     if counts is None:
-        row["note"] = f"pytest exited {proc.returncode} without a report"
+        row["note"] = f"pytest exited {rc} without a report"
         row["failed"] = 1
-        return row
-    row.update(passed=counts["passed"], failed=counts["failures"] + counts["errors"],
-               skipped=counts["skipped"])
-    rc = proc.returncode
-    if counts["tests"] == 0:
-        row["note"] = "no test ran"
-        row["failed"] = max(row["failed"], 1)
-    elif row["failed"] == 0 and rc == 0:
-        row["ok"] = True
-    elif row["failed"] == 0 and rc in (-11, 139) and lane == "4.2":
-        # bpy 4.2's teardown crash at interpreter exit (docs/testing.md, The lanes): every test
-        # passed according to pytest's own report, written before the exit.
-        row["ok"] = True
-        row["note"] = f"pytest passed; the process then crashed at exit (rc {rc}, bpy 4.2)"
-    elif row["failed"] == 0:
-        row["note"] = f"pytest exited {rc}"
-        row["failed"] = 1
+    else:
+        row.update(passed=counts["passed"], failed=counts["failures"] + counts["errors"],
+                   skipped=counts["skipped"])
+        if counts["tests"] == 0:
+            row["note"] = "no test ran"
+            row["failed"] = max(row["failed"], 1)
+        elif row["failed"] == 0 and rc == 0:
+            row["ok"] = True
+        elif row["failed"] == 0 and rc in (-11, 139) and lane == "4.2":
+            # bpy 4.2's teardown crash at interpreter exit (docs/testing.md, The lanes): every
+            # test passed according to pytest's own report, written before the exit.
+            row["ok"] = True
+            row["note"] = f"pytest passed; the process then crashed at exit (rc {rc}, bpy 4.2)"
+        elif row["failed"] == 0:
+            row["note"] = f"pytest exited {rc}"
+            row["failed"] = 1
+    text = out.read_text(errors="replace").splitlines()
+    with PRINT:
+        print(f"\n----- lane {name}: {'ok' if row['ok'] else 'FAILED'} "
+              f"({row['wall_s']:.0f} s) -----", flush=True)
+        print("\n".join(text if not row["ok"] else text[-3:]), flush=True)
     return row
 
 
@@ -161,14 +191,28 @@ def main(argv: list[str]) -> int:
         lanes = tuple(p for p in ALL if p in pick)
         log(f"FURCOLLIDE_LANES={','.join(lanes)}: only these lanes (not a full run)")
     t0 = time.time()
-    rows = [run_lane(lane, extra) for lane in lanes]
+    rows, work = [], []
+    for lane in lanes:  # environments first, one at a time (each is built once, then reused)
+        py, why = prepare(lane)
+        if py is None:
+            rows.append({"lane": lane, "passed": 0, "failed": 1, "skipped": 0, "ok": False,
+                         "note": f"cannot be prepared: {why}"})
+            continue
+        work += [(name, lane, py, target) for name, target in jobs_for(lane)]
+    jobs = test_jobs()
+    log(f"{len(work)} pytest runs, {jobs} at a time (FURCOLLIDE_TEST_JOBS)")
+    with tempfile.TemporaryDirectory(prefix="furcollide_lanes_") as tmp, \
+            ThreadPoolExecutor(max_workers=jobs) as pool:
+        done = [pool.submit(run_job, name, lane, py, target, extra, Path(tmp))
+                for name, lane, py, target in work]
+        rows += [f.result() for f in done]
     print("\n" + "=" * 78)
-    print(f"{'lane':6s} {'passed':>7s} {'failed':>7s} {'skipped':>8s} {'wall s':>8s} "
+    print(f"{'lane':8s} {'passed':>7s} {'failed':>7s} {'skipped':>8s} {'wall s':>8s} "
           f"{'cpu s':>7s}  result")
     for r in rows:
         status = "ok" if r["ok"] else "FAILED"
         note = f" ({r['note']})" if r["note"] else ""
-        print(f"{r['lane']:6s} {r['passed']:7d} {r['failed']:7d} {r['skipped']:8d} "
+        print(f"{r['lane']:8s} {r['passed']:7d} {r['failed']:7d} {r['skipped']:8d} "
               f"{r.get('wall_s', 0):8.1f} {r.get('cpu_s', 0):7.1f}  {status}{note}")
     total_p = sum(r["passed"] for r in rows)
     total_f = sum(r["failed"] for r in rows)

@@ -15,7 +15,9 @@
 A collider keeps its triangles in its own (object) space. Rigid motion only
 changes :attr:`Collider.matrix`: rays are moved into the collider's space, the
 BVH is never rebuilt. Deformation sets :attr:`Collider.vertices`, which
-rebuilds the BVH lazily, and only when the vertices really changed.
+rebuilds the BVH lazily, and only when the vertices really changed and, for a
+collider given its rest shape, did not only move rigidly from it (a hat skinned
+to one bone: :mod:`.pose` fits the motion and places the rest shape's BVH).
 :meth:`Collider.place` does both as one update and remembers the placement
 before it (:attr:`Collider.previous`): the surface's velocity at a point
 (:meth:`Collider.velocities`, Follow Collider Motion).
@@ -118,6 +120,16 @@ class Collider:
         :meth:`contains_grid`), which a second query of the same frame (the
         render groom's clearance pass after the guides) would otherwise build
         every frame for one use.
+    rest : (n, 3) array_like of float, optional
+        The rest shape (the undeformed mesh, e.g. a skinned object's own
+        vertices; same topology as ``V``, which is then placed on it). Vertices
+        that only moved rigidly from it (a hat, belt or buckle skinned to one
+        bone), ``V`` included, reuse its BVH placed by the fitted motion instead
+        of a new build (``tol.RIGID_FIT_ULPS``, :mod:`.pose`); the topology and
+        repairs are made of it. Results then depend on ``rest`` and each frame's
+        placement only (whatever frame the collider was constructed at), within
+        one Rotation Precision step of a collider without it, and as safe. None:
+        every new shape is built.
 
     Attributes
     ----------
@@ -150,14 +162,20 @@ class Collider:
         backend=None,
         name="collider",
         deforming=None,
+        rest=None,
     ):
         self.name = str(name)
         if backend not in (None, "embree", "numpy"):
             raise ColliderError(f"collider '{self.name}': unknown backend {backend!r}")
         self.offset = None if offset is None else _check_offset(offset, self.name)
-        self.mesh = ColliderMesh(V, F, self.name, drop_degenerate)
+        # With a rest shape the mesh is made of it (topology, repairs): the same
+        # whatever frame the collider is constructed at; V is then placed on it.
+        self.mesh = ColliderMesh(V if rest is None else rest, F, self.name, drop_degenerate)
         self.closest = Closest(self.mesh)
-        self.pose = Pose(self.mesh, matrix, self.closest.nearest_faces)
+        self.pose = Pose(self.mesh, matrix, self.closest.nearest_faces,
+                         fit_rest=rest is not None)
+        if rest is not None:
+            self.pose.start(V)
         self.grid = Occupancy(self.mesh, self.pose)
         self.shells = Shells(self.mesh, self.pose, bool(double_sided), backend)
         self.inside = Inside(self.mesh, self.pose, self.grid, self.shells,
@@ -211,8 +229,9 @@ class Collider:
 
     @property
     def vertices(self) -> np.ndarray:
-        """(n, 3) float32 vertices in the collider's own space (read-only view)."""
-        v = self.mesh.V.view()
+        """(n, 3) float32 vertices in the collider's own space, as last given
+        (read-only view)."""
+        v = self.pose.vertices.view()
         v.flags.writeable = False
         return v
 
@@ -225,7 +244,7 @@ class Collider:
         """Shape version: 0 at construction, +1 each time :attr:`vertices`
         changes. Derived data keyed on it stays valid while the collider only
         moves (see :meth:`derived`)."""
-        return self.mesh.version
+        return self.pose.user_version
 
     def derived(self, name: str, key, build):
         """Data derived from this collider, kept with it under ``name``.
@@ -269,8 +288,8 @@ class Collider:
     # ----------------------------------------------------------- placement
     @property
     def matrix(self) -> np.ndarray:
-        """(4, 4) float64 world transform (a copy)."""
-        return self.pose.M.copy()
+        """(4, 4) float64 world transform, as last given (a copy)."""
+        return self.pose.user_M.copy()
 
     @matrix.setter
     def matrix(self, M):

@@ -111,7 +111,10 @@ class Occupancy:
         A, b = self.pose.local_map()
         stretch = norm_bound(A)  # at least the largest local length of a world unit
         reach = np.asarray(radius_wo, np.float64) + offset_wo * tol.OFFSET_MAX_STRETCH
-        r = np.broadcast_to(reach * stretch + max_edge + h, (k,))
+        r = reach * stretch + max_edge + h
+        if self.pose.allowance:  # a fitted placement's shells lie this much farther out
+            r = r + self.pose.allowance * tol.OFFSET_MAX_STRETCH * 1.01
+        r = np.broadcast_to(r, (k,))
         # Summed-area table over the cells the ball's box covers, by flat
         # index (one gather per corner).
         outside = np.zeros(k, bool)

@@ -68,26 +68,30 @@ class Inside:
     def __init__(self, mesh, pose, grid, shells, deforming):
         self.mesh, self.pose, self.grid, self.shells = mesh, pose, grid, shells
         self.deforming = deforming
-        self._seen = {}  # offset -> shape version of the last inside test
-        self._answers = {}  # (fine?, offset) -> (shape version, answers): answers
-        self._touched = {}  # offset -> (shape version, cells): surface_cells
+        # (keyed by shell: the offset, or (offset, allowance) for a fitted placement)
+        self._seen = {}  # shell -> shape version of the last inside test
+        self._answers = {}  # (fine?, shell) -> (shape version, answers): answers
+        self._touched = {}  # shell -> (shape version, cells): surface_cells
 
     def contains_grid(self, p_wo, q, offset_wo=0.0) -> np.ndarray:
         """Inside test of world points ``p_wo`` (k, 3) given their grid coordinates
         ``q`` (3, k) (the collider detects pinches, ``k > 0``)."""
         k = len(p_wo)
         version = self.mesh.version
+        allowance = self.pose.allowance
+        shell = (offset_wo, allowance) if allowance else offset_wo
         # (per offset: the shells of several per-curve clearance levels, asked
-        # once each per frame, are each a first call for their shape)
+        # once each per frame, are each a first call for their shape; a fitted
+        # placement keeps its shape whatever the hint says)
         seen = self._seen
-        static = seen.get(offset_wo) == version and not self.deforming
-        if offset_wo not in seen and len(seen) >= 2 * (tol.OFFSET_LEVELS + 3):
+        static = seen.get(shell) == version and (not self.deforming or allowance > 0)
+        if shell not in seen and len(seen) >= 2 * (tol.OFFSET_LEVELS + 3):
             seen.clear()
-        seen[offset_wo] = version
+        seen[shell] = version
         if static:
             lo, h, dims = self.inside_grid()
             flat_cells = cells(q, h, dims)
-            touched = self.surface_cells(offset_wo).reshape(-1)
+            touched = self.surface_cells(offset_wo, shell).reshape(-1)
             trace = flat_cells < 0
             trace[flat_cells >= 0] = touched[flat_cells[flat_cells >= 0]]
         else:
@@ -96,7 +100,7 @@ class Inside:
             # near_surface pads by h + max_edge: a point it calls far has no
             # vertex within max_edge of its own cell: no triangle crosses it
             trace = self.grid.near_surface_grid(q, 0.0, offset_wo)
-        inside = self.answers(static, offset_wo, dims)
+        inside = self.answers(static, shell, dims)
         out = np.zeros(k, bool)
         far = np.flatnonzero(~trace & (flat_cells >= 0))
         if len(far):
@@ -129,13 +133,13 @@ class Inside:
         lo, h, dims, _, _ = self.grid.get()
         return lo, h / tol.INSIDE_SUBDIV, dims * tol.INSIDE_SUBDIV
 
-    def answers(self, fine, offset_wo, dims):
+    def answers(self, fine, shell, dims):
         """The inside test's per-cell answers (int8 grid of ``dims``: -1 unknown,
-        0 outside, 1 inside) of the shell at ``offset_wo`` on the fine or the
-        coarse grid, kept per shape and offset (several offset levels of
-        per-curve clearances each keep theirs)."""
+        0 outside, 1 inside) of ``shell`` (the offset, or (offset, allowance) for a
+        fitted placement) on the fine or the coarse grid, kept per shape and
+        shell (several offset levels of per-curve clearances each keep theirs)."""
         version = self.mesh.version
-        key = (bool(fine), offset_wo)
+        key = (bool(fine), shell)
         hit = self._answers.get(key)
         if hit is not None and hit[0] == version and hit[1].shape == tuple(dims):
             return hit[1]
@@ -144,19 +148,23 @@ class Inside:
         self._answers[key] = (version, inside)
         return inside
 
-    def surface_cells(self, offset_wo):
+    def surface_cells(self, offset_wo, shell=None):
         """(dims) bool grid: the cells of the fine grid that a triangle of the
         shell at ``offset_wo`` may touch (each triangle's bounding box, grown by
-        how far the shell moves it; kept per shape and offset)."""
+        how far the shell moves it; kept per shape and ``shell``, by default the
+        offset)."""
         mesh = self.mesh
         version = mesh.version
-        hit = self._touched.get(offset_wo)
+        shell = offset_wo if shell is None else shell
+        hit = self._touched.get(shell)
         if hit is not None and hit[0] == version:
             return hit[1]
         lo, h, dims = self.inside_grid()
         V = mesh.local_vertices()
         grow = mesh.margin * 1.01 + offset_wo * tol.OFFSET_MAX_STRETCH * 1.01 * norm_bound(
             self.pose.Minv[:3, :3]) + 1e-9 * h
+        if self.pose.allowance:
+            grow = grow + self.pose.allowance * tol.OFFSET_MAX_STRETCH * 1.01
         F = [np.ascontiguousarray(mesh.F[:, k]) for k in range(3)]
         ilo = np.empty((len(mesh.F), 3), np.int64)
         ihi = np.empty_like(ilo)
@@ -169,7 +177,7 @@ class Inside:
             ihi[:, i] = np.floor((mx + grow - lo[i]) / h)
         touched = mark_boxes(ilo, ihi, dims)
         keep_recent(self._touched, version, tol.OFFSET_LEVELS + 3)
-        self._touched[offset_wo] = (version, touched)
+        self._touched[shell] = (version, touched)
         return touched
 
     def parity(self, p_wo, offset_wo):
@@ -190,6 +198,7 @@ class Inside:
         diag = float(np.linalg.norm(hi - lo)) or 1.0
         step = tol.PARITY_STEP_REL * diag
         shell = offset_wo * tol.OFFSET_MAX_STRETCH * norm_bound(self.pose.Minv[:3, :3])
+        shell += self.pose.allowance * tol.OFFSET_MAX_STRETCH
         far = 4.0 * (diag + 2.0 * shell) + float(np.abs(p_lo).max(initial=0.0)) * 2.0
 
         def votes(points, dirs):
@@ -221,6 +230,8 @@ class Inside:
             out[hit] = rot_dot(ng[hit].astype(np.float64), dirs[hit]) >= 0
             return out
 
+        # (a fitted placement's allowance, a few float32 ulps as the clearance
+        # margin, leaves one closed surface as the margin does)
         if offset_wo == 0 and mesh.repairs.parts == 1:
             votes = first_facing  # one closed surface, wound outward: its first hit decides
         two = votes(np.concatenate([p_lo, p_lo]), np.repeat(PARITY_DIRS[:2], k, axis=0))

@@ -62,21 +62,26 @@ class Shells:
         self._key_memo = (None, -1, {})  # (matrix, version, offset -> key): shell_key
         self._rows = {}  # shell layout -> prepared triangles (see rows)
         self._offset_dirs = PerShape()
+        self._own_dirs = PerShape()  # offset directions in own units, per shape
         #: BVHs built so far (every shell, every shape).
         self.build_count = 0
 
     def shell_key(self, offset_wo):
-        """What a shell depends on: the vertices, the offset and, for an offset,
-        the matrix's rotation-invariant stretch ``M^T M`` (quantized, so float32
-        jitter of a rigid transform never triggers a rebuild)."""
+        """What a shell depends on: the vertices, a fitted placement's allowance
+        (``Pose.allowance``), the offset and, for an offset, the matrix's
+        rotation-invariant stretch ``M^T M`` (quantized, so float32 jitter of a
+        rigid transform never triggers a rebuild)."""
         version = self.mesh.version
+        allowance = self.pose.allowance
+        if allowance:
+            version = (version, allowance)
         if offset_wo <= 0:
             return (version, 0.0)
         # Every ray query asks: remembered per matrix (assigning one replaces the
         # array, never writes into it) and shape.
         M = self.pose.M
         memo = self._key_memo
-        if memo[0] is not M or memo[1] != version:
+        if memo[0] is not M or memo[1] != version:  # (a fitted placement: a new M)
             memo = self._key_memo = (M, version, {})
         key = memo[2].get(offset_wo)
         if key is None:
@@ -121,6 +126,11 @@ class Shells:
         disp = mesh.margin * mesh.margin_directions()
         if offset_wo > 0:
             disp = disp + offset_wo * self.offset_directions()
+        if self.pose.allowance:
+            # A fitted placement (Pose.allowance): every face moves out by the
+            # fit's allowance too, as an offset in the collider's own units.
+            disp = disp + self.pose.allowance * self._own_dirs.get(
+                mesh.version, lambda: self.offset_directions_of(np.eye(3), np.eye(3)))
         # Face blocks: [outer shell, (inner shell, surface)]. A closed
         # single-sided solid is only kept at a distance from outside (inside
         # is a pinch). Anything else (open sheets, double-sided meshes) gets
@@ -142,11 +152,18 @@ class Shells:
         backend = make_backend(self.backend_name, V, F, rows=self.rows(F))
         self.build_count += 1
         # (room for every level of per-curve clearances, tol.OFFSET_LEVELS,
-        # beside a few other offsets: several solvers may share a collider)
+        # beside a few other offsets: several solvers may share a collider; a
+        # fitted placement's shells beside the plain ones)
         self.built = [b for b in self.built
-                      if b[0][0] == mesh.version][-(tol.OFFSET_LEVELS + 3):]
+                      if self._version_of(b[0]) == mesh.version][-(tol.OFFSET_LEVELS + 3):]
         self.built.append((key, backend, faces))
         return backend, faces
+
+    @staticmethod
+    def _version_of(key):
+        """The shape version of a :meth:`shell_key`."""
+        v = key[0]
+        return v[0] if isinstance(v, tuple) else v
 
     def rows(self, F):
         """:func:`core.rays.triangle_rows` of the shell faces ``F`` (a topology
@@ -161,11 +178,15 @@ class Shells:
     def offset_directions(self):
         """:meth:`offset_directions_of` the current shape and matrix, kept for the
         shells of other offsets (per-curve clearance levels) of the same."""
-        key = (self.mesh.version, self.pose.M[:3, :3].tobytes())
-        return self._offset_dirs.get(key, self.offset_directions_of)
+        pose = self.pose
+        key = (self.mesh.version, pose.M[:3, :3].tobytes())
+        return self._offset_dirs.get(
+            key, lambda: self.offset_directions_of(pose.M[:3, :3], pose.Minv[:3, :3]))
 
-    def offset_directions_of(self):
-        """Local displacement of each vertex for a world offset of 1, (n, 3).
+    def offset_directions_of(self, S, Sinv):
+        """Local displacement of each vertex for a world offset of 1, (n, 3), for
+        the linear part ``S`` (3, 3) of the world matrix (its inverse ``Sinv``;
+        the identity: an offset in the collider's own units).
 
         Computed in world metric (the matrix's scale and shear included), so
         the shell keeps the offset in world units whatever the matrix. Each
@@ -177,8 +198,7 @@ class Shells:
         The lengthening is capped at ``tol.OFFSET_MAX_STRETCH`` (needle-sharp
         vertices).
         """
-        mesh, pose = self.mesh, self.pose
-        S = pose.M[:3, :3]
+        mesh = self.mesh
         Vw = apply(S, mesh.local_vertices())
         F = mesh.F
         fa = np.cross(Vw[F[:, 1]] - Vw[F[:, 0]], Vw[F[:, 2]] - Vw[F[:, 0]])
@@ -193,7 +213,7 @@ class Shells:
         lowest = np.ones(n)
         lowest[verts] = np.minimum.reduceat(cos[order], first)
         stretch = 1.0 / np.clip(lowest, 1.0 / tol.OFFSET_MAX_STRETCH, 1.0)
-        return apply(pose.Minv[:3, :3], vn * stretch[:, None])
+        return apply(Sinv, vn * stretch[:, None])
 
     # ------------------------------------------------------------- queries
     def hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1) -> np.ndarray:

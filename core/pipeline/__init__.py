@@ -10,7 +10,7 @@ Public API (paper names, see README "The fur pipeline")::
         bind_groom, GroomWeights, deform_groom,          # render groom follows guides
         GroomDeformer,                                   #   (its bind-time work, explicit)
         GroomBinding,                                    #   a whole bound groom, per frame
-        clearance_pass,                                  # final clearance (FurCollide)
+        clearance_pass, ClearanceMargins,                # final clearance (FurCollide)
         Shot, Motion, RootHistory,                       # a shot, frame by frame
     )
 
@@ -29,6 +29,7 @@ from .distance import (
 )
 from .frame import FrameResult, Motion, RootHistory, Shot
 from .groom import (
+    ClearanceMargins,
     GroomBinding,
     GroomDeformer,
     GroomWeights,
@@ -44,6 +45,7 @@ from .sampler import dart_throwing, neighbor_pairs, sample_guides
 __all__ = [
     "surface_values",
     "Binding",
+    "ClearanceMargins",
     "GroomBinding",
     "GroomDeformer",
     "GroomWeights",

@@ -214,8 +214,8 @@ class Binding:
             The deformed growth surface (same topology as at bind time).
         threads : int or None, default None
             Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS``
-            curves of one CV count the curves are moved in two halves on two
-            threads; the result is the same bit for bit.
+            curves of one CV count the curves are moved in parts, one per
+            thread; the result is the same bit for bit.
 
         Returns
         -------

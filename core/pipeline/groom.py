@@ -34,8 +34,9 @@ from ..curves import (
 from ..errors import InputError
 from ..proximity import knn
 from ..rays import in_two, thread_count
-from ..settings import Settings
+from ..settings import MAX_DISTANCE, Settings
 from ..solver import Solver
+from ..splines import DrawnMargin
 from ..status import Status
 from .attach import Binding, bind
 from .distance import LowerBoundField
@@ -471,7 +472,7 @@ def deform_groom(render_ref_points, render_offsets, guides_ref_points, guides_no
         groom's own Fur Attach roots, which stay exactly on the surface).
     threads : int or None, default None
         Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS`` guides or
-        render curves the work runs in two halves on two threads; the result
+        render curves the work runs in parts, one per thread; the result
         is the same bit for bit.
 
     Returns
@@ -695,8 +696,56 @@ class GroomBinding:
         return points, status
 
 
+class ClearanceMargins:
+    """The drawn margins of one clearance pass, kept between frames: a
+    :class:`core.splines.DrawnMargin` for its settings and one for its fallback's
+    (each keeps its last margin and what it was computed from: a groom that does not
+    move is not measured again). One per pass that runs every frame (a setup's render
+    groom, its children).
+    """
+
+    def __init__(self):
+        self.settings = DrawnMargin()
+        self.fallback = DrawnMargin()
+
+
+def drawn_settings(settings, splines, points, offsets, drawn=None) -> Settings:
+    """``settings`` with their clearance widened so that the curves Blender draws
+    through ``points`` as ``splines`` clear the colliders wherever their polygons keep
+    the widened clearance, through any solve of ``settings``.
+
+    The widening is the largest drawn margin of the curves
+    (:func:`core.splines.clearance_margin`, rounded up as ``DrawnMargin`` does), added
+    to ``Settings.clearance_margin`` for every curve: one offset shell per collider,
+    as :func:`core.pipeline.frame.drawn_clearance`; one value for all curves also
+    keeps each curve's result independent of the others solved with it. The same
+    ``settings`` object when nothing is widened (``splines`` None, every curve Poly,
+    or straight curves): a pass on polygons is exactly the pass without splines.
+
+    Parameters
+    ----------
+    settings : Settings
+    splines : core.splines.Splines or None
+        Bezier handles in the space of ``points``.
+    points : (P, 3) ndarray
+    offsets : (C+1,) ndarray
+    drawn : core.splines.DrawnMargin, optional
+        Keeps the last margin; a new one when not given.
+    """
+    if splines is None or splines.drawn_as_polygon:
+        return settings
+    margin = (DrawnMargin() if drawn is None else drawn)(splines, points, offsets, settings)
+    widen = float(margin.max()) if len(margin) else 0.0
+    if widen <= 0.0:
+        return settings
+    have = settings.clearance_margin
+    if isinstance(have, np.ndarray):
+        return settings.replace(clearance_margin=np.minimum(have + widen, MAX_DISTANCE))
+    return settings.replace(clearance_margin=min(float(have) + widen, MAX_DISTANCE))
+
+
 def clearance_pass(render_points, render_offsets, colliders, settings=None, growth=None,
-                   fallback=None):
+                   fallback=None, splines=None, margins=None):
     """Final clearance: FurCollide once on the render curves, counting those it moved.
 
     Render curves that still pass through a collider after
@@ -734,6 +783,16 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
         (e.g. Bend: a bent curve clears where a rigidly turned one cannot); the
         second result is kept where it resolves the curve. Curves still
         unresolved keep the status ``UNRESOLVED``.
+    splines : core.splines.Splines, optional
+        How Blender draws the render curves (their curve types; Bezier handles in the
+        space of ``render_points``): each solve (the settings' and the fallback's)
+        widens its clearance by the curves' drawn margin for its own settings
+        (:func:`drawn_settings`), so that the drawn curve clears the colliders, not
+        only its control polygon. None, or every curve Poly: the polygons, exactly
+        as without.
+    margins : ClearanceMargins, optional
+        Keeps the last drawn margins (one per pass that runs every frame); new ones
+        when not given.
 
     Returns
     -------
@@ -749,6 +808,14 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     colliders = list(colliders)
     settings = Settings(mode="stiff") if settings is None else settings
     R = len(off) - 1
+    if splines is not None:
+        if len(splines.types) != R:
+            raise InputError(f"splines describe {len(splines.types)} curves, "
+                             f"render_offsets {R}")
+        margins = ClearanceMargins() if margins is None else margins
+        settings = drawn_settings(settings, splines, pts, off, margins.settings)
+        if fallback is not None:
+            fallback = drawn_settings(fallback, splines, pts, off, margins.fallback)
     nonfinite = np.zeros(R, bool)
     finite = None  # (None: every point is finite, the usual case)
     if not np.isfinite(pts.reshape(-1)).all():

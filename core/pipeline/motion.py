@@ -140,7 +140,7 @@ def wind(points, offsets, frame, direction=(1.0, 0.0, 0.0), strength=0.1, freque
         bends instead of stretching).
     threads : int or None, default None
         Threads to use (None: every CPU). From ``tolerances.SPLIT_MIN_ITEMS``
-        curves the work runs in two halves on two threads; the result is the
+        curves the work runs in parts, one per thread; the result is the
         same bit for bit (every curve's wind is its own).
 
     Returns

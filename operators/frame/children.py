@@ -50,7 +50,7 @@ from ..blender.dependencies import DEPENDENCY_MODIFIER
 from ..store import registry
 from .clock import clock
 from .colliders import collider_list, in_scene
-from .groom import clearance_settings
+from .groom import clearance_settings, world_splines
 from .inputs import shown
 from .output import hide_in_viewport
 
@@ -260,6 +260,8 @@ class ChildrenState:
     def __init__(self):
         self.key = None  # digests of the inputs of ``result``
         self.result = None  # (points (P, 3) float32 world, status (C,), n_fixed)
+        #: The clearance pass's drawn margins (the children's splines, last frame's).
+        self.drawn = pipeline.ClearanceMargins()
 
 
 def children_state(rt) -> ChildrenState:
@@ -328,7 +330,7 @@ def _run(setup, baking=False):
     if baked is not None:
         points, status, n_fixed = baked
     elif clear:
-        points, status, n_fixed = _clear(setup, state, offsets, world)
+        points, status, n_fixed = _clear(setup, state, data, offsets, world)
     else:  # (Clear in Viewport off: the stack's result as it is)
         points, status, n_fixed = world.astype(np.float32), np.zeros(
             len(offsets) - 1, np.int8), 0
@@ -425,28 +427,33 @@ def _baked_blend(setup, offsets):
     return points, np.asarray(parts[0]["status"], np.int8), int(parts[0]["fixed"][0])
 
 
-def _clear(setup, state, offsets, world):
-    """The clearance pass on the stack's children (reused while nothing it depends on
-    changed): (points (P, 3) float32 world, status (C,) int8, n_fixed)."""
+def _clear(setup, state, data, offsets, world):
+    """The clearance pass on the stack's children ``data`` (evaluated; reused while
+    nothing it depends on changed): (points (P, 3) float32 world, status (C,) int8,
+    n_fixed)."""
     s = setup.s
     with clock.timing("clearance"):
         cols = collider_list(setup)
         entries = list(setup.rt.colliders.values())
+        sp = world_splines(s.output, setup.depsgraph, data)
     key = (settings_key(setup.ob), framecache.digest(offsets),
            framecache.digest(world), tuple((e.inputs, e.double_sided, e.offset)
-                                           for e in entries))
+                                           for e in entries), framecache.digest(sp.types))
     if key == state.key and state.result is not None:
         return state.result
     with clock.timing("clearance"):
-        points, status, n_fixed = clear_children(s, world, offsets, cols)
+        points, status, n_fixed = clear_children(s, world, offsets, cols, sp, state.drawn)
     state.key, state.result = key, (points, status, n_fixed)
     return state.result
 
 
-def clear_children(s, world, offsets, colliders):
+def clear_children(s, world, offsets, colliders, splines=None, margins=None):
     """The clearance pass (:func:`groom.clearance_settings`) on children ``world``
     (P, 3) of layout ``offsets``; curves of fewer than 2 points are set aside (shown
-    as they are, ``Status.INVALID``). Returns (points float32, status int8, n_fixed)."""
+    as they are, ``Status.INVALID``). ``splines`` (world: :func:`groom.world_splines`):
+    the curves Blender draws clear the colliders, not only their points (``margins``:
+    the pass's ``core.pipeline.ClearanceMargins``). Returns (points float32, status
+    int8, n_fixed)."""
     C = len(offsets) - 1
     status = np.zeros(C, np.int8)
     if C == 0 or not colliders:
@@ -455,14 +462,17 @@ def clear_children(s, world, offsets, colliders):
     short = np.diff(offsets) < 2
     if not short.any():
         pts, status, n_fixed = pipeline.clearance_pass(world, offsets, colliders,
-                                                       settings=settings, fallback=fallback)
+                                                       settings=settings, fallback=fallback,
+                                                       splines=splines, margins=margins)
         return np.asarray(pts, np.float32), status, n_fixed
     rows, sub = subset(offsets, ~short)
     out = world.copy()
     status[short] = Status.INVALID
     if len(sub) > 1:
-        pts, st, n_fixed = pipeline.clearance_pass(world[rows], sub, colliders,
-                                                   settings=settings, fallback=fallback)
+        pts, st, n_fixed = pipeline.clearance_pass(
+            world[rows], sub, colliders, settings=settings, fallback=fallback,
+            splines=None if splines is None else splines.take(~short, offsets),
+            margins=margins)
         out[rows] = pts
         status[~short] = st
     else:

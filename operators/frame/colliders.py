@@ -176,9 +176,12 @@ def sync_collider(entry, o, depsgraph, double_sided=False, offset=None, matrix=N
         if changed:
             F = np.zeros((0, 3), np.int32) if me is None else bridge.mesh_triangles(me)
     if changed:
+        rest = rest_shape(o, key) if deforming else None
+        if rest is not None:  # triangulated as the rest shape is (quads split alike)
+            F = bridge.mesh_triangles(o.data)
         col = core.Collider(
             V, F, double_sided=double_sided, matrix=M, offset=offset, drop_degenerate=True,
-            name=name or o.name, deforming=deforming,
+            name=name or o.name, deforming=deforming, rest=rest,
         )
         return ColliderEntry(col, key, double_sided, offset, deforming,
                              collider_inputs(M, V, key))
@@ -188,6 +191,20 @@ def sync_collider(entry, o, depsgraph, double_sided=False, offset=None, matrix=N
     entry.collider.place(matrix=M, vertices=None if same else V)
     entry.inputs = collider_inputs(M, V, key)
     return entry
+
+
+def rest_shape(o, key) -> np.ndarray | None:
+    """The undeformed vertices (n, 3) float32 of mesh object ``o`` (its own mesh, local
+    space) when its evaluated mesh has the same topology (shape ``key`` of
+    :func:`mesh_reading`), as under an Armature modifier or shape keys; else None.
+
+    Given to ``core.Collider(rest=...)``: a skinned hat, belt or buckle whose vertices
+    only moved rigidly from it reuses the rest shape's BVH placed by the fitted motion
+    instead of a build every frame (a shape that does not fit is built as before)."""
+    if o.type != "MESH" or o.data is None or o.mode == "EDIT":
+        return None
+    rest_key, rest = mesh_reading(o.data)
+    return rest if rest_key == key else None
 
 
 def mesh_reading(me) -> tuple:

@@ -223,6 +223,8 @@ class GroomState:
         self.carried = None  # (last_guides, core Binding of them to the Surface)
         self.note = ""  # what the last computation found (shown after the checks)
         self.noted = ""  # the status the stage set last
+        #: The clearance pass's drawn margins (its curves' splines, last frame's).
+        self.drawn = pipeline.ClearanceMargins()
 
     def remember_guides(self, guides, surface_V) -> None:
         self.last_guides = (np.array(guides, np.float64), surface_V)
@@ -261,10 +263,14 @@ def _compute(setup, state, guides_world, remember=True):
         cols = collider_list(setup) if g.use_clearance else []
         entries = list(setup.rt.colliders.values()) if g.use_clearance else []
     guides = np.asarray(guides_world, np.float64)
+    sp = None  # (an output with other curves than the bound ones: write_groom says so)
+    if cols and np.array_equal(bridge.curve_offsets(g.output.data), binding.render_offsets):
+        sp = world_splines(g.output, setup.depsgraph)
     key = (
         state.bind_id, settings_key(setup.ob), framecache.digest(guides),
         None if V is None else framecache.digest(V),
         tuple((e.inputs, e.double_sided, e.offset) for e in entries),
+        None if sp is None else framecache.digest(sp.types),
     )
     if remember:
         state.remember_guides(guides, V)
@@ -275,29 +281,35 @@ def _compute(setup, state, guides_world, remember=True):
     n_fixed = 0
     if cols:
         with clock.timing("clearance"):
-            points, status, n_fixed = clearance(s, binding, points, status, cols)
+            points, status, n_fixed = clearance(s, binding, points, status, cols, sp,
+                                                state.drawn)
     stats = groom_stats(status, n_fixed)
     state.key, state.result = key, (points, status, stats)
     return points, status, stats
 
 
-def clearance(s, binding, points, status, colliders):
+def clearance(s, binding, points, status, colliders, splines=None, margins=None):
     """The clearance pass on the deformed render curves (the invalid ones set aside).
 
     Stiff (the minimal rotation at the root, shape kept) with the setup's own
     Collision Offset, so render strands keep the same gap as the guides; the curves
     Stiff cannot free within Max Angle get a second try in Bend, and those still
-    crossing are UNRESOLVED. Returns (points, status, n_fixed).
+    crossing are UNRESOLVED. ``splines`` (world, :func:`world_splines`): the curves
+    Blender draws clear the colliders, not only their control points (``margins``:
+    the pass's ``core.pipeline.ClearanceMargins``). Returns (points, status, n_fixed).
     """
     settings, fallback = clearance_settings(s)
     valid = status != Status.INVALID
     if valid.all():
         pts, st, n_fixed = pipeline.clearance_pass(points, binding.render_offsets, colliders,
-                                                   settings=settings, fallback=fallback)
+                                                   settings=settings, fallback=fallback,
+                                                   splines=splines, margins=margins)
         return pts, st, n_fixed
     rows, off = binding.subset(valid)
+    sub = None if splines is None else splines.take(valid, binding.render_offsets)
     pts, st, n_fixed = pipeline.clearance_pass(points[rows], off, colliders,
-                                               settings=settings, fallback=fallback)
+                                               settings=settings, fallback=fallback,
+                                               splines=sub, margins=margins)
     out = points.copy()
     out[rows] = pts
     status = status.copy()
@@ -313,6 +325,19 @@ def clearance_settings(s):
     (:mod:`.children`) share them."""
     common = {"collision_offset": s.collision_offset, "threads": s.core_threads}
     return core.Settings(mode="stiff", **common), core.Settings(mode="bend", **common)
+
+
+def world_splines(ob, depsgraph, curves=None):
+    """How Blender draws the curves of hair object ``ob`` (``curves``: its evaluated
+    data, default its own): ``core.splines.Splines`` with the Bezier handles in world
+    space (the space the clearance pass works in). The render groom and the children
+    (:mod:`.children`) share it."""
+    sp = bridge.read_splines(ob.data if curves is None else curves)
+    if sp.handle_left is not None and sp.handle_right is not None:
+        M = bridge.matrix(ob.evaluated_get(depsgraph))
+        sp = sp.with_handles(bridge.transform(sp.handle_left, M).astype(np.float64),
+                             bridge.transform(sp.handle_right, M).astype(np.float64))
+    return sp
 
 
 def groom_stats(status, n_fixed) -> dict:

@@ -1555,6 +1555,23 @@ def evaluated_crossing(out, colliders, status=None):
     return np.flatnonzero(bad & np.isin(st, RESOLVED))
 
 
+def drawn_inside(ob, colliders, status=None):
+    """(points, curves): how many points of the curves Blender draws for ``ob``
+    (:func:`evaluated_curves`) of resolved curves lie inside the closed evaluated
+    meshes of ``colliders``, and in how many curves."""
+    P, offs = evaluated_curves(ob)
+    st = status_of(ob) if status is None else status
+    assert len(offs) == len(st) + 1, "the evaluated curves lost or gained curves"
+    inside = np.zeros(len(P), bool)
+    for col in colliders:
+        V, F = evaluated_world_mesh(col)
+        box = ((P >= V.min(0)) & (P <= V.max(0))).all(1)  # (only these can be inside)
+        inside[np.flatnonzero(box)[oracle.points_inside_closed_mesh(P[box], V, F)]] = True
+    curve = np.repeat(np.arange(len(offs) - 1), np.diff(offs))
+    inside &= np.isin(st, RESOLVED)[curve]
+    return int(inside.sum()), len(np.unique(curve[inside]))
+
+
 CURVE_TYPES = ("CATMULL_ROM", "POLY", "BEZIER", "NURBS")
 
 

@@ -87,6 +87,7 @@ def test_crossing_agrees_with_the_oracle():
 
 
 # --------------------------------------------------------- played, scrubbed, jumped
+@pytest.mark.slow
 def test_demo_played_scrubbed_and_jumped(fc, split_spy):
     """The demo's fur (20,000 curves, Bend) played 1..24: every frame holds the README's
     promises and both phases of a step ran in two halves; scrubbed back, the same
@@ -143,6 +144,7 @@ def test_threads_give_the_same_frames(fc, split_spy, mode):
         same_frame(got, ref[f], f"{mode}: Threads 2 -> 1 at 13, frame {f}")
 
 
+@pytest.mark.slow
 def test_threads_one_is_one_thread_for_the_whole_frame(fc, split_spy):
     """The Threads tooltip: "Threads a frame uses (0 = all CPUs)". With
     Threads 1 (a farm running one Blender per core), no step of the frame, the render

@@ -88,6 +88,7 @@ def test_add_keeps_under_120_bytes_a_point(fc, traced):
     assert kept < 120, kept
 
 
+@pytest.mark.slow
 def test_playback_memory_is_flat_once_the_cache_is_full(fc, traced):
     scene, hair, ball = _scene((1, 120))
     assert bpy.ops.furcollide.add() == {"FINISHED"}

@@ -18,6 +18,7 @@ from helpers import (
     demo_pipeline,
     dependency_objects,
     draw_panel,
+    drawn_inside,
     duplicate,
     groom_scene,
     make_box,
@@ -28,6 +29,7 @@ from helpers import (
     pipeline_state,
     play,
     play_pipeline,
+    poly,
     positions,
     ragged_groom,
     render_camera,
@@ -89,6 +91,45 @@ def test_render_groom_follows_guides_with_clearance(fc):
     crossing = segments_in_box(world(gout), roff, box.matrix_world.translation)
     assert len(crossing) > 0
     assert fixed_on >= len(crossing) > 0  # the pass reported the curves it fixed
+
+
+def test_render_groom_drawn_as_catmull_rom_clears_the_collider(fc):
+    """A render groom drawn as Catmull-Rom (Blender's default hair type): the curves
+    Blender draws through the cleared points dipped into the box once it pressed into
+    the groom (20 to 21 drawn points in 8 to 10 of 144 curves, frames 5 to 8, 0
+    control points). The clearance pass widens their clearance by their drawn margin:
+    no drawn point inside, roots where the groom's are."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    roots = world(groom)[offsets_of(groom)[:-1]]
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    types = fc.blender.bridge.read_splines(gout.data).types
+    assert (types == fc.core.splines.CATMULL_ROM).all()
+    fixed = 0
+    for f in range(1, 9):
+        scene.frame_set(f)
+        fixed += guides.furcollide.stat_groom_fixed
+        assert drawn_inside(gout, [box]) == (0, 0), f"frame {f}"
+        np.testing.assert_allclose(world(gout)[offsets_of(gout)[:-1]], roots, atol=1e-5)
+    assert fixed > 0
+
+
+def test_poly_render_groom_is_the_pass_without_a_margin_bit_for_bit(fc, monkeypatch):
+    """A Poly render groom is drawn as its points: its clearance pass is the pass
+    without splines, bit for bit."""
+    scene = bpy.context.scene
+    guides, groom, box, out = groom_scene(fc)
+    poly(groom)
+    assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
+    gout = guides.furcollide.groom.output
+    frames = range(1, 9)
+    got = [positions(gout).copy() for f in frames if scene.frame_set(f) is None]
+    assert guides.furcollide.stat_groom_fixed > 0
+    monkeypatch.setattr(fc.frame.groom, "world_splines", lambda *a, **k: None)
+    want = [positions(gout).copy() for f in frames if scene.frame_set(f) is None]
+    for f, a, b in zip(frames, got, want, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg=f"frame {f}")
 
 
 def test_render_groom_remove_restores_the_groom(fc):

@@ -123,16 +123,19 @@ def test_armature_arm_presses_into_fur_played_then_baked(fc, tmp_path):
     n_verts = len(arm.data.vertices)
     out = fc.setup(hair, [arm])
     rt = fc.store.registry.get_runtime(hair)
-    seen = np.zeros(6, int)
+    seen, builds = np.zeros(6, int), []
     for f in range(1, 9):
         scene.frame_set(f)
         st = check_frame(hair, out, [arm])
         seen += np.bincount(st, minlength=6)
+        (entry,) = rt.colliders.values()
+        builds.append(entry.collider.build_count)
     assert seen[COLLIDING] > 0 and seen[PINCHED] > 0, seen
     assert hair.furcollide.stat_pinched > 0
-    (entry,) = rt.colliders.values()
     assert entry.deforming and entry.collider.closed
-    assert entry.collider.build_count > 1  # the skinned arm really deformed
+    # Skinned wholly to one bone, the box only moves rigidly: its rest shape's BVH is
+    # placed by the fitted motion, never built again once placed (issue 32).
+    assert builds[1:] == [builds[1]] * 7 and builds[1] <= 2, builds
     played = record(scene, out, range(1, 9))  # (all cached now)
     save_in(tmp_path)
     bake_setup(hair)
@@ -141,6 +144,34 @@ def test_armature_arm_presses_into_fur_played_then_baked(fc, tmp_path):
     # the artist's rig, mesh and groom are untouched
     assert [m.type for m in arm.modifiers] == ["ARMATURE"] and arm.modifiers[0].object == rig
     assert len(arm.data.vertices) == n_verts and not arm.data.shape_keys
+
+
+def test_a_skinned_box_that_really_bends_is_built_each_frame(fc):
+    """The same arm with its outer half skinned to a second bone that stays: the box
+    bends (no rigid fit of the whole), so it is built again every frame, and every
+    frame is collision free where resolved."""
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 6
+    scene.frame_set(1)
+    hair = make_hair(nx=6, ny=3)
+    rig, arm = _arm_rig([(1, 0.0), (6, -0.6)])
+    bpy.context.view_layer.objects.active = rig
+    bpy.ops.object.mode_set(mode="EDIT")
+    b = rig.data.edit_bones.new("Still")
+    b.head, b.tail = (-0.3, 0, 0.9), (0.6, 0, 0.9)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    outer = [v.index for v in arm.data.vertices if v.co.x > -0.3]
+    arm.vertex_groups["Upper"].remove(outer)
+    arm.vertex_groups.new(name="Still").add(outer, 1.0, "REPLACE")
+    out = fc.setup(hair, [arm])
+    rt = fc.store.registry.get_runtime(hair)
+    builds = []
+    for f in range(1, 7):
+        scene.frame_set(f)
+        check_frame(hair, out, [arm])
+        (entry,) = rt.colliders.values()
+        builds.append(entry.collider.build_count)
+    assert np.all(np.diff(builds[1:]) >= 1), builds
 
 
 @pytest.mark.parametrize("resolution", ["stop", "growth_surface"])

@@ -97,6 +97,7 @@ def _sequence(rng):
     return seq[:CHANGES]
 
 
+@pytest.mark.slow
 def test_soak_paper_scale_playback_equals_the_bake(fc, tmp_path):
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = SHOT

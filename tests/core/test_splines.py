@@ -414,3 +414,28 @@ def test_per_curve_settings_give_each_curve_its_own_margin(kind):
     np.testing.assert_allclose(got, np.where(pick, m_hi, m_lo), rtol=1e-12)
     drawn = splines.DrawnMargin()
     np.testing.assert_array_equal(drawn(sp, P, offs, mixed), drawn(sp, P, offs, mixed))
+
+
+def test_take_keeps_each_curves_own_splines():
+    """A subset of curves (the clearance pass sets some aside) keeps every curve's own
+    type and per-point data, and so its own margin."""
+    rng = np.random.default_rng(5)
+    P, offs = _groom(rng, wiggle=1.0)
+    C = len(offs) - 1
+    sp = splines.Splines(np.arange(C, dtype=np.int8) % 4, np.zeros(C, bool),
+                         rng.normal(size=(len(P), 3)), rng.normal(size=(len(P), 3)),
+                         np.zeros(len(P), np.int8), np.zeros(len(P), np.int8),
+                         np.full(C, 3), np.zeros(C, np.int8), rng.uniform(0.5, 2, len(P)))
+    keep = np.arange(C) % 3 != 1
+    sizes = np.diff(offs)[keep]
+    sub_off = np.r_[0, np.cumsum(sizes)]
+    rows = np.concatenate([np.arange(offs[c], offs[c + 1]) for c in np.flatnonzero(keep)])
+    sub = sp.take(keep, offs)
+    np.testing.assert_array_equal(sub.types, sp.types[keep])
+    np.testing.assert_array_equal(sub.handle_left, sp.handle_left[rows])
+    np.testing.assert_array_equal(sub.nurbs_weight, sp.nurbs_weight[rows])
+    np.testing.assert_array_equal(sub.nurbs_order, sp.nurbs_order[keep])
+    s = Settings(mode="bend")
+    np.testing.assert_array_equal(splines.clearance_margin(sub, P[rows], sub_off, s),
+                                  splines.clearance_margin(sp, P, offs, s)[keep])
+    assert splines.Splines.catmull_rom(C).take(keep, offs).cyclic is None

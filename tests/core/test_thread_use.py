@@ -6,7 +6,8 @@ used, which only a benchmark would otherwise see: a probe batch of a few curves 
 traced on all of the step's threads, a large one is built and traced in two halves
 by two threads, each half tracing on its own thread (not both halves on both
 threads: four tracers on two cores). A step with many curves of work is solved in
-two halves, one per thread (``core.tolerances.SPLIT_MIN_CURVES``).
+two halves, one per thread (``core.tolerances.SPLIT_MIN_CURVES``). On N threads
+both are N-way, one part per thread, with the bits of one thread (N = 2, 3, 4, 8).
 """
 
 from __future__ import annotations
@@ -200,3 +201,70 @@ def test_an_error_in_the_other_half_reaches_the_caller(monkeypatch):
     with pytest.raises(MemoryError, match="pool thread"):
         solver.step(pts, [col])
     assert finished  # the caller's half ran to its end before the error was raised
+
+
+# ------------------------------------------------------------ N threads
+def test_the_split_count_is_one_part_per_thread_of_at_least_half_the_threshold():
+    from core.rays import split_count
+
+    assert [split_count(n, 8, 100) for n in (99, 100, 149, 150, 250, 400, 10**6)] == \
+        [1, 2, 2, 3, 5, 8, 8]
+    assert split_count(10**6, 1, 100) == 1
+    assert split_count(10**6, 3, 100) == 3
+    assert split_count(3, 8, 1) == 3  # never more parts than items
+
+
+@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+@pytest.mark.parametrize("threads", [2, 3, 4, 8])
+def test_a_step_split_n_ways_gives_the_bits_of_one_thread(monkeypatch, mode, threads):
+    """Forced to split (the threshold at 100 curves of work, 400 curves pressed),
+    a step on N threads solves its phases in N parts, each with every N-th curve
+    and one ray thread, and gives the bits and the ray count of one thread."""
+    ref = _two_steps(mode, 1)
+    seen = _phases(monkeypatch, 100)
+    got = _two_steps(mode, threads)
+    for a, b in zip(got, ref, strict=True):
+        assert np.array_equal(a.points, b.points) and np.array_equal(a.status, b.status)
+        assert a.timings["rays"] == b.timings["rays"]
+    split = [c for c in seen if c[3] == 1]
+    assert split, seen
+    for name in {n for n, *_ in split}:
+        calls = [c for c in split if c[0] == name]
+        assert len(calls) % threads == 0, (name, len(calls))
+        first = calls[:threads]
+        assert len({tid for _, tid, _, _ in first}) >= 2
+        # each curve array of the phase: call k of N has every N-th curve from the k-th
+        for arrays in zip(*(c[2] for c in first), strict=True):
+            whole = np.sort(np.concatenate(arrays))
+            by_start = sorted(arrays, key=lambda p: int(p[0]) if len(p) else 1 << 60)
+            for k, p in enumerate(by_start):
+                assert np.array_equal(p, whole[k::threads]), (name, k)
+
+
+@pytest.mark.parametrize("threads", [3, 4, 8])
+def test_a_batch_of_n_blocks_is_traced_in_n_parts(monkeypatch, threads):
+    """On N threads a probe batch of N blocks or more (``rigid._BLOCK``) is built
+    and traced in N parts of whole blocks, one ray thread each, with the bits of
+    one thread."""
+    from core import rigid
+
+    sizes = []
+    hits_uniform = rigid.RigidBatch._hits_uniform
+
+    def count(self, items, theta, hit):
+        sizes.append(len(items))
+        return hits_uniform(self, items, theta, hit)
+
+    monkeypatch.setattr(rigid.RigidBatch, "_hits_uniform", count)
+    pts, offs, col = _pressed_grid(8)
+    ref = Solver(offs, Settings(mode="bend", threads=1)).step(pts, [col])
+    k = max(sizes)
+    B = k // threads
+    monkeypatch.setattr(rigid, "_BLOCK", B)
+    parts = _probe_tracing(monkeypatch)
+    res = Solver(offs, Settings(mode="bend", threads=threads)).step(pts, [col])
+    # N parts of whole blocks, about equal, the last one to the batch's end
+    cut = [i * (k // B) // threads * B for i in range(threads)] + [k]
+    for a, b in zip(cut[:-1], cut[1:], strict=True):
+        assert (a, b, 1) in parts, (k, B, cut, sorted(set(parts)))
+    assert np.array_equal(res.points, ref.points) and np.array_equal(res.status, ref.status)

@@ -20,11 +20,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis_profiles import examples
 
-from core import Collider, Settings, Solver, Status
-from core.pipeline import clearance_pass
+from core import Collider, Settings, Solver, Status, splines
+from core.pipeline import ClearanceMargins, clearance_pass
 from core.pipeline import groom as groom_mod
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "core"))
+import oracle  # noqa: E402  (the core tests' oracle: imports nothing from core)
 import scenes  # noqa: E402  (the core tests' scene builders)
 
 PROP = settings(max_examples=examples(15), deadline=None)
@@ -280,3 +281,84 @@ def test_clearance_pass_equals_solving_every_curve(offset):
         moved = np.logical_or.reduceat(np.any(out != pts, axis=1), offs[:-1])
     assert n_fixed == int((moved & (st != Status.INVALID)).sum()) > 0
     assert 0 < (st == Status.COLLIDING).sum() < 150
+
+
+# ------------------------------------------------------------ the drawn curve
+def _catmull_rom(Q, n=16):
+    """Samples of Blender's non-cyclic Catmull-Rom through ``Q`` (end points repeated),
+    ``n`` per segment: the curve Blender draws for hair of that type."""
+    if len(Q) < 2:
+        return Q.copy()
+    ext = np.vstack([Q[:1], Q, Q[-1:]])
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    out = []
+    for i in range(len(Q) - 1):
+        p0, p1, p2, p3 = ext[i:i + 4]
+        out.append(0.5 * (2 * p1 + (p2 - p0) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t**2
+                          + (-p0 + 3 * p1 - 3 * p2 + p3) * t**3))
+    return np.vstack(out)
+
+
+def _curly_fur_under_a_ball(seed):
+    """Curly fur (4 to 9 points a curve) under a ball low enough to press into most
+    of it: (points, offsets, colliders, world vertices, faces of the ball)."""
+    rng = np.random.default_rng(seed)
+    pts, off = scenes.fur_on_plane(rng, n_curves=250, curly=0.25, extent=0.6, n_cvs=(4, 9),
+                                   length=(0.5, 0.9))
+    V, F = scenes.uv_sphere([0, 0, 0], 0.3, 24, 12)
+    M = scenes.translation([0.0, 0.0, 0.45])
+    return pts, off, [Collider(V, F, matrix=M)], oracle.transform(V, M), F
+
+
+def _drawn_inside(out, off, status, V, F):
+    """(points, curves) of the resolved curves' drawn Catmull-Rom samples inside the
+    closed mesh ``V``, ``F``."""
+    ok = np.flatnonzero(np.isin(status, (Status.FREE, Status.COLLIDING)))
+    drawn = [_catmull_rom(out[off[c]:off[c + 1]]) for c in ok]
+    which = np.repeat(ok, [len(d) for d in drawn])
+    D = np.vstack(drawn)
+    inside = np.zeros(len(D), bool)
+    # (only samples in the mesh's box can be inside it)
+    box = ((D >= V.min(0)) & (D <= V.max(0))).all(1)
+    inside[box] = oracle.points_inside_closed_mesh(D[box], V, F)
+    return int(inside.sum()), len(np.unique(which[inside]))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_drawn_catmull_rom_curve_clears_the_collider(seed):
+    """Solved as polylines, Catmull-Rom curves dip into the ball between their cleared
+    points (70 to 120 drawn samples in 13 to 21 curves of 250); with their splines
+    the pass widens each solve's clearance by the drawn margin: no drawn sample
+    inside, roots fixed, segment lengths kept, the same bits with the margins kept
+    from the pass before."""
+    pts, off, cols, V, F = _curly_fur_under_a_ball(seed)
+    s, fb = Settings(mode="stiff"), Settings(mode="bend")
+    out, st, _ = clearance_pass(pts, off, cols, settings=s, fallback=fb)
+    assert _drawn_inside(out, off, st, V, F)[1] >= 5  # the polygons only: the wrong picture
+    sp = splines.Splines.catmull_rom(len(off) - 1)
+    margins = ClearanceMargins()
+    out, st, n_fixed = clearance_pass(pts, off, cols, settings=s, fallback=fb, splines=sp,
+                                      margins=margins)
+    assert n_fixed > 50 and (st == Status.UNRESOLVED).sum() == 0
+    assert _drawn_inside(out, off, st, V, F) == (0, 0)
+    np.testing.assert_array_equal(out[off[:-1]], pts[off[:-1]])
+    inner = np.ones(len(pts) - 1, bool)
+    inner[off[1:-1] - 1] = False  # (a curve's last point to the next curve's root)
+    np.testing.assert_allclose(np.linalg.norm(np.diff(out, axis=0), axis=1)[inner],
+                               np.linalg.norm(np.diff(pts, axis=0), axis=1)[inner],
+                               rtol=1e-6, atol=1e-9)
+    again = clearance_pass(pts, off, cols, settings=s, fallback=fb, splines=sp,
+                           margins=margins)
+    assert_same(again, (out, st, n_fixed))
+
+
+def test_poly_curves_are_the_pass_without_splines_bit_for_bit():
+    """Poly curves are drawn as their polygons: the pass with their splines is the pass
+    without, bit for bit (and a pass on curves set aside keeps its own splines)."""
+    pts, off, cols, _V, _F = _curly_fur_under_a_ball(2)
+    s, fb = Settings(mode="stiff"), Settings(mode="bend")
+    want = clearance_pass(pts, off, cols, settings=s, fallback=fb)
+    poly = splines.Splines(np.full(len(off) - 1, splines.POLY, np.int8))
+    assert_same(clearance_pass(pts, off, cols, settings=s, fallback=fb, splines=poly), want)
+    with pytest.raises(groom_mod.InputError, match="splines describe 3 curves"):
+        clearance_pass(pts, off, cols, splines=splines.Splines.catmull_rom(3))

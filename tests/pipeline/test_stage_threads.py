@@ -5,8 +5,9 @@ and :func:`deform_groom` (its blend; the guides' root fits stay on one thread) r
 in two halves, one on
 a ray-pool thread, one on the caller's. Curves are independent, so the result
 must be the same bit for bit as on one thread, and each half must really run
-on its own thread. The tests lower the threshold to 1 so that small grooms
-split too.
+on its own thread. On N threads they run in N parts, one per thread, with the
+same bits (N = 2, 3, 4, 8). The tests lower the threshold to 1 so that small
+grooms split too.
 """
 
 from __future__ import annotations
@@ -93,6 +94,48 @@ def test_two_threads_give_the_bits_of_one(seed, n_guides, n_render, uniform, own
         np.testing.assert_array_equal(a, c)
     assert halves.calls[-1][0] == len(ro) - 1  # (wind: its curves)
     assert all(len(ids) == 2 for *_, ids in halves.calls), halves.calls
+
+
+@pytest.mark.parametrize("threads", [2, 3, 4, 8])
+def test_n_threads_give_the_bits_of_one(monkeypatch, threads):
+    """On N threads Binding.apply, deform_groom and wind run in N parts (consecutive
+    ranges of about equal size, on more than one thread) and give the bits of one."""
+    rng, V, F, gp, go, rp, ro = _groom(7, 12, 90, False)
+    b = bind(rp, ro, V, F)
+    V2 = V + 0.2 * rng.normal(size=V.shape) + 1.0
+    w = bind_groom(rp[ro[:-1]], gp[go[:-1]], 3)
+    gn = wind(gp, go, 5, strength=0.6, turbulence=1.0, seed=7) + 0.25
+    blow = dict(frame=3.25, direction=(1.0, 0.2, -0.3), strength=0.3, turbulence=0.8)
+    one = (b.apply(V2, threads=1), deform_groom(rp, ro, gp, gn, go, w, threads=1),
+           wind(rp, ro, threads=1, **blow))
+    monkeypatch.setattr(tolerances, "SPLIT_MIN_ITEMS", 1)
+    ranges = []
+    real = rays.in_two
+
+    def spy(fn, n, nthreads, min_n):
+        seen, idents = [], set()
+
+        def part(a, b):
+            seen.append((a, b))
+            idents.add(threading.get_ident())
+            fn(a, b)
+
+        real(part, n, nthreads, min_n)
+        ranges.append((n, sorted(seen), idents))
+
+    for mod in ("core.pipeline.groom", "core.pipeline.attach", "core.pipeline.motion"):
+        monkeypatch.setattr(f"{mod}.in_two", spy)
+    many = (b.apply(V2, threads=threads), deform_groom(rp, ro, gp, gn, go, w, threads=threads),
+            wind(rp, ro, threads=threads, **blow))
+    for a, c in zip(many, one, strict=True):
+        np.testing.assert_array_equal(a, c)
+    assert ranges
+    for n, seen, idents in ranges:
+        assert len(seen) == min(threads, n) and len(idents) >= 2, (n, seen)
+        assert [a for a, _ in seen][1:] == [b for _, b in seen][:-1]  # consecutive
+        assert seen[0][0] == 0 and seen[-1][1] == n
+        sizes = [b - a for a, b in seen]
+        assert max(sizes) - min(sizes) <= 1
 
 
 def test_one_thread_or_few_curves_run_whole_on_the_caller(monkeypatch):
