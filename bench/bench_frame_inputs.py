@@ -63,20 +63,20 @@ def run(n_frames: int, repeat: int, deforming: bool):
         for f in range(1, n_frames + 2):  # solve (not measured)
             scene.frame_set(f)
         rt = ops.store.registry.get_runtime(hair)
-        assert len(rt.memory) == n_frames + 1, len(rt.memory)
+        assert len(rt.cache.memory) == n_frames + 1, len(rt.cache.memory)
 
         checks, handler = [], []
-        rules = ops.frame.rules
-        real_check, real_eval = rules.cached_frame_change, rules.evaluate
+        rules, spine = ops.frame.rules, ops.frame.spine
+        real_check, real_eval = rules.cached_frame_change, spine.evaluate
         rules.cached_frame_change = _clock(real_check, checks)
-        rules.evaluate = _clock(real_eval, handler)
+        spine.evaluate = _clock(real_eval, handler)
         try:
             for _ in range(repeat):
                 for f in range(1, n_frames + 2):
                     scene.frame_set(f)
-                    assert ops.store.registry.stats_for(hair).get("source") == "cache", f
+                    assert ops.store.report.stats_for(hair).get("source") == "cache", f
         finally:
-            rules.cached_frame_change, rules.evaluate = real_check, real_eval
+            rules.cached_frame_change, spine.evaluate = real_check, real_eval
         wall, cpu = np.median(np.array(checks), axis=0)
         h = np.median(np.array(handler)[:, 0])
         print(f"check per cached frame: median {wall:.3f} ms wall, {cpu:.3f} ms main-thread "
@@ -87,6 +87,7 @@ def run(n_frames: int, repeat: int, deforming: bool):
         dg = bpy.context.evaluated_depsgraph_get()
         setup = ops.frame.setup.Setup(hair, scene, dg)
         inp = ops.frame.inputs.read_inputs(setup)
+        read = ops.settings.fingerprints.read_settings(hair, scene)
         ref = ops.frame.colliders.collider_objects(hair, scene)[0]
         parts = {
             "source digest (positions + offsets)": lambda: cache.digest(inp.raw, inp.offsets),
@@ -94,7 +95,8 @@ def run(n_frames: int, repeat: int, deforming: bool):
                 ref.object, dg, ref.matrix(dg)),
             "settings signature": lambda: ops.settings.fingerprints.signature(
                 hair, scene=scene, identities=False),
-            "whole record (current_inputs)": lambda: ops.frame.record.current_inputs(setup, inp),
+            "whole record (current_inputs)": lambda: ops.frame.record.current_inputs(setup, inp,
+                                                                                read),
         }
         for name, fn in parts.items():
             print(f"  {name:38s} {_best(fn):.3f} ms")

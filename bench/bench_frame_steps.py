@@ -39,10 +39,11 @@ OPS = ADDON + ".operators"
 #: Functions counted by name (wherever they live in either layout).
 WATCHED = {
     "write": ("frame_outputs", "output"),  # the output hair written
-    "set_status": ("registry", "status"),  # the setup's status set
+    "set_status": ("registry", "report"),  # the setup's status set
     "collider_objects": ("colliders",),  # the setup's colliders listed
     "signature": ("setup", "fingerprints"),  # the settings' fingerprint
-    "structure": ("setup", "fingerprints"),  # what every frame shares
+    "structure": ("setup", "fingerprints"),  # what every frame shares...
+    "structures": ("fingerprints",),  # ...with and without identities, in one pass
 }
 
 

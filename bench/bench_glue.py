@@ -8,7 +8,7 @@ at the origin), a 130k-triangle UV sphere (rigid, keyframed) sweeping through th
 Plays ``scene.frame_set`` forward and prints per frame:
 
 * ``frame_set``: the whole call (Blender's depsgraph + our handler),
-* ``handler``: FurCollide's ``frame_rules.evaluate`` for the setup,
+* ``handler``: FurCollide's ``frame.spine.evaluate`` for the setup,
 * ``core``: ``Solver.step`` (the core's own work),
 * ``glue``: handler - core (reading inputs, colliders, cache, writing the output),
 * ``glue CPU``: the same in main-thread CPU time (less sensitive to a busy machine).
@@ -97,7 +97,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
               f"collider {n_tris} triangles")
         core_mod = sys.modules[ADDON + ".core"]
         spent, in_core = [], []  # (wall ms, main-thread CPU ms) per call
-        real, real_step = ops.frame.rules.evaluate, core_mod.Solver.step
+        real, real_step = ops.frame.spine.evaluate, core_mod.Solver.step
 
         def clocked(fn, into):
             def wrapper(*args, **kw):
@@ -108,7 +108,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
                     into.append(((time.perf_counter() - t) * 1e3, (time.thread_time() - c) * 1e3))
             return wrapper
 
-        ops.frame.rules.evaluate = clocked(real, spent)
+        ops.frame.spine.evaluate = clocked(real, spent)
         core_mod.Solver.step = clocked(real_step, in_core)
         prof = None
         if profile:
@@ -132,7 +132,7 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
                 handler, handler_cpu = np.sum(spent, axis=0)
                 core, core_cpu = np.sum(in_core, axis=0)
                 row = (f, total, handler, core, handler - core, handler_cpu - core_cpu,
-                       ops.store.registry.stats_for(hair).get("colliding", 0))
+                       ops.store.report.stats_for(hair).get("colliding", 0))
                 if f not in best or row[4] < best[f][4]:
                     best[f] = row
         rows = [best[f] for f in sorted(best)]
@@ -141,9 +141,9 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
             for f in range(2, n_frames + 2):
                 spent.clear()
                 scene.frame_set(f)
-                assert ops.store.registry.stats_for(hair).get("source") == "cache"
+                assert ops.store.report.stats_for(hair).get("source") == "cache"
                 cached.append(spent[0][0])
-        ops.frame.rules.evaluate, core_mod.Solver.step = real, real_step
+        ops.frame.spine.evaluate, core_mod.Solver.step = real, real_step
         print(f"{'frame':>5} {'frame_set':>10} {'handler':>8} {'core':>8} {'glue':>7} "
               f"{'glue CPU':>8} {'colliding':>9}")
         for r in rows:
@@ -159,8 +159,8 @@ def run(n_frames: int, profile: bool, identity: bool, repeat: int = 1):
 
             stats = pstats.Stats(prof).sort_stats("cumulative")
             stats.print_callees(
-                r"frame_rules.py.*\((evaluate|_solve)\)|frame_solve.py.*\(solve_frame\)"
-                r"|frame_outputs.py.*\(write\)|frame_inputs.py.*\(read_inputs\)"
+                r"spine.py.*\((evaluate|_solve)\)|solve.py.*\(solve_frame\)"
+                r"|output.py.*\(write\)|inputs.py.*\(read_inputs\)"
                 r"|framecache.py.*\((put|encode)\)|bridge.py.*\(write_status\)")
     finally:
         link = dev / "furcollide"

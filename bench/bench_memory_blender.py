@@ -138,7 +138,7 @@ def run(side, n_frames, limit, trace, top, sink=None, mode="stiff"):
 
         def row(label, rt=None):
             gc.collect()
-            cache = rt.memory.nbytes / MB if rt is not None else 0.0
+            cache = rt.cache.memory.nbytes / MB if rt is not None else 0.0
             peak = tracemalloc.get_traced_memory()[1] / MB if trace else float("nan")
             r = (rss_mb(), traced(), cache, peak)
             print(f"  {label:>14} {r[0]:9.1f} {r[1]:9.1f} {r[2]:9.1f} {r[3]:9.1f}", flush=True)
@@ -158,7 +158,7 @@ def run(side, n_frames, limit, trace, top, sink=None, mode="stiff"):
         for f in range(2, n_frames + 2):
             scene.frame_set(f)
             rows.append((f, *row(f"frame {f}", rt)))
-            if full_at is None and rt.memory.nbytes > 0.9 * limit * MB:
+            if full_at is None and rt.cache.memory.nbytes > 0.9 * limit * MB:
                 full_at = f
             snaps[f] = snap()
         print(f"\n  Add: +{added[0] - base[0]:.0f} MB resident, +{added[1] - base[1]:.0f} MB "

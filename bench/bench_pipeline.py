@@ -263,7 +263,7 @@ def stage_attach(sc, Vn):
 
 def stage_motion(sc, guides_out, frame):
     """Wind after collision, its collider distance capped at the longest
-    displacement (as operators/stages.output_stage does), the Region of Influence."""
+    displacement (as core/pipeline/frame.py does), the Region of Influence."""
     blown = wind(guides_out, sc.goff, frame, direction=(1.0, 0.3, -0.2), strength=0.08,
                  turbulence=0.5)
     reach = float(np.sqrt(((blown - guides_out) ** 2).sum(1).max()))

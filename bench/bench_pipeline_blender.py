@@ -8,7 +8,7 @@ operators with the ``bpy`` wheel and played frame by frame
 (``scene.frame_set``: the add-on's frame handler runs every stage).
 
 The per-stage times are the add-on's own: the *Last Frame* statistics of the
-setup (``operators/clock.py``; ``attach_ms`` ... ``write_ms``), what the panel
+setup (``operators/frame/clock.py``; ``attach_ms`` ... ``write_ms``), what the panel
 shows. The stages:
 
 * attach: Fur Attach of the guides and the Surface of the render roots;
@@ -131,14 +131,14 @@ def run(user, argv=None):
     print(f"  pipeline set up in {time.perf_counter() - t0:.1f} s (sampler, attach bind, "
           "groom bind)", flush=True)
 
-    registry = sys.modules[pkg + ".operators.store.registry"]
+    report = sys.modules[pkg + ".operators.store.report"]
     framecache = sys.modules[pkg + ".core.framecache"]
     guides = pipe.guides
     scene = scn.scene
     start = scene.frame_start
     frames = list(range(start, start + args.frames))
     table(f"Blender end-to-end, {args.frames} frames played",
-          play(bpy, scene, frames, lambda: registry.stats_for(guides)))
+          play(bpy, scene, frames, lambda: report.stats_for(guides)))
 
     # The bake holds the render groom: a baked frame only reads its file.
     s = guides.furcollide
@@ -155,7 +155,7 @@ def run(user, argv=None):
     print(f"\n  baked {len(frames)} frames in {time.perf_counter() - t0:.1f} s "
           f"(render groom baked: {s.groom.is_baked_with})", flush=True)
     med = table("Baked frames played", play(bpy, scene, frames,
-                                              lambda: registry.stats_for(guides)))
+                                              lambda: report.stats_for(guides)))
     directory = bpy.path.abspath(s.bake_path)
     reads = []
     for f in frames[1:]:
@@ -273,7 +273,7 @@ def children_figure(bpy, pkg, density, frames=8):
                    Density=float(density))
     _hair_modifier(bpy, compat, out, "Clump Hair Curves", path, Factor=0.8)
     _hair_modifier(bpy, compat, out, "Frizz Hair Curves", path)
-    registry = sys.modules[pkg + ".operators.store.registry"]
+    report = sys.modules[pkg + ".operators.store.report"]
     for cleared in (True, False):
         hair.furcollide.children.use_children = cleared
         scene.frame_set(1)
@@ -290,7 +290,7 @@ def children_figure(bpy, pkg, density, frames=8):
         n = frames - 1
         on = [ms for _w, c, ms in seen if c]
         off = [ms for _w, c, ms in seen if not c]
-        stats = registry.stats_for(hair)
+        stats = report.stats_for(hair)
         what = (f"children cleared live ({stats.get('children', 0):,} children, "
                 f"{stats.get('children_fixed', 0)} fixed on the last frame)" if cleared
                 else "Clear Children off (the output renders its own stack)")

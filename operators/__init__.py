@@ -4,13 +4,13 @@ Thin: read evaluated Blender data into numpy (``foreach_get``), call the core, w
 the result into the output hair (``foreach_set``), report errors. Each job has its
 room (a sub-package), so the folder says what a change may touch:
 
-frame/      what happens when Blender changes frame: the handlers, the frame rules,
-            reading the frame's inputs, the solve, writing the output, the stages after
+frame/      what happens when Blender changes frame: the handlers, the spine (read
+            once, decide, solve, write once), the frame rules, the stages after
 settings/   the settings on the hair object (Blender properties) and reading them:
             keyed values, parameter maps, the motion settings, fingerprints
 ops/        the operators (one module per concern) and the command line
-store/      what a session keeps: the setups' runtimes, what an edit drops, bake and
-            baked frames
+store/      what a session keeps: the setups' runtimes, the playback cache, the
+            status, what an edit drops, bake and baked frames
 blender/    Blender I/O every room uses: numpy <-> bpy transfers, version
             differences, the outputs' dependency modifier
 

@@ -10,7 +10,7 @@ from ..operators.frame.colliders import collider_lines, in_scene
 from ..operators.ops import bake as bake_ops
 from ..operators.ops.common import active_setup, backend_message
 from ..operators.ops.scene import drops_frames, needs_lock
-from ..operators.store import registry
+from ..operators.store import playback, registry, report
 from .text import note, warning
 
 #: What the panel says before a setup: Add FurCollide takes the *active* hair (the object
@@ -108,7 +108,7 @@ class FURCOLLIDE_PT_main(Panel):
         row = col.row()
         row.enabled = False
         row.prop(s, "output")
-        level, message = registry.status_shown(src)
+        level, message = report.status_shown(src)
         if message:
             icon = {"ERROR": "ERROR", "WARNING": "ERROR"}.get(level, "INFO")
             box = layout.box()
@@ -273,7 +273,7 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         note(layout, context, f"{n} of {total} frames {where}", icon="FILE_CACHE")
         rt = registry.get_runtime(src, create=False)
         if foreign is None and not s.is_baked and rt is not None and (
-                rt.dropped == registry.NOT_SAVED):
+                rt.cache.dropped == playback.NOT_SAVED):
             note(layout, context, NOT_SAVED, icon="ERROR")
         if s.is_outdated:  # (the status above says why)
             note(layout, context, OUTDATED_BAKE if s.is_baked else OUTDATED, icon="ERROR")
@@ -329,7 +329,7 @@ class FURCOLLIDE_PT_stats(_Sub, Panel):
                       icon="ERROR" if c.stat_unresolved else "BLANK1")
             if c.stat_invalid:
                 col.label(text=f"Invalid (yellow): {c.stat_invalid}", icon="ERROR")
-        draw_stage_times(layout, registry.stats_for(s.id_data))
+        draw_stage_times(layout, report.stats_for(s.id_data))
 
 
 def draw_stage_times(layout, stats):
@@ -354,7 +354,7 @@ def cached_count(src) -> tuple[int, str]:
         n = sum(1 for f in frames if s.frame_start <= f <= s.frame_end)
         return n, "baked" if s.is_baked else "on disk (partial bake)"
     rt = registry.get_runtime(src, create=False)
-    return (len(rt.memory) if rt else 0), "cached"
+    return (len(rt.cache.memory) if rt else 0), "cached"
 
 
 from .presets import FURCOLLIDE_PT_presets  # noqa: E402  (avoid a cycle at import)

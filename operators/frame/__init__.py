@@ -1,20 +1,23 @@
 """What happens when Blender changes frame: the frame's path through the glue.
 
-A frame reads top to bottom: ``handlers`` -> ``scenes`` -> ``rules`` (with ``inputs``
-and ``record``) -> ``solve`` -> ``output`` -> ``groom`` -> ``children``.
+A frame reads top to bottom (``spine``): ``handlers`` -> ``scenes`` -> ``spine``: read once
+(``inputs``), what changed since (``rules``), decide (``rules``, with ``record``), solve
+(``solve``, with ``colliders``), write once (``output``), the stages after (``groom``,
+``children``), the status once (``output``).
 
 Modules
 -------
 handlers    Blender's handlers: thin loops over the setups that never raise
 scenes      a setup in the scenes its hair is in: solved in its own, shown in the others
-rules       the frame rules: what a frame does (solve, show cached, hold, pass through)
+spine       a frame top to bottom: read once, decide, solve, write once, the stages after
+rules       the frame rules as a decision that writes nothing: what a frame shows and why
 setup       ``Setup``: one setup as one evaluation sees it
-inputs      the evaluated source read into ``FrameInputs``; the motion before collision
-record      the frame-inputs record of a cached frame, and what changed since
+inputs      the frame read once: the evaluated source into ``FrameInputs``, the settings
+record      the frame-inputs record of a cached frame and what changed; what was seen last
 colliders   which objects collide; their core Colliders kept across frames
 attach      Fur Attach: the binding's storage and the attached input curves
-solve       ``solve_frame``: the one solve of playback, bake, the command line
-output      writing the output hair: positions, handles, status, colours, attributes
+solve       the solver and the state a frame starts from; ``solve_frame``: the one solve
+output      the one write of the output hair and the one status of a frame
 groom       the render groom stage: the dense groom follows the guides, clearance pass
 children    the children stage: the output's own children stack, cleared live
 topology    a source whose curves change every frame: the message and the fix

@@ -47,12 +47,12 @@ from ...core import Status, framecache, pipeline
 from ...core.curves import subset
 from ..blender import bridge, compat
 from ..blender.dependencies import DEPENDENCY_MODIFIER
-from ..store import registry
+from ..store import registry, report
 from .clock import clock
 from .colliders import collider_list, in_scene
 from .groom import clearance_settings, world_splines
 from .inputs import shown
-from .output import hide_in_viewport
+from .output import Stage, hide_in_viewport
 
 #: The modifier FurCollide puts on the output, right after its dependency modifier,
 #: that passes the guides on to the artist's stack only while FurCollide opens it.
@@ -231,7 +231,7 @@ def remove_children_output(src) -> None:
     rt = registry.get_runtime(src, create=False)
     if rt is not None:
         rt.children = None
-        rt.stats = {k: v for k, v in rt.stats.items() if not k.startswith("children")}
+        report.drop_stats(rt, "children")
 
 
 def apply_visibility(src) -> None:
@@ -257,6 +257,8 @@ def wants_children(setup) -> bool:
 class ChildrenState:
     """What the children stage keeps between frames (in the setup's runtime)."""
 
+    __slots__ = ("key", "result", "drawn")
+
     def __init__(self):
         self.key = None  # digests of the inputs of ``result``
         self.result = None  # (points (P, 3) float32 world, status (C,), n_fixed)
@@ -271,33 +273,50 @@ def children_state(rt) -> ChildrenState:
 
 
 # -------------------------------------------------------------------- frame
-def run(setup) -> None:
+def run(setup, baked=None) -> Stage | None:
     """The children stage of a frame (after the guides and the render groom): the
     output's stack evaluated on the guides just written, cleared and written into the
-    children output. Never raises (a problem is the setup's status)."""
+    children output. Returns what it adds to the frame's status and statistics (None:
+    no children here). Never raises (a problem is a note of the frame's status).
+
+    ``baked``: (frame, ``framecache.ShownFrame``) of the baked frame the output shows
+    (its children are shown while the stack makes the same curves); None: the frame
+    does not show a bake."""
     try:
         if setup.depsgraph is None:
-            return
+            return None
         if wants_children(setup):
             create_children_output(setup.ob, setup.scene)
             setup.depsgraph.update()  # (the depsgraph gets the new object)
         if not owns_children(setup.ob):
-            return
+            return None
         if not shown(setup.s.children.output, setup.depsgraph):
-            return
-        _run(setup)
+            return None
+        return _run(setup, baked)[0]
     except Exception as exc:  # noqa: BLE001 - the guides are written: only warn
-        _note(setup, f"Children: {registry.describe(exc)}")
+        return Stage({}, f"Children: {report.describe(exc)}")
 
 
-def bake_frame(setup) -> dict | None:
+def with_note(status, stage) -> tuple[str, str]:
+    """The frame's status ``(level, message)`` with a children note (``stage``'s) as a
+    warning after it; never over an error of the guides."""
+    note = stage.note if stage is not None else ""
+    level, msg = status
+    if not note or level == "ERROR" or note in msg:
+        return status
+    return "WARNING", f"{msg} {note}" if msg else note
+
+
+def bake_frame(setup) -> tuple[dict, dict] | None:
     """The children of a frame being baked: cleared (always), written, and returned
-    as the bake file's part (None: the setup's output makes no children)."""
+    as (the bake file's part, their statistics); None: the setup's output makes no
+    children."""
     if wants_children(setup):
         create_children_output(setup.ob, setup.scene)
     if not owns_children(setup.ob):
         return None
-    return _run(setup, baking=True)
+    stage, part = _run(setup, baking=True)
+    return None if part is None else (part, stage.stats)
 
 
 def before_frame(ob) -> None:
@@ -308,9 +327,9 @@ def before_frame(ob) -> None:
         set_gate(ob.furcollide.output, False)
 
 
-def _run(setup, baking=False):
-    """Evaluate, clear and write the children (see the module docstring); the bake
-    part when ``baking``."""
+def _run(setup, baked=None, baking=False) -> tuple[Stage, dict | None]:
+    """Evaluate, clear and write the children (see the module docstring): (what the
+    stage adds to the frame, the bake part when ``baking``)."""
     s, rt, dg = setup.s, setup.rt, setup.depsgraph
     out = s.output
     state = children_state(rt)
@@ -323,26 +342,25 @@ def _run(setup, baking=False):
     with clock.timing("children"):
         stack = _stack_result(setup)
     if stack is None:
-        return None
+        return Stage({}), None
     data, offsets, world = stack
-    baked, outdated = _baked_children(setup, offsets, world)
+    from_bake, note, outdated = _baked_children(setup, offsets, world, baked)
     clear = render or baking or s.children.use_viewport
-    if baked is not None:
-        points, status, n_fixed = baked
+    fresh = ()
+    if from_bake is not None:
+        points, status, n_fixed = from_bake
     elif clear:
-        points, status, n_fixed = _clear(setup, state, data, offsets, world)
+        points, status, n_fixed, fresh = _clear(setup, state, data, offsets, world)
     else:  # (Clear in Viewport off: the stack's result as it is)
         points, status, n_fixed = world.astype(np.float32), np.zeros(
             len(offsets) - 1, np.int8), 0
     with clock.timing("write"):
         _write(setup, data, offsets, points, status)
-    rt.stats = dict(rt.stats, **children_stats(status, n_fixed, cleared=clear or (
-        baked is not None)))
-    if outdated:
-        _note(setup, outdated)
+    stage = Stage(children_stats(status, n_fixed, cleared=clear or from_bake is not None),
+                  note, outdated, fresh=fresh)
     if not baking:
-        return None
-    return {"points": np.asarray(points, np.float32), "status": status,
+        return stage, None
+    return stage, {"points": np.asarray(points, np.float32), "status": status,
             "offsets": np.asarray(offsets, np.int32),
             "stack": _digest_array(world), "key": np.frombuffer(
                 settings_key(setup.ob).encode(), np.uint8),
@@ -373,37 +391,41 @@ def _digest_array(points):
         np.int64)
 
 
-def _baked_children(setup, offsets, world):
+def _baked_children(setup, offsets, world, baked):
     """((points, status, n_fixed) from the bake, or None: computed live; a note when the
-    bake is not what the stack gives now, or '')."""
+    bake is not what the stack gives now, or ''; whether what is shown is outdated).
+    ``baked``: as :func:`run`'s; at a subframe of a baked setup the two baked frames
+    around it are blended."""
     s = setup.s
-    if not s.is_baked or setup.rt.stats.get("source") != "bake":
-        return None, ""
     if setup.subframe != 0.0:
-        return _baked_blend(setup, offsets), ""
-    part = None if setup.baked is None else setup.baked.extra.get(BAKE_PART)
-    if part is None and setup.baked is None:
+        if not (s.is_baked and s.enabled):
+            return None, "", False
+        return _baked_blend(setup, offsets), "", False
+    if baked is None:
+        return None, "", False
+    f, shown_frame = baked
+    part = None if shown_frame is None else shown_frame.extra.get(BAKE_PART)
+    if part is None and shown_frame is None:
         try:
-            part = framecache.read_extra(bpy.path.abspath(s.bake_path),
-                                         int(setup.rt.stats["frame"]), BAKE_PART)
+            part = framecache.read_extra(bpy.path.abspath(s.bake_path), f, BAKE_PART)
         except (OSError, ValueError, KeyError):
             part = None
     if part is None:
-        return None, ""
+        return None, "", False
     if not np.array_equal(part["offsets"], offsets):
         return None, (
             f"Children: the output's stack now makes {len(offsets) - 1} children, the bake "
             f"holds {len(part['offsets']) - 1} (its stack was edited since the bake): they "
-            "are cleared live. Press Free Bake, then Bake")
-    note = ""
+            "are cleared live. Press Free Bake, then Bake"), False
+    note, outdated = "", False
     if int(part["stack"][0]) != int(_digest_array(world)[0]):
-        setup.rt.outdated = True
+        outdated = True
         note = ("Children: the output's stack gives other children than when they were "
                 "baked (the bake's are shown): press Free Bake, then Bake")
     if part["key"].tobytes().decode() != settings_key(setup.ob):
-        setup.rt.outdated = True
+        outdated = True
     return (np.asarray(part["points"], np.float32), np.asarray(part["status"], np.int8),
-            int(part["fixed"][0])), note
+            int(part["fixed"][0])), note, outdated
 
 
 def _baked_blend(setup, offsets):
@@ -430,21 +452,21 @@ def _baked_blend(setup, offsets):
 def _clear(setup, state, data, offsets, world):
     """The clearance pass on the stack's children ``data`` (evaluated; reused while
     nothing it depends on changed): (points (P, 3) float32 world, status (C,) int8,
-    n_fixed)."""
+    n_fixed, what was said of the colliders built for it)."""
     s = setup.s
     with clock.timing("clearance"):
-        cols = collider_list(setup)
-        entries = list(setup.rt.colliders.values())
+        cols, fresh = collider_list(setup)
+        entries = list(setup.rt.colliders.entries.values())
         sp = world_splines(s.output, setup.depsgraph, data)
     key = (settings_key(setup.ob), framecache.digest(offsets),
            framecache.digest(world), tuple((e.inputs, e.double_sided, e.offset)
                                            for e in entries), framecache.digest(sp.types))
     if key == state.key and state.result is not None:
-        return state.result
+        return (*state.result, tuple(fresh))
     with clock.timing("clearance"):
         points, status, n_fixed = clear_children(s, world, offsets, cols, sp, state.drawn)
     state.key, state.result = key, (points, status, n_fixed)
-    return state.result
+    return points, status, n_fixed, tuple(fresh)
 
 
 def clear_children(s, world, offsets, colliders, splines=None, margins=None):
@@ -520,11 +542,3 @@ def _sync_materials(src, dst) -> None:
         for m in want:
             dst.materials.append(m)
 
-
-def _note(setup, note) -> None:
-    """Show a children note as a warning, after the guides' own status of this frame;
-    never over an error of the guides."""
-    level, msg = registry.status_for(setup.ob)
-    if level == "ERROR" or note in msg:
-        return
-    setup.set_status("WARNING", f"{msg} {note}" if msg else note)

@@ -4,17 +4,18 @@
   enabled entries, then the collider collection's objects; collection instances (linked
   assets) are followed. The source and its growth Surface never collide.
 * :func:`sync_collider` keeps one core ``Collider`` per collider across frames
-  (:class:`ColliderEntry`, in the setup's runtime): a rigid collider only updates its
-  matrix and never rebuilds its BVH; a new topology or option builds a new one.
-* :func:`read_for_solve` gives a frame's inputs the colliders (and growth surface) it
-  is solved against.
+  (:class:`ColliderEntry`, in the setup's runtime's :class:`ColliderState`, changed only
+  here): a rigid collider only updates its matrix and never rebuilds its BVH; a new
+  topology or option builds a new one.
+* :func:`read_for_solve` reads the colliders (and growth surface) a frame is solved
+  against.
 * :func:`collider_inputs` is a collider's part of the frame-inputs record (its matrix
   and shape digests, see :mod:`.inputs`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
@@ -138,6 +139,25 @@ def surface_as_collider(ob) -> str:
     return ""
 
 
+@dataclass(slots=True)
+class ColliderState:
+    """The part of a setup's runtime with its colliders, changed only here."""
+
+    entries: dict = field(default_factory=dict)  # collider uid -> ColliderEntry
+    growth: object = None  # ColliderEntry of the growth surface
+    #: Follow Collider Motion: frame -> {collider uid: core Placement} of cached frames.
+    placements: dict = field(default_factory=dict)
+    #: Collider uid -> what was said about it once (:func:`_tell`).
+    told: dict = field(default_factory=dict)
+
+
+def forget(rt) -> None:
+    """Forget the core Colliders of the setup's runtime ``rt`` (which objects collide,
+    or the curves they collide with, changed): the next frame builds them again."""
+    rt.colliders.entries.clear()
+    rt.colliders.growth = None
+
+
 @dataclass
 class ColliderEntry:
     """A collider's core ``Collider`` as the last frame left it, with what decides
@@ -241,18 +261,21 @@ def is_deforming(o, scene) -> bool:
     return any(m.type == "NODES" and m.show_viewport for m in o.modifiers)
 
 
-def collider_list(setup) -> list:
-    """The core Colliders of the setup's colliders at this frame (kept in its runtime)."""
+def collider_list(setup, refs=None) -> tuple[list, list]:
+    """(the core Colliders of the setup's colliders at this frame, kept in its runtime;
+    what there is to say about the ones just built: :func:`_tell`). ``refs``: the
+    colliders (:func:`collider_objects`), when listed already."""
     rt, depsgraph = setup.rt, setup.depsgraph
-    cols = {}
-    for r in collider_objects(setup.ob, depsgraph.scene):
-        old = rt.colliders.get(r.uid)
+    refs = collider_objects(setup.ob, depsgraph.scene) if refs is None else refs
+    cols, notes = {}, []
+    for r in refs:
+        old = rt.colliders.entries.get(r.uid)
         cols[r.uid] = sync_collider(old, r.object, depsgraph, r.double_sided, r.offset,
                                     r.matrix(depsgraph), r.name)
         if cols[r.uid] is not old:
-            _tell(setup, r.uid, cols[r.uid].collider, r.object.type == "MESH")
-    rt.colliders = cols  # forgets deleted colliders
-    return [e.collider for e in cols.values()]
+            notes += _tell(setup, r.uid, cols[r.uid].collider, r.object.type == "MESH")
+    rt.colliders.entries = cols  # forgets deleted colliders
+    return [e.collider for e in cols.values()], notes
 
 
 # ------------------------------------------------------------- what was made of them
@@ -275,33 +298,33 @@ def repaired(col) -> str:
     return f"'{col.name}': {text}" if text else ""
 
 
-def _tell(setup, uid, col, mesh) -> None:
-    """A collider was built: say once (one console line, and the next status) what was
-    repaired in it when it is a ``mesh`` object (a curve, text or surface is always
-    tessellated with seams: nothing the artist could fix), and once that it detects no
-    pinch when it is an open mesh."""
-    rt = setup.rt
-    said = rt.told.setdefault(uid, set())
+def _tell(setup, uid, col, mesh) -> list[str]:
+    """A collider was built: say once (one console line, and the frame's status: the
+    notes returned) what was repaired in it when it is a ``mesh`` object (a curve, text
+    or surface is always tessellated with seams: nothing the artist could fix), and
+    once that it detects no pinch when it is an open mesh."""
+    said = setup.rt.colliders.told.setdefault(uid, set())
+    notes = []
     for kind, text in (("repaired", repaired(col) if mesh else ""), ("open", open_mesh(col))):
         if text and kind not in said:
             said.add(kind)
-            rt.fresh_notes.append(text)
+            notes.append(text)
             what = "collider " if kind == "repaired" else ""
             print(f"FurCollide '{setup.ob.name}': {what}{text}", flush=True)
+    return notes
 
 
-def collider_note(rt, setup=None) -> str:
-    """The status note about a setup's colliders ('' when none): the open meshes that
-    detect no pinch (while they are colliders), what was repaired in colliders just
-    built (said once), and, given the ``setup`` (:class:`setup.Setup`), the colliders
-    renders see with other geometry than the viewport (:func:`render_note`)."""
-    notes, rt.fresh_notes = list(rt.fresh_notes), []
-    for e in rt.colliders.values():
+def collider_note(rt, scene, refs, fresh=()) -> str:
+    """The status note about a setup's colliders ('' when none): what was repaired in
+    colliders just built (``fresh``: said once), the open meshes that detect no pinch
+    (while they are colliders), and the colliders (``refs``) renders of ``scene`` see
+    with other geometry than the viewport (:func:`render_note`)."""
+    notes = list(fresh)
+    for e in rt.colliders.entries.values():
         text = open_mesh(e.collider)
         if text and text not in notes:
             notes.append(text)
-    if setup is not None and setup.ob is not None:
-        notes.extend(render_note(setup.ob, setup.scene))
+    notes.extend(render_note(scene, refs))
     return "Colliders: " + "; ".join(notes) if notes else ""
 
 
@@ -311,7 +334,7 @@ def collider_lines(rt, obj) -> list[str]:
     if rt is None or obj is None:
         return []
     lines = []
-    for e in rt.colliders.values():
+    for e in rt.colliders.entries.values():
         name = e.collider.name
         if name != obj.name and not name.startswith(obj.name + " › "):
             continue
@@ -338,34 +361,37 @@ def growth_collider(setup, settings):
             f"the hair's Surface '{surf.name}' is a {surf.type.lower()} object, not a mesh: "
             "Attract to Growth Surface / Put to Growth Surface need a mesh Surface"
         )
-    rt.growth = sync_collider(rt.growth, surf, setup.depsgraph)
-    return rt.growth.collider
+    part = rt.colliders
+    part.growth = sync_collider(part.growth, surf, setup.depsgraph)
+    return part.growth.collider
 
 
-def read_for_solve(setup, inputs, continuous=True, fresh=False) -> None:
-    """Give the frame ``inputs`` (:class:`inputs.FrameInputs`) the core Colliders
-    and growth surface this frame is solved against (the solver's settings decide
-    whether the growth surface is read).
+def read_for_solve(setup, refs, continuous=True, fresh=False) -> tuple[list, object, list]:
+    """(the core Colliders, the growth surface's or None, the notes about colliders
+    just built: :func:`collider_list`) this frame is solved against; ``refs``: the
+    setup's colliders (:func:`collider_objects`). The solver's settings decide whether
+    the growth surface is read.
 
     With Follow Collider Motion, each collider's motion is the one since the previous
     frame, however the frame is reached: ``continuous`` (the colliders were last read
     for the previous frame), ``fresh`` (a frame solved from the groomed shape: no
     motion before it), else the previous frame's placements kept for it
     (:func:`keep_placements`; none kept: no motion known, the paper's direction)."""
-    inputs.colliders = collider_list(setup)
-    inputs.growth = growth_collider(setup, setup.solver.settings)
+    cols, notes = collider_list(setup, refs)
+    growth = growth_collider(setup, setup.solver.settings)
     if not setup.solver.settings.follow_collider_motion:
-        return
+        return cols, growth, notes
     rt, f = setup.rt, setup.frame
     if fresh or not continuous:
-        kept = {} if fresh else rt.placements.get(f - 1, {})
-        for uid, e in rt.colliders.items():
+        kept = {} if fresh else rt.colliders.placements.get(f - 1, {})
+        for uid, e in rt.colliders.entries.items():
             p = kept.get(uid)
             if p is None:
                 e.collider.forget_previous()
             else:
                 e.collider.set_previous(p.matrix, p.vertices)
     keep_placements(setup)
+    return cols, growth, notes
 
 
 def keep_placements(setup) -> None:
@@ -373,10 +399,11 @@ def keep_placements(setup) -> None:
     later from this one's cached state takes its colliders' motion since here), for the
     cached frames only."""
     rt = setup.rt
-    rt.placements = {k: v for k, v in rt.placements.items() if k in rt.memory.frames}
-    rt.placements[setup.frame] = {
+    part = rt.colliders
+    part.placements = {k: v for k, v in part.placements.items() if k in rt.cache.memory.frames}
+    part.placements[setup.frame] = {
         uid: Placement(e.collider.matrix, e.collider.vertices)
-        for uid, e in rt.colliders.items()}
+        for uid, e in part.entries.items()}
 
 
 # ------------------------------------------------------- frame-inputs record
@@ -521,8 +548,8 @@ def _has_is_viewport(tree, depth=0, seen=None) -> bool:
     return False
 
 
-def render_note(ob, scene) -> list[str]:
-    """For the status: each collider of setup ``ob`` that renders of ``scene`` evaluate
+def render_note(scene, refs) -> list[str]:
+    """For the status: each of the colliders ``refs`` that renders of ``scene`` evaluate
     to other geometry than its viewport, with the cause (:func:`render_difference`).
 
     Playback and bakes read the viewport's evaluation; a render shows a cached or baked
@@ -530,7 +557,7 @@ def render_note(ob, scene) -> list[str]:
     :func:`.record.first_change`); only a frame first solved in a render is solved
     against the render shape."""
     out = []
-    for r in collider_objects(ob, scene):
+    for r in refs:
         why = render_difference(r.object, scene)
         if why:
             out.append(f"'{r.name}' renders with other geometry than the viewport ({why}): "

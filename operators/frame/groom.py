@@ -40,11 +40,11 @@ from ... import core
 from ...core import Status, framecache, pipeline
 from ...core.pipeline import GroomBinding
 from ..blender import bridge
-from ..store import registry
-from ..store.registry import get_runtime, set_status, status_for
+from ..store import report
+from ..store.registry import get_runtime
 from .clock import clock
 from .colliders import collider_list, in_scene
-from .output import hide_in_viewport
+from .output import Stage, hide_in_viewport
 
 #: Custom property (bytes of an ``np.savez`` file) on the groom output object with
 #: the render groom binding (reference poses, guide weights, optional root binding).
@@ -54,8 +54,9 @@ BAKE_PART = "groom"
 
 
 # ------------------------------------------------------------------ frame
-def run(setup, guides_world) -> None:
-    """The render groom follows the guides the output shows (deform + clearance pass).
+def run(setup, guides_world, baked=None) -> Stage | None:
+    """The render groom follows the guides the output shows (deform + clearance pass);
+    what it adds to the frame's status and statistics (None: no groom output here).
 
     Parameters
     ----------
@@ -63,6 +64,9 @@ def run(setup, guides_world) -> None:
     guides_world : (P, 3) float32 ndarray or None
         The guides' world points the output shows now; None when the guides' frame
         failed: the groom then follows the last good guides (:func:`follow_last_guides`).
+    baked : (int, framecache.ShownFrame) or None
+        The baked frame the output shows, as read from its file (its render groom is
+        shown while it is the bound one); None: the frame does not show a bake.
 
     Raises
     ------
@@ -72,9 +76,9 @@ def run(setup, guides_world) -> None:
     depsgraph = setup.depsgraph
     out = setup.s.groom.output
     if depsgraph is None or not in_scene(out, depsgraph.scene):
-        return
+        return None
     state = groom_state(setup.ob, setup.rt)
-    state.note = ""
+    state.note, state.fresh = "", []
     binding = state.binding
     note = groom_changes(setup, binding)
     if guides_world is not None and guides_world.shape != binding.guides_ref.shape:
@@ -84,21 +88,23 @@ def run(setup, guides_world) -> None:
             "the last guides it could use)")
         guides_world = None
     if guides_world is None:
-        _follow(setup, state)
-        _show_note(setup, note or state.note or binding.note, guides_ok=False)
-        return
-    baked = None
-    if setup.s.is_baked:
-        baked = _baked(setup, state) if setup.subframe == 0.0 else _baked_blend(setup, state)
-    if baked is not None:
-        points, status, stats = baked
+        stats = _follow(setup, state)
+        return Stage(stats, note or state.note or binding.note, guides_ok=False,
+                     fresh=tuple(state.fresh))
+    shown, outdated = None, False
+    if setup.subframe != 0.0:
+        shown = _baked_blend(setup, state) if setup.s.is_baked else None
+    elif baked is not None:
+        shown, outdated = _baked(setup, state, *baked)
+    if shown is not None:
+        points, status, stats = shown
         if setup.subframe == 0.0:
             state.remember_guides(guides_world, _surface_now(setup, binding)[0])
     else:
         points, status, stats = _compute(setup, state, guides_world)
     _write(setup, state, points, status)
-    setup.rt.stats = dict(setup.rt.stats, **stats)
-    _show_note(setup, note or state.note or binding.note, guides_ok=True)
+    return Stage(stats, note or state.note or binding.note, outdated=outdated,
+                 fresh=tuple(state.fresh))
 
 
 def follow_unsolved(setup, guides_world) -> None:
@@ -120,10 +126,17 @@ def follow_unsolved(setup, guides_world) -> None:
     _write(setup, state, points, status)
 
 
+def forget_written(rt) -> None:
+    """The groom output was written by another runtime (the setup shown in another
+    scene): the next write of ``rt``'s writes its status and colours in full."""
+    if isinstance(rt.groom, GroomState):
+        rt.groom.written = None
+
+
 def error_message(exc, setup=None) -> str:
     """The status of an error of this stage: "Render groom: ...", said once, its
     advice one that works on ``setup`` (:func:`advice`)."""
-    text = registry.describe(exc)
+    text = report.describe(exc)
     text = text if text.startswith("Render groom:") else f"Render groom: {text}"
     return text if setup is None else advice(setup.ob, text)
 
@@ -146,7 +159,7 @@ def advice(ob, text) -> str:
 def follow_last_guides(setup) -> None:
     """The guides' frame failed: the groom follows the last good guides (attached to
     the current Surface), so it neither freezes nor crosses the colliders. Never
-    raises (an error here must not hide the guides' own)."""
+    raises (an error here must not hide the guides' own, which is the status)."""
     try:
         if setup.s.groom.output is not None:
             run(setup, None)
@@ -154,10 +167,24 @@ def follow_last_guides(setup) -> None:
         print(f"FurCollide '{setup.ob.name}': render groom: {exc}", flush=True)
 
 
-def bake_frame(setup, guides_world) -> dict | None:
+def with_note(status, stage, ob) -> tuple[str, str]:
+    """The frame's status ``(level, message)`` with what the groom check found
+    (``stage``, :func:`run`'s): alone when the guides are fine, after their own warning
+    otherwise; never over an error of the guides."""
+    note = stage.note if stage is not None else ""
+    level, msg = status
+    if not note or level == "ERROR" or not stage.guides_ok and msg:
+        return status
+    note = advice(ob, note)
+    if msg and note not in msg:
+        note = f"{msg} {note}"
+    return "WARNING", note
+
+
+def bake_frame(setup, guides_world) -> tuple[dict, dict] | None:
     """The render groom of a frame being baked: computed (and written, so the bake
-    shows it) from the guides just baked; returns its arrays for the bake file, or
-    None when the setup has no render groom."""
+    shows it) from the guides just baked; returns (its arrays for the bake file, its
+    statistics), or None when the setup has no render groom."""
     g = setup.s.groom
     out = g.output
     if out is None or not has_groom(out) or not in_scene(out, setup.depsgraph.scene):
@@ -167,11 +194,10 @@ def bake_frame(setup, guides_world) -> dict | None:
         return None  # (the guides changed since Bind Groom: not baked, computed live)
     points, status, stats = _compute(setup, state, guides_world)
     _write(setup, state, points, status)
-    setup.rt.stats = dict(setup.rt.stats, **stats)
     g.baked_id = g.bind_id
     return {"points": np.asarray(points, np.float32), "status": status,
             "key": np.frombuffer(settings_key(setup.ob).encode(), np.uint8),
-            "fixed": np.array([stats["groom_fixed"]], np.int64)}
+            "fixed": np.array([stats["groom_fixed"]], np.int64)}, stats
 
 
 def settings_key(ob) -> str:
@@ -193,7 +219,6 @@ def groom_state(ob, rt) -> GroomState:
     g = ob.furcollide.groom
     if not isinstance(rt.groom, GroomState) or rt.groom.bind_id != g.bind_id:
         rt.groom = GroomState(g.bind_id, load_groom(g.output))
-        rt.groom_shown = None
     return rt.groom
 
 
@@ -207,11 +232,14 @@ def remove_groom(src) -> None:
         hide_in_viewport(g.groom, False, render=False)
     rt = get_runtime(src, create=False)
     if rt is not None:
-        rt.groom = rt.groom_shown = None
+        rt.groom = None
 
 
 class GroomState:
     """What the render groom stage keeps between frames (in the setup's runtime)."""
+
+    __slots__ = ("bind_id", "binding", "key", "result", "written", "last_guides", "carried",
+                 "note", "fresh", "drawn")
 
     def __init__(self, bind_id, binding):
         self.bind_id = bind_id
@@ -222,7 +250,7 @@ class GroomState:
         self.last_guides = None  # (guides world (Q, 3), Surface world (n, 3) or None)
         self.carried = None  # (last_guides, core Binding of them to the Surface)
         self.note = ""  # what the last computation found (shown after the checks)
-        self.noted = ""  # the status the stage set last
+        self.fresh = []  # what it said of the colliders it built (colliders._tell)
         #: The clearance pass's drawn margins (its curves' splines, last frame's).
         self.drawn = pipeline.ClearanceMargins()
 
@@ -260,8 +288,9 @@ def _compute(setup, state, guides_world, remember=True):
         V, surface_note = _surface_now(setup, binding)
     state.note = state.note or surface_note
     with clock.timing("clearance"):  # (its colliders, read at this frame)
-        cols = collider_list(setup) if g.use_clearance else []
-        entries = list(setup.rt.colliders.values()) if g.use_clearance else []
+        cols, fresh = collider_list(setup) if g.use_clearance else ([], [])
+        entries = list(setup.rt.colliders.entries.values()) if g.use_clearance else []
+    state.fresh += fresh
     guides = np.asarray(guides_world, np.float64)
     sp = None  # (an output with other curves than the bound ones: write_groom says so)
     if cols and np.array_equal(bridge.curve_offsets(g.output.data), binding.render_offsets):
@@ -348,21 +377,20 @@ def groom_stats(status, n_fixed) -> dict:
             "groom_pinched": int(counts[Status.PINCHED]), "groom_curves": int(len(status))}
 
 
-def _follow(setup, state) -> None:
+def _follow(setup, state) -> dict:
     """Write the groom following the last good guides, carried rigidly with their
     Surface triangles to the Surface of this frame. With none in this session (a file
     just opened: the playback cache is not saved), it follows the guides as their
     output shows them (as saved), its roots on this frame's Surface; nothing when
-    the output shows other guides than the bound ones."""
+    the output shows other guides than the bound ones. Returns its statistics."""
     binding = state.binding
     if state.last_guides is None:
         guides = _guides_shown(setup, binding)
         if guides is None:
-            return
+            return {}
         points, status, stats = _compute(setup, state, guides, remember=False)
         _write(setup, state, points, status)
-        setup.rt.stats = dict(setup.rt.stats, **stats)
-        return
+        return stats
     guides, V_then = state.last_guides
     V, _ = _surface_now(setup, binding)
     if V is not None and V_then is not None and V.shape == V_then.shape and not np.array_equal(
@@ -371,7 +399,7 @@ def _follow(setup, state) -> None:
         guides = _carry(setup, state, guides, V_then, V)
     points, status, stats = _compute(setup, state, guides, remember=False)
     _write(setup, state, points, status)
-    setup.rt.stats = dict(setup.rt.stats, **stats)
+    return stats
 
 
 def _guides_shown(setup, binding):
@@ -429,56 +457,32 @@ def _write_data(setup, state, out, points_world, status) -> None:
         state.written = (data.session_uid, status.copy(), colors)
 
 
-def _show_note(setup, note, guides_ok) -> None:
-    """Show what the groom check found: alone when the guides are fine, after their
-    own warning otherwise; never over an error of the guides."""
-    state = setup.rt.groom
-    if not note:
-        state.noted = ""
-        return
-    level, msg = status_for(setup.ob)
-    if level == "ERROR" or not guides_ok and msg:
-        return
-    note = advice(setup.ob, note)
-    if msg and note not in msg:
-        note = f"{msg} {note}"
-    if note == state.noted:  # (one console line per problem, not one per frame)
-        setup.rt.status = ("WARNING", note)
-        setup.rt.printed = re.sub(r"\d+", "#", note)
-    else:
-        set_status(setup.ob, "WARNING", note)
-    state.noted = note
-
-
 # ----------------------------------------------------------------- bake
-def _baked(setup, state):
-    """The render groom baked with the frame the output shows: (points (P, 3) world,
-    status, stats), else None (the bake holds no groom, or another one: computed live). A
-    groom baked with other settings is shown all the same, the setup outdated."""
-    rt = setup.rt
-    if rt.stats.get("source") != "bake":
-        return None
+def _baked(setup, state, f, shown):
+    """(the render groom baked with frame ``f`` the output shows: (points (P, 3) world,
+    status, stats), else None: the bake holds no groom, or another one, computed live;
+    outdated). ``shown``: that frame as read (:func:`framecache.read_shown`). A groom
+    baked with other settings is shown all the same, the setup outdated."""
     held = None
-    if setup.baked is not None:  # (read with the guides' frame: no groom in it, none)
-        held = setup.baked.extra.get(BAKE_PART)
+    if shown is not None:  # (read with the guides' frame: no groom in it, none)
+        held = shown.extra.get(BAKE_PART)
         if held is None:
-            return None
-    part = _baked_part(setup, state, int(rt.stats["frame"]), held)
+            return None, False
+    part = _baked_part(setup, state, f, held)
     if part is None:
-        return None
+        return None, False
     points = part["points"]  # (float32 as baked: written as they are, no float64 copy)
     status = np.asarray(part["status"], np.int8)
-    if part["key"].tobytes().decode() != settings_key(setup.ob):
-        # Baked with other groom settings: still shown, as the guides' baked frame is
-        # (it is what renders), never as if current (the frame rules say it:
-        # baked.settings_differ).
-        rt.outdated = True
-    return points, status, groom_stats(status, int(part["fixed"][0]))
+    # Baked with other groom settings: still shown, as the guides' baked frame is (it
+    # is what renders), never as if current (the frame rules say it:
+    # baked.settings_differ).
+    outdated = part["key"].tobytes().decode() != settings_key(setup.ob)
+    return (points, status, groom_stats(status, int(part["fixed"][0]))), outdated
 
 
 def _baked_blend(setup, state):
     """At a motion-blur subframe of a baked setup, the render groom blended between
-    the two baked frames around it, as the guides are (``rules._baked_subframe``;
+    the two baked frames around it, as the guides are (``rules.subframe``;
     from Frame End on, Frame End held): (points (P, 3) world, the first frame's status,
     stats), else None (a frame of the pair without the groom, or another groom bound
     since: computed live). Nothing is computed, and the groom moves over the shutter

@@ -20,7 +20,7 @@
   pointing at the same files when the file is saved elsewhere.
 * The playback cache is not saved with the file: ``save_pre`` records how many frames
   each setup had cached, and ``load_post`` has such a setup say that they are gone
-  (:data:`registry.NOT_SAVED`): at once, and on every frame that is not cached until
+  (:data:`..store.playback.NOT_SAVED`): at once, and on every frame that is not cached until
   the start frame is solved again.
 * ``undo_pre`` / ``redo_pre``: a running modal bake stops first (its objects are about
   to be replaced: :func:`bake.stop_for_undo`). ``undo_post`` / ``redo_post``: the
@@ -40,8 +40,8 @@ from ..blender.dependencies import dependencies_stale, update_dependencies
 from ..ops import bake
 from ..settings import keyed
 from ..settings.fingerprints import structure, structure_change
-from ..store import invalidation, registry
-from . import children, scenes
+from ..store import invalidation, playback, registry, report
+from . import children, record, scenes
 from .colliders import collider_objects
 from .setup import Setup
 
@@ -58,9 +58,9 @@ def on_frame_change_post(scene, depsgraph=None):
                 try:  # (another scene's setup shows its source here, never raising)
                     scenes.evaluate(ob, scene, depsgraph)
                 except Exception as exc:  # noqa: BLE001 - the handler must never raise
-                    registry.record_error(ob, exc)
+                    report.record_error(ob, exc)
         except Exception as exc:  # noqa: BLE001 - not even while listing the setups
-            print(f"FurCollide: frame handler failed: {registry.describe(exc)}", flush=True)
+            print(f"FurCollide: frame handler failed: {report.describe(exc)}", flush=True)
 
 
 @persistent
@@ -74,7 +74,7 @@ def on_frame_change_pre(scene, *_args):
             if ob.furcollide.children.output is not None:
                 children.before_frame(ob)
     except Exception as exc:  # noqa: BLE001 - the handler must never raise
-        print(f"FurCollide: frame change handler failed: {registry.describe(exc)}",
+        print(f"FurCollide: frame change handler failed: {report.describe(exc)}",
               flush=True)
 
 
@@ -106,8 +106,8 @@ def on_depsgraph_update_post(scene, depsgraph=None):
                 _check_edits(ob, scene, depsgraph, edited)
             except Exception as exc:  # noqa: BLE001 - one setup's failure stays its own
                 # its status (and one console line), as a frame's error would be
-                registry.set_status(ob, "ERROR", "depsgraph update check failed: "
-                                    f"{registry.describe(exc)}")
+                report.set_status(ob, "ERROR", "depsgraph update check failed: "
+                                    f"{report.describe(exc)}")
     except Exception as exc:  # noqa: BLE001
         print(f"FurCollide: depsgraph update check failed: {exc}", flush=True)
 
@@ -121,20 +121,23 @@ def _check_edits(ob, scene, depsgraph, edited) -> None:
         update_dependencies(ob)  # (a no-op next time: no update loop)
     if rt is None or rt.baking or ob.furcollide.is_baked:
         return
-    if rt.signature is not None and structure(ob, scene=scene) != rt.signature:
-        why = structure_change(rt.signature, structure(ob, scene=scene))
+    seen = rt.seen
+    now = structure(ob, scene=scene) if seen.structure is not None else None
+    if now is not None and now != seen.structure:
+        why = structure_change(seen.structure, now)
         invalidation.invalidate(ob, scene, reason=why, colliders=True)
         return
     values = keyed.fingerprint(ob)
-    if rt.values_seen is not None and values != rt.values_seen and len(rt.memory):
+    cached = len(rt.cache.memory)
+    if seen.values is not None and values != seen.values and cached:
         # A key edited (or a setting changed without an update callback): the frames
         # from the first one whose values changed are dropped, the others hold.
         invalidation.values_changed(Setup(ob, scene, depsgraph, rt))
-    rt.values_seen = values
+    record.saw_values(rt, values)
     inputs = {ob.name} | {o.name for r in collider_objects(ob, scene) for o in r.objects}
     if ob.data.surface is not None:
         inputs.add(ob.data.surface.name)
-    if edited & inputs and len(rt.memory):
+    if edited & inputs and len(rt.cache.memory):
         why = invalidation.edit_seen(Setup(ob, scene, depsgraph, rt))
         if why:  # this frame's inputs changed: an edit
             invalidation.invalidate(ob, scene, reason=why)
@@ -142,8 +145,7 @@ def _check_edits(ob, scene, depsgraph, edited) -> None:
             # This frame still holds: the animation evaluated again, or a key moved on
             # another frame. Only this frame is known to hold now; a cached frame whose
             # inputs changed in these objects is solved again from a verified one.
-            rt.trusted |= edited & inputs
-            rt.verified &= {scene.frame_current}
+            playback.trust(rt, edited & inputs, scene.frame_current)
 
 
 @persistent
@@ -176,14 +178,14 @@ def _cache_not_saved(ob) -> None:
     """``ob``'s file was saved while its setup had a playback cache, and that cache is
     not in the file: say so now (the status, one console line), and have the frames
     that are not cached say it until the start frame is solved again (the reason
-    ``rules`` gives when it holds a frame is ``Runtime.dropped``)."""
+    ``rules`` gives when it holds a frame is ``PlaybackCache.dropped``)."""
     s = ob.furcollide
     rt = registry.get_runtime(ob)
     if rt is None:
         return
-    rt.dropped = registry.NOT_SAVED
+    playback.not_saved(rt)
     n = s.cached_at_save
-    registry.set_status(ob, "WARNING", (
+    report.set_status(ob, "WARNING", (
         f"The playback cache ({n} frame{'s' if n != 1 else ''}) is not saved with the "
         f"file: bake to keep the frames, or play from frame {s.frame_start}"))
 
@@ -201,10 +203,11 @@ def _record_playback_caches() -> None:
         rt = registry.get_runtime(ob, create=False)
         if s.is_baked:
             n = 0
-        elif rt is None or (not len(rt.memory) and rt.dropped == registry.NOT_SAVED):
+        elif rt is None or (not len(rt.cache.memory) and rt.cache.dropped == playback.NOT_SAVED):
             continue
         else:
-            n = len(rt.memory) if any(f > s.frame_start for f in rt.memory.frames) else 0
+            memory = rt.cache.memory
+            n = len(memory) if any(f > s.frame_start for f in memory.frames) else 0
         if s.cached_at_save != n:
             s.cached_at_save = n
 

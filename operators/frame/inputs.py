@@ -10,14 +10,16 @@ record (:mod:`.record`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...core import framecache
-from ...core.pipeline.frame import before_collision
+from ...core import framecache, splines
+from ...core.pipeline.frame import Motion, before_collision
 from ..blender import bridge
 from ..settings import maps, motion
+from ..settings.fingerprints import SettingsRead, read_settings
+from . import solve
 from .attach import attach_input
 from .clock import clock
 
@@ -51,8 +53,8 @@ class FrameInputs:
     attached: object = None
     #: Parameter maps at this frame: setting name -> (C,) values (:func:`maps.read_maps`).
     maps: dict = field(default_factory=dict)
-    #: How the source draws its curves (``output.SourceSplines``; read by
-    #: ``output.source_splines``). None: not read (a script: Catmull-Rom).
+    #: How the source draws its curves (:class:`SourceSplines`, read with the source).
+    #: None: not read (a script: Catmull-Rom).
     splines: object = None
 
     def __post_init__(self):
@@ -60,6 +62,59 @@ class FrameInputs:
             self.raw = self.points
         if self.key is None:
             self.key = framecache.topology_key(self.offsets)
+
+
+@dataclass
+class SourceSplines:
+    """How the evaluated source draws its curves, as one frame reads it.
+
+    Attributes
+    ----------
+    world : core.splines.Splines
+        Types, NURBS data and Bezier handles, the handles in world space.
+    points : (P, 3) float32 ndarray or None
+        The source's world polygon the handles go with (Bezier only); the frame's
+        input when neither Fur Attach nor motion moved it.
+    left_local, right_local : (P, 3) float32 ndarrays or None
+        The source's own handles (local space): written back as they are where the
+        output sits on the source and a curve was not moved.
+    """
+
+    world: splines.Splines
+    points: np.ndarray | None = None
+    left_local: np.ndarray | None = None
+    right_local: np.ndarray | None = None
+
+    @property
+    def has_handles(self) -> bool:
+        return self.points is not None
+
+    def at(self, points, offsets) -> splines.Splines:
+        """The splines with the handles moved onto the polygon ``points`` (world)."""
+        sp = self.world
+        if not self.has_handles or points is self.points or np.array_equal(points, self.points):
+            return sp
+        return sp.with_handles(*splines.moved_handles(self.points, points, offsets,
+                                                      sp.handle_left, sp.handle_right))
+
+
+def source_splines(src, local=None) -> SourceSplines:
+    """How the evaluated source ``src`` draws its curves (read once per frame).
+
+    ``local``: its local positions (P, 3), when read already."""
+    data = src.data
+    sp = bridge.read_splines(data)
+    out = SourceSplines(sp)
+    if sp.has(splines.BEZIER) and sp.handle_left is not None and sp.handle_right is not None:
+        M = bridge.matrix(src)
+        local = local if local is not None else bridge.get_positions(data)
+        # (as read_inputs transforms them: bit for bit ``inputs.raw`` without Fur Attach)
+        out.points = bridge.transform(local, M)
+        out.left_local, out.right_local = sp.handle_left, sp.handle_right
+        sp.handle_left = bridge.transform(sp.handle_left, M).astype(np.float64)
+        sp.handle_right = bridge.transform(sp.handle_right, M).astype(np.float64)
+    return out
+
 
 
 def read_inputs(setup, attach=True) -> FrameInputs:
@@ -87,7 +142,7 @@ def read_inputs(setup, attach=True) -> FrameInputs:
     warning = "; ".join(w for w in (warning, *map_warnings) if w)
     M_out_inv = bridge.matrix(out, inverted=True)
     common = dict(offsets=offs, enabled=mask, frame=setup.frame, key=key, m_out_inv=M_out_inv,
-                  warning=warning, maps=mapped)
+                  warning=warning, maps=mapped, splines=source_splines(src, P))
     if s.use_fur_attach:  # the input stage: curves follow the evaluated growth surface
         att = attach_input(ob, depsgraph, offs, s.core_threads)
         world = np.asarray(att.points(), np.float32) if attach else None
@@ -97,20 +152,36 @@ def read_inputs(setup, attach=True) -> FrameInputs:
     return FrameInputs(bridge.transform(P, M), local=local, **common)
 
 
-def prepare_input(setup, inp) -> None:
-    """Record the roots for jiggle and apply the motion that runs before collision
-    (:func:`core.pipeline.frame.before_collision`)."""
-    m, f, rt = motion.values(setup.motion), inp.frame, setup.rt
+def prepare_input(setup, inp, m) -> FrameInputs:
+    """``inp`` after the motion that runs before collision
+    (:func:`core.pipeline.frame.before_collision`, ``m``: the motion settings as
+    :func:`..settings.motion.values` reads them), the roots recorded for jiggle first."""
+    f = inp.frame
     if m.needs_history and f >= setup.s.frame_start:
         # (before the start frame the hair counts as at rest: frames viewed there
         # must not change a bake, which starts at the start frame)
-        rt.history.record(f, inp.points[inp.offsets[:-1]])
+        solve.record_roots(setup.rt, f, inp.points[inp.offsets[:-1]])
     with clock.timing("motion"):
-        moved = before_collision(m, inp.points, inp.offsets, f, setup.fps, rt.history,
+        moved = before_collision(m, inp.points, inp.offsets, f, setup.fps, setup.history,
                                  setup.s.core_threads)
-    if moved is not None:
-        inp.points = moved
-        inp.local = None
+    return inp if moved is None else replace(inp, points=moved, local=None)
+
+
+@dataclass(frozen=True)
+class FrameRead:
+    """What one evaluation of a setup's frame reads, once (:func:`read_frame`): the
+    evaluated source (``inputs``), the settings (``settings``: colliders listed, keyable
+    values, fingerprints) and the motion settings as plain values (``motion``)."""
+
+    inputs: FrameInputs
+    settings: SettingsRead
+    motion: Motion
+
+
+def read_frame(setup, attach=True) -> FrameRead:
+    """Read the frame of ``setup`` once (:func:`read_inputs`, ``attach`` as there)."""
+    return FrameRead(read_inputs(setup, attach), read_settings(setup.ob, setup.scene),
+                     motion.values(setup.motion))
 
 
 def shown(obj, depsgraph) -> bool:

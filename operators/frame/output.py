@@ -1,12 +1,14 @@
-"""What a frame writes: the output hair's positions, status codes, colours and attributes.
+"""What a frame writes: the output hair, and the setup's status; once a frame.
 
-FurCollide writes only into the output object it owns (never the source): the world
-points are brought into the output's local space (:func:`output_local`, bit for bit for
-the points the solver left alone when the output sits where the source sits), the
-per-curve ``furcollide_status`` and the point colours are rewritten only where a
-status changed, and per-point attributes (the collider distance) are set. Also here:
-the output's curve layout follows the source's (:func:`sync_output`), and which of
-source and output the viewport shows (:func:`apply_visibility`).
+FurCollide writes only into the output object it owns (never the source). A frame
+shows one :class:`Shown` (:func:`show`): the output's curve layout first follows the
+source's (:func:`sync_output`), the world points are brought into the output's local
+space (:func:`output_local`, bit for bit for the points the solver left alone when the
+output sits where the source sits), the per-curve ``furcollide_status`` and the point
+colours are rewritten only where a status changed, and per-point attributes (the
+collider distance) are set. Then the frame's status, statistics and outdated mark are
+set, once (:func:`publish`). Also here: which of source and output the viewport shows
+(:func:`apply_visibility`).
 """
 
 from __future__ import annotations
@@ -17,8 +19,71 @@ import numpy as np
 
 from ...core import framecache, splines
 from ..blender import bridge, compat
-from ..store.registry import source_of
+from ..store import registry, report
 from .clock import clock
+
+
+@dataclass(frozen=True)
+class Shown:
+    """What a frame writes into the output: world points (P, 3) and status codes (C,),
+    with the points that differ from the input (``changed``, computed when None) and
+    per-point ``attributes`` (name -> (P,) array)."""
+
+    points: np.ndarray
+    status: np.ndarray
+    changed: np.ndarray | None = None
+    attributes: dict | None = None
+
+
+@dataclass(frozen=True)
+class Stage:
+    """What a stage after the output (the render groom, the children) adds to the
+    frame: its ``stats`` (merged into the setup's statistics), a ``note`` for the
+    status ('' when none), and whether what it shows is ``outdated`` (a part of the
+    bake made with other settings). ``guides_ok``: the guides' frame was shown (a note
+    then follows their own status; otherwise it only shows alone). ``fresh``: what was
+    said of the colliders the stage built (:func:`.colliders.collider_list`)."""
+
+    stats: dict
+    note: str = ""
+    outdated: bool = False
+    guides_ok: bool = True
+    fresh: tuple = ()
+
+
+def show(setup, inputs, shown, sync=False):
+    """The one write of a frame: the output's layout follows the source's (``sync``),
+    then ``shown`` (a :class:`Shown`, or None: the output keeps what it shows) is
+    written. Returns the world points written, or None."""
+    if sync:
+        sync_output(setup, inputs)
+    if shown is None:
+        return None
+    return write(setup, inputs, shown.points, shown.status, shown.changed, shown.attributes)
+
+
+def publish(setup, status, outdated=None, stats=None) -> None:
+    """The frame's status ``(level, message)``, outdated mark and statistics (each
+    None: unchanged), set once at the end of the frame (:func:`..store.report.publish`)."""
+    report.publish(setup.ob, setup.rt, status, outdated, stats)
+
+
+@dataclass(slots=True)
+class Written:
+    """The part of a setup's runtime with what its output got last, changed only here
+    (the status colours are written again only where a status changed)."""
+
+    status: tuple | None = None  # (data session uid, status, colours) last written
+    #: What the output last got of the evaluated source's attributes
+    #: (``bridge.attribute_state``; None: nothing yet, copy them on the next frame).
+    attributes: tuple | None = None
+
+
+def forget_written(rt) -> None:
+    """Another runtime wrote into the output (the setup shown in another scene): the
+    next write of ``rt``'s writes the status, colours and attributes in full."""
+    rt.output.status = None
+    rt.output.attributes = None
 
 
 def write(setup, inputs, points_world, status, changed=None, attributes=None) -> np.ndarray:
@@ -52,12 +117,12 @@ def _write(setup, inputs, points_world, status, changed, attributes) -> np.ndarr
     data = setup.s.output.data
     local = output_local(inputs, points_world, changed)
     bridge.set_positions(data, local)
-    if setup.ob is not None:
-        write_handles(data, source_splines(setup, inputs), inputs, points_world, local)
+    if inputs.splines is not None:
+        write_handles(data, inputs.splines, inputs, points_world, local)
     if attributes:
         write_attributes(data, attributes)
     attr = data.attributes.get(bridge.STATUS_ATTRIBUTE)
-    last = rt.written_status  # (data, status, colours) written last
+    last = rt.output.status  # (data, status, colours) written last
     if last is not None and (
         attr is None or last[0] != data.session_uid or len(attr.data) != len(status)
     ):
@@ -66,7 +131,7 @@ def _write(setup, inputs, points_world, status, changed, attributes) -> np.ndarr
         previous, colors = (last[1], last[2]) if last is not None else (None, None)
         colors = bridge.status_colors(status, inputs.offsets, previous, colors)
         bridge.write_status(data, status, inputs.offsets, colors)
-        rt.written_status = (data.session_uid, status.copy(), colors)
+        rt.output.status = (data.session_uid, status.copy(), colors)
     return points_world
 
 
@@ -88,60 +153,6 @@ def output_local(inputs, points_world, changed=None) -> np.ndarray:
     if len(idx):
         local[idx] = bridge.transform(points_world[idx], inputs.m_out_inv)
     return local
-
-
-@dataclass
-class SourceSplines:
-    """How the evaluated source draws its curves, as one frame reads it.
-
-    Attributes
-    ----------
-    world : core.splines.Splines
-        Types, NURBS data and Bezier handles, the handles in world space.
-    points : (P, 3) float32 ndarray or None
-        The source's world polygon the handles go with (Bezier only); the frame's
-        input when neither Fur Attach nor motion moved it.
-    left_local, right_local : (P, 3) float32 ndarrays or None
-        The source's own handles (local space): written back as they are where the
-        output sits on the source and a curve was not moved.
-    """
-
-    world: splines.Splines
-    points: np.ndarray | None = None
-    left_local: np.ndarray | None = None
-    right_local: np.ndarray | None = None
-
-    @property
-    def has_handles(self) -> bool:
-        return self.points is not None
-
-    def at(self, points, offsets) -> splines.Splines:
-        """The splines with the handles moved onto the polygon ``points`` (world)."""
-        sp = self.world
-        if not self.has_handles or points is self.points or np.array_equal(points, self.points):
-            return sp
-        return sp.with_handles(*splines.moved_handles(self.points, points, offsets,
-                                                      sp.handle_left, sp.handle_right))
-
-
-def source_splines(setup, inputs) -> SourceSplines:
-    """The source's splines of this frame (read once per frame, kept on ``inputs``)."""
-    if inputs.splines is None:
-        src = setup.ob.evaluated_get(setup.depsgraph)
-        data = src.data
-        sp = bridge.read_splines(data)
-        out = SourceSplines(sp)
-        if (sp.has(splines.BEZIER) and sp.handle_left is not None
-                and sp.handle_right is not None):
-            M = bridge.matrix(src)
-            local = inputs.local if inputs.local is not None else bridge.get_positions(data)
-            # (as read_inputs transforms them: bit for bit ``inputs.raw`` without Fur Attach)
-            out.points = bridge.transform(local, M)
-            out.left_local, out.right_local = sp.handle_left, sp.handle_right
-            sp.handle_left = bridge.transform(sp.handle_left, M).astype(np.float64)
-            sp.handle_right = bridge.transform(sp.handle_right, M).astype(np.float64)
-        inputs.splines = out
-    return inputs.splines
 
 
 def write_handles(data, source, inputs, points_world, local) -> None:
@@ -219,7 +230,7 @@ def sync_output(setup, inputs) -> None:
     src = ob.evaluated_get(setup.depsgraph).data
     names, radius = bridge.attribute_state(src)
     rt = setup.rt
-    old = rt.output_attributes
+    old = rt.output.attributes
     same = (old is not None and old[0] == names
             and (radius is None) == (old[1] is None)
             and (radius is None or np.array_equal(radius, old[1])))
@@ -227,14 +238,13 @@ def sync_output(setup, inputs) -> None:
         bridge.copy_topology(src, compat.emptied_curves(out))
     elif not same:  # (the output's points stay: a held frame is still shown)
         bridge.copy_attributes(src, out.data)
-    rt.output_attributes = (names, radius)
-    source_splines(setup, inputs)  # (the solve widens the clearance of spline curves)
+    rt.output.attributes = (names, radius)
 
 
 # ---------------------------------------------------------------- viewport
 def apply_visibility(ob) -> None:
     """Show source or output in the viewport according to ``show_result``."""
-    ob = source_of(ob)
+    ob = registry.source_of(ob)
     if ob is None:
         return
     s = ob.furcollide

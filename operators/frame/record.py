@@ -16,12 +16,14 @@ animation evaluated again by comparing the scene with it
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ...core import framecache
 from ..blender import bridge
 from ..settings import keyed, maps
-from ..settings.fingerprints import signature, structure, structure_change
+from ..settings.fingerprints import structure_change
 from .colliders import collider_objects, read_collider_inputs, renders_otherwise
 
 
@@ -98,16 +100,19 @@ def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False,
     return rec
 
 
-def solved_inputs(setup, inp) -> dict:
-    """The record of the frame just solved, from the colliders as the solve read them."""
+def solved_inputs(setup, inp, read) -> dict:
+    """The record of the frame just solved (``read``: its settings as read once,
+    :class:`..settings.fingerprints.SettingsRead`), from the colliders as the solve
+    read them."""
     rt = setup.rt
-    growth = rt.growth if rt.growth is not None and uses_growth(rt.solver.settings) else None
-    entries = list(rt.colliders.values())
+    growth = rt.colliders.growth
+    growth = growth if growth is not None and uses_growth(rt.solve.solver.settings) else None
+    entries = list(rt.colliders.entries.values())
     return _tagged(setup, frame_inputs(
-        inp, setup.signature(identities=False), [e.inputs for e in entries],
+        inp, read.signature_record, [e.inputs for e in entries],
         [(e.double_sided, e.offset) for e in entries],
         growth.inputs if growth is not None else None,
-        structure=setup.structure(identities=False), values=keyed.values(setup.ob)))
+        structure=read.structure_record, values=read.values))
 
 
 #: Part of a frame-inputs record made from a render's depsgraph (see :func:`first_change`).
@@ -134,72 +139,119 @@ def _tagged(setup, record) -> dict:
     return record
 
 
-def current_inputs(setup, inp, like=None) -> dict:
+def current_inputs(setup, inp, read, like=None) -> dict:
     """The record of the frame the setup's depsgraph shows now, read afresh (no solver
-    needed): what a cached frame's record must equal to be shown.
+    needed; ``read``: the settings as read once): what a cached frame's record must
+    equal to be shown.
 
     ``like``: the record it will be compared with. One of a bake made before the
     ``attached`` part existed has ``source``, the digest of the attached points,
     instead: the record made then has it too (the curves attached once, here).
     """
     ob, depsgraph = setup.ob, setup.depsgraph
-    scene = depsgraph.scene
-    refs = collider_objects(ob, scene)
+    refs = read.refs
     cols = [read_collider_inputs(r.object, depsgraph, r.matrix(depsgraph)) for r in refs]
     surf = ob.data.surface
     surface = None
     if uses_growth(ob.furcollide) and surf is not None and surf.type == "MESH":
         surface = read_collider_inputs(surf, depsgraph)
-    return _tagged(setup, frame_inputs(inp, signature(ob, scene=scene, identities=False),
+    return _tagged(setup, frame_inputs(inp, read.signature_record,
                                        cols, [(r.double_sided, r.offset) for r in refs],
                                        surface,
                                        attached_as_source=like is not None and "source" in like,
-                                       structure=structure(ob, scene=scene, identities=False),
-                                       values=keyed.values(ob)))
+                                       structure=read.structure_record, values=read.values))
 
 
-def seen_inputs(setup, inp) -> dict:
-    """:func:`current_inputs`, remembered as what the frame handler saw at this frame
-    (``Runtime.seen``: the depsgraph check compares the scene with it)."""
-    new = current_inputs(setup, inp)
-    saw(setup, new)
-    return new
+@dataclass(slots=True)
+class Seen:
+    """The part of a setup's runtime with what the frame handler saw last, changed
+    only here: changes made since without an update callback drop cached frames
+    (:func:`.rules.since_seen`), and the depsgraph check tells an edit from the
+    animation evaluated again (:func:`..store.invalidation.edit_seen`)."""
+
+    #: What every frame of the shot shares (``fingerprints.structure``: which objects
+    #: collide, Mode, ...); a change drops the playback cache.
+    structure: str | None = None
+    #: ``keyed.fingerprint``: the depsgraph check looks for changed values only when it
+    #: changed (keys edited, a setting changed without an update).
+    values: int | None = None
+    attach: tuple | None = None  # (use_fur_attach, attach_id)
+    time: float | None = None  # fingerprints.time_key
+    #: ((scene name, frame), frame-inputs record) of the frame last evaluated: an update
+    #: that changes nothing the frame was solved or shown from is the animation
+    #: evaluated again, not an edit.
+    record: tuple | None = None
 
 
-def saw(setup, record) -> None:
-    """Remember ``record`` as the inputs the frame handler saw at the current frame."""
-    setup.rt.seen = ((setup.scene.name, setup.frame), record)
+def saw(rt, scene, frame, record) -> None:
+    """Remember ``record`` as the inputs the frame handler saw at ``frame`` of
+    ``scene`` (the depsgraph check compares the scene with it)."""
+    rt.seen.record = ((scene.name, frame), record)
 
 
-def fixed_change(setup, old, frame=None, animation=None) -> str:
+def last_seen(rt, scene, frame) -> dict | None:
+    """The record the frame handler saw at ``frame`` of ``scene``; None when it has not
+    evaluated that frame last."""
+    seen = rt.seen.record
+    return seen[1] if seen is not None and seen[0] == (scene.name, frame) else None
+
+
+def saw_settings(rt, s, read) -> None:
+    """Remember Fur Attach (of the setup's properties ``s``) and the time key of the
+    settings ``read`` once: a change of either drops every cached frame."""
+    rt.seen.attach = (bool(s.use_fur_attach), s.attach_id if s.use_fur_attach else "")
+    rt.seen.time = read.time_key
+
+
+def saw_structure(rt, read) -> None:
+    """Remember what every frame shares and the values' fingerprint of the settings
+    ``read`` once."""
+    rt.seen.structure = read.structure
+    rt.seen.values = read.fingerprint
+
+
+def saw_values(rt, fingerprint) -> None:
+    """Remember the values' fingerprint (the depsgraph check looked at it; None: look
+    at the values again next time)."""
+    rt.seen.values = fingerprint
+
+
+def forget_structure(rt) -> None:
+    """Accept the next structure seen without dropping cached frames (they were just
+    dropped)."""
+    rt.seen.structure = None
+
+
+def fixed_change(setup, old, read, frame=None) -> str:
     """What changed, in words, in the settings record ``old`` (of cached ``frame``) was
     made with: what every frame shares, and the keyable values at ``frame``
     (:func:`keyed.values` there, without going there); '' when nothing did (or ``old``
     is None). A step from a cached frame checks them: that frame cannot be evaluated
     again at this one. A record made before values were recorded compares the
-    settings and the colliders' options of the current frame instead."""
+    settings and the colliders' options of the current frame instead. ``read``: the
+    settings as read once at the frame shown (:class:`..settings.fingerprints.SettingsRead`)."""
     if old is None:
         return ""
-    ob, scene = setup.ob, setup.scene
+    ob = setup.ob
     if VALUES_PART in old and STRUCTURE_PART in old:
-        now = structure(ob, scene=scene, identities=False)
+        now = read.structure_record
         if old[STRUCTURE_PART] != now:
             return structure_change(old[STRUCTURE_PART], now)
+        animation = read.animation
         at = None if frame is None or frame == setup.frame else frame
-        animation = keyed.Animation(ob) if animation is None else animation
-        path = keyed.first_difference(old[VALUES_PART], keyed.values(ob, at, animation))
+        values = read.values if at is None else keyed.values(ob, at, animation)
+        path = keyed.first_difference(old[VALUES_PART], values)
         if path is None:
             return ""
         return value_change(ob, path, frame if animation.animates(path) else None)
-    refs = collider_objects(ob, scene)
+    refs = read.refs
     flags = framecache.text_digest(repr([(r.double_sided, r.offset) for r in refs]))
     if old.get("colliders") != flags:
         count = sum(k.startswith("collider ") and k.endswith(" matrix") for k in old)
         if count != len(refs):
             return f"a collider was {'added' if len(refs) > count else 'removed'}"
         return "a collider's Double Sided or Collision Offset changed"
-    if old.get("settings") != framecache.text_digest(
-            signature(ob, scene=scene, identities=False)):
+    if old.get("settings") != framecache.text_digest(read.signature_record):
         return "the settings changed"
     return ""
 
@@ -211,29 +263,27 @@ def value_change(ob, path, frame) -> str:
     return f"{keyed.label(ob, path)} changed{where}"
 
 
-def first_changed_frame(setup, frames) -> tuple[int, str] | None:
+def first_changed_frame(setup, frames, read) -> tuple[int, str] | None:
     """(the first of the cached ``frames`` whose settings record no longer holds, why),
     or None: the frames before it stay valid, it and every later one must be solved
-    again (:func:`fixed_change`)."""
-    memory = setup.rt.memory
-    animation = keyed.Animation(setup.ob)
+    again (:func:`fixed_change`; ``read`` as there)."""
+    memory = setup.rt.cache.memory
     for f in sorted(frames):
-        why = fixed_change(setup, memory.inputs(f), f, animation)
+        why = fixed_change(setup, memory.inputs(f), read, f)
         if why:
             return f, why
     return None
 
 
-def changed_objects(setup, old, new) -> set | None:
+def changed_objects(setup, old, new, refs) -> set | None:
     """Names of the objects whose parts differ between the records ``old`` and ``new``
     (the source, a collider and its instancers, the growth surface); None when
     another part differs (settings, the colliders' number or options) or a record is
-    missing."""
+    missing. ``refs``: the setup's colliders (:func:`.colliders.collider_objects`)."""
     if old is None or new is None:
         return None
-    old, new = _comparable(setup, old, new)
+    old, new = _comparable(setup, old, new, refs)
     ob = setup.ob
-    refs = collider_objects(ob, setup.scene)
     names = set()
     for part in set(old) | set(new):
         if old.get(part) == new.get(part):
@@ -250,9 +300,10 @@ def changed_objects(setup, old, new) -> set | None:
     return names
 
 
-def describe_change(ob, part, scene, old=None, new=None) -> str:
+def describe_change(ob, part, scene, old=None, new=None, refs=None) -> str:
     """The change :func:`framecache.first_change` found between the records ``old`` and
-    ``new``, in words naming the object."""
+    ``new``, in words naming the object (``refs``: the setup's colliders, when listed
+    already)."""
     if part == "colliders":
         count = [sum(k.endswith(" matrix") and k.startswith("collider ") for k in r or {})
                  for r in (old, new)]
@@ -284,34 +335,38 @@ def describe_change(ob, part, scene, old=None, new=None) -> str:
     if what == "surface":
         surf = ob.data.surface
         return f"the growth surface '{surf.name if surf is not None else '?'}' {change}"
-    refs = collider_objects(ob, scene)
+    refs = collider_objects(ob, scene) if refs is None else refs
     i = int(what.split()[-1]) if what.startswith("collider ") else len(refs)
     return f"'{refs[i].name}' {change}" if i < len(refs) else "the colliders changed"
 
 
-def cached_frame_change(setup, inp, f) -> str:
-    """Why memory-cached frame ``f`` no longer matches the current inputs ('' when it
-    does, or when it was stored without a record)."""
-    old = setup.rt.memory.inputs(f)
+def cached_frame_change(setup, inp, f, read) -> tuple[str, dict | None]:
+    """(why memory-cached frame ``f`` no longer matches the current inputs, '' when it
+    does; the current record, None when ``f`` was stored without a record)."""
+    old = setup.rt.cache.memory.inputs(f)
     if old is None:
-        return ""
-    new = seen_inputs(setup, inp)
-    part = first_change(setup, old, new)
-    return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""
+        return "", None
+    new = current_inputs(setup, inp, read)
+    return change(setup, old, new, read.refs), new
 
 
-def baked_frame_change(setup, inp, old) -> str:
+def baked_frame_change(setup, inp, old, read) -> str:
     """Why the baked frame whose inputs record is ``old`` (:func:`framecache.read_shown`)
     no longer matches the current inputs ('' when it does, or for files baked before
     FurCollide stored their inputs, ``old`` None: not checked)."""
     if old is None:
         return ""
-    new = current_inputs(setup, inp, like=old)
-    part = first_change(setup, old, new)
-    return describe_change(setup.ob, part, setup.depsgraph.scene, old, new) if part else ""
+    return change(setup, old, current_inputs(setup, inp, read, like=old), read.refs)
 
 
-def first_change(setup, old, new) -> str | None:
+def change(setup, old, new, refs) -> str:
+    """What differs between the records ``old`` and ``new`` (:func:`first_change`), in
+    words (:func:`describe_change`); '' when nothing does."""
+    part = first_change(setup, old, new, refs)
+    return describe_change(setup.ob, part, setup.scene, old, new, refs) if part else ""
+
+
+def first_change(setup, old, new, refs) -> str | None:
     """The first part that differs between frame-inputs records ``old`` and ``new``
     (:func:`framecache.first_change`), where one was made from a render's depsgraph
     and the other from the viewport's: a collider that Blender evaluates with other
@@ -319,17 +374,16 @@ def first_change(setup, old, new) -> str | None:
     Subdivision Surface at its defaults) has another shape in each, which is not an
     edit (its placement still counts). So F12 keeps the playback cache, a bake (made
     from the viewport) is not outdated in its renders, and frames solved in a render
-    are shown in the viewport."""
-    return framecache.first_change(*_comparable(setup, old, new))
+    are shown in the viewport. ``refs``: the setup's colliders."""
+    return framecache.first_change(*_comparable(setup, old, new, refs))
 
 
-def _comparable(setup, old, new) -> tuple[dict, dict]:
+def _comparable(setup, old, new, refs) -> tuple[dict, dict]:
     """``old`` and ``new`` without what :func:`first_change` does not compare."""
     skip = {RENDER_PART}
     # (records made before the settings were recorded per frame: ``settings`` holds them)
     skip |= {p for p in (STRUCTURE_PART, VALUES_PART) if p not in old}
     if (RENDER_PART in old) != (RENDER_PART in new):
-        refs = collider_objects(setup.ob, setup.scene)
         skip |= {f"collider {i} shape" for i, r in enumerate(refs)
                  if renders_otherwise(r.object, setup.scene)}
     return ({k: v for k, v in old.items() if k not in skip},

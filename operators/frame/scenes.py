@@ -8,7 +8,7 @@ FurCollide; an older file's setup is adopted by the scene that holds its collide
 the first that evaluates or bakes it). :func:`evaluate` runs a frame of a setup in a
 scene:
 
-* in its own scene, the frame rules (:func:`rules.evaluate`) as always;
+* in its own scene, the frame's spine (:func:`.spine.evaluate`) as always;
 * in another scene, :func:`show_source`: the output shows the source as groomed (Fur
   Attach applied, nothing collides, no motion), the render groom follows it without
   the clearance pass, and nothing of the setup's cache, bake or status is read or
@@ -24,9 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..store import registry
-from . import groom, output, rules
+from ..store import registry, report
+from . import groom, output, rules, spine
 from .inputs import read_inputs, shown
+from .output import Shown
 from .setup import Setup
 
 #: What has been said in the console about a setup shown in another scene (one line
@@ -35,17 +36,17 @@ _said: dict = {}
 
 
 def evaluate(ob, scene, depsgraph):
-    """Evaluate the frame of setup ``ob`` in ``scene``: the frame rules where it belongs
-    (recording that scene, :func:`registry.adopt`), else :func:`show_source`. Returns
-    the frame rules' ``Outcome`` (None in another scene). Raises what the frame rules
-    raise; never raises for another scene's setup."""
+    """Evaluate the frame of setup ``ob`` in ``scene``: the frame's spine where it
+    belongs (recording that scene, :func:`registry.adopt`), else :func:`show_source`.
+    Returns the frame's ``Outcome`` (None in another scene). Raises what the spine
+    raises; never raises for another scene's setup."""
     if registry.belongs(ob, scene):
         registry.adopt(ob, scene)
-        return rules.evaluate(Setup(ob, scene, depsgraph))
+        return spine.evaluate(Setup(ob, scene, depsgraph))
     try:
         show_source(ob, scene, depsgraph)
     except Exception as exc:  # noqa: BLE001 - the setup is not this scene's: only say it
-        text = registry.describe(exc)
+        text = report.describe(exc)
         if _said.get(ob.name) != text:
             _said[ob.name] = text
             print(f"FurCollide '{ob.name}' in scene '{scene.name}': the source hair could "
@@ -75,13 +76,10 @@ def show_source(ob, scene, depsgraph) -> bool:
     own = registry.get_runtime(ob, create=False)
     for r in (rt, own):  # both write into the same output data
         if r is not None:
-            r.written_status = None
-            r.output_attributes = None
-            if isinstance(r.groom, groom.GroomState):
-                r.groom.written = None
-    output.sync_output(setup, inp)
-    written = output.write(setup, inp, inp.points,
-                           np.zeros(len(inp.offsets) - 1, np.int8))
+            output.forget_written(r)
+            groom.forget_written(r)
+    written = output.show(setup, inp, Shown(inp.points, np.zeros(len(inp.offsets) - 1, np.int8)),
+                          sync=True)
     if s.groom.output is not None:
         groom.follow_unsolved(setup, written)
     _said.pop(ob.name, None)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import bpy
 from bpy.types import Operator
 
-from ..store import registry
+from ..store import registry, report
 from ..store.bake import BakeError, BakeJob, bake_sharers, free_bake
 from .common import SetupOperator, active_setup, backend_message, refresh, refuse, reports_errors
 
@@ -64,7 +64,7 @@ class _BakeBase:
         try:
             self._job = BakeJob(context.scene, self.sources(context), verbose=verbose)
         except Exception as exc:  # noqa: BLE001 - BakeError or unexpected: a report
-            self.report({"ERROR"}, registry.describe(exc))
+            self.report({"ERROR"}, report.describe(exc))
             return False
         return True
 
@@ -119,7 +119,7 @@ class _BakeBase:
             job.step()
         except Exception as exc:  # noqa: BLE001 - BakeError or unexpected: a report
             self._end(context, cancelled=True)
-            self.report({"ERROR"}, registry.describe(exc))
+            self.report({"ERROR"}, report.describe(exc))
             return {"CANCELLED"}
         context.window_manager.progress_update(job.frames_done)
         PROGRESS[context.scene.name] = (job.frames_done, max(1, job.total))

@@ -21,7 +21,7 @@ import sys
 import bpy
 
 from ...core import framecache
-from ..store import bake, registry
+from ..store import bake, registry, report
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -66,7 +66,7 @@ def run(argv) -> int:
     try:
         return _run(argv)
     except Exception as exc:  # noqa: BLE001 - a farm needs an exit code, not a traceback
-        print(f"furcollide: failed: {registry.describe(exc)}", file=sys.stderr)
+        print(f"furcollide: failed: {report.describe(exc)}", file=sys.stderr)
         return EXIT_FAILED
 
 

@@ -8,7 +8,7 @@ import functools
 import bpy
 
 from ..frame import scenes
-from ..store import registry
+from ..store import registry, report
 
 NO_SETUP = "Active object has no FurCollide setup"
 
@@ -63,7 +63,7 @@ def reports_errors(execute):
         try:
             return execute(self, context)
         except Exception as exc:  # noqa: BLE001 - reported to the artist
-            self.report({"ERROR"}, f"FurCollide: {registry.describe(exc)}")
+            self.report({"ERROR"}, f"FurCollide: {report.describe(exc)}")
             return {"CANCELLED"}
 
     return wrapper
@@ -81,7 +81,7 @@ def evaluate_now(context, src) -> str:
     try:
         scenes.evaluate(src, context.scene, context.evaluated_depsgraph_get())
     except Exception as exc:  # noqa: BLE001 - the caller reports it
-        return registry.describe(exc)
+        return report.describe(exc)
     return ""
 
 

@@ -232,13 +232,14 @@ def label(ob, path: str) -> str:
     return text
 
 
-def fingerprint(ob) -> int:
+def fingerprint(ob, animation=None) -> int:
     """Digest of what decides the setup's values at every frame: each unanimated
     value, each keyed value's F-curve (its keys, handles, interpolation, extrapolation
     and modifiers), each driven one's driver. Equal fingerprints give equal values at
     every frame, so the depsgraph check looks for changed frames only when it changes
-    (:func:`frame.rules.drop_changed`)."""
-    anim = Animation(ob)
+    (:func:`frame.rules.drop_changed`). ``animation``: the setup's :class:`Animation`,
+    when made already."""
+    anim = Animation(ob) if animation is None else animation
     parts = []
     for path, owner, names in _owners(ob):
         for name in names:

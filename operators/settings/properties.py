@@ -22,7 +22,7 @@ from bpy.props import (
 from bpy.types import PropertyGroup
 
 from ..blender import compat
-from ..store import registry
+from ..store import report
 from . import angles
 from .core_values import core_value
 from .properties_pipeline import FurCollideChildren, FurCollideGroom, FurCollideMotion
@@ -389,12 +389,12 @@ class FurCollideSettings(PropertyGroup):
     )
     status_message: StringProperty(
         name="Status",
-        get=lambda self: registry.status_shown(self.id_data)[1],
+        get=lambda self: report.status_shown(self.id_data)[1],
         description="What FurCollide did on the last frame, or what went wrong",
     )
     is_outdated: BoolProperty(
         name="Outdated",
-        get=lambda self: registry.is_outdated(self.id_data),
+        get=lambda self: report.is_outdated(self.id_data),
         description="The shown frame could not be solved from the previous one: play from "
         "the start frame or bake",
     )

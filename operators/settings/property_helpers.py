@@ -15,7 +15,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, St
 from ..blender import bridge
 from ..frame import children, output
 from ..frame.colliders import instanced_collection
-from ..store import invalidation, registry
+from ..store import invalidation, playback, registry, report
 from . import maps
 
 # ------------------------------------------------------------------ updates
@@ -29,7 +29,7 @@ def never_raises(update):
         try:
             update(self, context)
         except Exception as exc:  # noqa: BLE001
-            print(f"FurCollide: {update.__name__.strip('_')} failed: {registry.describe(exc)}")
+            print(f"FurCollide: {update.__name__.strip('_')} failed: {report.describe(exc)}")
 
     return wrapper
 
@@ -66,7 +66,7 @@ def update_range(self, context):
         s.frame_end = s.frame_start
         return
     rt = registry.get_runtime(ob, create=False)
-    if rt is not None and rt.memory.start == s.frame_start:
+    if rt is not None and rt.cache.memory.start == s.frame_start:
         # Only the end moved: frames inside the new range stay valid.
         invalidation.invalidate(ob, context.scene, reason="the frame range changed",
                                 from_frame=s.frame_end)
@@ -106,7 +106,7 @@ def update_motion(self, context):
 def update_memory_limit(self, context):
     rt = registry.get_runtime(self.id_data, create=False)
     if rt is not None:
-        rt.memory.limit = int(self.memory_limit * 1024 * 1024)
+        playback.set_limit(rt, self.memory_limit)
 
 
 @never_raises
@@ -222,6 +222,6 @@ def stat(name, key, description, prop=IntProperty, **kw):
     default = 0.0 if prop is FloatProperty else 0
 
     def get(self):
-        return registry.stats_for(self.id_data).get(key, default)
+        return report.stats_for(self.id_data).get(key, default)
 
     return prop(name=name, get=get, description=description, **kw)

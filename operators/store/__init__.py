@@ -2,8 +2,10 @@
 
 Modules
 -------
-registry      the setups of this session: one ``Runtime`` each, their status, their scene
+registry      the setups of this session: one ``Runtime`` each (one part per owner), their scene
+playback      the playback cache: frames kept, dropped, held
+report        what the panel shows of a setup: status, outdated mark, statistics; errors
 invalidation  what an edit drops (cached frames), and the refresh after it
-bake          bake and resume (``BakeJob``), bake directories, free
+bake          bake and resume (``BakeJob``; ``ToBake``: the spine's sink), directories, free
 baked         a baked setup against its bake: settings changed since mark it outdated
 """

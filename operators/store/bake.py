@@ -1,8 +1,9 @@
 """Bake and resume: solve a frame range in order and write it to disk.
 
 A bake writes ``frame_NNNNNN.npz`` files (see :mod:`..core.framecache`) into the
-setup's folder under its Cache Directory (:func:`bake_directory`). Each frame is solved
-by :func:`bake_frame` through the same :func:`solve.solve_frame` as playback.
+setup's folder under its Cache Directory (:func:`bake_directory`). Each frame runs
+the frame's spine as playback does (:func:`bake_frame`: :func:`..frame.spine.evaluate`
+into :class:`ToBake`, which writes the frame's file).
 Finished frames survive a cancel or a crash and the next bake resumes after the last
 one whose settings match (:func:`resume_frame`) and whose inputs still hold
 (:func:`resume_inputs_match`). A baked setup only reads its files until Free Bake.
@@ -20,15 +21,15 @@ import numpy as np
 
 from ...core import framecache
 from ..blender import bridge
-from ..frame import children, groom, output, rules, solve, topology
+from ..frame import children, groom, rules, solve, spine, topology
 from ..frame.clock import clock
-from ..frame.colliders import collider_list, keep_placements, read_for_solve
-from ..frame.inputs import prepare_input, read_inputs
-from ..frame.record import current_inputs, first_change, fixed_change, solved_inputs
+from ..frame.colliders import collider_list, keep_placements
+from ..frame.inputs import read_inputs
+from ..frame.record import current_inputs, first_change, fixed_change
 from ..frame.setup import Setup
 from ..settings import keyed, motion
-from ..settings.fingerprints import core_settings, structure
-from . import registry
+from ..settings.fingerprints import core_settings, read_settings, structure
+from . import playback, registry, report
 
 
 def bake_directory(ob) -> str:
@@ -75,7 +76,8 @@ def settings_fingerprint(ob) -> str:
 
 
 def bake_frame(setup, directory, trust_solver) -> dict:
-    """Solve the current frame ``f`` of ``setup`` for a bake and write it to ``directory``.
+    """Solve the current frame ``f`` of ``setup`` for a bake and write it to ``directory``:
+    the frame's spine (:func:`..frame.spine.evaluate`) into the bake (:class:`ToBake`).
 
     Parameters
     ----------
@@ -92,46 +94,92 @@ def bake_frame(setup, directory, trust_solver) -> dict:
     dict
         The frame's stats (curve counts per status, ``solve_ms``).
     """
-    rt, f = setup.rt, setup.frame
-    clock.start()
-    inp = read_inputs(setup)
-    if trust_solver and rt.topology is not None and rt.topology != inp.key:
-        # (frames of other curves than the frame before: no playback could show them)
-        raise ValueError(topology.topology_message(setup.ob, rt.topology, inp.key,
-                                                        "baking", setup.s.frame_start))
-    rt.adopt_topology(inp.key)
-    prepare_input(setup, inp)
-    output.sync_output(setup, inp)
-    solver = setup.ensure_solver(inp)
-    if rules.starts_here(setup):  # (the start frame, or enabled again)
-        solver.reset()
-    elif not trust_solver:
-        _p, _st, offsets, stored = framecache.read_frame(directory, f - 1)
-        if not np.array_equal(offsets, inp.offsets):
-            raise ValueError(f"bake frame {f - 1} was made for other curves")
-        solver.state = framecache.decode_state(stored, rt.memory.sparse)
-    read_for_solve(setup, inp, continuous=trust_solver, fresh=rules.starts_here(setup))
-    rt.solver_frame = None  # until the frame is solved: a failed stage leaves it unknown
-    result = solve.solve_frame(setup, inp)
-    rt.solver_frame = f
-    fp = settings_fingerprint(setup.ob)
-    state = solver.state
-    state["fingerprint"] = np.frombuffer(fp.encode(), np.uint8)
-    rt.stats = dict(result.stats, source="bake")
-    groom_part = _bake_groom(setup, result.points)  # the render groom is baked with its guides
-    # The children are made from the guides written (their stack evaluates the output).
-    output.write(setup, inp, result.points, result.status, result.changed, result.attributes)
-    children_part = children.bake_frame(setup)
-    extra = {groom.BAKE_PART: groom_part, children.BAKE_PART: children_part}
-    framecache.write_frame(directory, f, result.points, result.status, inp.offsets, state,
-                           rt.memory.sparse, result.attributes,
-                           inputs=solved_inputs(setup, inp),
-                           extra={k: v for k, v in extra.items() if v is not None})
-    rt.stats = dict(rt.stats, **clock.stats())
-    rt.invalid_note = rules.invalid_note(result.problems)
-    if rt.invalid_note:
-        setup.set_status(*rt.invalid_note)
-    return rt.stats
+    sink = ToBake(directory, trust_solver)
+    spine.evaluate(setup, sink)
+    return sink.stats
+
+
+class ToBake:
+    """The sink of a frame baked (:func:`bake_frame`; the spine's other sink is
+    :class:`..frame.spine.Playback`): every frame is solved, from the groomed shape at
+    the start frame (or enabled again), else from frame ``f - 1``'s state (the solver's,
+    just solved by this bake, or read from ``f - 1``'s file); the frame goes into its
+    bake file with the render groom and the children made from it."""
+
+    #: Not the frame handler's evaluation: nothing is remembered as seen.
+    sees = False
+
+    def __init__(self, directory, trust_solver):
+        self.directory = directory
+        self.trust_solver = trust_solver
+        self.stats = None  # the frame's statistics, once written
+
+    def skip(self, setup):
+        return None  # (a bake evaluates its frames while the frame handler keeps off)
+
+    def attaches(self, setup) -> bool:
+        return True
+
+    def changes(self, setup, read):
+        rt, inp = setup.rt, read.inputs
+        layout = rt.solve.topology
+        if self.trust_solver and layout is not None and layout != inp.key:
+            # (frames of other curves than the frame before: no playback could show them)
+            raise ValueError(topology.topology_message(setup.ob, layout, inp.key,
+                                                       "baking", setup.s.frame_start))
+        return rules.Changes(adopt=inp.key)
+
+    def decide(self, setup, read):
+        start = "reset" if rules.starts_here(setup, read.settings.animation) else "step"
+        first = setup.frame == setup.s.frame_start
+        return rules.Decision(rules.Outcome.RESET if first else rules.Outcome.STEP,
+                              show="solve", start=start)
+
+    def prepare(self, setup, read, d):
+        rt, f = setup.rt, setup.frame
+        solver = solve.ensure_solver(setup, read.inputs)
+        if d.start == "reset":  # (the start frame, or enabled again)
+            solver.reset()
+        elif not self.trust_solver:
+            _p, _st, offsets, stored = framecache.read_frame(self.directory, f - 1)
+            if not np.array_equal(offsets, read.inputs.offsets):
+                raise ValueError(f"bake frame {f - 1} was made for other curves")
+            solve.restore(setup, framecache.decode_state(stored, rt.cache.memory.sparse))
+        return None
+
+    def continuous(self, setup) -> bool:
+        return self.trust_solver
+
+    def keep(self, setup, read, result, record) -> None:
+        pass  # (the bake file is written with the render groom and the children)
+
+    def stages(self, setup, outcome, shown):
+        """The render groom and the children made from the guides just written: their
+        parts of the bake file and statistics (None each: none)."""
+        return _bake_groom(setup, shown.written), children.bake_frame(setup)
+
+    def publish(self, setup, outcome, shown, parts) -> None:
+        """Write the frame's bake file (the solver's state with the settings'
+        fingerprint, the frame-inputs record, the render groom's and the children's
+        parts), its statistics, and the status of INVALID curves."""
+        rt, f, result = setup.rt, setup.frame, shown.result
+        stats = dict(result.stats, source="bake")
+        extra = {}
+        for name, part in zip((groom.BAKE_PART, children.BAKE_PART), parts, strict=True):
+            if part is not None:
+                extra[name] = part[0]
+                stats.update(part[1])
+        state = rt.solve.solver.state
+        state["fingerprint"] = np.frombuffer(settings_fingerprint(setup.ob).encode(), np.uint8)
+        framecache.write_frame(self.directory, f, result.points, result.status,
+                               shown.read.inputs.offsets, state, rt.cache.memory.sparse,
+                               result.attributes, inputs=shown.record, extra=extra)
+        self.stats = dict(stats, **clock.stats())
+        invalid = rt.report.invalid_note
+        report.publish(setup.ob, rt, invalid, stats=self.stats)
+
+    def failed(self, setup) -> None:
+        pass  # (the frames baked before are kept; the bake reports the error)
 
 
 def _bake_groom(setup, guides_world):
@@ -141,7 +189,7 @@ def _bake_groom(setup, guides_world):
         return groom.bake_frame(setup, guides_world)
     except Exception as exc:  # noqa: BLE001 - the guides are baked all the same
         print(f"FurCollide bake '{setup.ob.name}': frame {setup.frame}: render groom not "
-              f"baked: {registry.describe(exc)}", flush=True)
+              f"baked: {report.describe(exc)}", flush=True)
         return None
 
 
@@ -188,8 +236,9 @@ def resume_inputs_match(ob, directory, f, scene) -> bool:
         old = framecache.read_inputs(directory, f)
         if old is None:  # baked before FurCollide stored the record: start over
             return False
-        now = current_inputs(setup, read_inputs(setup, attach=False), like=old)
-        return first_change(setup, old, now) is None
+        read = read_settings(ob, scene)
+        now = current_inputs(setup, read_inputs(setup, attach=False), read, like=old)
+        return first_change(setup, old, now, read.refs) is None
 
 
 def resume_frame(ob, directory) -> int | None:
@@ -200,6 +249,7 @@ def resume_frame(ob, directory) -> int | None:
     have = set(framecache.list_frames(directory))
     fp = settings_fingerprint(ob)
     setup = Setup(ob, bpy.context.scene, None)
+    read = read_settings(ob, setup.scene)
     last = None
     f = s.frame_start
     while f in have and f <= s.frame_end:
@@ -208,7 +258,7 @@ def resume_frame(ob, directory) -> int | None:
                 key = next((k for k in z.files if k.endswith("__fingerprint")), None)
                 ok = key is not None and z[key].tobytes().decode() == fp
             # (the keyable values at f: a key edited since the bake changes them there)
-            ok = ok and not fixed_change(setup, framecache.read_inputs(directory, f), f)
+            ok = ok and not fixed_change(setup, framecache.read_inputs(directory, f), read, f)
         except framecache.UNREADABLE:
             ok = False
         if not ok:
@@ -337,7 +387,7 @@ class BakeJob:
             except Exception as exc:  # noqa: BLE001 - becomes a report
                 kept = (f"frames {s.frame_start}-{f - 1} are kept; bake again to resume"
                         if f > s.frame_start else "no frame was written")
-                raise BakeError(f"'{ob.name}' frame {f}: {registry.describe(exc)} ({kept})"
+                raise BakeError(f"'{ob.name}' frame {f}: {report.describe(exc)} ({kept})"
                                 ) from exc
             job[3] = f
             if self.verbose:
@@ -378,8 +428,7 @@ class BakeJob:
             complete = all(f in have for f in range(s.frame_start, s.frame_end + 1))
             if complete and not cancelled:
                 s.is_baked = True
-                rt.memory.clear()
-                rt.hold = None
+                playback.forget(rt)
                 baked.append(ob)
         if restore_frame:
             f, sub = self.orig_frame

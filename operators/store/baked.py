@@ -23,8 +23,8 @@ from ...core import framecache
 from ..frame import groom
 from ..frame.record import VALUES_PART, fixed_change
 from ..frame.setup import Setup
-from ..settings.fingerprints import signature
-from . import registry
+from ..settings.fingerprints import read_settings
+from . import registry, report
 
 #: What a baked setup whose settings are not the bake's says (:func:`message`).
 MESSAGE = "baked with other settings"
@@ -75,7 +75,7 @@ def _baked_with(directory, f):
     return got
 
 
-def settings_change(ob, scene=None, directory=None, f=None, record=None) -> str:
+def settings_change(ob, scene=None, directory=None, f=None, record=None, read=None) -> str:
     """What of the setup's settings is other than what its bake's frame ``f`` was made
     with, in words ('' when nothing, or when the bake does not say: files of older
     versions). Default: the baked frame the scene's current frame shows.
@@ -83,7 +83,8 @@ def settings_change(ob, scene=None, directory=None, f=None, record=None) -> str:
     A frame's record holds what every frame shares and the keyable values at that
     frame (:func:`..frame.record.fixed_change` compares them, at ``f`` without going
     there); a bake made before values were recorded holds one digest of the settings,
-    the same for every frame."""
+    the same for every frame. ``read``: the settings as read once at the frame shown
+    (:func:`..settings.fingerprints.read_settings`, read now when not given)."""
     scene = scene or bpy.context.scene
     if directory is None:
         where = _bake_file(ob, scene)
@@ -93,13 +94,14 @@ def settings_change(ob, scene=None, directory=None, f=None, record=None) -> str:
     record_read, groom_key = _baked_with(directory, f)
     record = record_read if record is None else record
     if record is not None:
+        read = read_settings(ob, scene) if read is None else read
         if VALUES_PART in record:
             setup = Setup(ob, scene, None, registry.get_runtime(ob, create=False))
-            why = fixed_change(setup, record, f)
+            why = fixed_change(setup, record, read, f)
             if why:
                 return why
         elif record.get("settings") not in (None, framecache.text_digest(
-                signature(ob, scene=scene, identities=False))):
+                read.signature_record)):
             return "the settings changed"
     g = ob.furcollide.groom
     if (groom_key is not None and g.output is not None and g.bind_id != ""
@@ -126,10 +128,10 @@ def check(ob, scene=None) -> bool:
     if rt is None:
         return bool(what)
     if what:
-        rt.outdated = True
-        registry.set_status(ob, "WARNING",
-                            f"This setup was {message(what)} (the frames shown are the bake's)")
-    elif MESSAGE in rt.status[1]:
-        rt.outdated = False
-        registry.set_status(ob, "INFO", "")
+        report.mark_outdated(rt)
+        report.set_status(ob, "WARNING",
+                          f"This setup was {message(what)} (the frames shown are the bake's)")
+    elif MESSAGE in rt.report.status[1]:
+        report.mark_outdated(rt, False)
+        report.set_status(ob, "INFO", "")
     return bool(what)

@@ -14,16 +14,21 @@ import bpy
 
 from ..blender.dependencies import update_dependencies
 from ..frame import rules, scenes
+from ..frame.colliders import forget as forget_colliders
 from ..frame.inputs import read_inputs
 from ..frame.record import (
     STRUCTURE_PART,
     VALUES_PART,
+    change,
     current_inputs,
-    describe_change,
-    first_change,
+    first_changed_frame,
+    last_seen,
+    saw,
+    saw_values,
 )
 from ..frame.setup import Setup
-from . import baked, registry
+from ..settings.fingerprints import read_settings
+from . import baked, playback, registry, report
 
 
 def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=True,
@@ -59,19 +64,19 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
     s = ob.furcollide
     if values and from_frame is None:
         values_changed(Setup(ob, scene, None, rt))
-        rt.values_seen = None
+        saw_values(rt, None)
     elif from_frame is not None and from_frame >= s.frame_start:
-        rt.drop_frames_after(from_frame, s.frame_start)
-    elif rt.drop_cache(reason, s.frame_start, scene.frame_current) and not s.is_baked:
+        playback.drop_after(rt, from_frame, s.frame_start)
+    elif playback.drop_cache(rt, reason, s.frame_start, scene.frame_current) and (
+            not s.is_baked):
         f = scene.frame_current
         if s.enabled and s.frame_start <= f:  # the output shows a result solved before
-            rt.outdated = True
+            report.mark_outdated(rt)
             if f > s.frame_start:  # (the start frame is solved again when shown)
-                registry.set_status(ob, "WARNING",
-                                    rules.dropped_message(f, reason, s.frame_start))
+                report.set_status(ob, "WARNING",
+                                  rules.dropped_message(f, reason, s.frame_start))
     if colliders:
-        rt.colliders.clear()
-        rt.growth = None
+        forget_colliders(rt)
         update_dependencies(ob)
     if refresh:
         schedule_refresh(ob.name)
@@ -80,20 +85,24 @@ def invalidate(ob, scene, reason="", from_frame=None, colliders=False, refresh=T
 def values_changed(setup) -> None:
     """The setup's keyable values may have changed (a key edited, a setting changed):
     drop the cached frames from the first one whose values changed
-    (:func:`rules.drop_changed`), keep the others, and say so when the frame
-    shown is one of the dropped ones; refresh the current frame."""
+    (:func:`..frame.record.first_changed_frame`), keep the others, and say so when the
+    frame shown is one of the dropped ones; refresh the current frame."""
     s, rt, f = setup.s, setup.rt, setup.frame
-    changed = rules.drop_changed(setup)
-    if changed is None or s.is_baked:
+    memory = rt.cache.memory
+    changed = first_changed_frame(setup, memory.frames, read_settings(setup.ob, setup.scene))
+    if changed is None:
         return
     first, why = changed
+    playback.drop_from(rt, first, why, s.frame_start, f)
+    if s.is_baked:
+        return
     if s.enabled and first <= f and f > s.frame_start:
-        rt.outdated = True
-        k = rt.memory.newest_before(f)
+        report.mark_outdated(rt)
+        k = memory.newest_before(f)
         resume = k if first > s.frame_start and k is not None and (
-            rt.memory.frames[k].state is not None) else None
-        registry.set_status(setup.ob, "WARNING",
-                            rules.dropped_message(f, why, s.frame_start, resume))
+            memory.frames[k].state is not None) else None
+        report.set_status(setup.ob, "WARNING",
+                          rules.dropped_message(f, why, s.frame_start, resume))
     schedule_refresh(setup.ob.name)
 
 
@@ -109,19 +118,18 @@ def edit_seen(setup) -> str | None:
     saw.
     """
     rt = setup.rt
-    key = (setup.scene.name, setup.frame)
-    if rt.seen is None or rt.seen[0] != key:
+    old = last_seen(rt, setup.scene, setup.frame)
+    if old is None:
         return None
-    new = current_inputs(setup, read_inputs(setup, attach=False))  # (the record only)
-    old = rt.seen[1]
-    rt.seen = (key, new)
+    read = read_settings(setup.ob, setup.scene)
+    new = current_inputs(setup, read_inputs(setup, attach=False), read)  # (the record only)
+    saw(rt, setup.scene, setup.frame, new)
     if VALUES_PART in old:
         # The settings (their values, and what derives from them) are checked by
         # values_changed, frame by frame: only the objects are compared here.
         skip = (STRUCTURE_PART, VALUES_PART, "settings", "colliders")
         old, new = ({k: v for k, v in r.items() if k not in skip} for r in (old, new))
-    part = first_change(setup, old, new)
-    return describe_change(setup.ob, part, setup.scene, old, new) if part else ""
+    return change(setup, old, new, read.refs)
 
 
 def refresh_groom(ob) -> None:
@@ -131,7 +139,6 @@ def refresh_groom(ob) -> None:
         baked.check(ob)
     rt = registry.get_runtime(ob, create=False) if ob is not None else None
     if rt is not None:
-        rt.groom_shown = None
         schedule_refresh(ob.name)
 
 
@@ -161,7 +168,7 @@ def schedule_refresh(name: str) -> None:
                     # (shown as groomed where the setup is not the scene's: scenes)
                     scenes.evaluate(ob, scene, bpy.context.evaluated_depsgraph_get())
             except Exception as exc:  # noqa: BLE001 - a timer must never raise either
-                registry.record_error(ob, exc)
+                report.record_error(ob, exc)
         return None
 
     _pending_refresh[name] = refresh

@@ -1,11 +1,16 @@
-"""The setups of this Blender session: one :class:`Runtime` each, their status and errors.
+"""The setups of this Blender session: one :class:`Runtime` each, and their scene.
 
-A setup's runtime lives only in this session (never in bpy properties): the core
-``Solver``, one core ``Collider`` per collider object (kept across frames, so that rigid
-motion never rebuilds a BVH), the bounded memory cache, and the status and statistics the
-panel shows. It is keyed by the setup id plus the source object's session id, so a
-duplicated source never shares the original's. :func:`prune` drops the runtimes of
-setups that are gone (a source deleted in the UI), memory cache and all.
+A setup's runtime lives only in this session (never in bpy properties). It is made of
+parts, each changed only by the module that owns it: the playback cache
+(:mod:`.playback`), the solver and its frame (:mod:`..frame.solve`), the core Colliders
+kept across frames, so that rigid motion never rebuilds a BVH (:mod:`..frame.colliders`),
+what the frame handler saw last (:mod:`..frame.record`), the status and statistics the
+panel shows (:mod:`.report`), what the output got last (:mod:`..frame.output`), the
+render groom's, the children's and Fur Attach's state (:mod:`..frame.groom`,
+:mod:`..frame.children`, :mod:`..frame.attach`). It is keyed by the setup id plus the
+source object's session id, so a duplicated source never shares the original's.
+:func:`prune` drops the runtimes of setups that are gone (a source deleted in the UI),
+memory cache and all.
 
 A setup belongs to one scene (:func:`owner`): the one Add FurCollide ran in, recorded
 on the source (``owner_scene``). A hair object linked into several scenes (a character
@@ -13,160 +18,68 @@ collection in several shots) is set up in that one only: in the others its outpu
 the source as groomed and nothing of the setup's cache or bake is touched
 (:mod:`..frame.scenes`); :func:`setups` lists a scene's own setups, and :func:`foreign_message`
 says where a setup belongs.
-
-Status messages and errors live here too: :func:`set_status` prints one console line per
-distinct problem, :func:`record_error` turns an exception into the setup's status, and
-:func:`describe` gives an exception's user-facing text.
 """
 
 from __future__ import annotations
 
-import os
-import re
-import traceback
 import uuid
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import bpy
 
-from ... import core
-from ...core import framecache, splines
-from ...core.pipeline.frame import RootHistory
-from ..blender import bridge
+from ...core import framecache
 
 
-@dataclass
+@dataclass(slots=True)
 class Runtime:
-    """Session-only state of one setup."""
+    """Session-only state of one setup: one part per job, each changed only by the
+    functions of the module that owns it (others read it). The runtime and its parts
+    have slots: no module can leave an attribute on them for another to find."""
 
     uid: str
+    #: The frames cached in this session, and what was dropped
+    #: (:class:`.playback.PlaybackCache`).
+    cache: object
+    #: The core Solver, the frame its state holds, the curve layout it belongs to, the
+    #: jiggle's root history and the spline margin (:class:`..frame.solve.SolveState`).
+    solve: object
+    #: The core Colliders kept across frames, what was said of them, their placements
+    #: at the cached frames (:class:`..frame.colliders.ColliderState`).
+    colliders: object
+    #: What the frame handler saw last: the structure, the values' fingerprint, Fur
+    #: Attach, the time key, the frame-inputs record (:class:`..frame.record.Seen`).
+    seen: object
+    #: What the panel shows: status, outdated mark, statistics, errors
+    #: (:class:`.report.Report`).
+    report: object
+    #: What the output got last: its status colours, the source's attributes
+    #: (:class:`..frame.output.Written`).
+    output: object
     name: str = ""  # the source object's name when last looked up (see prune)
-    solver: object = None  # core.Solver, built for ``topology`` (its settings: solver.settings)
-    #: The source's curve layout (``framecache.topology_key``) the solver, the cached
-    #: frames and the jiggle history belong to: :meth:`adopt_topology` changes it.
-    topology: tuple | None = None
-    colliders: dict = field(default_factory=dict)  # collider uid -> colliders.ColliderEntry
-    #: The spline margin of the last frame solved and what it was computed from.
-    drawn: splines.DrawnMargin = field(default_factory=splines.DrawnMargin)
-    #: Follow Collider Motion: frame -> {collider uid: core Placement} of cached frames.
-    placements: dict = field(default_factory=dict)
-    growth: object = None  # colliders.ColliderEntry of the growth surface
-    memory: framecache.MemoryCache = field(default_factory=framecache.MemoryCache)
-    solver_frame: int | None = None  # frame whose result the solver state holds
-    hold: tuple | None = None  # (frame, world positions, status) of newest frame
-    #: What every frame of the shot shares, seen last (``fingerprints.structure``: which
-    #: objects collide, Mode, ...); a change drops the playback cache.
-    signature: str | None = None
-    #: ``keyed.fingerprint`` seen last: the depsgraph check looks for changed values
-    #: only when it changed (keys edited, a setting changed without an update).
-    values_seen: int | None = None
-    outdated: bool = False
+    #: The render groom's binding and what it computed last (``frame.groom.GroomState``,
+    #: :mod:`..frame.groom`; None until the stage first runs).
+    groom: object = None
+    #: The children stage's last clearance (``frame.children.ChildrenState``,
+    #: :mod:`..frame.children`; None until the stage first runs).
+    children: object = None
+    #: (attach_id, core Binding, surface topology key): Fur Attach's binding as loaded
+    #: (:mod:`..frame.attach`).
+    attach: tuple | None = None
+    #: A bake of this setup is running (:mod:`.bake`: it writes the frames; the frame
+    #: handler keeps off).
     baking: bool = False
-    status: tuple = ("INFO", "")
-    printed: str = ""
-    stats: dict = field(default_factory=dict)
-    #: The status for the INVALID curves of the last solved frame (None: none).
-    invalid_note: tuple | None = None
-    error: str = ""  # last solve error (kept visible while frames cannot be solved)
-    written_status: tuple | None = None  # (data session uid, status, colours) last written
-    attach: tuple | None = None  # (attach_id, core Binding, surface topology key): Fur Attach
-    attach_state: tuple | None = None  # (use_fur_attach, attach_id) seen last
-    time_state: float | None = None  # fingerprints.time_key seen last
-    history: RootHistory = field(default_factory=RootHistory)  # jiggle
-    groom: tuple | None = None  # (bind_id, frame.groom.GroomBinding): render groom
-    groom_shown: tuple | None = None  # (frame, guides) the groom output shows
-    children: object = None  # frame.children.ChildrenState: the children output
-    #: Why the playback cache is empty (until the start frame is solved again): the
-    #: reason the frames that are not cached give, e.g. "'Box' moved: the playback
-    #: cache was dropped".
-    dropped: str = ""
-    dropped_why: str = ""  # the change itself ("'Box' moved")...
-    dropped_at: int | None = None  # ...and the frame it was seen at...
-    dropped_from: int = 0  # ...and the first frame dropped
-    #: ((scene name, frame), frame-inputs record) the frame handler last evaluated: the
-    #: depsgraph check compares the scene with it (an update that changes nothing the
-    #: frame was solved or shown from is the animation evaluated again, not an edit).
-    seen: tuple | None = None
-    #: Objects the depsgraph reported updated while the current frame's inputs held (the
-    #: animation evaluated again, or a key moved on another frame), since the playback
-    #: cache was last dropped; and the cached frames known to hold since: the frame it
-    #: was seen at, the frames solved after. A cached frame whose inputs changed only
-    #: in those objects is solved again from a verified previous frame (a key moved
-    #: ahead of it); any other change drops the playback cache (see frame.rules).
-    trusted: set = field(default_factory=set)
-    verified: set = field(default_factory=set)
-    #: Collider uid -> what was said about it once (``colliders._tell``), and what the
-    #: next status says of colliders just built (``colliders.collider_note``).
-    told: dict = field(default_factory=dict)
-    fresh_notes: list = field(default_factory=list)
-    #: What the output last got of the evaluated source's attributes
-    #: (``bridge.attribute_state``; None: nothing yet, copy them on the next frame).
-    output_attributes: tuple | None = None
 
-    def forget_solver(self):
-        self.solver = None
-        self.solver_frame = None
-        self.colliders.clear()
-        self.growth = None
 
-    def adopt_topology(self, key) -> bool:
-        """Take the source's curve layout ``key``; True when it changed (the solver and
-        the jiggle history, which belong to the old curves, are forgotten)."""
-        changed = self.topology is not None and self.topology != key
-        if changed:
-            self.forget_solver()
-            self.history.clear()
-        self.topology = key
-        return changed
+def new_runtime(uid, memory_limit_mb=framecache.DEFAULT_MEMORY_LIMIT_MB) -> Runtime:
+    """A setup's runtime with every part empty, each made by its owner (its cache's
+    Memory Limit ``memory_limit_mb``)."""
+    from ..frame import colliders, output, record, solve  # (they read the registry)
+    from . import playback, report
 
-    def drop_frames_after(self, f: int, start: int) -> None:
-        """Forget the cached frames after ``f`` (every one when ``f`` is before the
-        start frame ``start``), and what was derived from them."""
-        self.verified = {k for k in self.verified if k <= f}
-        if f < start:
-            self.memory.clear()
-            self.hold = None
-        else:
-            self.memory.drop_after(f)
-            if self.hold is not None and self.hold[0] > f:
-                self.hold = None
-        if self.solver_frame is not None and self.solver_frame > f:
-            self.solver_frame = None
-        self.history.drop_after(f)
-        self.groom_shown = None
-        self.signature = None  # accept the new settings without a second drop
-
-    def drop_from(self, first: int, why: str, start: int, frame: int | None = None) -> bool:
-        """Drop the cached frames from ``first`` on (every one when ``first`` is the
-        start frame ``start`` or before it: :meth:`drop_cache`): ``why`` (a change seen
-        at ``frame``) made them other than they were solved. True when frames were
-        dropped."""
-        if first <= start:
-            return self.drop_cache(why, start, frame)
-        had = any(k >= first for k in self.memory.frames) or (
-            self.solver_frame is not None and self.solver_frame >= first)
-        self.drop_frames_after(first - 1, start)
-        self.trusted.clear()
-        if had and why:
-            self.dropped = f"{why}: the frames from {first} on were dropped"
-            self.dropped_why, self.dropped_at, self.dropped_from = why, frame, first
-        return had
-
-    def drop_cache(self, why: str, start: int, frame: int | None = None) -> bool:
-        """Drop the whole playback cache, as Blender's point cache does on a change:
-        the frames shown next are solved again from the start frame ``start`` on, and
-        until then the frames that are not cached say ``why`` (the change, seen at
-        ``frame``). True when frames (or a solver state) were dropped."""
-        had = len(self.memory) > 0 or self.solver_frame is not None
-        self.drop_frames_after(start - 1, start)
-        self.solver_frame = None
-        self.verified.clear()
-        self.trusted.clear()
-        if had and why:
-            self.dropped = f"{why}: the playback cache was dropped"
-            self.dropped_why, self.dropped_at, self.dropped_from = why, frame, start
-        return had
+    return Runtime(uid, cache=playback.new(memory_limit_mb), solve=solve.SolveState(),
+                   colliders=colliders.ColliderState(), seen=record.Seen(),
+                   report=report.Report(), output=output.Written())
 
 
 registry: dict[str, Runtime] = {}
@@ -174,11 +87,6 @@ registry: dict[str, Runtime] = {}
 #: last written with there, the render groom's binding): (setup key, scene session id)
 #: -> Runtime. Never the setup's own cache: :func:`foreign_runtime`.
 foreign: dict[tuple, Runtime] = {}
-
-#: Why the playback cache is empty after a file saved with one was opened (the reason
-#: the frames that are not cached give, as ``Runtime.dropped``, until the start frame
-#: is solved again).
-NOT_SAVED = "the playback cache is not saved with the file: bake to keep the frames"
 
 
 def ensure_uid(ob) -> str:
@@ -203,8 +111,7 @@ def get_runtime(ob, create=True) -> Runtime | None:
     key = _key(ob)
     rt = registry.get(key)
     if rt is None and create:
-        rt = registry[key] = Runtime(uid)
-        rt.memory = framecache.MemoryCache(ob.furcollide.memory_limit)
+        rt = registry[key] = new_runtime(uid, ob.furcollide.memory_limit)
     if rt is not None:
         rt.name = ob.name
     return rt
@@ -232,7 +139,7 @@ def foreign_runtime(ob, scene) -> Runtime:
     key = (_key(ob), scene.session_uid)
     rt = foreign.get(key)
     if rt is None:
-        rt = foreign[key] = Runtime(ob.furcollide.uid)
+        rt = foreign[key] = new_runtime(ob.furcollide.uid)
     rt.name = ob.name
     return rt
 
@@ -400,67 +307,3 @@ def handlers_held():
         yield
     finally:
         _busy = was
-
-
-# ------------------------------------------------------------- status, errors
-def set_status(ob, level: str, message: str) -> None:
-    """Set the setup's status; a new warning/error prints one console line."""
-    rt = get_runtime(ob)
-    if rt is None:
-        return
-    rt.status = (level, message)
-    # One console line per distinct problem (frame numbers do not count).
-    key = re.sub(r"\d+", "#", message) if level != "INFO" else ""
-    if key and key != rt.printed:
-        print(f"FurCollide '{ob.name}': {message}", flush=True)
-    rt.printed = key
-
-
-def stats_for(ob) -> dict:
-    rt = get_runtime(ob, create=False)
-    return rt.stats if rt else {}
-
-
-def status_for(ob) -> tuple:
-    rt = get_runtime(ob, create=False)
-    return rt.status if rt else ("INFO", "")
-
-
-def status_shown(ob, scene=None) -> tuple:
-    """The status the panel shows for the setup on ``ob`` in ``scene`` (default: the
-    context scene): where it belongs to another scene, that
-    (:func:`foreign_message`); else :func:`status_for`."""
-    msg = foreign_message(ob, scene)
-    return ("WARNING", msg) if msg else status_for(ob)
-
-
-def is_outdated(ob, scene=None) -> bool:
-    """Is the frame the setup on ``ob`` shows outdated? Never in a scene it does not
-    belong to (its output shows the source there)."""
-    rt = get_runtime(ob, create=False)
-    return bool(rt and rt.outdated) and not foreign_message(ob, scene)
-
-
-def record_error(ob, exc: Exception) -> None:
-    """A failed frame of the setup on ``ob``: its status message plus one console line
-    (a traceback too with ``FURCOLLIDE_DEBUG`` set). Never raises."""
-    message = describe(exc)
-    try:
-        rt = get_runtime(ob)
-        if rt is not None:
-            rt.error = message
-        set_status(ob, "ERROR", message)
-    except Exception:  # noqa: BLE001 - the object or the add-on is gone
-        print(f"FurCollide: {message}", flush=True)
-    if os.environ.get("FURCOLLIDE_DEBUG"):
-        traceback.print_exception(exc)
-
-
-def describe(exc: Exception) -> str:
-    """The user-facing text of ``exc``: the message of the errors FurCollide raises on
-    purpose, else the exception's type and message."""
-    if isinstance(exc, core.FurCollideError | ImportError):
-        return str(exc)
-    if isinstance(exc, ValueError | RuntimeError | bridge.BridgeError):
-        return str(exc)
-    return f"{type(exc).__name__}: {exc}"

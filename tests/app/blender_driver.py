@@ -208,6 +208,7 @@ def run():
         raise RuntimeError("the add-on is not enabled after package_install_files")
     pkg = sys.modules[ADDON]
     registry = sys.modules[ADDON + ".operators.store.registry"]
+    report = sys.modules[ADDON + ".operators.store.report"]
     bake = sys.modules[ADDON + ".operators.store.bake"]
     ops_bake = sys.modules[ADDON + ".operators.ops.bake"]  # the modal bake's PROGRESS
     core = sys.modules[ADDON + ".core"]
@@ -254,7 +255,7 @@ def run():
     statuses = {}
 
     def on_frame(scn, _dg=None):
-        st = registry.status_for(fur)
+        st = report.status_for(fur)
         statuses[scn.frame_current] = list(st) if st else None
 
     bpy.app.handlers.frame_change_post.append(on_frame)
@@ -277,7 +278,7 @@ def run():
          fps_rigid=round(11 / max(t_rigid, 1e-6), 2),
          fps_deforming=round(12 / max(wall - t_rigid, 1e-6), 2),
          statuses={str(k): v for k, v in sorted(statuses.items())},
-         cached_after_play=sorted(rt.memory.frames) if rt else None)
+         cached_after_play=sorted(rt.cache.memory.frames) if rt else None)
     yield 2.0
     shot("2_panel_after_playback")
 
@@ -289,8 +290,8 @@ def run():
             bpy.ops.screen.frame_offset(delta=delta)
         yield 0.3
         rt = registry.get_runtime(fur, create=False)
-        scrub.append({"frame": scene.frame_current, "source": rt.stats.get("source"),
-                      "cached": len(rt.memory), "status": list(registry.status_for(fur))})
+        scrub.append({"frame": scene.frame_current, "source": rt.report.stats.get("source"),
+                      "cached": len(rt.cache.memory), "status": list(report.status_for(fur))})
     step("scrub", scrub=scrub)
 
     # 5. zero crossings on a few frames (independent oracle: Blender's BVH)
@@ -300,7 +301,7 @@ def run():
         n_bad, tested = crossings(out, [ball, blob])
         moved = float(np.abs(_positions(out) - P0).max())
         cross[str(f)] = {"crossing_curves": n_bad, "segments_near": tested,
-                         "max_move": round(moved, 4), "status": list(registry.status_for(fur))}
+                         "max_move": round(moved, 4), "status": list(report.status_for(fur))}
         yield 0.1
     src_now = _positions(fur)
     step("crossings", crossings=cross, source_untouched=bool(np.array_equal(src_now, P0)))
@@ -351,7 +352,7 @@ def run():
         scene.frame_set(f)
         n_bad, tested = crossings(out, [ball, blob])
         baked_cross[str(f)] = {"crossing_curves": n_bad, "segments_near": tested,
-                               "status": list(registry.status_for(fur))}
+                               "status": list(report.status_for(fur))}
     step("bake_resume", resume_return=sorted(ret), baked=bool(fur.furcollide.is_baked),
          resume_s=round(bake_s, 2), files_done=files_done, baked_crossings=baked_cross)
     yield 2.0

@@ -168,7 +168,7 @@ def sidebar(name, caption):
 
 
 def status(ob):
-    reg = sys.modules[ADDON + ".operators.store.registry"]
+    reg = sys.modules[ADDON + ".operators.store.report"]
     return list(reg.status_shown(ob))
 
 

@@ -114,8 +114,8 @@ def positions(ob):
     return P.reshape(-1, 3)
 
 
-def status(registry, ob):
-    return list(registry.status_for(ob))
+def status(report, ob):
+    return list(report.status_for(ob))
 
 
 # -------------------------------------------------------------------- the run
@@ -138,7 +138,7 @@ def run():
     step("install", install_return=sorted(ret), enabled=enabled)
     if not enabled:
         raise RuntimeError("the add-on is not enabled after package_install_files")
-    registry = sys.modules[ADDON + ".operators.store.registry"]
+    report = sys.modules[ADDON + ".operators.store.report"]
     step("instrumented", ui_classes=instrument_ui())
 
     scene = bpy.context.scene
@@ -171,7 +171,7 @@ def run():
     fur.furcollide.attract_to_growth_surface = True  # no Surface: an error
     scene.frame_set(1)
     scene.frame_set(2)
-    result["error_status"] = status(registry, fur)
+    result["error_status"] = status(report, fur)
     yield from show("error")
     fur.furcollide.attract_to_growth_surface = False
     for f in range(1, 6):
@@ -217,7 +217,7 @@ def run():
         for ob in bpy.data.objects:
             s = getattr(ob, "furcollide", None)
             if s is not None and s.is_setup:
-                level, msg = registry.status_for(ob)
+                level, msg = report.status_for(ob)
                 if level == "ERROR":
                     log_errors.append(f"frame {scn.frame_current}: {ob.name}: {msg}")
 
@@ -259,7 +259,7 @@ def run():
         o = bpy.data.objects.get(out_name)
         if o is not None:
             moved = max(moved, float(np.abs(positions(o) - positions(fur2)).max()))
-    redone.update(reset=reset, moved=moved, status=status(registry, fur2))
+    redone.update(reset=reset, moved=moved, status=status(report, fur2))
     # a setting change, undone
     bpy.context.scene.frame_set(1)
     with override():
@@ -281,7 +281,7 @@ def run():
     yield 0.5
     bpy.app.handlers.frame_change_post.remove(watch)
     step("undo", undo_added=added, undo_undone=undone, undo_redone=redone,
-         undo_mode_after=mode_after, undo_final_status=status(registry, fur2),
+         undo_mode_after=mode_after, undo_final_status=status(report, fur2),
          undo_handler_errors=log_errors,
          undo_draw_errors=result["draw_errors"][errors_before:])
     shot("undo_done")

@@ -209,7 +209,7 @@ def snap(label, **extra):
     ``claims_current`` (an INFO status, not outdated, in the frame range) and
     ``matches`` (the output is, bit for bit, the reference frame of its mode, or the
     baked frame; None when there is nothing to compare with)."""
-    registry = M["registry"]
+    registry, report = M["registry"], M["report"]
     scene = bpy.context.scene
     f = scene.frame_current
     d = {"scenario": M["scenario"], "label": label, "frame": f}
@@ -217,11 +217,11 @@ def snap(label, **extra):
     s = fur.furcollide
     rt = registry.get_runtime(fur, create=False)
     out = s.output
-    level, message = registry.status_for(fur)
+    level, message = report.status_for(fur)
     d.update(is_setup=s.is_setup, is_baked=s.is_baked, bake_path=s.bake_path,
              output=getattr(out, "name", None), level=level, message=message,
              outdated=bool(s.is_outdated), baking=bool(rt and rt.baking),
-             cached=sorted(rt.memory.frames) if rt else None, mode=s.mode,
+             cached=sorted(rt.cache.memory.frames) if rt else None, mode=s.mode,
              colliders=[getattr(c.object, "name", None) for c in s.colliders],
              use_fur_attach=s.use_fur_attach, bound=bool(s.attach_id),
              groom_output=getattr(s.groom.output, "name", None),
@@ -570,7 +570,8 @@ def run():
     if ADDON not in bpy.context.preferences.addons:
         raise RuntimeError("the add-on is not enabled after package_install_files")
     result["install_return"] = sorted(ret)
-    for name, module in (("registry", "store.registry"), ("ops_bake", "ops.bake"),
+    for name, module in (("registry", "store.registry"), ("report", "store.report"),
+                         ("ops_bake", "ops.bake"),
                          ("bake", "store.bake"), ("fur_attach", "frame.attach")):
         M[name] = sys.modules[f"{ADDON}.operators.{module}"]
     instrument_ui()

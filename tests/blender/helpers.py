@@ -655,7 +655,7 @@ def render_spy(fc, tmp_path, hair, out, tag, record=None):
     seen = {}
     if record is None:
         def record():
-            return (world(out).copy(), fc.store.registry.status_for(hair),
+            return (world(out).copy(), fc.store.report.status_for(hair),
                     hair.furcollide.is_outdated)
 
     def spy(sc, depsgraph):

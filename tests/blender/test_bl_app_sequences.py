@@ -98,14 +98,14 @@ def test_play_steps_every_frame_then_replays_from_the_cache(fc):
     rt = fc.store.registry.get_runtime(hair)
     scene.frame_set(1)
     first = play_like_the_app(scene, hair, out, colliders, range(1, 11))
-    assert sorted(rt.memory.frames) == list(range(1, 11))
+    assert sorted(rt.cache.memory.frames) == list(range(1, 11))
     scene.frame_set(1)
     sources = []
     again = {}
     animation_evaluated_again(scene)
     for f in range(2, 11):
         scene.frame_set(f)
-        sources.append(rt.stats["source"])
+        sources.append(rt.report.stats["source"])
         again[f] = positions(out).copy()
     assert sources == ["cache"] * 9, sources
     for f in again:
@@ -128,7 +128,7 @@ def test_play_from_the_middle_of_the_shot(fc):
     for f in range(1, 6):
         scene.frame_set(f)
     play_like_the_app(scene, hair, out, colliders, range(5, 11))
-    assert sorted(rt.memory.frames) == list(range(1, 11))
+    assert sorted(rt.cache.memory.frames) == list(range(1, 11))
 
 
 def test_arrow_keys_and_the_start_frame_keep_the_cache(fc):
@@ -143,9 +143,9 @@ def test_arrow_keys_and_the_start_frame_keep_the_cache(fc):
         ref[f] = positions(out).copy()
     for f in (9, 8, 3, 2, 1, 0, 1, 2):
         arrow_key(scene, f)
-        assert sorted(rt.memory.frames) == list(range(1, 11)), f
+        assert sorted(rt.cache.memory.frames) == list(range(1, 11)), f
         if f >= 1:
-            assert rt.stats["source"] == "cache", f
+            assert rt.report.stats["source"] == "cache", f
             np.testing.assert_array_equal(positions(out), ref[f], err_msg=f"frame {f}")
             assert not hair.furcollide.is_outdated
     play_like_the_app(scene, hair, out, colliders, range(2, 11))
@@ -164,7 +164,7 @@ def test_a_collider_moved_by_hand_during_a_pause_still_drops_the_cache(fc):
     ball.location.z = 0.45
     bpy.context.view_layer.update()
     s = hair.furcollide
-    assert len(rt.memory) == 0 and s.is_outdated
+    assert len(rt.cache.memory) == 0 and s.is_outdated
     assert s.status_message == ("Frame 5 is outdated: 'Ball' moved. The playback cache is "
                                 "dropped: go to frame 1 and play, or press Bake.")
     arrow_key(scene, 6)
@@ -173,7 +173,7 @@ def test_a_collider_moved_by_hand_during_a_pause_still_drops_the_cache(fc):
     scene.frame_set(1)  # the advice
     got = play_like_the_app(scene, hair, out, colliders, range(1, 11))
     rt2 = fc.store.registry.get_runtime(hair)
-    assert sorted(rt2.memory.frames) == list(range(1, 11))
+    assert sorted(rt2.cache.memory.frames) == list(range(1, 11))
     # what a clean session gives with the ball there from the start
     hair_name = hair.name
     del hair, out

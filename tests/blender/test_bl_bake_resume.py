@@ -133,7 +133,7 @@ def test_bake_matches_playback_and_free(fc, tmp_path, capsys):
         bpy.context.scene.frame_set(f)
         assert np.array_equal(out_positions(out), live[f]), f
         assert s.stat_frame == f
-    assert rt.solver_frame is None or rt.memory.frames == {}
+    assert rt.solve.frame is None or rt.cache.memory.frames == {}
     # motion-blur subframes blend the two baked frames (never step)
     bpy.context.scene.frame_set(5, subframe=0.25)
     want = live[5] + (live[6] - live[5]) * np.float32(0.25)
@@ -333,7 +333,7 @@ def test_a_damaged_baked_frame_says_which_file_and_what_to_do(fc, tmp_path, caps
     bpy.context.scene.frame_set(5)
     capsys.readouterr()
     bpy.context.scene.frame_set(6)
-    level, message = fc.store.registry.status_for(hair)
+    level, message = fc.store.report.status_for(hair)
     assert level == "ERROR", message
     assert message == s.status_message
     assert "Frame 6 of the bake cannot be read" in s.status_message
@@ -342,7 +342,7 @@ def test_a_damaged_baked_frame_says_which_file_and_what_to_do(fc, tmp_path, caps
     no_traceback(capsys)
     bpy.context.scene.frame_set(7)
     assert np.array_equal(out_positions(out), baked[7])
-    assert fc.store.registry.status_for(hair)[0] != "ERROR", s.status_message
+    assert fc.store.report.status_for(hair)[0] != "ERROR", s.status_message
 
 
 def test_save_reload_keeps_settings_and_bake(fc, tmp_path):
@@ -442,7 +442,7 @@ def test_setting_change_on_a_bake_then_free_and_bake_again(fc, tmp_path):
     assert ("prop", "mode", True) in log  # editable again
     for f in (6, 7):
         scene.frame_set(f)
-        assert s.is_outdated and fc.store.registry.status_for(hair)[0] == "WARNING"
+        assert s.is_outdated and fc.store.report.status_for(hair)[0] == "WARNING"
         assert "not cached" in s.status_message
     assert ("label", "Outdated: play from the start or bake", True) in draw_enabled(
         bpy.types.FURCOLLIDE_PT_cache)
@@ -499,7 +499,7 @@ def test_sub_range_bake_before_inside_after(fc, tmp_path):
     for f in range(1, 11):
         scene.frame_set(f)
         live[f] = fc.positions(out).copy()
-        assert fc.store.registry.status_for(hair)[0] == "INFO", (f, s.status_message)
+        assert fc.store.report.status_for(hair)[0] == "INFO", (f, s.status_message)
         assert not s.is_outdated, f
     for f in (1, 2, 3):
         np.testing.assert_array_equal(live[f], source, err_msg=f"frame {f}")
@@ -516,7 +516,7 @@ def test_sub_range_bake_before_inside_after(fc, tmp_path):
     for f in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 9, 2, 6, 10, 4, 3):
         scene.frame_set(f)
         P = fc.positions(out)
-        level, msg = fc.store.registry.status_for(hair)
+        level, msg = fc.store.report.status_for(hair)
         assert level == "INFO", (f, msg)
         if f < 4:  # README: before Frame Start the output follows the source
             np.testing.assert_array_equal(P, source, err_msg=f"frame {f}")

@@ -205,7 +205,7 @@ def test_the_baked_render_groom_is_read_not_computed(fc, tmp_path, monkeypatch):
     _shows_the_bake(fc, guides, out, gout, baked, (5, 1, 3, 6), outdated=False)
     assert calls == []
     assert any((baked[f][2] == 1).any() for f in FRAMES)  # the clearance pass was baked
-    stats = fc.store.registry.stats_for(guides)
+    stats = fc.store.report.stats_for(guides)
     assert stats["groom_ms"] == 0.0 and stats["clearance_ms"] == 0.0
     activate(guides)
     assert bpy.ops.furcollide.free_bake() == {"FINISHED"}

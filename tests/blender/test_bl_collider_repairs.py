@@ -106,7 +106,7 @@ def test_a_closed_mesh_made_by_an_importer_detects_pinches_and_says_what_was_rep
     scene, hair, out = scene_with(fc, ball)
     s = hair.furcollide
     # frame 1, where the collider was built: the repairs, said once, as info
-    level, msg = fc.store.registry.status_for(hair)
+    level, msg = fc.store.report.status_for(hair)
     assert level == "INFO" and msg.startswith("Colliders: 'Ball': "), msg
     for words in said:
         assert words in msg, msg
@@ -128,7 +128,7 @@ def test_a_closed_mesh_made_by_an_importer_detects_pinches_and_says_what_was_rep
 def test_a_clean_mesh_says_nothing(fc):
     ball = mesh("Ball", *sphere())
     scene, hair, out = scene_with(fc, ball)
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     assert fc.frame.colliders.collider_lines(fc.store.registry.get_runtime(hair), ball) == []
 
 
@@ -142,12 +142,12 @@ def test_an_open_mesh_says_it_detects_no_pinch_until_double_sided(fc, capsys):
     scene, hair, out = scene_with(fc, bowl)
     s = hair.furcollide
     rt = fc.store.registry.get_runtime(hair)
-    n_open = int(rt.colliders[bowl.session_uid].collider.repairs.open_edges)
+    n_open = int(rt.colliders.entries[bowl.session_uid].collider.repairs.open_edges)
     assert n_open == 24
     note = f"Colliders: no pinch detection for 'Bowl': open mesh ({n_open} open edges)"
     for f in (1, 2, 3, 1):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(hair) == ("INFO", note), f
+        assert fc.store.report.status_for(hair) == ("INFO", note), f
         check_frame(hair, out, [bowl], status=note)
     assert s.stat_pinched == 0
     assert fc.frame.colliders.collider_lines(rt, bowl) == [
@@ -155,7 +155,7 @@ def test_an_open_mesh_says_it_detects_no_pinch_until_double_sided(fc, capsys):
     assert capsys.readouterr().out.count("no pinch detection for 'Bowl'") == 1
     s.colliders[0].double_sided = True
     scene.frame_set(1)
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     assert fc.frame.colliders.collider_lines(rt, bowl) == []
 
 
@@ -168,11 +168,11 @@ def test_a_warning_comes_before_the_collider_note(fc):
     scene, hair, out = scene_with(fc, bowl)
     hair.data.attributes.new("furcollide_enable", "BOOLEAN", "POINT")
     scene.frame_set(2)
-    level, msg = fc.store.registry.status_for(hair)
+    level, msg = fc.store.report.status_for(hair)
     assert level == "WARNING" and "furcollide_enable" in msg, msg
     hair.data.attributes.remove(hair.data.attributes["furcollide_enable"])
     scene.frame_set(3)
-    assert fc.store.registry.status_for(hair)[1].startswith("Colliders: no pinch detection")
+    assert fc.store.report.status_for(hair)[1].startswith("Colliders: no pinch detection")
 
 
 @pytest.mark.parametrize("make", [flipped, flat_export], ids=["flipped", "flat-export"])

@@ -215,7 +215,7 @@ def test_rope_curve_with_a_bevel_collides(fc):
     met = 0
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.report.status_for(hair) == ("INFO", "")
         V, F = evaluated_world_mesh(rope)
         assert len(F) > 50  # the bevel's tube and caps
         assert crossing_free_curves(out, V, F).size == 0, f
@@ -237,7 +237,7 @@ def test_rope_moving_as_a_whole_never_rebuilds(fc):
     rt = fc.store.registry.get_runtime(hair)
     for f in range(1, 9):
         scene.frame_set(f)
-    col = rt.colliders[rope.session_uid].collider
+    col = rt.colliders.entries[rope.session_uid].collider
     assert col.build_count == 1
     assert fc.frame.colliders.is_deforming(rope, scene) is False
     scene.frame_set(1)
@@ -252,7 +252,7 @@ def test_rope_moving_as_a_whole_never_rebuilds(fc):
         scene.frame_set(f)
         V, F = evaluated_world_mesh(rope)
         assert crossing_free_curves(out, V, F).size == 0, f
-        col = rt.colliders[rope.session_uid].collider
+        col = rt.colliders.entries[rope.session_uid].collider
         radius = 0.05 + 0.1 * (f - 1) / 7  # the keyed bevel depth, linear in between
         assert abs(np.abs(col.vertices[:, 0]).max() - radius) < 0.03, f
 
@@ -265,7 +265,7 @@ def test_curve_without_a_surface_is_an_empty_collider(fc):
     out = setup_with(hair, rope)
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.report.status_for(hair) == ("INFO", "")
         np.testing.assert_allclose(world(out), world(hair), atol=1e-6)
     scene.frame_set(1)  # (an edit keeps the frames before the current one)
     rope.data.bevel_depth = 0.08
@@ -311,7 +311,7 @@ def test_text_and_surface_in_a_collider_collection(fc):
     moved = 0
     for f in range(1, 7):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.report.status_for(hair) == ("INFO", "")
         for ob in (txt, ball):
             V, F = evaluated_world_mesh(ob)
             assert len(F) > 0
@@ -394,14 +394,14 @@ def test_collection_instance_collides_where_blender_places_it(fc):
     moved = 0
     for f in range(1, 9):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.report.status_for(hair) == ("INFO", "")
         meshes = instance_meshes(empty)
         assert len(meshes) == 2
         for V, F in meshes:
             assert crossing_free_curves(out, V, F).size == 0, f
         moved += int((np.abs(world(out) - world(hair)) > 1e-6).any(axis=1).sum())
     assert moved > 0
-    assert all(e.collider.build_count == 1 for e in rt.colliders.values())
+    assert all(e.collider.build_count == 1 for e in rt.colliders.entries.values())
     activate(hair)
     assert bpy.ops.furcollide.collider_distance() == {"FINISHED"}
     a = out.data.attributes["furcollide_collider_distance"]
@@ -439,7 +439,7 @@ def test_nested_instances_in_the_collider_collection_and_edits(fc):
     def check():
         for f in range(1, 7):
             scene.frame_set(f)
-            assert fc.store.registry.status_for(hair) == ("INFO", "")
+            assert fc.store.report.status_for(hair) == ("INFO", "")
             meshes = instance_meshes(empty)  # nested: the outermost parent is reported
             assert len(meshes) == 2
             for V, F in meshes:
@@ -453,7 +453,7 @@ def test_nested_instances_in_the_collider_collection_and_edits(fc):
     bpy.context.view_layer.update()
     check()
     rt = fc.store.registry.get_runtime(hair)
-    e = next(e for k, e in rt.colliders.items()
+    e = next(e for k, e in rt.colliders.entries.items()
              if isinstance(k, tuple) and k[-1] == box.session_uid)
     assert np.abs(e.collider.vertices).max() > 0.29  # the grown box (half size 0.3)
 
@@ -483,7 +483,7 @@ def test_rigid_collider_never_rebuilds_deforming_does(fc):
     out = fc.setup(hair, [box])
     rt = fc.store.registry.get_runtime(hair)
     positions_per_frame(out, range(1, 13))
-    col = rt.colliders[box.session_uid].collider
+    col = rt.colliders.entries[box.session_uid].collider
     assert col.build_count == 1
     # a deforming collider (animated modifier) is rebuilt when its shape changes;
     # editing a collider invalidates the frames after the current one
@@ -494,9 +494,9 @@ def test_rigid_collider_never_rebuilds_deforming_does(fc):
     mod.strength = 0.2
     mod.keyframe_insert("strength", frame=12)
     bpy.context.view_layer.update()  # fires depsgraph_update_post, as the UI does
-    assert len(rt.memory) == 0
+    assert len(rt.cache.memory) == 0
     positions_per_frame(out, range(1, 13))
-    col = rt.colliders[box.session_uid].collider
+    col = rt.colliders.entries[box.session_uid].collider
     assert col.build_count > 3
 
 
@@ -517,7 +517,7 @@ def test_double_sided_sheet_and_own_offset(fc):
     bpy.context.scene.frame_set(1)
     assert s.status_message == "" and s.stat_colliding == len(hair.data.curves)
     rt = fc.store.registry.get_runtime(hair)
-    col = rt.colliders[sheet.session_uid].collider
+    col = rt.colliders.entries[sheet.session_uid].collider
     assert col.double_sided and col.offset == pytest.approx(0.05)
 
 
@@ -534,7 +534,7 @@ def test_deforming_colliders_get_the_fast_bvh_build(fc):
     fc.setup(hair, [box, still])
     bpy.context.scene.frame_set(2)
     rt = fc.store.registry.get_runtime(hair)
-    flags = {e.collider.name: e.collider.deforming for e in rt.colliders.values()}
+    flags = {e.collider.name: e.collider.deforming for e in rt.colliders.entries.values()}
     assert flags == {"Box": True, "Still": False}
 
 
@@ -565,14 +565,14 @@ def test_two_setups_share_a_deforming_collider(fc):
         alone[f] = fc.positions(out_a).copy()
     assert all(contact.values()), contact
     assert hi[0] - lo[0] == pytest.approx(0.6, abs=1e-5)  # the key really animated
-    flags_a = {e.collider.name: e.collider.deforming for e in rt_a.colliders.values()}
-    flags_b = {e.collider.name: e.collider.deforming for e in rt_b.colliders.values()}
+    flags_a = {e.collider.name: e.collider.deforming for e in rt_a.colliders.entries.values()}
+    flags_b = {e.collider.name: e.collider.deforming for e in rt_b.colliders.entries.values()}
     assert flags_a == {"Blob": True} and flags_b == {"Blob": True, "Wall": False}
     is_deforming = fc.frame.colliders.is_deforming
     assert is_deforming(blob, scene) and not is_deforming(wall, scene)
     # each setup owns its core collider; A's result does not depend on B
-    assert rt_a.colliders[blob.session_uid].collider is not \
-        rt_b.colliders[blob.session_uid].collider
+    assert rt_a.colliders.entries[blob.session_uid].collider is not \
+        rt_b.colliders.entries[blob.session_uid].collider
     hair_b.furcollide.enabled = False
     activate(hair_a)
     scene.frame_set(1)
@@ -730,7 +730,7 @@ def test_linked_duplicate_colliders_both_collide(fc):
     moved = np.linalg.norm(P - rest, axis=1) > 1e-4
     assert moved[rest[:, 0] < 0].any() and moved[rest[:, 0] > 0].any()
     rt = fc.store.registry.get_runtime(hair)
-    assert {e.collider.name for e in rt.colliders.values()} == {"Left", "Right"}
+    assert {e.collider.name for e in rt.colliders.entries.values()} == {"Left", "Right"}
     assert hair.furcollide.stat_colliding > 0
 
 

@@ -88,17 +88,17 @@ def test_an_edit_in_a_scene_the_window_does_not_show_is_seen_at_its_own_frame(fc
     for f in range(1, 7):
         sc_b.frame_set(f)
     rt = fc.store.registry.get_runtime(hair)
-    assert sorted(rt.memory.frames) == [1, 2, 3, 4, 5, 6]
+    assert sorted(rt.cache.memory.frames) == [1, 2, 3, 4, 5, 6]
     win.scene = sc_a
     sc_a.frame_set(2)
     assert bpy.context.scene == sc_a and sc_b.frame_current == 6
     box.data.update()  # re-evaluated, unchanged
     sc_b.view_layers[0].depsgraph.update()
-    assert sorted(rt.memory.frames) == [1, 2, 3, 4, 5, 6]
+    assert sorted(rt.cache.memory.frames) == [1, 2, 3, 4, 5, 6]
     box.data.vertices[0].co.z += 0.01  # an edit of B's collider, seen by B's depsgraph
     box.data.update()
     sc_b.view_layers[0].depsgraph.update()
-    assert len(rt.memory) == 0
+    assert len(rt.cache.memory) == 0
     assert "Frame 6 is outdated: 'Box' changed shape" in hair.furcollide.status_message
 
 
@@ -135,7 +135,7 @@ def test_moved_blend_with_its_bake_and_without(fc, tmp_path, capsys):
     s = hair.furcollide
     for f in (3, 4):
         bpy.context.scene.frame_set(f)
-        level, msg = fc.store.registry.status_for(hair)
+        level, msg = fc.store.report.status_for(hair)
         assert level == "ERROR" and "missing" in msg, msg
         assert str(c / "furcollide_cache") in msg  # where they were looked for
         assert s.is_outdated
@@ -168,12 +168,12 @@ def test_two_scenes_keep_their_setups_and_outputs_apart(fc, tmp_path):
     # playing B never evaluates A
     rest_a = fc.positions(out_a).copy()
     rt_a = fc.store.registry.get_runtime(hair_a)
-    frames_a = sorted(rt_a.memory.frames)  # the add operator solved frame 1
+    frames_a = sorted(rt_a.cache.memory.frames)  # the add operator solved frame 1
     for f in range(1, 7):
         sc_b.frame_set(f)
         assert hair_b.furcollide.status_message == "", (f, hair_b.furcollide.status_message)
-    assert len(fc.store.registry.get_runtime(hair_b).memory) == 6
-    assert sorted(rt_a.memory.frames) == frames_a and sc_a.frame_current == 1
+    assert len(fc.store.registry.get_runtime(hair_b).cache.memory) == 6
+    assert sorted(rt_a.cache.memory.frames) == frames_a and sc_a.frame_current == 1
     np.testing.assert_array_equal(fc.positions(out_a), rest_a)
     moved_b = fc.positions(out_b).copy()
     assert not np.array_equal(moved_b, fc.positions(hair_b)), "the box never touched B"
@@ -553,7 +553,7 @@ def _cache_bits(rt):
     """Every cached frame of a runtime, as bytes (and its inputs record)."""
     return {f: (fr.curves.tobytes(), fr.points.tobytes(), fr.status_idx.tobytes(),
                 fr.status_val.tobytes(), repr(fr.inputs))
-            for f, fr in rt.memory.frames.items()}
+            for f, fr in rt.cache.memory.frames.items()}
 
 
 def _file_bits(d):
@@ -565,9 +565,9 @@ def _counting_solves(fc, monkeypatch):
     calls = []
     real = fc.frame.solve.solve_frame
 
-    def counting(setup, inp):
+    def counting(setup, inp, **kw):
         calls.append((setup.scene.name, setup.frame))
-        return real(setup, inp)
+        return real(setup, inp, **kw)
 
     monkeypatch.setattr(fc.frame.solve, "solve_frame", counting)
     return calls

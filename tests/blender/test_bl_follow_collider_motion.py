@@ -83,7 +83,7 @@ def test_scrub_bake_and_resume_equal_playback(fc, monkeypatch, tmp_path):
     # Scrubbed: frames 7.. dropped by a key there, then solved again from cached frame 6
     # after the scene was shown at frame 12 (the colliders were read there last).
     rt = fc.store.registry.get_runtime(hair)
-    rt.drop_frames_after(6, 1)
+    fc.store.playback.drop_after(rt, 6, 1)
     scene.frame_set(6)
     for f in range(7, 13):
         scene.frame_set(f)

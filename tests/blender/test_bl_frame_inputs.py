@@ -138,7 +138,7 @@ def test_add_on_an_unkeyed_pose_then_the_start_frame_is_solved_again(fc, tmp_pat
     box.location = (3.0, 0.0, 0.6)  # explored after keying: far from the fur
     out = fc.setup(hair, [box])
     rt = fc.store.registry.get_runtime(hair)
-    assert 1 in rt.memory and hair.furcollide.stat_colliding == 0  # solved un-keyed
+    assert 1 in rt.cache.memory and hair.furcollide.stat_colliding == 0  # solved un-keyed
 
     scene.frame_set(1)
     assert tuple(box.matrix_world.translation) == pytest.approx((0.0, 0.0, 0.6))
@@ -159,7 +159,7 @@ def test_collider_moved_without_keying_on_a_cached_frame(fc, tmp_path):
     box.location.z = 0.45  # z is not keyed: the move stays on every frame
     scene.frame_set(5)
     outdated(hair, "Frame 5 is outdated", "'Box' moved", "go to frame 1", "Bake")
-    assert len(rt.memory) == 0  # nothing stepped from the old pose is shown again
+    assert len(rt.cache.memory) == 0  # nothing stepped from the old pose is shown again
     np.testing.assert_array_equal(positions(out), before[5])  # left as it was
     scene.frame_set(3)  # any other frame: not shown as current either
     outdated(hair, "Frame 3 is not cached", "'Box' moved", "Play from frame 1")
@@ -262,7 +262,8 @@ def test_bake_resumes_only_when_the_inputs_still_hold(fc, tmp_path, monkeypatch)
     setup = fc.Setup(hair, scene, bpy.context.evaluated_depsgraph_get())
     inputs = fc.frame.inputs.read_inputs(setup)
     assert fc.frame.record.baked_frame_change(
-        setup, inputs, fc.cache.read_inputs(d, scene.frame_current)) == ""
+        setup, inputs, fc.cache.read_inputs(d, scene.frame_current),
+        fc.settings.fingerprints.read_settings(hair, scene)) == ""
     activate(hair)
     assert bpy.ops.furcollide.free_bake() == {"FINISHED"}
     same(play(scene, hair, out, range(1, 9), [box]), baked)

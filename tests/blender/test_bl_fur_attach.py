@@ -107,7 +107,7 @@ def check_follows(fc, hair, surf, out, frames):
     moved = 0.0
     for f in frames:
         bpy.context.scene.frame_set(f)
-        assert fc.store.registry.status_for(hair)[0] == "INFO", fc.store.registry.status_for(hair)
+        assert fc.store.report.status_for(hair)[0] == "INFO", fc.store.report.status_for(hair)
         V = surface_world(surf)
         P = output_world(fc, out)
         np.testing.assert_allclose(P[offs[:-1]], binding.roots(V), atol=1e-5)
@@ -231,7 +231,7 @@ def test_attached_curves_still_collide(fc):
     penetrating_input = 0
     for f in range(1, 9):
         bpy.context.scene.frame_set(f)
-        assert fc.store.registry.status_for(hair)[0] != "ERROR", fc.store.registry.status_for(hair)
+        assert fc.store.report.status_for(hair)[0] != "ERROR", fc.store.report.status_for(hair)
         V = surface_world(surf)
         P = output_world(fc, out)
         np.testing.assert_allclose(P[offs[:-1]], binding.roots(V), atol=1e-5)
@@ -290,7 +290,7 @@ def test_poll_and_errors(fc):
     # option on without a binding: a clear error, the output keeps its result
     hair.furcollide.use_fur_attach = True
     bpy.context.scene.frame_set(2)
-    level, msg = fc.store.registry.status_for(hair)
+    level, msg = fc.store.report.status_for(hair)
     assert level == "ERROR" and "press Bind" in msg
 
 
@@ -303,7 +303,7 @@ def test_surface_topology_change_is_an_error(fc):
     held = fc.positions(out).copy()
     surf.modifiers.new("Subdivide", "SUBSURF").levels = 1
     bpy.context.scene.frame_set(3)
-    level, msg = fc.store.registry.status_for(hair)
+    level, msg = fc.store.report.status_for(hair)
     assert level == "ERROR" and "changed topology" in msg and "Bind again" in msg
     np.testing.assert_array_equal(fc.positions(out), held)  # holds the last result
     # binding again on the new topology works
@@ -363,10 +363,10 @@ def test_rebinding_without_callback_drops_the_cache(fc):
     bind(hair)
     played_list(fc, out, range(1, 6))
     rt = fc.store.registry.get_runtime(hair)
-    assert len(rt.memory) == 5
+    assert len(rt.cache.memory) == 5
     hair.furcollide.attach_id = "rebound elsewhere"  # hidden: no update callback
     bpy.context.scene.frame_set(5)
-    assert len(rt.memory) == 0 and fc.store.registry.is_outdated(hair)
+    assert len(rt.cache.memory) == 0 and fc.store.report.is_outdated(hair)
     check_follows(fc, hair, surf, out, range(1, 9))
 
 
@@ -405,7 +405,7 @@ def test_attach_bind_refuses_surfaces_it_cannot_use(fc):
             bpy.ops.furcollide.fur_attach_bind()
         assert not s.use_fur_attach and not fc.frame.attach.has_binding(hair)
     play(scene, range(1, 4))  # the setup still solves its source's own curves
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     np.testing.assert_allclose(world(out), world(hair), atol=1e-6)
     # not a mesh: the operator is not even offered
     ctrl = bpy.data.objects.new("Ctrl", None)
@@ -428,7 +428,7 @@ def test_attach_bind_far_from_the_surface_snaps_with_a_warning(fc, capsys):
     assert "9 roots were not on the Surface at frame 1 (up to 50 away)" in log, log
     assert "Traceback" not in log
     play(scene, range(1, 4))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     P, offs = world(out), offsets_of(out)
     np.testing.assert_allclose(P[offs[:-1], 2], -50.0, atol=1e-5)  # roots on the Surface
     # the curves were translated whole: same shape
@@ -457,7 +457,7 @@ def test_attach_surface_edited_after_bind(fc, capsys, edit):
     capsys.readouterr()
     for f in (3, 4, 1):
         scene.frame_set(f)
-        level, msg = fc.store.registry.status_for(hair)
+        level, msg = fc.store.report.status_for(hair)
         assert level == "ERROR", (f, msg)
         assert "Surface 'Skin' changed topology since binding" in msg and want in msg, msg
         assert "press Bind again" in msg
@@ -469,7 +469,7 @@ def test_attach_surface_edited_after_bind(fc, capsys, edit):
     activate(hair)
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(scene, range(1, 4))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
 
 
 def test_attach_surface_vertex_order_change_is_reported(fc):
@@ -485,7 +485,7 @@ def test_attach_surface_vertex_order_change_is_reported(fc):
     me.from_pydata(V[perm].tolist(), [], [tuple(int(inv[i]) for i in f) for f in F])
     me.update()
     scene.frame_set(3)
-    level, msg = fc.store.registry.status_for(hair)
+    level, msg = fc.store.report.status_for(hair)
     # either the change is reported, or the hair stays where the (same) surface is
     assert level == "ERROR" or np.abs(fc.positions(out) - before).max() < 1e-5, msg
 
@@ -496,12 +496,12 @@ def test_attach_bind_again_then_reopen_keeps_the_binding(fc, tmp_path):
     surf.data.update()
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(bpy.context.scene, range(1, 3))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     path = save_in(tmp_path)
     bpy.ops.wm.open_mainfile(filepath=path)
     hair = bpy.data.objects["Fur"]
     play(bpy.context.scene, range(1, 3))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
 
 
 @pytest.mark.parametrize("surface_first", [True, False])
@@ -535,7 +535,7 @@ def test_attach_surface_edited_on_a_baked_setup_says_free_bake_first(fc, tmp_pat
     surf.data.update()
     scene.frame_set(2)
     np.testing.assert_array_equal(fc.positions(out), baked2)  # the bake is still shown
-    level, msg = fc.store.registry.status_for(hair)
+    level, msg = fc.store.report.status_for(hair)
     assert "changed topology since binding" in msg, msg
     assert "press Free Bake, then Bind again" in msg, msg
     activate(hair)
@@ -546,7 +546,7 @@ def test_attach_surface_edited_on_a_baked_setup_says_free_bake_first(fc, tmp_pat
     activate(hair)
     assert bpy.ops.furcollide.fur_attach_bind() == {"FINISHED"}
     play(scene, range(1, 4))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
 
 
 def test_an_edit_away_from_the_roots_keeps_the_playback_cache(fc):
@@ -557,22 +557,22 @@ def test_an_edit_away_from_the_roots_keeps_the_playback_cache(fc):
     scene, hair, out, surf = _attach_bound(fc)
     rt = fc.store.registry.get_runtime(hair)
     play(scene, range(1, 5))
-    assert sorted(rt.memory.frames) == [1, 2, 3, 4]
+    assert sorted(rt.cache.memory.frames) == [1, 2, 3, 4]
     used = fc.frame.attach.load_binding(hair)[0].used_vertices
     free = np.setdiff1d(np.arange(len(surf.data.vertices)), used)
     assert len(free)
     surf.data.vertices[int(free[0])].co.z += 0.3
     surf.data.update()
     bpy.context.view_layer.update()  # (the depsgraph check runs)
-    assert sorted(rt.memory.frames) == [1, 2, 3, 4]
+    assert sorted(rt.cache.memory.frames) == [1, 2, 3, 4]
     scene.frame_set(3)
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
-    assert rt.stats["source"] == "cache"
+    assert fc.store.report.status_for(hair) == ("INFO", "")
+    assert rt.report.stats["source"] == "cache"
     surf.data.vertices[int(used[0])].co.z += 0.3
     surf.data.update()
     bpy.context.view_layer.update()
-    assert len(rt.memory) == 0
-    level, msg = fc.store.registry.status_for(hair)
+    assert len(rt.cache.memory) == 0
+    level, msg = fc.store.report.status_for(hair)
     assert f"the Surface '{surf.name}' the curves are attached to" in msg, msg
 
 

@@ -88,7 +88,7 @@ def test_a_depsgraph_check_error_becomes_the_setups_status(fc, capfd, monkeypatc
     box.scale.x *= 1.2
     bpy.context.view_layer.update()
     _no_handler_error(capfd)
-    level, message = fc.store.registry.status_for(hair)
+    level, message = fc.store.report.status_for(hair)
     assert level == "ERROR" and "injected fault" in message, (level, message)
 
 
@@ -130,21 +130,21 @@ def test_refresh_timer_refreshes_the_current_frame(fc, timers, monkeypatch):
     scene = bpy.context.scene
     hair, box, out = small_setup(fc)
     play(scene, range(1, 4))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     hair.furcollide.recovery_rate = 0.9  # a setting: drops frames, schedules a refresh
     assert len(timers) == 1
     # the setting's update already says so (the playback cache was dropped) ...
-    assert fc.store.registry.status_for(hair)[1].startswith("Frame 3 is outdated: Recovery Rate")
-    fc.store.registry.set_status(hair, "INFO", "")
+    assert fc.store.report.status_for(hair)[1].startswith("Frame 3 is outdated: Recovery Rate")
+    fc.store.report.set_status(hair, "INFO", "")
     seen = []
-    evaluate = fc.frame.rules.evaluate
-    monkeypatch.setattr(fc.frame.rules, "evaluate",
+    evaluate = fc.frame.spine.evaluate
+    monkeypatch.setattr(fc.frame.spine, "evaluate",
                         lambda setup: seen.append((setup.ob.name, setup.frame)) or
                         evaluate(setup))
     assert timers[0]() is None  # done: not rescheduled
     # ... and the timer evaluated the current frame again, which says it once more
     assert seen == [(hair.name, 3)], seen
-    level, message = fc.store.registry.status_for(hair)
+    level, message = fc.store.report.status_for(hair)
     assert level == "WARNING" and message.startswith("Frame 3 is outdated: Recovery Rate "
                                                      "changed"), message
 
@@ -159,7 +159,7 @@ def test_refresh_timer_never_raises(fc, capfd, monkeypatch, timers, fault):
     inv = _module("store.invalidation")
     capfd.readouterr()
     if fault == "evaluate":
-        monkeypatch.setattr(fc.frame.rules, "evaluate", _raiser)
+        monkeypatch.setattr(fc.frame.spine, "evaluate", _raiser)
     elif fault == "Setup":
         monkeypatch.setattr(fc.frame.scenes, "Setup", _raiser)  # (the refresh goes through it)
     elif fault == "deleted":
@@ -168,10 +168,10 @@ def test_refresh_timer_never_raises(fc, capfd, monkeypatch, timers, fault):
         monkeypatch.setattr(inv.registry, "busy", lambda: True)
         assert refresh() == pytest.approx(0.1)  # the frame handler runs: try again soon
         monkeypatch.setattr(inv.registry, "busy", lambda: False)
-        monkeypatch.setattr(fc.frame.rules, "evaluate", _raiser)
+        monkeypatch.setattr(fc.frame.spine, "evaluate", _raiser)
     assert refresh() is None
     text = _no_handler_error(capfd)
     if fault != "deleted":
-        level, message = fc.store.registry.status_for(hair)
+        level, message = fc.store.report.status_for(hair)
         assert level == "ERROR" and "injected fault" in message, (level, message)
         assert sum("injected fault" in ln for ln in text.splitlines()) == 1, text

@@ -105,9 +105,9 @@ def solves(fc, monkeypatch):
     counts = {}
     real = fc.frame.solve.solve_frame
 
-    def spy(setup, inp):
+    def spy(setup, inp, **kw):
         counts[setup.frame] = counts.get(setup.frame, 0) + 1
-        return real(setup, inp)
+        return real(setup, inp, **kw)
 
     monkeypatch.setattr(fc.frame.solve, "solve_frame", spy)
     return counts
@@ -218,7 +218,7 @@ def test_editing_a_key_keeps_every_frame_before_the_first_changed_value(fc, solv
     hair.update_tag()
     bpy.context.view_layer.update()
     rt = fc.store.registry.get_runtime(hair)
-    assert sorted(rt.memory.frames) == list(range(1, 9)), sorted(rt.memory.frames)
+    assert sorted(rt.cache.memory.frames) == list(range(1, 9)), sorted(rt.cache.memory.frames)
     scene.frame_set(14)
     assert "Recovery Rate" in s.status_message and "frame 9" in s.status_message, (
         s.status_message)
@@ -233,7 +233,7 @@ def test_an_unkeyed_edit_drops_the_whole_playback_cache(fc):
     _play(scene, hair, out, box, range(1, 8))
     hair.furcollide.plasticity = 0.5  # the same value on every frame: every frame changed
     rt = fc.store.registry.get_runtime(hair)
-    assert len(rt.memory) == 0
+    assert len(rt.cache.memory) == 0
 
 
 def test_mode_cannot_be_keyed(fc):

@@ -102,22 +102,22 @@ def test_playback_memory_is_flat_once_the_cache_is_full(fc, traced):
     while full_at is None:
         f += 1
         scene.frame_set(f)
-        assert rt.stats.get("source") == "solved", (f, rt.stats)
-        per_frame.append(rt.memory.frames[f].nbytes / MB)
-        if rt.memory.nbytes > 0.9 * limit:
+        assert rt.report.stats.get("source") == "solved", (f, rt.report.stats)
+        per_frame.append(rt.cache.memory.frames[f].nbytes / MB)
+        if rt.cache.memory.nbytes > 0.9 * limit:
             full_at = f
-        assert f < 60, f"the cache did not fill: {rt.memory.nbytes / MB:.1f} MB"
+        assert f < 60, f"the cache did not fill: {rt.cache.memory.nbytes / MB:.1f} MB"
     # two more sweeps (the largest temporaries of a sweep are made once), then measure
     # at the same point of each sweep
     first = full_at + 2 * PERIOD
     traced, rss = {}, {}
     for f in range(full_at + 1, first + SWEEPS * PERIOD + 1):
         scene.frame_set(f)
-        assert rt.stats.get("source") == "solved" and s.status_message == ""
-        assert rt.memory.nbytes <= limit
+        assert rt.report.stats.get("source") == "solved" and s.status_message == ""
+        assert rt.cache.memory.nbytes <= limit
         if (f - first) % PERIOD == 0:
             traced[f], rss[f] = _traced_mb(), _rss_mb()
-    assert len(rt.memory) < f - 1  # frames were dropped for the limit
+    assert len(rt.cache.memory) < f - 1  # frames were dropped for the limit
     grew, rss_grew = traced[max(traced)] - traced[first], rss[max(rss)] - rss[first]
     print(f"cache full at frame {full_at} ({np.mean(per_frame):.2f} MB a frame); frames "
           f"{first}-{max(traced)}: tracemalloc {traced[first]:.1f} -> {traced[max(traced)]:.1f}"
@@ -143,8 +143,8 @@ def test_memory_limit_at_real_size(fc):
     reset_cache(hair)
     play_demo(demo.scene, hair, out)
     rt = fc.store.registry.get_runtime(hair, create=False)
-    kept = sorted(rt.memory.frames)
-    with_state = [f for f in kept if rt.memory.state(f) is not None]
+    kept = sorted(rt.cache.memory.frames)
+    with_state = [f for f in kept if rt.cache.memory.state(f) is not None]
     assert len(kept) < REAL_LAST or len(with_state) < len(kept), (kept, with_state)
     for f in kept[::-1]:
         demo.scene.frame_set(f)

@@ -172,9 +172,9 @@ def test_motion_settings_invalidate_the_cache(fc):
     hair, box, out = box_scene(fc, location=(2.0, 0.0, 0.6))
     play(scene, range(1, 4))
     rt = fc.store.registry.get_runtime(hair)
-    assert 3 in rt.memory
+    assert 3 in rt.cache.memory
     hair.furcollide.motion.use_wind = True
-    assert len(rt.memory) == 0
+    assert len(rt.cache.memory) == 0
     scene.frame_set(1)
     before = world(out)
     hair.furcollide.motion.wind_strength = 0.3
@@ -300,7 +300,7 @@ def test_motion_stages_bake_then_render_match_the_viewport(fc, tmp_path, capsys,
     live = {}
     for f in range(1, 7):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(hair) == ("INFO", ""), f
+        assert fc.store.report.status_for(hair) == ("INFO", ""), f
         live[f] = world(out).copy()
     assert max(np.abs(live[f] - still[f]).max() for f in range(2, 7)) > 0.02
     save_in(tmp_path)
@@ -322,7 +322,7 @@ def test_motion_stages_bake_then_render_match_the_viewport(fc, tmp_path, capsys,
 
     def spy(sc, depsgraph):
         if depsgraph is not None and depsgraph.mode == "RENDER":
-            seen[sc.frame_current] = (world(out).copy(), fc.store.registry.status_for(hair))
+            seen[sc.frame_current] = (world(out).copy(), fc.store.report.status_for(hair))
 
     scene.frame_set(1)
     capsys.readouterr()
@@ -403,7 +403,7 @@ def test_distance_attribute_max_distance_zero_is_exact_and_a_cap_clamps(fc):
     exact = {}
     for f in range(1, 5):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.report.status_for(hair) == ("INFO", "")
         d = attribute(out, "furcollide_collider_distance")
         me = box.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
         V = np.array([box.matrix_world @ v.co for v in me.vertices])
@@ -444,7 +444,7 @@ def test_collider_of_zero_faces(fc, capsys):
     m = hair.furcollide.motion
     m.write_collider_distance = True
     play(scene, range(1, 4))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     np.testing.assert_allclose(world(out), world(hair), atol=1e-6)
     assert np.isposinf(attribute(out, "furcollide_collider_distance")).all()
     m.distance_max = 0.2
@@ -457,7 +457,7 @@ def test_collider_of_zero_faces(fc, capsys):
     item.object = box
     m.distance_max = 0.0
     play(scene, range(1, 4))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     with_wire = attribute(out, "furcollide_collider_distance")
     assert np.isfinite(with_wire).all()
     assert bpy.ops.furcollide.collider_distance() == {"FINISHED"}  # Now: the box counts
@@ -474,7 +474,7 @@ def test_distance_attribute_without_an_enabled_collider_honours_max_distance(fc)
     m.write_collider_distance, m.distance_max = True, 0.1
     hair.furcollide.colliders[0].enabled = False
     play(bpy.context.scene, range(1, 3))
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
     np.testing.assert_array_equal(attribute(out, "furcollide_collider_distance"),
                                   np.float32(0.1))
 

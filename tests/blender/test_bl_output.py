@@ -30,7 +30,7 @@ def _world_result(fc, hair):
     rt = fc.store.registry.get_runtime(hair)
     inp = fc.frame.inputs.read_inputs(
         fc.Setup(hair, bpy.context.scene, bpy.context.evaluated_depsgraph_get()))
-    points, status_of, _stats = rt.memory.get(bpy.context.scene.frame_current, inp.points,
+    points, status_of, _stats = rt.cache.memory.get(bpy.context.scene.frame_current, inp.points,
                                             inp.offsets)
     return inp, points
 

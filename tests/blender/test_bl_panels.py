@@ -174,7 +174,7 @@ def test_an_error_is_shown_in_the_main_panel(fc):
     hair, box, out = small_setup(fc)
     hair.furcollide.attract_to_growth_surface = True  # needs the hair's Surface: none
     play(scene, range(1, 3))
-    level, message = fc.store.registry.status_for(hair)
+    level, message = fc.store.report.status_for(hair)
     assert level == "ERROR" and "Surface" in message
     activate(hair)
     main = draw_everything()["FURCOLLIDE_PT_main"]

@@ -374,7 +374,7 @@ def test_children_from_guides_on_odd_setups(fc):
     dg = bpy.context.evaluated_depsgraph_get()
     assert len(out.evaluated_get(dg).data.curves) > 10
     play(scene, range(1, 4))
-    assert fc.store.registry.status_for(one) == ("INFO", "")
+    assert fc.store.report.status_for(one) == ("INFO", "")
 
     # a Surface that is not a mesh: refused with the reason, nothing changed
     ctrl = bpy.data.objects.new("Ctrl", None)

@@ -34,7 +34,7 @@ def test_scrub_back_is_exact_and_jump_holds(fc):
     out = fc.setup(hair, [box])
     rt = fc.store.registry.get_runtime(hair)
     rec = positions_per_frame(out, range(1, 13))
-    assert len(rt.memory) == 12
+    assert len(rt.cache.memory) == 12
     assert any(not np.array_equal(rec[f], fc.positions(hair)) for f in rec)
     for f in (5, 1, 12, 7):
         bpy.context.scene.frame_set(f)
@@ -63,11 +63,11 @@ def test_subframes_and_repeats_do_not_step(fc):
     sc = bpy.context.scene
     sc.frame_set(6, subframe=0.5)
     assert np.array_equal(fc.positions(out), rec[6])
-    assert sorted(rt.memory.frames) == list(range(1, 7))
+    assert sorted(rt.cache.memory.frames) == list(range(1, 7))
     sc.frame_set(6)
     sc.frame_set(6)
     assert np.array_equal(fc.positions(out), rec[6])
-    assert rt.solver_frame == 6
+    assert rt.solve.frame == 6
 
 
 def test_setting_change_drops_the_playback_cache(fc):
@@ -80,29 +80,29 @@ def test_setting_change_drops_the_playback_cache(fc):
     rec = positions_per_frame(out, range(1, 13))
     bpy.context.scene.frame_set(6)
     hair.furcollide.mode = "STIFF"
-    assert len(rt.memory) == 0
+    assert len(rt.cache.memory) == 0
     assert hair.furcollide.is_outdated
     assert hair.furcollide.status_message == (
         "Frame 6 is outdated: Mode changed. The playback cache is dropped: go to "
         "frame 1 and play, or press Bake.")
     for f in (3, 9):  # earlier or later: not shown as current, not stepped
         bpy.context.scene.frame_set(f)
-        assert hair.furcollide.is_outdated and len(rt.memory) == 0
+        assert hair.furcollide.is_outdated and len(rt.cache.memory) == 0
         assert "(Mode changed: the playback cache was dropped)" in (
             hair.furcollide.status_message)
         assert np.array_equal(fc.positions(out), rec[6])  # the output is left as it was
     positions_per_frame(out, range(1, 13))  # the advice
-    assert not hair.furcollide.is_outdated and len(rt.memory) == 12
+    assert not hair.furcollide.is_outdated and len(rt.cache.memory) == 12
     # a shorter end keeps the frames inside the new range...
     hair.furcollide.frame_end = 4
-    assert sorted(rt.memory.frames) == [1, 2, 3, 4]
+    assert sorted(rt.cache.memory.frames) == [1, 2, 3, 4]
     # ... a new start drops everything
     hair.furcollide.frame_start = 2
-    assert len(rt.memory) == 0
+    assert len(rt.cache.memory) == 0
     # the thread count changes nothing in the result: the cache stays
     positions_per_frame(out, range(2, 5))
     hair.furcollide.threads = 1
-    assert sorted(rt.memory.frames) == [2, 3, 4]
+    assert sorted(rt.cache.memory.frames) == [2, 3, 4]
 
 
 def clean_run(fc, mode, frames, **settings):
@@ -155,10 +155,10 @@ def test_a_change_without_an_update_callback_is_not_stepped_from(fc, monkeypatch
     monkeypatch.setattr(fc.store.invalidation, "invalidate", lambda *a, **k: None)
     hair.furcollide.mode = "SOFT"
     if seen == "previous-frame-record":
-        rt.signature = None  # (as after a shorter frame range)
+        fc.frame.record.forget_structure(rt)  # (as after a shorter frame range)
     bpy.context.scene.frame_set(7)
     s = hair.furcollide
-    assert s.is_outdated and len(rt.memory) == 0
+    assert s.is_outdated and len(rt.cache.memory) == 0
     assert "Frame 7 is outdated: Mode changed" in s.status_message, s.status_message
     positions_per_frame(out, range(1, 8))
     assert not s.is_outdated and s.status_message == ""
@@ -258,7 +258,7 @@ def test_negative_start_frame_plays_scrubs_and_holds(fc):
         check_frame(hair, out, [box])
         rec[f] = (positions(out).copy(), status_of(out).copy())
     assert any(rec[f][1].any() for f in rec)
-    assert sorted(fc.store.registry.get_runtime(hair).memory.frames) == list(range(-4, 4))
+    assert sorted(fc.store.registry.get_runtime(hair).cache.memory.frames) == list(range(-4, 4))
     assert_same_frames(rec, scene, out, [0, -3, 2, -4, 3], "scrubbed")
     scene.frame_set(5)
     np.testing.assert_array_equal(positions(out), rec[3][0])

@@ -93,7 +93,7 @@ def test_render_animation_sees_result(fc, tmp_path):
     assert sorted(seen) == [1, 2, 3, 4]
     # every rendered frame got exactly the solved (cached) result
     rt = fc.store.registry.get_runtime(hair)
-    assert sorted(rt.memory.frames) == [1, 2, 3, 4]
+    assert sorted(rt.cache.memory.frames) == [1, 2, 3, 4]
     for f in range(1, 5):
         bpy.context.scene.frame_set(f)
         assert np.array_equal(fc.positions(out), seen[f]), f
@@ -305,13 +305,13 @@ def _simplified_ball(fc, frames=(1, 6)):
 
 
 def _counting_solves(fc, monkeypatch):
-    """Count the frames solved from now on (``frame_solve.solve_frame`` calls)."""
+    """Count the frames solved from now on (``frame.solve.solve_frame`` calls)."""
     calls = []
     real = fc.frame.solve.solve_frame
 
-    def counting(setup, inp):
+    def counting(setup, inp, **kw):
         calls.append(setup.frame)
-        return real(setup, inp)
+        return real(setup, inp, **kw)
 
     monkeypatch.setattr(fc.frame.solve, "solve_frame", counting)
     return calls
@@ -330,7 +330,7 @@ def test_f12_under_simplify_keeps_the_playback_cache(fc, tmp_path, monkeypatch):
     assert any(not np.array_equal(p, played[1]) for p in played.values())
     scene.frame_set(5)
     rt = fc.store.registry.get_runtime(hair, create=False)
-    assert sorted(rt.memory.frames) == list(range(1, 7))
+    assert sorted(rt.cache.memory.frames) == list(range(1, 7))
     msg = hair.furcollide.status_message
     assert SIMPLIFIED in msg and "renders show them as they are" in msg, msg
     solves = _counting_solves(fc, monkeypatch)
@@ -339,7 +339,7 @@ def test_f12_under_simplify_keeps_the_playback_cache(fc, tmp_path, monkeypatch):
 
     def spy(sc, depsgraph):
         if depsgraph is not None and depsgraph.mode == "RENDER":
-            seen[sc.frame_current] = (positions(out).copy(), fc.store.registry.status_for(hair),
+            seen[sc.frame_current] = (positions(out).copy(), fc.store.report.status_for(hair),
                                       hair.furcollide.is_outdated)
 
     bpy.app.handlers.frame_change_post.append(spy)
@@ -347,7 +347,7 @@ def test_f12_under_simplify_keeps_the_playback_cache(fc, tmp_path, monkeypatch):
         assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
     finally:
         bpy.app.handlers.frame_change_post.remove(spy)
-    assert solves == [] and sorted(rt.memory.frames) == list(range(1, 7))
+    assert solves == [] and sorted(rt.cache.memory.frames) == list(range(1, 7))
     P, (level, msg), outdated = seen[5]
     np.testing.assert_array_equal(P, played[5])  # the render showed the cached frame
     assert level == "INFO" and SIMPLIFIED in msg and not outdated, msg
@@ -496,11 +496,11 @@ def test_f12_with_a_subdivided_collider_keeps_the_playback_cache(fc, tmp_path):
         scene.frame_set(f)
     scene.frame_set(5)
     rt = fc.store.registry.get_runtime(hair, create=False)
-    assert len(rt.memory) == 6
+    assert len(rt.cache.memory) == 6
     scene.render.filepath = str(tmp_path / "still.png")
     bpy.ops.render.render(write_still=True)
     assert "changed shape" not in hair.furcollide.status_message
-    assert len(rt.memory) == 6, hair.furcollide.status_message
+    assert len(rt.cache.memory) == 6, hair.furcollide.status_message
 
 
 def test_render_of_a_bake_with_a_subdivided_collider_is_not_outdated(fc, tmp_path):
@@ -526,13 +526,13 @@ def test_frames_solved_in_a_render_of_a_subdivided_collider_are_shown_in_the_vie
     rt = fc.store.registry.get_runtime(hair, create=False)
     seen, statuses = render_watching(tmp_path, "anim", [out], hair)
     assert [s for s in statuses if s[1] != SUBDIVIDED] == []
-    assert len(rt.memory) == 6
+    assert len(rt.cache.memory) == 6
     for f in (4, 5, 6, 3):
         scene.frame_set(f)
         assert hair.furcollide.status_message == SUBDIVIDED
         assert not hair.furcollide.is_outdated
         np.testing.assert_array_equal(world(out), seen[(f, 0.0)][-1][out.name])
-    assert len(rt.memory) == 6
+    assert len(rt.cache.memory) == 6
 
 
 def _render_only_subdivision():
@@ -682,7 +682,7 @@ def test_motion_blur_render_of_a_played_setup(fc, tmp_path, position):
         else:  # the whole frame being rendered, evaluated just before
             same_frame(got, ref[last_whole], f"{position}: subframe {f}+{sub}")
     rt = fc.store.registry.get_runtime(hair)
-    assert sorted(rt.memory.frames) == list(range(1, R_LAST + 1))
+    assert sorted(rt.cache.memory.frames) == list(range(1, R_LAST + 1))
     for f in (R_LAST, 3, 9):
         scene.frame_set(f)
         same_frame(frame_of(out), ref[f], f"after the render, frame {f}")
@@ -751,6 +751,6 @@ def test_f12_with_motion_blur_in_the_middle_of_playback(fc, tmp_path):
     assert {k for k, _ in seen} >= {(8, 0.0), (7, 0.75), (8, 0.25)}, [k for k, _ in seen]
     for key, got in seen:
         same_frame(got, ref[8], f"F12 at {key}")
-    assert sorted(fc.store.registry.get_runtime(hair).memory.frames) == list(range(1, 11))
+    assert sorted(fc.store.registry.get_runtime(hair).cache.memory.frames) == list(range(1, 11))
     for f, got in play_demo(scene, hair, out, [9, 10, 11, 12, 2]).items():
         same_frame(got, ref[f], f"after F12, frame {f}")

@@ -423,7 +423,7 @@ def test_render_groom_ragged_groom(fc, capsys):
     moved = 0.0
     for f in range(1, 8):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(guides) == ("INFO", ""), f
+        assert fc.store.report.status_for(guides) == ("INFO", ""), f
         P = world(gout)
         np.testing.assert_allclose(P[roff[:-1]], ref[roff[:-1]], atol=1e-5)  # roots stay
         np.testing.assert_allclose(seg_lengths(P, roff), seg_lengths(ref, roff), atol=1e-4)
@@ -479,7 +479,7 @@ def test_render_groom_on_another_surface_follows_the_guides(fc, capsys):
     np.testing.assert_allclose(world(gout), ref, atol=1e-5)
     for f in range(1, 8):
         scene.frame_set(f)
-        assert fc.store.registry.status_for(guides) == ("INFO", ""), f
+        assert fc.store.report.status_for(guides) == ("INFO", ""), f
         assert len(segments_in_box(world(gout), roff, box.matrix_world.translation)) == 0
     assert np.abs(world(gout) - ref).max() > 0.05
     # the other Surface moving does not move the roots (they follow the guides' roots)
@@ -503,14 +503,14 @@ def test_guides_per_curve_changed_after_binding_keeps_the_old_binding(fc):
     g.guides = 1
     scene.frame_set(3)
     scene.frame_set(4)
-    assert fc.store.registry.status_for(guides) == (
+    assert fc.store.report.status_for(guides) == (
         "WARNING", "Render groom: Guides per Curve is 1 but the groom was bound with 4: "
         "press Bind Groom again")
     assert fc.frame.groom.groom_binding(guides, rt).weights.index.shape[1] == 4
     np.testing.assert_array_equal(world(g.output), before)
     g.guides = 4
     scene.frame_set(3)
-    assert fc.store.registry.status_for(guides) == ("INFO", "")
+    assert fc.store.report.status_for(guides) == ("INFO", "")
 
 
 def test_bind_groom_again_after_changing_guides_per_curve(fc):
@@ -524,7 +524,7 @@ def test_bind_groom_again_after_changing_guides_per_curve(fc):
     scene.frame_set(1)
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     play(scene, range(1, 6))
-    status_for = fc.store.registry.status_for
+    status_for = fc.store.report.status_for
     assert status_for(guides) == ("INFO", ""), status_for(guides)
     rt = fc.store.registry.get_runtime(guides)
     assert fc.frame.groom.groom_binding(guides, rt).weights.index.shape[1] == 1

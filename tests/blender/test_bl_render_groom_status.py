@@ -191,7 +191,7 @@ def test_editing_the_render_groom_after_bind_is_reported(fc, edit):
         guides.furcollide.groom.groom = other
         want = "the Render Groom is now 'Other' but 'Groom' is bound: press Bind Groom"
     scene.frame_set(3)
-    level, msg = fc.store.registry.status_for(guides)
+    level, msg = fc.store.report.status_for(guides)
     assert level == "WARNING" and want in msg, msg
     assert "press Bind Groom" in msg and "Render groom: Render groom" not in msg
     np.testing.assert_array_equal(world(gout), before)  # the bound groom, still following
@@ -199,7 +199,7 @@ def test_editing_the_render_groom_after_bind_is_reported(fc, edit):
     activate(guides)
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     scene.frame_set(2)
-    assert fc.store.registry.status_for(guides) == ("INFO", "")
+    assert fc.store.report.status_for(guides) == ("INFO", "")
 
 
 @pytest.mark.parametrize("edit", ["comb", "none_chosen"])
@@ -220,7 +220,7 @@ def test_advice_on_a_baked_setup_works_when_followed(fc, tmp_path, edit):
     else:
         guides.furcollide.groom.groom = None
     scene.frame_set(3)
-    level, msg = fc.store.registry.status_for(guides)
+    level, msg = fc.store.report.status_for(guides)
     assert level == "WARNING", msg
     if edit == "comb":
         assert "was edited since Bind Groom" in msg, msg
@@ -237,7 +237,7 @@ def test_advice_on_a_baked_setup_works_when_followed(fc, tmp_path, edit):
     assert bpy.ops.furcollide.groom_bind.poll()
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     scene.frame_set(2)
-    assert fc.store.registry.status_for(guides) == ("INFO", "")
+    assert fc.store.report.status_for(guides) == ("INFO", "")
 
 
 
@@ -308,7 +308,7 @@ def test_error_state_groom_follows_the_last_guides_on_the_current_skin(fc):
     guides.data = hc
     for f in range(4, 9):
         scene.frame_set(f)
-        level, msg = fc.store.registry.status_for(guides)
+        level, msg = fc.store.report.status_for(guides)
         assert level == "ERROR" and "press Bind again" in msg, msg
         P = world(gout)
         lift = np.array(surf.matrix_world.translation)
@@ -379,7 +379,7 @@ def test_stage_times_and_skipped_stages(fc, monkeypatch):
     scene = bpy.context.scene
     guides, groom, box, out, gout = _bound(fc)
     play(scene, range(1, 5))
-    stats = fc.store.registry.stats_for(guides)
+    stats = fc.store.report.stats_for(guides)
     for k in ("attach", "collide", "motion", "groom", "clearance", "write"):
         assert f"{k}_ms" in stats
     assert stats["collide_ms"] > 0 and stats["groom_ms"] > 0 and stats["write_ms"] > 0
@@ -403,7 +403,7 @@ def test_stage_times_and_skipped_stages(fc, monkeypatch):
     scene.frame_set(3)  # a cached frame: its guides differ
     scene.frame_set(3)
     assert len(calls) == 1
-    assert fc.store.registry.stats_for(guides)["groom_ms"] == 0.0  # (skipped this time)
+    assert fc.store.report.stats_for(guides)["groom_ms"] == 0.0  # (skipped this time)
     scene.frame_set(4)
     np.testing.assert_array_equal(world(gout), shown)
     box.scale = (1.1, 1.1, 1.1)  # a collider changed: computed again
@@ -450,7 +450,7 @@ def test_a_groom_stage_error_is_prefixed_once(fc):
     hc.add_curves([5] * 3)
     gout.data = hc
     scene.frame_set(3)
-    level, msg = fc.store.registry.status_for(guides)
+    level, msg = fc.store.report.status_for(guides)
     assert level == "WARNING" and msg.startswith(
         "Render groom: The groom output 'Groom FurCollide' has other curves than the bound "
         "groom (edited?): press Bind Groom again"), msg
@@ -484,7 +484,7 @@ def test_a_bad_curve_in_the_groom_after_bind(fc, bad):
     _set_groom_points(groom, partial(_break_curve_7, bad))
     for f in range(3, 7):
         scene.frame_set(f)
-        level, msg = fc.store.registry.status_for(guides)
+        level, msg = fc.store.report.status_for(guides)
         assert level == "WARNING" and "'Groom' was edited since Bind Groom" in msg, msg
         assert np.isfinite(world(gout)).all()
         # (the bound curves are the reference: the lengths are the bound ones)
@@ -560,14 +560,14 @@ def test_groom_with_fewer_curves_than_bound_from_a_modifier(fc):
     mod = _delete_curves_modifier(groom, 10)
     for f in range(3, 7):
         scene.frame_set(f)
-        level, msg = fc.store.registry.status_for(guides)
+        level, msg = fc.store.report.status_for(guides)
         assert level == "WARNING" and "'Groom' now gives 134 curves" in msg, msg
         assert "press Bind Groom again" in msg
         same_pipeline_frame(pipeline_frame(guides), first[f], f"bound curves shown, frame {f}")
     mod.show_viewport = False
     scene.frame_set(5)
     scene.frame_set(6)
-    assert fc.store.registry.status_for(guides) == ("INFO", "")
+    assert fc.store.report.status_for(guides) == ("INFO", "")
     same_pipeline_frame(pipeline_frame(guides), first[6], "modifier off")
 
 

@@ -128,7 +128,7 @@ def test_armature_arm_presses_into_fur_played_then_baked(fc, tmp_path):
         scene.frame_set(f)
         st = check_frame(hair, out, [arm])
         seen += np.bincount(st, minlength=6)
-        (entry,) = rt.colliders.values()
+        (entry,) = rt.colliders.entries.values()
         builds.append(entry.collider.build_count)
     assert seen[COLLIDING] > 0 and seen[PINCHED] > 0, seen
     assert hair.furcollide.stat_pinched > 0
@@ -169,7 +169,7 @@ def test_a_skinned_box_that_really_bends_is_built_each_frame(fc):
     for f in range(1, 7):
         scene.frame_set(f)
         check_frame(hair, out, [arm])
-        (entry,) = rt.colliders.values()
+        (entry,) = rt.colliders.entries.values()
         builds.append(entry.collider.build_count)
     assert np.all(np.diff(builds[1:]) >= 1), builds
 
@@ -240,7 +240,7 @@ def test_scrub_back_change_a_setting_then_play_on_with_a_skinned_arm(fc):
     for f in (7, 2, 9, 4):  # scrubbing back and forth over cached frames
         scene.frame_set(f)
     s.recovery_rate = 0.6
-    assert len(fc.store.registry.get_runtime(hair).memory) == 0
+    assert len(fc.store.registry.get_runtime(hair).cache.memory) == 0
     scene.frame_set(5)
     assert s.is_outdated and "Play from frame 1" in s.status_message, s.status_message
     rec = record(scene, out, range(1, 10))  # the advice
@@ -328,7 +328,7 @@ def test_cloth_collider_played_from_start_then_baked_then_rendered(fc, tmp_path)
         played[f] = (positions(out).copy(), status_of(out).copy())
     assert z[8] < 0.8 < z[1], z  # the cloth really fell into the fur
     assert played[8][1].any() and (played[8][1] == COLLIDING).sum() > 3
-    (entry,) = rt.colliders.values()
+    (entry,) = rt.colliders.entries.values()
     assert entry.deforming
     save_in(tmp_path)
     bake_setup(hair)
@@ -441,7 +441,7 @@ def test_collider_parented_to_an_animated_non_uniformly_scaled_empty(fc, offset)
             d = np.linalg.norm(np.maximum(np.maximum(lo - pts, pts - hi), 0.0), axis=1)
             assert d.min() > 0.9 * offset, (f, d.min())
     assert hits > 0
-    (entry,) = rt.colliders.values()
+    (entry,) = rt.colliders.entries.values()
     assert not entry.deforming and not fc.frame.colliders.is_deforming(box, scene)
     if not offset:
         assert entry.collider.build_count == 1  # moved and stretched, never rebuilt
@@ -522,12 +522,12 @@ def test_animator_edits_the_rig_mid_session(fc, how):
     k.handle_left[1] = k.handle_right[1] = k.co[1]
     fcu.update()
     bpy.context.view_layer.update()
-    assert sorted(rt.memory.frames) == list(range(1, 9)), sorted(rt.memory.frames)
-    assert rt.trusted and rt.verified == {4}
+    assert sorted(rt.cache.memory.frames) == list(range(1, 9)), sorted(rt.cache.memory.frames)
+    assert rt.cache.trusted and rt.cache.verified == {4}
     edited = {}
     for f in range(5, 9):
         scene.frame_set(f)
-        assert rt.stats["source"] == "solved" and not hair.furcollide.is_outdated, f
+        assert rt.report.stats["source"] == "solved" and not hair.furcollide.is_outdated, f
         edited[f] = (positions(out).copy(), status_of(out).copy())
     scene.frame_set(1)
     assert bpy.ops.furcollide.reset() == {"FINISHED"}

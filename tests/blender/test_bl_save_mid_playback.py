@@ -55,7 +55,7 @@ def _played_then_saved(fc, tmp_path):
     assert bpy.ops.furcollide.reset() == {"FINISHED"}  # the cache again, up to frame 6
     for f in range(FRAMES[0] + 1, SAVED_AT + 1):
         scene.frame_set(f)
-    assert len(fc.store.registry.get_runtime(hair).memory) == SAVED_AT
+    assert len(fc.store.registry.get_runtime(hair).cache.memory) == SAVED_AT
     return save_in(tmp_path), ref
 
 
@@ -81,7 +81,7 @@ def test_the_status_says_the_cache_is_not_saved_and_bake_gives_the_frames(fc, tm
     s = hair.furcollide
     assert s.cached_at_save == SAVED_AT
     # the moment the file is open (no frame evaluated yet): the status and the console
-    level, msg = fc.store.registry.status_for(hair)
+    level, msg = fc.store.report.status_for(hair)
     assert level == "WARNING", msg
     assert msg == (f"The playback cache ({SAVED_AT} frames) is not saved with the file: "
                    "bake to keep the frames, or play from frame 1"), msg
@@ -108,7 +108,7 @@ def test_the_status_says_the_cache_is_not_saved_and_bake_gives_the_frames(fc, tm
     path = save_in(tmp_path, "baked.blend")
     scene, hair, out = _opened(fc, path)
     assert hair.furcollide.cached_at_save == 0
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
 
 
 def test_playing_from_the_start_frame_gives_the_frames_and_ends_the_note(fc, tmp_path):
@@ -128,7 +128,7 @@ def test_playing_from_the_start_frame_gives_the_frames_and_ends_the_note(fc, tmp
     path = save_in(tmp_path, "again.blend")
     scene, hair, out = _opened(fc, path)
     assert hair.furcollide.cached_at_save == SAVED_AT + 2
-    assert fc.store.registry.status_for(hair)[1].startswith(
+    assert fc.store.report.status_for(hair)[1].startswith(
         f"The playback cache ({SAVED_AT + 2} frames) is not saved with the file")
 
 
@@ -142,13 +142,13 @@ def test_saved_again_before_playing_still_says_it(fc, tmp_path):
     path = save_in(tmp_path, "untouched.blend")
     scene, hair, out = _opened(fc, path)
     assert hair.furcollide.cached_at_save == SAVED_AT
-    assert "is not saved with the file" in fc.store.registry.status_for(hair)[1]
+    assert "is not saved with the file" in fc.store.report.status_for(hair)[1]
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     hair, box = fc.make_scene(frames=FRAMES, nx=3, ny=3)
     fc.setup(hair, [box])
     path = save_in(tmp_path, "fresh.blend")
     scene, hair, out = _opened(fc, path)
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
 
 
 # ------------------------------------------------------ a pipeline setup

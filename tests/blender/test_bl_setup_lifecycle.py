@@ -144,7 +144,7 @@ def test_hidden_setup_is_skipped_quietly(fc):
     sc = bpy.context.scene
     hair.hide_viewport = out.hide_viewport = True
     dg = bpy.context.evaluated_depsgraph_get()
-    assert fc.frame.rules.evaluate(fc.Setup(hair, sc, dg)) == fc.frame.rules.Outcome.HIDDEN
+    assert fc.frame.spine.evaluate(fc.Setup(hair, sc, dg)) == fc.frame.rules.Outcome.HIDDEN
     for f in range(sc.frame_start, sc.frame_start + 4):
         sc.frame_set(f)
         assert hair.furcollide.status_message == ""
@@ -171,7 +171,7 @@ def test_a_deleted_source_drops_its_runtime_and_memory_cache(fc):
         scene.frame_set(f)
     rt = fc.store.registry.get_runtime(hair, create=False)
     kept = fc.store.registry.get_runtime(other, create=False)
-    assert len(rt.memory) == 6 and len(kept.memory) == 6
+    assert len(rt.cache.memory) == 6 and len(kept.cache.memory) == 6
     assert len(fc.store.registry.registry) == 2
 
     hair.furcollide.show_result = False  # the source shows (and can be selected)
@@ -182,7 +182,7 @@ def test_a_deleted_source_drops_its_runtime_and_memory_cache(fc):
     assert bpy.ops.object.delete() == {"FINISHED"}  # the output's pointer keeps it alive
     assert hair.name in bpy.data.objects and not hair.users_scene
     bpy.context.view_layer.update()  # the depsgraph check
-    assert list(fc.store.registry.registry.values()) == [kept] and len(kept.memory) == 6
+    assert list(fc.store.registry.registry.values()) == [kept] and len(kept.cache.memory) == 6
     assert fc.store.registry.get_runtime(hair, create=False) is None
 
     other.name = "Renamed"  # a rename is not a deletion
@@ -254,7 +254,7 @@ def test_duplicated_setup_errors_and_leaves_the_original_alone(fc):
     dup = duplicate(hair, dx=0.3)  # the copy's curves differ from the original's
     for f in range(1, 6):
         scene.frame_set(f)
-        level, msg = fc.store.registry.status_for(dup)
+        level, msg = fc.store.report.status_for(dup)
         assert level == "ERROR" and "copy of the setup on 'Fur'" in msg, msg
         assert hair.furcollide.status_message == ""
         np.testing.assert_array_equal(world(out), clean[f], err_msg=f"frame {f}")

@@ -116,16 +116,16 @@ def test_soak_paper_scale_playback_equals_the_bake(fc, tmp_path):
     rss, how, touched = [], {}, []
     for i, f in enumerate(_sequence(np.random.default_rng(14))):
         scene.frame_set(f)
-        assert rt.memory.nbytes <= limit, (i, f, rt.memory.nbytes)
+        assert rt.cache.memory.nbytes <= limit, (i, f, rt.cache.memory.nbytes)
         if s.is_outdated:  # a jump past the cache: held, and said so
             assert "not cached" in s.status_message, s.status_message
             outdated += 1
         else:
             assert s.status_message == "" or f > SHOT[1], (f, s.status_message)
             shown.setdefault(min(f, SHOT[1]), set()).add(_digest(out))
-            how[rt.stats.get("source")] = how.get(rt.stats.get("source"), 0) + 1
+            how[rt.report.stats.get("source")] = how.get(rt.report.stats.get("source"), 0) + 1
             touched.append(s.stat_colliding + s.stat_recovering)
-        evicted += sum(1 for fr in rt.memory.frames.values() if fr.state is None) > 0
+        evicted += sum(1 for fr in rt.cache.memory.frames.values() if fr.state is None) > 0
         if i >= SHOT[1] and i % 50 == 0:
             rss.append(_rss_mb())
     assert outdated > 20 and evicted > 100  # the sequence did reach those rules
@@ -136,8 +136,8 @@ def test_soak_paper_scale_playback_equals_the_bake(fc, tmp_path):
     growth = max(rss) - rss[0]
     print(f"soak: {CHANGES} frame changes ({how}, {outdated} outdated; median "
           f"{np.median(touched):.0f} curves colliding or recovering), cache "
-          f"{rt.memory.nbytes / 2**20:.1f} MB of {LIMIT_MB}, RSS {rss[0]:.0f} -> {rss[-1]:.0f} "
-          f"MB (max growth {growth:.1f} MB)")
+          f"{rt.cache.memory.nbytes / 2**20:.1f} MB of {LIMIT_MB}, RSS {rss[0]:.0f} -> "
+          f"{rss[-1]:.0f} MB (max growth {growth:.1f} MB)")
     assert growth < 64, rss
 
     activate(hair)

@@ -47,7 +47,7 @@ def _render_local_spy(fc, tmp_path, hair, out, tag):
     as the RENDER depsgraph's frame changes left them. (Local: the originals'
     matrix_world is the viewport's, not the rendered frame's.)"""
     return render_spy(fc, tmp_path, hair, out, tag, record=lambda: (
-        positions(out).copy(), status_of(out).copy(), fc.store.registry.status_for(hair)))
+        positions(out).copy(), status_of(out).copy(), fc.store.report.status_for(hair)))
 
 
 def _unit_run(fc, scale_length):
@@ -245,7 +245,7 @@ def test_source_topology_change_is_reported_and_nothing_lost(fc):
     assert "press Reset Cache and play from frame 1" in msg, msg
     np.testing.assert_array_equal(fc.positions(out), fc.positions(hair))
     assert hair.furcollide.is_outdated
-    assert len(rt.memory) == 6
+    assert len(rt.cache.memory) == 6
     assert len(out.data.curves) == n + 1
     bpy.context.scene.frame_set(1)
     assert bpy.ops.furcollide.reset() == {"FINISHED"}
@@ -265,7 +265,7 @@ def test_source_data_swapped_for_more_curves_mid_play(fc, capsys):
     hair.data = data  # a new hair data block with 25 curves instead of 16
     for f in (5, 6, 2):
         scene.frame_set(f)
-        level, msg = fc.store.registry.status_for(hair)
+        level, msg = fc.store.report.status_for(hair)
         assert level == "ERROR" and "16" in msg and "25" in msg and "Reset Cache" in msg, msg
         # the output follows the source (not collided), outdated
         np.testing.assert_array_equal(fc.positions(out), fc.positions(hair))
@@ -440,7 +440,7 @@ def test_one_bad_curve_never_stops_the_groom(fc, capsys, bad):
         others = np.delete(np.arange(len(st)), c)
         assert (st[others] != fc.core.Status.INVALID).all()
         hits += int((st == COLLIDING).sum())
-        level, msg = fc.store.registry.status_for(hair)
+        level, msg = fc.store.report.status_for(hair)
         assert level == "WARNING" and f"curve {c}" in msg, msg
         assert hair.furcollide.stat_invalid == 1
     assert hits > 0  # the box really went through the other curves

@@ -317,12 +317,12 @@ def test_broken_preset_files_report_clearly(fc, capsys):
         p = preset("nan", "settings.max_angle = float('nan')\n")
         assert _load(p) == {"FINISHED"}
         play(scene, range(1, 3))
-        level, msg = fc.store.registry.status_for(hair)
+        level, msg = fc.store.report.status_for(hair)
         assert level == "ERROR" and "max_angle must be finite" in msg, msg
         # a good preset fixes it: the setup solves again from the start frame
         assert _load(os.path.join(folder, "Long_Fur_(Bend).py")) == {"FINISHED"}
         play(scene, range(1, 4))
-        assert fc.store.registry.status_for(hair) == ("INFO", "")
+        assert fc.store.report.status_for(hair) == ("INFO", "")
         # no active object: refused with the reason, not a crash
         bpy.context.view_layer.objects.active = None
         with pytest.raises(RuntimeError, match="no FurCollide setup"):

@@ -40,9 +40,9 @@ def test_undo_pre_stops_a_running_bake_and_keeps_its_frames(fc, tmp_path):
     job.stop("again")
     assert job.stopped == ops_bake.STOPPED_BY_UNDO
     scene.frame_set(1)  # the frame handler solves the start frame again
-    assert 1 in fc.store.registry.get_runtime(hair).memory
+    assert 1 in fc.store.registry.get_runtime(hair).cache.memory
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    assert fc.frame.rules.evaluate(fc.Setup(hair, scene, depsgraph)) is (
+    assert fc.frame.spine.evaluate(fc.Setup(hair, scene, depsgraph)) is (
         fc.frame.rules.Outcome.CACHE)
 
 
@@ -51,4 +51,4 @@ def test_undo_pre_without_a_bake_does_nothing(fc):
     handlers().on_undo_pre(bpy.context.scene)
     handlers().on_undo_post(bpy.context.scene)  # (headless: no refresh timer)
     bpy.context.scene.frame_set(1)
-    assert fc.store.registry.status_for(hair) == ("INFO", "")
+    assert fc.store.report.status_for(hair) == ("INFO", "")
