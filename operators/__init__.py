@@ -18,7 +18,7 @@ Each sub-package's docstring lists its modules, one line each.
 """
 
 from .frame import handlers
-from .ops import attach, bake, children, cli, groom, pipeline, sampler, setup
+from .ops import attach, bake, children, cli, groom, pipeline, sampler, scene, setup
 from .settings import properties
 
 classes = (
@@ -29,6 +29,7 @@ classes = (
     + groom.classes
     + children.classes
     + pipeline.classes
+    + scene.classes
 )
 
 

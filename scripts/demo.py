@@ -41,6 +41,7 @@ Exit status: 0 on success, 1 on any failure (the reason is printed).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import sys
@@ -202,6 +203,8 @@ def apply_addon_settings(ob, values: dict) -> list[str]:
     for key, value in values.items():
         if not hasattr(group, key):
             continue
+        if group.bl_rna.properties[key].subtype == "ANGLE":  # (Blender angles: radians)
+            value = math.radians(value)
         candidates = [value]
         if isinstance(value, str):
             candidates += [value.upper(), value.title()]

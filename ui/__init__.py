@@ -1,10 +1,11 @@
 """The user interface: View3D > Sidebar > FurCollide (``panel``), its Fur Pipeline
-sub-panel (``pipeline_panel``), the colliders list and the setting presets (``presets``).
+sub-panel (``pipeline_panel``), the colliders list, the setting presets (``presets``) and
+the Object menu's FurCollide entry (``menu``). Labels fit the sidebar (``text``).
 Thin: it draws the settings and calls the operators of :mod:`..operators`."""
 
-from . import panel, pipeline_panel, presets
+from . import menu, panel, pipeline_panel, presets
 
-classes = presets.classes + panel.classes + pipeline_panel.classes
+classes = presets.classes + panel.classes + pipeline_panel.classes + menu.classes
 
 
 def register():
@@ -12,11 +13,13 @@ def register():
 
     for cls in classes:
         bpy.utils.register_class(cls)
+    menu.register()
     presets.install_shipped_presets()
 
 
 def unregister():
     import bpy
 
+    menu.unregister()
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -9,7 +9,17 @@ from ..operators.frame.clock import STAGES
 from ..operators.frame.colliders import collider_lines, in_scene
 from ..operators.ops import bake as bake_ops
 from ..operators.ops.common import active_setup, backend_message
+from ..operators.ops.scene import drops_frames, needs_lock
 from ..operators.store import playback, registry, report
+from .text import note, warning
+
+#: What the panel says before a setup: Add FurCollide takes the *active* hair (the object
+#: selected last) and the other selected objects as its colliders.
+HINT = "Select the colliders, then Shift-click the hair last"
+#: The one-line warnings of the scene's settings, each beside the button that fixes it
+#: (:mod:`..operators.ops.scene`).
+LOCK_WARNING = "Renders unlocked"
+SYNC_WARNING = "Playback Sync"
 
 #: List icon per collider object type (a mesh, or what Blender turns into one).
 _TYPE_ICONS = {"CURVE": "CURVE_DATA", "SURFACE": "SURFACE_DATA", "FONT": "FONT_DATA",
@@ -82,15 +92,11 @@ class FURCOLLIDE_PT_main(Panel):
         if msg:
             box = layout.box()
             box.label(text="Ray tracer unavailable", icon="ERROR")
-            for line in _wrap(msg, _line_chars(context)):
-                box.label(text=line)
+            note(box, context, msg, icon="NONE", box=True)
         src = active_setup(context)
         if src is None:
             layout.operator("furcollide.add", icon="MOD_PHYSICS")
-            # Add FurCollide takes the *active* hair: it must be selected last.
-            col = layout.column(align=True)
-            col.label(text="Select the colliders,", icon="INFO")
-            col.label(text="then Shift-click the hair last")
+            note(layout, context, HINT)
             return
         s = src.furcollide
         layout.use_property_split = True
@@ -106,17 +112,22 @@ class FURCOLLIDE_PT_main(Panel):
         if message:
             icon = {"ERROR": "ERROR", "WARNING": "ERROR"}.get(level, "INFO")
             box = layout.box()
-            for i, line in enumerate(_wrap(message, _line_chars(context))):
-                box.label(text=line, icon=icon if i == 0 else "BLANK1")
+            note(box, context, message, icon=icon, box=True)
             if topology.BUTTON in message:  # (the fix the message names)
                 box.operator("furcollide.use_rest_position", icon="MOD_MESHDEFORM")
-        if not context.scene.render.use_lock_interface:
-            box = layout.box()
-            box.label(text="Enable Render > Lock Interface", icon="ERROR")
-            for line in _wrap("so renders cannot crash while hair updates", _line_chars(context)):
-                box.label(text=line, icon="BLANK1")
-            box.prop(context.scene.render, "use_lock_interface")
+        draw_scene_warnings(layout, context)
         layout.operator("furcollide.remove", icon="X")
+
+
+def draw_scene_warnings(layout, context) -> None:
+    """The scene settings a setup needs, when they are not so: one line each, with the
+    button that sets them (:mod:`..operators.ops.scene`)."""
+    scene = context.scene
+    if needs_lock(scene):
+        warning(layout, context, LOCK_WARNING, "furcollide.lock_interface", "Lock Interface")
+    if drops_frames(scene):
+        warning(layout, context, SYNC_WARNING, "furcollide.play_every_frame",
+                "Play Every Frame")
 
 
 class FURCOLLIDE_PT_colliders(_Sub, Panel):
@@ -144,7 +155,7 @@ class FURCOLLIDE_PT_colliders(_Sub, Panel):
             sub.prop(item, "collision_offset")
             rt = registry.get_runtime(active_setup(context), create=False)
             for line in collider_lines(rt, item.object):  # repairs, no pinch detection
-                col.label(text=line, icon="INFO")
+                note(col, context, line)
         col = layout.column()
         col.use_property_split = True
         col.prop(s, "collider_collection")
@@ -170,7 +181,7 @@ class FURCOLLIDE_PT_resolution(_Sub, Panel):
         col.prop(s, "max_angle")
         _map(col, s, "max_angle")
         sub = col.column()
-        sub.active = s.mode == "soft"
+        sub.active = s.mode == "SOFT"
         sub.prop(s, "affected_connected_cvs")
         sub.prop(s, "cv_falloff")
         col.prop(s, "attract_to_growth_surface")
@@ -191,16 +202,17 @@ class FURCOLLIDE_PT_shrink(_Sub, Panel):
     def draw(self, context):
         layout, s = self.prepare(context)
         col = layout.column()
-        col.active = s.shrink and s.mode != "soft"
+        col.active = s.shrink and s.mode != "SOFT"
         col.prop(s, "scale_minimum")
         _map(col, s, "scale_minimum")
         col.prop(s, "scale_angle")
-        if s.mode == "soft":
-            layout.label(text="Shrink works in Stiff and Bend modes", icon="INFO")
+        if s.mode == "SOFT":
+            note(layout, context, "Shrink works in Stiff and Bend modes")
 
 
 class FURCOLLIDE_PT_recovery(_Sub, Panel):
     bl_label = "Recovery & Plasticity"
+    bl_options = set()  # (open: the paper's signature control)
 
     def draw(self, context):
         layout, s = self.prepare(context)
@@ -217,7 +229,7 @@ class FURCOLLIDE_PT_pinch(_Sub, Panel):
     def draw(self, context):
         layout, s = self.prepare(context)
         col = layout.column()
-        col.prop(s, "pinch_resolution", text="Resolution")
+        col.prop(s, "pinch_resolution")
         col.prop(s, "recover_pinched")
 
 
@@ -258,15 +270,13 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         n, where = cached_count(src)
         if foreign is not None:
             where += f" in scene '{foreign.name}'"
-        layout.label(text=f"{n} of {total} frames {where}", icon="FILE_CACHE")
+        note(layout, context, f"{n} of {total} frames {where}", icon="FILE_CACHE")
         rt = registry.get_runtime(src, create=False)
         if foreign is None and not s.is_baked and rt is not None and (
                 rt.cache.dropped == playback.NOT_SAVED):
-            layout.label(text="The playback cache is not saved with the file: bake",
-                         icon="ERROR")
+            note(layout, context, NOT_SAVED, icon="ERROR")
         if s.is_outdated:  # (the status above says why)
-            layout.label(text="Outdated bake: Free Bake, then Bake" if s.is_baked
-                         else "Outdated: play from the start frame or bake", icon="ERROR")
+            note(layout, context, OUTDATED_BAKE if s.is_baked else OUTDATED, icon="ERROR")
         row = layout.row(align=True)
         if s.is_baked:
             row.operator("furcollide.free_bake", icon="TRASH")
@@ -278,6 +288,12 @@ class FURCOLLIDE_PT_cache(_Sub, Panel):
         row.operator("furcollide.bake_all")
         row.operator("furcollide.free_bake_all")
         layout.operator("furcollide.reset", icon="FILE_REFRESH")
+
+
+#: The Cache section's warnings (each above the button it names).
+NOT_SAVED = "Playback cache not saved: bake"
+OUTDATED_BAKE = "Outdated bake: Free Bake, then Bake"
+OUTDATED = "Outdated: play from the start or bake"
 
 
 class FURCOLLIDE_PT_stats(_Sub, Panel):
@@ -339,30 +355,6 @@ def cached_count(src) -> tuple[int, str]:
         return n, "baked" if s.is_baked else "on disk (partial bake)"
     rt = registry.get_runtime(src, create=False)
     return (len(rt.cache.memory) if rt else 0), "cached"
-
-
-def _line_chars(context, fallback=44) -> int:
-    """About how many characters fit on a label line of the sidebar as it is now (Blender
-    elides the middle of a longer one); ``fallback`` where the region is unknown."""
-    region = getattr(context, "region", None)
-    width = getattr(region, "width", 0) or 0
-    if width <= 1:
-        return fallback
-    scale = context.preferences.system.ui_scale
-    return max(16, int((width - 60 * scale) / (6.5 * scale)))
-
-
-def _wrap(text, width):
-    words, lines, cur = text.split(), [], ""
-    for w in words:
-        if cur and len(cur) + 1 + len(w) > width:
-            lines.append(cur)
-            cur = w
-        else:
-            cur = f"{cur} {w}".strip()
-    if cur:
-        lines.append(cur)
-    return lines
 
 
 from .presets import FURCOLLIDE_PT_presets  # noqa: E402  (avoid a cycle at import)

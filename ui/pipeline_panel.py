@@ -10,9 +10,10 @@ from ..operators.frame.groom import BIND_AGAIN, advice
 from ..operators.ops.common import active_setup
 from ..operators.ops.sampler import NO_SURFACE_HAIR
 from .panel import FURCOLLIDE_PT_main
+from .text import note
 
 
-def draw_attach(layout, src):
+def draw_attach(layout, context, src):
     """Fur Attach: the setup's optional input stage."""
     s = src.furcollide
     box = layout.box()
@@ -32,9 +33,9 @@ def draw_attach(layout, src):
     sub.enabled = bound or s.use_fur_attach
     sub.operator("furcollide.fur_attach_unbind", icon="UNLINKED")
     if not has_surface:
-        col.label(text="Fur Attach needs the source's Surface", icon="INFO")
+        note(col, context, "Fur Attach needs the source's Surface", box=True)
     elif not bound:
-        col.label(text="Not bound: press Bind", icon="INFO")
+        note(col, context, "Not bound: press Bind", box=True)
 
 
 def draw_motion(layout, src):
@@ -59,25 +60,36 @@ def draw_motion(layout, src):
         sub.prop(m, name)
 
 
-def draw_influence(layout, src):
-    """Region of Influence and the per-frame Fur Collider Distance attribute."""
-    m = src.furcollide.motion
+def _titled(layout, owner, name, enabled=True):
+    """A box whose title is the checkbox ``owner.name`` (the setting's whole name, as a
+    panel header's checkbox) with its keyframe decorator; returns its column."""
     box = layout.box()
-    box.label(text="Region of Influence", icon="DRIVER_DISTANCE")
+    row = box.row()
+    row.use_property_split = False
+    row.enabled = enabled
+    row.prop(owner, name)
+    row.prop_decorator(owner, name)
     col = box.column()
-    col.enabled = not src.furcollide.is_baked
+    col.enabled = enabled
+    return col
+
+
+def draw_influence(layout, context, src):
+    """Region of Influence, and the per-frame Collider Distance attribute."""
+    m = src.furcollide.motion
+    editable = not src.furcollide.is_baked
+    col = _titled(layout, m, "use_region_of_influence", editable)
     after = (m.use_wind and m.wind_stage == "OUTPUT") or (
         m.use_jiggle and m.jiggle_stage == "OUTPUT")
-    col.prop(m, "use_region_of_influence")
     sub = col.column()
     sub.enabled = m.use_region_of_influence
     sub.prop(m, "roi_margin")
     if not after:
-        col.label(text="Restricts motion After Collision (none is on)", icon="INFO")
+        note(col, context, "Restricts motion After Collision (none is on)", box=True)
     elif not m.use_region_of_influence:
-        col.label(text="Motion after collision may push hair into colliders", icon="ERROR")
-    col.separator()
-    col.prop(m, "write_collider_distance")
+        note(col, context, "Motion after collision may push hair into colliders",
+             icon="ERROR", box=True)
+    col = _titled(layout, m, "write_collider_distance", editable)
     sub = col.column()
     sub.enabled = m.write_collider_distance
     sub.prop(m, "distance_max")
@@ -85,7 +97,7 @@ def draw_influence(layout, src):
                  icon="DRIVER_DISTANCE")
 
 
-def draw_groom(layout, src):
+def draw_groom(layout, context, src):
     """A dense render groom following the collided guides, with its clearance pass."""
     s = src.furcollide
     g = s.groom
@@ -95,9 +107,12 @@ def draw_groom(layout, src):
     settings = col.column()
     settings.enabled = not g.is_baked_with  # the bake holds this render groom
     settings.prop(g, "groom")
-    settings.prop(g, "guides")
+    row = settings.row()
+    row.use_property_split = False  # (its whole name: it is not animatable, no key dot)
+    row.prop(g, "guides")
     if g.output is not None and g.bound_guides and g.guides != g.bound_guides:
-        col.label(text=advice(src, f"Bound with {g.bound_guides}: {BIND_AGAIN}"), icon="INFO")
+        note(col, context, advice(src, f"Bound with {g.bound_guides}: {BIND_AGAIN}"),
+             box=True)
     settings.prop(g, "use_clearance")
     row = col.row(align=True)
     sub = row.row(align=True)
@@ -108,9 +123,10 @@ def draw_groom(layout, src):
     sub.operator("furcollide.groom_remove", text="", icon="X")
     if g.output is None:
         return
-    col.label(text=f"Output: {g.output.name}", icon="OUTLINER_DATA_CURVES")
+    note(col, context, f"Output: {g.output.name}", icon="OUTLINER_DATA_CURVES", box=True)
     if g.is_baked_with:
-        col.label(text="Baked with the setup (Free Bake to change it)", icon="FILE_CACHE")
+        note(col, context, "Baked with the setup (Free Bake to change it)", icon="FILE_CACHE",
+             box=True)
     if g.use_clearance:
         col.label(text=f"Render curves fixed: {g.stat_fixed}", icon="CHECKMARK")
         if g.stat_unresolved:
@@ -121,13 +137,13 @@ def draw_groom(layout, src):
 
 #: How the children relate to the Render Groom (the Children box says it).
 CHILDREN_AND_GROOM = (
-    "Children are made from the collided guides by the output's",
-    "modifiers every frame; a Render Groom (below) is your own dense",
-    "groom bound to the guides. Both get the same clearance pass.",
+    "Children are made from the collided guides by the output's modifiers every frame; a "
+    "Render Groom (below) is your own dense groom bound to the guides. Both get the same "
+    "clearance pass."
 )
 
 
-def draw_children(layout, src, settings):
+def draw_children(layout, context, src, settings):
     """Children: the output's own Geometry Nodes stack, cleared live into the children
     output (Children from Guides adds Blender's Interpolate Hair Curves to it)."""
     s = src.furcollide
@@ -135,38 +151,41 @@ def draw_children(layout, src, settings):
     box = layout.box()
     box.label(text="Children", icon="OUTLINER_DATA_CURVES")
     col = box.column()
-    col.prop(settings, "density")
-    col.prop(settings, "guides")
+    inputs = col.column(align=True)
+    inputs.use_property_split = False  # (Children from Guides' inputs: never keyed)
+    inputs.prop(settings, "density")
+    inputs.prop(settings, "guides")
     row = col.row()
     row.enabled = src.data.surface is not None
     op = row.operator("furcollide.children_from_guides", icon="OUTLINER_DATA_CURVES")
     op.density, op.guides = settings.density, settings.guides
     if src.data.surface is None:
-        col.label(text="Children need the source's Surface", icon="INFO")
+        note(col, context, "Children need the source's Surface", box=True)
     col.prop(c, "use_children")
     sub = col.column()
     sub.enabled = c.use_children
     sub.prop(c, "use_viewport")
     stack = stack_modifiers(s.output)
     if not stack:
-        col.label(text="No modifiers on the output make children", icon="INFO")
+        note(col, context, "No modifiers on the output make children", box=True)
     elif not c.use_children:
-        col.label(text="Children are not cleared: they can cross a collider", icon="ERROR")
+        note(col, context, "Children are not cleared: they can cross a collider",
+             icon="ERROR", box=True)
     elif not owns_children(src):
-        col.label(text="Not cleared yet: play a frame, or", icon="ERROR")
+        note(col, context, "Not cleared yet: play a frame, or", icon="ERROR", box=True)
         col.operator("furcollide.children_output", icon="OUTLINER_DATA_CURVES")
     else:
-        col.label(text=f"Output: {c.output.name}", icon="OUTLINER_DATA_CURVES")
-        col.label(text=f"From: {', '.join(m.name for m in stack)}", icon="MODIFIER")
+        note(col, context, f"Output: {c.output.name}", icon="OUTLINER_DATA_CURVES", box=True)
+        note(col, context, f"From: {', '.join(m.name for m in stack)}", icon="MODIFIER",
+             box=True)
         col.label(text=f"Children: {c.stat_children}, fixed: {c.stat_fixed}", icon="CHECKMARK")
         if c.stat_unresolved:
             col.label(text=f"Unresolved (red): {c.stat_unresolved}", icon="ERROR")
         if c.stat_invalid:
             col.label(text=f"Invalid (yellow): {c.stat_invalid}", icon="ERROR")
         if not c.use_viewport:
-            col.label(text="Viewport: not cleared (renders and bakes are)", icon="INFO")
-    for i, line in enumerate(CHILDREN_AND_GROOM):
-        col.label(text=line, icon="INFO" if i == 0 else "BLANK1")
+            note(col, context, "Viewport: not cleared (renders and bakes are)", box=True)
+    note(col, context, CHILDREN_AND_GROOM, box=True)
 
 
 class FURCOLLIDE_PT_pipeline(Panel):
@@ -208,20 +227,19 @@ class FURCOLLIDE_PT_pipeline(Panel):
         op.fraction, op.seed, op.use_selection = s.fraction, s.seed, s.use_selection
         op.area = s.area
         if ob.data.surface is None:
-            col.label(text=NO_SURFACE_HAIR, icon="INFO")
+            note(col, context, NO_SURFACE_HAIR, box=True)
 
         src = active_setup(context)
         if src is None:
             box = layout.box()
             box.label(text="Collided Output", icon="MOD_PHYSICS")
-            box.column().label(text="Needs a FurCollide setup", icon="INFO")
+            note(box, context, "Needs a FurCollide setup", box=True)
             return
-        draw_attach(layout, src)
+        draw_attach(layout, context, src)
         draw_motion(layout, src)
-        draw_influence(layout, src)
-
-        draw_children(layout, src, s)
-        draw_groom(layout, src)
+        draw_influence(layout, context, src)
+        draw_children(layout, context, src, s)
+        draw_groom(layout, context, src)
 
 
 classes = (FURCOLLIDE_PT_pipeline,)

@@ -30,7 +30,7 @@ from .colliders import collider_objects, read_collider_inputs, renders_otherwise
 def uses_growth(settings) -> bool:
     """Does the solve read the growth surface? (core Settings or the setup's properties)"""
     return bool(settings.attract_to_growth_surface
-                or settings.pinch_resolution == "growth_surface")
+                or settings.pinch_resolution.lower() == "growth_surface")
 
 
 def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False,

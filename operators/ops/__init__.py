@@ -10,5 +10,6 @@ attach    Fur Attach Bind / Unbind
 groom     Bind Groom, Remove Groom Output
 children  Make Children Output, Use Rest Position
 pipeline  Collider Distance, Children from Guides, the Fur Pipeline panel's scene settings
+scene     the scene settings FurCollide needs: Lock Interface, Play Every Frame
 cli       ``blender -b --command furcollide bake`` (or ``free``, ``info``)
 """

@@ -197,17 +197,20 @@ def _prop_density():
         default=10.0,
         min=0.0,
         soft_max=10000.0,
+        options=set(),  # (an input of Children from Guides: nothing to key)
         description="Child curves per unit of surface area created around the guides",
     )
 
 
 def _prop_guides():
     return IntProperty(
-        name="Interpolation Guides",
+        name="Guides per Curve",
         default=4,
         min=1,
         soft_max=16,
-        description="Number of nearest guides each child curve interpolates",
+        options=set(),
+        description="How many nearest guides each child curve follows (Interpolate Hair "
+        "Curves' Interpolation Guides)",
     )
 
 

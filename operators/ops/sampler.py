@@ -146,10 +146,11 @@ def prop_use_selection():
 
 def prop_area():
     return StringProperty(
-        name="Area of Interest",
+        name="Area",
         default="",
-        description="Vertex group (or float point attribute) of the Surface: guides are "
-        "picked only where its weight is at least 0.5 (empty: everywhere)",
+        description="Area of interest: a vertex group (or float point attribute) of the "
+        "Surface; guides are picked only where its weight is at least 0.5 (empty: "
+        "everywhere)",
     )
 
 

@@ -11,6 +11,7 @@ from ..blender import bridge, dependencies
 from ..frame import children, output
 from ..frame.colliders import instanced_collection
 from ..frame.groom import remove_groom
+from ..settings.properties import CURRENT_VERSION
 from ..store import registry
 from ..store.invalidation import invalidate
 from .common import (
@@ -24,6 +25,7 @@ from .common import (
     refuse,
     reports_errors,
 )
+from .scene import needs_lock
 
 
 def _selected_colliders(context, exclude=()):
@@ -93,6 +95,7 @@ class FURCOLLIDE_OT_add(Operator):
         s.uid = ""
         registry.ensure_uid(src)
         s.is_setup = True
+        s.settings_version = CURRENT_VERSION  # (keys made from now on: radians)
         s.output = out
         registry.adopt(src, scene)  # the setup belongs to this scene (registry.owner)
         s.frame_start = scene.frame_start
@@ -104,6 +107,8 @@ class FURCOLLIDE_OT_add(Operator):
         for o in colliders:
             s.colliders.add().object = o
         s.collider_index = max(0, len(s.colliders) - 1)
+        locked = needs_lock(scene)  # (renders from the UI need it: ops/scene.py)
+        scene.render.use_lock_interface = True
         out.furcollide.is_output = True
         out.furcollide.source = src
         src.hide_render = True
@@ -115,7 +120,9 @@ class FURCOLLIDE_OT_add(Operator):
             self.report({"WARNING"}, f"Set up, but the first frame failed: {error}")
         self.report(
             {"INFO"},
-            f"FurCollide: '{src.name}' -> '{out.name}' with {len(colliders)} collider(s)",
+            f"FurCollide: '{src.name}' -> '{out.name}' with {len(colliders)} collider(s)"
+            + ("; Render > Lock Interface turned on (renders from the UI need it)"
+               if locked else ""),
         )
         redraw(context)
         return {"FINISHED"}
@@ -128,12 +135,23 @@ class FURCOLLIDE_OT_remove(SetupOperator, Operator):
     bl_idname = "furcollide.remove"
     bl_label = "Remove FurCollide"
     bl_options = {"REGISTER", "UNDO"}
+    #: The question the button asks first (Delete asks too in Blender's own menus).
+    CONFIRM = "Remove FurCollide and delete its output?"
 
     keep_output: BoolProperty(
         name="Keep Output",
         default=False,
         description="Keep the output hair object (as plain hair with its last result)",
     )
+
+    def invoke(self, context, event):
+        """From a button or a menu: ask first (the output is deleted)."""
+        src = active_setup(context)
+        what = f"'{src.furcollide.output.name}'" if src.furcollide.output else "the output"
+        return context.window_manager.invoke_confirm(
+            self, event, title=self.CONFIRM,
+            message=f"Deletes {what} and shows '{src.name}' again (bake files are kept)",
+            confirm_text="Remove", icon="WARNING")
 
     @reports_errors
     def execute(self, context):

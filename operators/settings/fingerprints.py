@@ -22,6 +22,7 @@ import bpy
 from ... import core
 from ..frame.colliders import collider_objects, in_scene
 from . import keyed, motion
+from .core_values import core_value
 from .maps import MAPPED
 
 
@@ -141,7 +142,7 @@ def structures(ob, stable=False, scene=None, animation=None) -> tuple[str, str]:
     anim = keyed.Animation(ob) if animation is None else animation
     timed = s.motion.use_wind or s.motion.use_jiggle or any(
         anim.animates(f"furcollide.motion.{n}") for n in ("use_wind", "use_jiggle"))
-    rest = [s.mode, s.enable_attribute, s.frame_start]
+    rest = [core_value(s, "mode"), s.enable_attribute, s.frame_start]
     tail = [["fur_attach", s.attach_id] if s.use_fur_attach else None,
             motion.fps(scene or bpy.context.scene) if timed else None]
     mapped = {k: getattr(s, f"{k}_map") for k in MAPPED if getattr(s, f"{k}_map")}

@@ -11,9 +11,11 @@ the values it was solved with hold at that frame.
 :func:`values` gives the values at any frame without going there: a keyed setting's
 F-curve is evaluated at that frame and converted as Blender converts it (clamped to
 the property's range; integers, booleans and choices are the F-curve's whole values).
-A driven setting, or one animated by NLA strips, is known only at the frame the scene
-shows (:data:`UNKNOWN` elsewhere, and never compared there): its value is checked when
-its frame is shown again.
+Angles are recorded in degrees and the Mode and Pinched Hair choices in the core's
+spelling, as :class:`core.Settings` takes them (and as earlier versions recorded them:
+their bakes stay valid). A driven setting, or one animated by NLA strips, is known only
+at the frame the scene shows (:data:`UNKNOWN` elsewhere, and never compared there): its
+value is checked when its frame is shown again.
 
 What cannot change mid-shot is not animatable (Blender refuses the key, saying the
 property is not animatable), each for a reason its tooltip gives: Mode (a curve's
@@ -25,6 +27,9 @@ input at once: bind again instead).
 from __future__ import annotations
 
 import numpy as np
+
+from . import angles
+from .core_values import CORE_CHOICES, core_value
 
 #: A value not known at that frame (a driver or NLA strips, away from the current frame).
 UNKNOWN = None
@@ -61,7 +66,11 @@ def _owners(ob):
 
 def _as_value(owner, name, index=None):
     """The current value of ``owner.name`` (element ``index`` of an array) as recorded:
-    a bool, int, float (the stored float32, exactly) or choice identifier."""
+    a bool, int, float (the stored float32, exactly) or choice identifier; a setup's
+    angle and choice as the core takes them (degrees exactly as stored, the core's
+    spelling: :func:`.properties.core_value`), as every version recorded them."""
+    if name in angles.ANGLES or name in CORE_CHOICES:
+        return core_value(owner, name)
     v = getattr(owner, name)
     if index is not None:
         v = v[index]
@@ -72,7 +81,8 @@ def _as_value(owner, name, index=None):
 
 def _from_fcurve(prop, v):
     """What Blender sets property ``prop`` (RNA) to from F-curve value ``v`` (the
-    F-curve evaluates integers, booleans and choices to whole values already)."""
+    F-curve evaluates integers, booleans and choices to whole values already), as
+    :func:`_as_value` records it (an angle: the degrees its setter stores for ``v``)."""
     kind = prop.type
     if kind == "BOOLEAN":
         return bool(v > 0.5)
@@ -81,8 +91,11 @@ def _from_fcurve(prop, v):
     if kind == "ENUM":
         for item in prop.enum_items:
             if item.value == int(round(v)):
-                return item.identifier
+                ident = item.identifier
+                return ident.lower() if prop.identifier in CORE_CHOICES else ident
         return UNKNOWN
+    if prop.identifier in angles.ANGLES:
+        return angles.to_degrees(prop.identifier, v)
     return float(np.float32(min(max(v, prop.hard_min), prop.hard_max)))
 
 

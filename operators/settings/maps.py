@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...core import framecache
+from .core_values import core_value
 
 #: The settings that take a map, with the range their mapped values are clamped to
 #: (None: the lower bound is the setup's Rotation Precision, as core.Settings asks).
@@ -61,8 +62,8 @@ def read_maps(curves, s, offsets) -> tuple[dict, list[str]]:
         if why:
             warnings.append(f"{label} map '{attr_name}' {why}: {label} applies unmapped")
             continue
-        lo = float(s.rotation_precision) if lo is None else lo
-        setting = float(getattr(s, name))
+        lo = core_value(s, "rotation_precision") if lo is None else lo
+        setting = float(core_value(s, name))  # (Max Angle in degrees, as the core takes it)
         values[name] = np.clip(setting * raw.astype(np.float64), lo, hi)
     return values, warnings
 

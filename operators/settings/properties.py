@@ -23,11 +23,12 @@ from bpy.types import PropertyGroup
 
 from ..blender import compat
 from ..store import report
+from . import angles
+from .core_values import core_value
 from .properties_pipeline import FurCollideChildren, FurCollideGroom, FurCollideMotion
 from .property_helpers import (
     NOT_ANIMATABLE,
     choice,
-    degrees,
     factor,
     fixed,
     hidden,
@@ -74,7 +75,7 @@ class FurCollideCollider(PropertyGroup):
     )
     use_offset: toggle(
         "Own Offset", False,
-        "Use this collider's own Collision Offset instead of the setup's",
+        "Use this collider's own Offset instead of the setup's",
         update=update_collider_options,
     )
     collision_offset: offset_property(
@@ -127,12 +128,12 @@ class FurCollideSettings(PropertyGroup):
         description="The collider selected in the list (its options are shown below it)",
     )
     collider_collection: PointerProperty(
-        name="Collider Collection",
+        name="Collection",
         type=bpy.types.Collection,
         update=update_colliders,
-        description="Every mesh in this collection (and every curve with a bevel, surface, "
-        "text or metaball) also collides, with the setup's Collision Offset and the option "
-        "below",
+        description="Collider Collection: every mesh in this collection (and every curve "
+        "with a bevel, surface, text or metaball) also collides, with the setup's Offset "
+        "and Double Sided below",
     )
     collection_double_sided: toggle(
         "Collection Double Sided", False,
@@ -145,38 +146,40 @@ class FurCollideSettings(PropertyGroup):
     mode: choice(
         "Mode",
         [
-            ("stiff", "Stiff", "Rotate the whole curve at its root, keeping its shape. "
+            ("STIFF", "Stiff", "Rotate the whole curve at its root, keeping its shape. "
              "Good for short fur"),
-            ("bend", "Bend", "Bend the curve evenly from root to tip. Good for long fur "
+            ("BEND", "Bend", "Bend the curve evenly from root to tip. Good for long fur "
              "and grass"),
-            ("soft", "Soft", "Let each colliding segment turn on its own and drag the "
+            ("SOFT", "Soft", "Let each colliding segment turn on its own and drag the "
              "next ones along. Hugs tight contacts such as cloth"),
         ],
-        "bend",
+        "BEND",
         fixed("How a colliding curve is turned out of the mesh",
               "a curve's state in one mode (its angle, or each segment's turn) means "
               "nothing in another, so a switch mid-shot would pop. Use two setups"),
         animatable=False,
     )
-    rotation_precision: degrees(
-        "Rotation Precision", 0.25,
-        "Angle step (degrees) used to search the smallest turn that frees a curve. "
-        "Smaller is more exact and slower",
-        min=0.001, max=45.0, soft_min=0.05, soft_max=5.0, precision=3,
+    rotation_precision: angles.angle(
+        "rotation_precision", "Precision",
+        "The angle step used to search the smallest turn that frees a curve. Smaller is "
+        "more exact and slower (the paper's Rotation Precision)",
+        update_settings, soft_min=0.05, soft_max=5.0, precision=3,
     )
-    max_angle: degrees(
-        "Max Angle", 180.0,
-        "Largest turn (degrees) a curve may take. Curves that would need more keep their "
-        "last collision-free shape and are flagged unresolved",
+    max_angle: angles.angle(
+        "max_angle", "Max Angle",
+        "Largest turn a curve may take. Curves that would need more keep their last "
+        "collision-free shape and are flagged unresolved",
+        update_settings,
     )
     affected_connected_cvs: IntProperty(
-        name="Affected Connected CVs",
+        name="Affected CVs",
         default=2,
         min=0,
         max=10000,
         soft_max=10,
         update=update_settings,
-        description="Soft mode: how many points after a colliding segment follow its turn",
+        description="Soft mode: how many points after a colliding segment follow its turn "
+        "(the paper's Affected Connected CVs)",
     )
     cv_falloff: factor(
         "CV Falloff", 0.5,
@@ -184,16 +187,17 @@ class FurCollideSettings(PropertyGroup):
         "(0 = they turn fully, 1 = only the colliding segment turns)",
     )
     attract_to_growth_surface: toggle(
-        "Attract to Growth Surface", False,
+        "Attract to Skin", False,
         "Push colliding hair down toward the skin it grows from (pats fur or grass flat) "
-        "instead of away along the collider's surface. Needs the hair's Surface object",
+        "instead of away along the collider's surface. Needs the hair's Surface object "
+        "(the paper's Attract to Growth Surface)",
     )
     follow_collider_motion: toggle(
-        "Follow Collider Motion", False,
+        "Follow Collider", False,
         "Lay colliding hair over in the direction the collider moves where it touches "
         "(a hand stroking fur, a ball rolling through grass) instead of away from its "
         "surface; where the collider does not move there, as without it (or toward the "
-        "skin with Attract to Growth Surface)",
+        "skin with Attract to Skin)",
     )
     collision_offset: offset_property(
         "Gap kept between the hair and every collider (a collider may use its own)",
@@ -217,18 +221,19 @@ class FurCollideSettings(PropertyGroup):
         "crossing at very different angles",
     )
     scale_minimum: FloatProperty(
-        name="Scale Minimum",
+        name="Min Scale",
         default=0.5,
         min=0.001,
         max=1.0,
         subtype="FACTOR",
         update=update_settings,
-        description="Shortest a curve may become (fraction of its length)",
+        description="The shortest a curve may become, as a fraction of its length (the "
+        "paper's Scale Minimum)",
     )
-    scale_angle: degrees(
-        "Scale Angle", 90.0,
-        "Turn (degrees) at which a curve reaches Scale Minimum; it shrinks gradually up "
-        "to that angle",
+    scale_angle: angles.angle(
+        "scale_angle", "Scale Angle",
+        "Turn at which a curve reaches Min Scale; it shrinks gradually up to that angle",
+        update_settings,
     )
 
     # ---------------------------------------------------- recovery, plasticity
@@ -246,27 +251,28 @@ class FurCollideSettings(PropertyGroup):
     # ------------------------------------------------------------ parameter maps
     plasticity_map: map_property("Plasticity")
     recovery_rate_map: map_property("Recovery Rate")
-    collision_offset_map: map_property("Collision Offset")
+    collision_offset_map: map_property("Offset")
     max_angle_map: map_property("Max Angle")
-    scale_minimum_map: map_property("Scale Minimum")
+    scale_minimum_map: map_property("Min Scale")
 
     # ---------------------------------------------------------------- pinch
     pinch_resolution: choice(
-        "Pinch Resolution",
+        "Pinched Hair",
         [
-            ("stop", "Stop Solving", "Pinched hair keeps the shape it had before the "
+            ("STOP", "Stop Solving", "Pinched hair keeps the shape it had before the "
              "pinch (no jitter trying to solve the impossible)"),
-            ("growth_surface", "Put to Growth Surface", "Lay pinched hair down onto the "
-             "skin it grows from (needs the hair's Surface object)"),
+            ("GROWTH_SURFACE", "Lay on Surface", "Lay pinched hair down onto the skin it "
+             "grows from (needs the hair's Surface object; the paper's Put to Growth "
+             "Surface)"),
         ],
-        "stop",
-        "What hair does when its root is trapped inside a closed collider "
-        "(e.g. an arm pressed into the body)",
+        "STOP",
+        "What hair does when its root is trapped inside a closed collider (e.g. an arm "
+        "pressed into the body; the paper's Pinch Resolution)",
     )
     recover_pinched: toggle(
-        "Recover Pinched Fur", True,
+        "Recover", True,
         "Let hair recover once it is no longer pinched. Off: it keeps the shape it had "
-        "when the pinch ended",
+        "when the pinch ended (the paper's Recover Pinched Fur)",
     )
 
     # ------------------------------------------------------ per-curve enable
@@ -321,12 +327,12 @@ class FurCollideSettings(PropertyGroup):
     use_fur_attach: toggle(
         "Fur Attach", False,
         fixed("Move the source's curves rigidly with the evaluated growth surface from the "
-              "reference frame, instead of using the source's own animation (press Bind "
+              "Bind Frame on, instead of using the source's own animation (press Bind "
               "first)", "it changes every frame's input curves at once"),
         update=update_attach, animatable=False,
     )
     attach_reference_frame: IntProperty(
-        name="Reference Frame",
+        name="Bind Frame",
         default=1,
         options=NOT_ANIMATABLE,
         description=fixed("Frame whose surface and curves Bind uses: each curve is tied to "
@@ -349,6 +355,9 @@ class FurCollideSettings(PropertyGroup):
         description="The output's own children stack, cleared of the colliders every frame",
     )
     bake_path: hidden(StringProperty, "Bake Path", "")
+    #: How this object's settings are keyed (:mod:`.versioning`): 0, saved before the
+    #: angles were Blender angles (their keys in degrees), or :data:`CURRENT_VERSION`.
+    settings_version: hidden(IntProperty, "Settings Version", 0)
     #: The scene this setup belongs to (Add FurCollide records it): in any other scene
     #: the hair is in, the output shows the source as groomed (registry.owner).
     owner_scene: hidden(StringProperty, "Scene", "")
@@ -397,8 +406,9 @@ class FurCollideSettings(PropertyGroup):
         return self.threads or None
 
     def to_core_kwargs(self) -> dict:
-        """Keyword arguments of :class:`core.Settings` for these properties."""
-        kw = {name: getattr(self, name) for name in SOLVER_PROPERTIES}
+        """Keyword arguments of :class:`core.Settings` for these properties (the angles
+        in degrees, the choices in the core's spelling: :func:`core_value`)."""
+        kw = {name: core_value(self, name) for name in SOLVER_PROPERTIES}
         kw["threads"] = self.core_threads
         return kw
 
@@ -423,17 +433,27 @@ SOLVER_PROPERTIES = (
     "collision_offset",
 )
 
+#: The version of the settings' storage (:attr:`FurCollideSettings.settings_version`):
+#: 1, the angles are Blender angles (keyed in radians) and the choices upper case.
+CURRENT_VERSION = 1
+
 classes = (FurCollideCollider, FurCollideMotion, FurCollideGroom, FurCollideChildren,
            FurCollideSettings)
 
 
 def register():
+    from . import versioning
+
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Object.furcollide = PointerProperty(type=FurCollideSettings)
+    versioning.register()
 
 
 def unregister():
+    from . import versioning
+
+    versioning.unregister()
     del bpy.types.Object.furcollide
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

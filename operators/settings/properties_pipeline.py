@@ -157,7 +157,7 @@ class FurCollideGroom(PropertyGroup):
     """Guide deform of an existing render groom (paper section 2) and its clearance pass."""
 
     groom: PointerProperty(
-        name="Render Groom",
+        name="Groom",
         type=bpy.types.Object,
         poll=poll_hair,
         update=update_groom,

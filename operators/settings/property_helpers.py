@@ -5,7 +5,7 @@ cache does; only a shorter frame range keeps the frames inside it) through its
 ``update=`` callback (:func:`invalidation.invalidate`). Like the frame
 handler, the callbacks never raise (a failure is one console line; the next frame
 re-checks everything). The factories give the solver settings their few shapes (a
-toggle, a 0..1 factor, an angle...), leaving the name, default and tooltip to the call.
+toggle, a 0..1 factor, a distance...), leaving the name, default and tooltip to the call.
 """
 
 import functools
@@ -151,7 +151,8 @@ def update_children_viewport(self, context):
 
 # ------------------------------------------------------ property factories
 # The solver settings share a few shapes; each factory fixes the shape and
-# leaves the name, default and the artist-facing tooltip to the call.
+# leaves the name, default and the artist-facing tooltip to the call. (The angles are
+# :func:`.angles.angle`.)
 
 
 def toggle(name, default, description, update=update_settings, animatable=True):
@@ -168,18 +169,10 @@ def factor(name, default, description):
     )
 
 
-def degrees(name, default, description, **limits):
-    """An angle in degrees (the unit of :class:`core.Settings`)."""
-    limits = {"min": 0.01, "max": 360.0, **limits}
-    return FloatProperty(
-        name=name, default=default, update=update_settings, description=description, **limits
-    )
-
-
 def offset_property(description, update):
     """A collision offset (world distance)."""
     return FloatProperty(
-        name="Collision Offset", default=0.0, min=0.0, soft_max=0.1, subtype="DISTANCE",
+        name="Offset", default=0.0, min=0.0, soft_max=0.1, subtype="DISTANCE",
         unit="LENGTH", update=update, description=description,
     )
 

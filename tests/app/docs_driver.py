@@ -47,7 +47,7 @@ SHOTS = os.path.join(WORK, "shots")  # full screenshots
 IMG = os.path.join(WORK, "img")  # the cropped pictures
 RESULT = os.path.join(WORK, "result.json")
 STILL = ds.STILL_FRAME
-#: The demo's settings (scripts/demo.py SETTINGS), set as an artist sets them.
+#: The demo's settings (scripts/demo.py SETTINGS: the core's names and values).
 SETTINGS = {
     "Fur": dict(mode="bend", rotation_precision=0.5, collision_offset=0.008,
                 recovery_rate=0.3, pinch_resolution="growth_surface"),
@@ -231,6 +231,7 @@ def run():
     yield 1.0  # (the FurCollide tab appears once a hair object is active and drawn)
     win, area, region, side = ui()
     side.active_panel_category = "FurCollide"
+    core_values = sys.modules[ADDON + ".operators.settings.core_values"]
     yield from sidebar("sidebar-no-setup", "No setup: the colliders selected, then the "
                        "hair (active): Add FurCollide")
     with bpy.context.temp_override(window=win, area=area, region=region):
@@ -241,11 +242,13 @@ def run():
     with bpy.context.temp_override(window=win, area=area, region=region):
         add_grass = sorted(bpy.ops.furcollide.add())
     for ob in (fur, grass):
-        for k, v in SETTINGS[ob.name].items():
-            setattr(ob.furcollide, k, v)
-    scene.render.use_lock_interface = True
-    scene.sync_mode = "NONE"  # Playback > Sync: Play Every Frame
-    step("setups", add=[add_fur, add_grass], output=out.name,
+        # (the core's names and values: angles in degrees, choices in lower case)
+        core_values.set_core_values(ob.furcollide, **SETTINGS[ob.name])
+    sync = scene.sync_mode
+    if sync != "NONE":  # the panel's Playback Sync warning: its button
+        with bpy.context.temp_override(window=win, area=area, region=side):
+            bpy.ops.furcollide.play_every_frame()
+    step("setups", sync=sync, add=[add_fur, add_grass], output=out.name,
          grass_output=grass.furcollide.output.name)
     for f in range(scene.frame_start, STILL + 1):
         scene.frame_set(f)
@@ -313,6 +316,7 @@ def run():
     yield 1.0
     win, area, region, side = ui()
     side.active_panel_category = "FurCollide"
+    core_values = sys.modules[ADDON + ".operators.settings.core_values"]
     sections = [n for n, _ in SECTIONS]
     base = names - set(sections)  # the main panel, the list, the presets
     reregister(classes, base)

@@ -3,8 +3,10 @@
 ``ui_driver.py`` runs in one session of Debian's Blender 4.3 with its UI under Xvfb (the
 chroot of ``scripts/blender_chroot.sh``, as ``test_real_blender.py``): it re-registers the
 add-on's panels open, counts every ``draw`` Blender itself calls per state (no setup, a
-fresh setup, played, an error, outdated, Lock Interface on, baked, an outdated bake, no
-output) and keeps any exception raised while drawing; then it undoes and redoes Add
+fresh setup, played, an error, outdated, the scene's warnings (Lock Interface off,
+Sync dropping frames: a label and its button on one line, measured with Blender's font
+at the real sidebar's width), Lock Interface on, baked, an outdated bake, no output)
+and keeps any exception raised while drawing; then it undoes and redoes Add
 FurCollide and a setting change, playing frames after each. The headless ``bpy`` lanes
 cannot do either: panels are not drawn there and undo needs a window
 (``tests/blender/test_bl_panels.py`` draws them into an RNA-checking recorder instead).
@@ -15,8 +17,8 @@ import pytest
 from app_session import ROOT, run_session
 
 WORK = ROOT / "out" / "app_ui"
-STATES = ("no_setup", "setup", "played", "error", "outdated", "lock_interface_on", "baked",
-          "baked_outdated", "no_output")
+STATES = ("no_setup", "setup", "played", "error", "outdated", "scene_warnings",
+          "lock_interface_on", "baked", "baked_outdated", "no_output")
 #: Panels drawn once a setup exists (their poll needs one).
 SETUP_PANELS = ("FURCOLLIDE_PT_colliders", "FURCOLLIDE_PT_resolution", "FURCOLLIDE_PT_shrink",
                 "FURCOLLIDE_PT_recovery", "FURCOLLIDE_PT_pinch", "FURCOLLIDE_PT_enable",
@@ -81,6 +83,6 @@ def test_undo_and_redo_of_add_and_of_a_setting(session):
     assert red["is_setup"] is True and red["output"] is True and red["reset"] == ["FINISHED"]
     assert red["moved"] > 0.01, red  # the box pushed the hair: it was solved again
     assert red["status"][0] == "INFO", red
-    assert r["undo_mode_after"] == "bend"
+    assert r["undo_mode_after"] == "BEND"
     assert r["undo_final_status"][0] == "INFO", r["undo_final_status"]
     assert r["undo_handler_errors"] == [] and r["undo_draw_errors"] == []

@@ -76,10 +76,10 @@ def test_bake_is_undone_alone_and_redone_its_files_untouched(session):
     undo resumes from those files and rewrites none. (Bake pushed no undo step: Ctrl+Z
     also undid the change before it, and redo never brought the bake back.)"""
     baked = one(session, "bake", "baked")
-    assert baked["is_baked"] and len(baked["files"]) == 8 and baked["mode"] == "stiff"
+    assert baked["is_baked"] and len(baked["files"]) == 8 and baked["mode"] == "STIFF"
     undone = one(session, "bake", "undone")
     assert undone["is_setup"] and not undone["is_baked"] and undone["bake_path"] == ""
-    assert undone["mode"] == "stiff", "the action before the bake was undone too"
+    assert undone["mode"] == "STIFF", "the action before the bake was undone too"
     assert undone["files"] == baked["files"]  # not one deleted or rewritten
     solved(snaps(session, "bake", "undone, play"))
     redone = one(session, "bake", "redone")
@@ -115,10 +115,10 @@ def test_reset_cache_is_no_undo_step(session):
     redo brings Stiff back and playing from the start solves it."""
     assert one(session, "reset", "reset at 5")["level"] == "WARNING"
     undone = one(session, "reset", "undone")
-    assert undone["mode"] == "bend" and undone["frame"] == 1
+    assert undone["mode"] == "BEND" and undone["frame"] == 1
     for s in snaps(session, "reset", "undone, play on"):
         assert s["level"] == "WARNING" and "is not cached" in s["message"], s
-    assert one(session, "reset", "redone")["mode"] == "stiff"
+    assert one(session, "reset", "redone")["mode"] == "STIFF"
     solved(snaps(session, "reset", "redone, play"))
 
 
@@ -170,9 +170,11 @@ def test_collider_add_and_remove_undone_and_redone(session):
 
 
 def test_remove_undone_brings_back_the_baked_setup(session):
-    """Remove FurCollide keeps the bake files; Ctrl+Z brings back the setup, its output
-    and its bake (it came back unbaked: the bake had pushed no undo step)."""
+    """Remove FurCollide asks first (confirmed with Return), keeps the bake files; Ctrl+Z
+    brings back the setup, its output and its bake (it came back unbaked: the bake had
+    pushed no undo step)."""
     baked = one(session, "remove", "baked")
+    assert session["result"]["remove_asked"] is True  # the button asks first
     assert session["result"]["removed"] == {"is_setup": False, "output": False, "files": 8}
     undone = one(session, "remove", "undone")
     assert undone["is_setup"] and undone["output"] == "Fur FurCollide"
@@ -191,10 +193,10 @@ def test_ctrl_z_during_playback(session):
     assert r["undo_while_playing_at"] >= 4
     seen = snaps(session, "playing", "playing ")
     modes = [s["mode"] for s in seen]
-    assert modes[0] == "stiff" and modes[-1] == "bend", modes
+    assert modes[0] == "STIFF" and modes[-1] == "BEND", modes
     assert all(s["level"] != "ERROR" for s in seen)
     last = one(session, "playing", "stopped")
-    assert last["mode"] == "bend" and last["frame"] == 8
+    assert last["mode"] == "BEND" and last["frame"] == 8
     solved([last])
 
 
@@ -207,7 +209,7 @@ def test_ctrl_z_during_the_modal_bake_stops_it(session):
     assert baking["running"] and baking["baking"] and len(baking["files"]) >= 2
     undone = one(session, "baking", "undone while baking")
     assert not undone["running"] and not undone["baking"] and not undone["is_baked"]
-    assert undone["mode"] == "bend"
+    assert undone["mode"] == "BEND"
     kept = session["result"]["baking_files"]
     assert set(baking["files"]) <= set(kept)  # the finished frames are kept
     solved(snaps(session, "baking", "after, play"))
@@ -230,5 +232,5 @@ def test_an_edit_after_opening_a_file_over_a_pending_refresh_refreshes(session):
     pending; opening the file dropped that timer and the object was never refreshed
     again in the session (an edit left the frame unsolved: 0 cached, outdated)."""
     edited = one(session, "reopen", "edited")
-    assert edited["mode"] == "stiff" and edited["cached"] == [1] and not edited["outdated"]
+    assert edited["mode"] == "STIFF" and edited["cached"] == [1] and not edited["outdated"]
     solved([edited])

@@ -181,7 +181,10 @@ def run():
     result["outdated"] = bool(fur.furcollide.is_outdated)
     yield from show("outdated")
     ball.rotation_euler.z -= 0.4
-    scene.render.use_lock_interface = True
+    # renders unlocked and Sync dropping frames: one line each with its button
+    scene.render.use_lock_interface, scene.sync_mode = False, "AUDIO_SYNC"
+    yield from show("scene_warnings")
+    scene.render.use_lock_interface, scene.sync_mode = True, "NONE"
     yield from show("lock_interface_on")
     bpy.ops.wm.save_as_mainfile(filepath=os.path.join(WORK, "ui.blend"))
     with override():
@@ -261,7 +264,7 @@ def run():
     bpy.context.scene.frame_set(1)
     with override():
         bpy.ops.ed.undo_push(message="before stiff")
-    fur2.furcollide.mode = "stiff"
+    fur2.furcollide.mode = "STIFF"
     with override():
         bpy.ops.ed.undo_push(message="stiff")
     for f in range(1, 4):

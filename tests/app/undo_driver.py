@@ -262,7 +262,7 @@ def build():
     result["add"] = op("add")
     fur = ob("Fur")
     ref = {}
-    for mode in ("stiff", "bend"):
+    for mode in ("STIFF", "BEND"):
         fur.furcollide.mode = mode
         ref[mode] = {}
         for f in FRAMES:
@@ -270,7 +270,7 @@ def build():
             ref[mode][f] = positions(fur.furcollide.output).copy()
     M["ref"] = ref
     result["ref_moves"] = {m: float(np.abs(r[8] - r[1]).max()) for m, r in ref.items()}
-    result["ref_modes_differ"] = not np.array_equal(ref["stiff"][8], ref["bend"][8])
+    result["ref_modes_differ"] = not np.array_equal(ref["STIFF"][8], ref["BEND"][8])
     scene.frame_set(1)
     select(fur)
     op("reset")  # only the start frame cached: the file says nothing of a lost cache
@@ -283,7 +283,7 @@ def sc_bake():
     """Bake, undo, redo: undo takes back only the bake (its files stay), redo brings it
     back; frames played after each."""
     yield from fresh("bake")
-    ob("Fur").furcollide.mode = "stiff"
+    ob("Fur").furcollide.mode = "STIFF"
     push("Mode Stiff")  # an action before the bake: undoing the bake must keep it
     yield from play(FRAMES)
     snap("played")
@@ -328,7 +328,7 @@ def sc_reset():
     """Reset Cache is no undo step (only the session's cache): Ctrl+Z after it undoes
     the action before it."""
     yield from fresh("reset")
-    ob("Fur").furcollide.mode = "stiff"
+    ob("Fur").furcollide.mode = "STIFF"
     push("Mode Stiff")
     yield from play(range(1, 6))
     result["reset"] = op("reset")
@@ -433,14 +433,18 @@ def sc_colliders():
 
 
 def sc_remove():
-    """Remove FurCollide on a baked setup (the files are kept), undo (setup, output
-    and bake back), redo."""
+    """Remove FurCollide on a baked setup (it asks first: confirmed with Return; the files
+    are kept), undo (setup, output and bake back), redo."""
     yield from fresh("remove")
     op("bake")
     yield from wait_bake()
     snap("baked")
-    result["remove"] = op("remove")
-    yield 0.3
+    result["remove"] = op("remove")  # the button: Blender asks first
+    yield 0.5
+    result["remove_asked"] = ob("Fur").furcollide.is_setup  # (nothing removed yet)
+    # the dialog's Remove: Return, with the mouse where the click left it
+    subprocess.run(["xdotool", "key", "Return"], capture_output=True)
+    yield 0.8
     result["removed"] = {"is_setup": ob("Fur").furcollide.is_setup,
                          "output": ob("Fur FurCollide") is not None,
                          "files": len(bake_files())}
@@ -460,7 +464,7 @@ def sc_remove():
 def sc_playing():
     """Ctrl+Z during playback (a real key press), then play on."""
     yield from fresh("playing")
-    ob("Fur").furcollide.mode = "stiff"
+    ob("Fur").furcollide.mode = "STIFF"
     push("Mode Stiff")
     yield 0.5  # (an artist is slower than the refresh after a setting change)
     scene = bpy.context.scene
@@ -500,7 +504,7 @@ def sc_playing():
 def sc_baking():
     """Ctrl+Z (a real key press) while the modal bake runs, then play."""
     yield from fresh("baking")
-    ob("Fur").furcollide.mode = "stiff"
+    ob("Fur").furcollide.mode = "STIFF"
     push("Mode Stiff")
     result["baking_invoke"] = op("bake")
     t0 = time.perf_counter()
@@ -545,13 +549,13 @@ def sc_reopen():
     scheduled is dropped with the old file's timers; the next edit in the new file
     still solves the current frame again (and so does an undo: see sc_held)."""
     yield from fresh("reopen")
-    ob("Fur").furcollide.mode = "stiff"  # a refresh is scheduled...
+    ob("Fur").furcollide.mode = "STIFF"  # a refresh is scheduled...
     bpy.ops.wm.open_mainfile(filepath=BASE)  # ...and dropped with the file's timers
     yield 0.5
     bpy.context.scene.frame_set(1)
     yield 0.1
     snap("opened")
-    ob("Fur").furcollide.mode = "stiff"  # an edit in the new file: frame 1 solved again
+    ob("Fur").furcollide.mode = "STIFF"  # an edit in the new file: frame 1 solved again
     yield 0.5
     snap("edited")
 

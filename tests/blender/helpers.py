@@ -120,6 +120,13 @@ def activate(ob, *selected):
     bpy.context.view_layer.objects.active = ob
 
 
+def set_core(s, **values):
+    """Set setup properties ``s`` from :class:`core.Settings` names and values: angles in
+    degrees, choices as the core spells them (``set_core(s, mode="bend",
+    max_angle=120.0)``; the add-on's ``core_values.set_core_values``)."""
+    sys.modules[ADDON + ".operators.settings.core_values"].set_core_values(s, **values)
+
+
 def setup(hair, colliders):
     """Run furcollide.add with ``hair`` active and ``colliders`` selected."""
     activate(hair, *colliders)
@@ -393,15 +400,29 @@ class RnaLayout:
     * ``template_list`` draws each item with the list class's ``draw_item``.
 
     Each call is logged as a dict (``kind``, ``name``, ``text``, ``icon``, and the
-    effective ``enabled``, ``active`` and ``alert`` of the layout it was drawn in).
+    effective ``enabled``, ``active`` and ``alert`` of the layout it was drawn in, its
+    ``split`` and ``decorate`` (``use_property_split`` / ``_decorate``, as inherited),
+    ``boxes`` (how many boxes it is in) and ``in_split`` (in a ``split()``)).
     """
 
-    def __init__(self, log, context, parent=None):
+    def __init__(self, log, context, parent=None, kind=None):
         object.__setattr__(self, "_log", log)
         object.__setattr__(self, "_context", context)
         object.__setattr__(self, "_parent", parent)
         object.__setattr__(self, "_attrs", {"enabled": True, "active": True, "alert": False})
         object.__setattr__(self, "_item", getattr(parent, "_item", None))
+        object.__setattr__(self, "_kind", kind)
+
+    def _inherited(self, key):
+        """``use_property_split`` / ``_decorate`` as the layout has it (set here, or on
+        the nearest layout it is in)."""
+        if key in self._attrs:
+            return bool(self._attrs[key])
+        return self._parent._inherited(key) if self._parent is not None else False
+
+    def _count(self, kind):
+        up = self._parent._count(kind) if self._parent is not None else 0
+        return up + (self._kind == kind)
 
     # attributes: only UILayout's, with values of their type
     def __setattr__(self, name, value):
@@ -443,12 +464,16 @@ class RnaLayout:
                 _check_value(f"layout.{name}", p, given[p.identifier])
         entry = {"kind": name, "text": given.get("text"), "icon": given.get("icon"),
                  "enabled": self._state("enabled"), "active": self._state("active"),
-                 "alert": self._state("alert"), "list_item": self._item}
+                 "alert": self._state("alert"), "list_item": self._item,
+                 "split": self._inherited("use_property_split"),
+                 "decorate": self._inherited("use_property_decorate"),
+                 "boxes": self._count("box"), "in_split": self._count("split") > 0,
+                 "layout": id(self), "layout_kind": self._kind}
         handler = getattr(self, "_do_" + name, None)
         result = handler(given, entry) if handler else None
         self._log.append(entry)
         if name in ("row", "column", "box", "split", "column_flow", "grid_flow"):
-            return RnaLayout(self._log, self._context, self)
+            return RnaLayout(self._log, self._context, self, kind=name)
         return result
 
     def _do_prop(self, g, entry):
@@ -457,6 +482,7 @@ class RnaLayout:
         entry["data"] = g["data"]
 
     _do_prop_menu_enum = _do_prop
+    _do_prop_decorator = _do_prop
 
     def _do_prop_search(self, g, entry):
         _rna_property(g["data"], g["property"], "layout.prop_search")
@@ -581,7 +607,7 @@ class EnabledLayout:
     def _child(self, *args, **kw):
         return EnabledLayout(self.log, self)
 
-    box = row = column = _child
+    box = row = column = split = _child
 
     def prop(self, data, name, **kw):
         assert hasattr(data, name), name
@@ -599,6 +625,9 @@ class EnabledLayout:
 
     def separator(self, **kw):
         pass
+
+    def prop_decorator(self, data, name, **kw):  # (a setting's keyframe dot)
+        assert hasattr(data, name), name
 
 
 def draw_enabled(panel):
@@ -1136,7 +1165,8 @@ def toggle_collider(kind, ob, guides, off):
 
 
 # ------------------------------------------------------------ the demo's scene
-#: The demo's "fur" settings (scripts/demo.py SETTINGS["fur"]).
+#: The demo's "fur" settings (scripts/demo.py SETTINGS["fur"]), in the core's names and
+#: units (:func:`set_core`).
 DEMO_FUR = dict(
     mode="bend",
     rotation_precision=0.5,
@@ -1185,8 +1215,7 @@ def demo_fur(n_fur, last, mode="bend", grass=50, scene_end=None, polygons=False,
     activate(demo.fur, demo.pusher, demo.cloth)
     assert bpy.ops.furcollide.add() == {"FINISHED"}
     s = demo.fur.furcollide
-    for k, v in dict(DEMO_FUR, mode=mode, **settings).items():
-        setattr(s, k, v)
+    set_core(s, **dict(DEMO_FUR, mode=mode, **settings))
     s.frame_start, s.frame_end = 1, last
     if scene_end is None:
         demo.scene.frame_start, demo.scene.frame_end = 1, last
@@ -1222,8 +1251,7 @@ def demo_pipeline(n_fur, last, motion, fraction=0.25, scene_range=True,
     activate(guides, demo.pusher, demo.cloth)
     assert bpy.ops.furcollide.add() == {"FINISHED"}
     s = guides.furcollide
-    for k, v in DEMO_FUR.items():
-        setattr(s, k, v)
+    set_core(s, **DEMO_FUR)
     s.frame_start, s.frame_end = 1, last
     if collider_offsets:
         for c in s.colliders:

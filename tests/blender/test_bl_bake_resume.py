@@ -4,6 +4,7 @@ sub-range bakes, unwritable bake directories, frame steps, negative frames, copi
 that share a bake."""
 
 import contextlib
+import math
 import os
 import struct
 import subprocess
@@ -40,6 +41,7 @@ from helpers import (
     save_as,
     save_in,
     seg_lengths,
+    set_core,
     small_setup,
     status_of,
     sweep_box,
@@ -346,7 +348,7 @@ def test_a_damaged_baked_frame_says_which_file_and_what_to_do(fc, tmp_path, caps
 def test_save_reload_keeps_settings_and_bake(fc, tmp_path):
     hair, box, out = saved_scene(fc, tmp_path)
     s = hair.furcollide
-    s.mode = "soft"
+    s.mode = "SOFT"
     s.cv_falloff = 0.25
     s.plasticity = 0.5
     assert bpy.ops.furcollide.bake() == {"FINISHED"}
@@ -357,7 +359,7 @@ def test_save_reload_keeps_settings_and_bake(fc, tmp_path):
     bpy.ops.wm.open_mainfile(filepath=path)
     hair = bpy.data.objects["Fur"]
     s = hair.furcollide
-    assert s.is_setup and s.is_baked and s.mode == "soft"
+    assert s.is_setup and s.is_baked and s.mode == "SOFT"
     assert s.cv_falloff == pytest.approx(0.25) and s.plasticity == pytest.approx(0.5)
     assert s.colliders[0].object.name == "Box"
     out = s.output
@@ -418,8 +420,8 @@ def test_setting_change_on_a_bake_then_free_and_bake_again(fc, tmp_path):
     activate(hair)
     log = draw_enabled(bpy.types.FURCOLLIDE_PT_resolution)
     assert ("prop", "mode", False) in log and ("prop", "rotation_precision", False) in log
-    s.mode = "stiff"  # a script can still change it
-    s.rotation_precision = 2.0
+    s.mode = "STIFF"  # a script can still change it
+    s.rotation_precision = math.radians(2.0)
     # the bake still shows its own frames, bit for bit, never a re-solve, but
     # marked outdated: they were baked with other settings (issue 14)
     for f in (3, 8, 1, 5, 6):
@@ -442,7 +444,7 @@ def test_setting_change_on_a_bake_then_free_and_bake_again(fc, tmp_path):
         scene.frame_set(f)
         assert s.is_outdated and fc.store.report.status_for(hair)[0] == "WARNING"
         assert "not cached" in s.status_message
-    assert ("label", "Outdated: play from the start frame or bake", True) in draw_enabled(
+    assert ("label", "Outdated: play from the start or bake", True) in draw_enabled(
         bpy.types.FURCOLLIDE_PT_cache)
 
     # play from the start: the new settings' result
@@ -762,7 +764,8 @@ def test_a_bake_resumed_after_a_crash_gives_the_played_frames(fc, tmp_path, monk
 
 
 # ----------------------------------------------- the demo's grass and fur, Bake All
-#: The Grass Trampling preset (ui/preset_files/Grass_Trampling.py).
+#: The Grass Trampling preset (ui/preset_files/Grass_Trampling.py), in the core's names
+#: and units (``helpers.set_core``).
 GRASS_TRAMPLING = dict(
     mode="bend",
     rotation_precision=0.5,
@@ -787,8 +790,7 @@ def grass_and_fur(n_grass, n_fur, last):
     ):
         activate(hair, *cols)
         assert bpy.ops.furcollide.add() == {"FINISHED"}
-        for k, v in values.items():
-            setattr(hair.furcollide, k, v)
+        set_core(hair.furcollide, **values)
         hair.furcollide.frame_start, hair.furcollide.frame_end = 1, end
     scene.frame_set(1)
     return demo, [demo.grass.furcollide.output, demo.fur.furcollide.output]

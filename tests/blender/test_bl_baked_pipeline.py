@@ -100,7 +100,7 @@ CHANGES = [  # (group, property, new value, what the status names)
     ("motion", "roi_margin", 0.5, "Region of Influence Margin"),
     ("motion", "distance_max", 0.0, "Max Distance"),
     ("", "use_fur_attach", False, "Fur Attach"),
-    ("", "collision_offset", 0.02, "Collision Offset"),
+    ("", "collision_offset", 0.02, "Offset"),  # (its name in the panel)
     ("groom", "use_clearance", False, "Clearance Pass"),
 ]
 
@@ -154,7 +154,7 @@ class _DataLayout(EnabledLayout):
     def _child(self, *args, **kw):
         return _DataLayout(self.log, self)
 
-    box = row = column = _child
+    box = row = column = split = _child
 
     def prop(self, data, name, **kw):
         assert hasattr(data, name), name

@@ -134,7 +134,7 @@ def pressed(kind, mode="bend", **type_args):
     b = ball()
     scene.frame_set(FRAMES[0])
     out = setup(hair, [b])
-    hair.furcollide.mode = mode
+    hair.furcollide.mode = mode.upper()
     return hair, b, out
 
 

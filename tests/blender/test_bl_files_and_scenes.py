@@ -225,9 +225,10 @@ def test_addon_disable_enable_with_operators_registers_handlers_once(fc):
         scene.frame_set(2)  # nothing runs, nothing breaks
         assert bpy.ops.preferences.addon_enable(module=ADDON) == {"FINISHED"}
         assert len(_fc_handlers()) == 1
-        for name in ("depsgraph_update_post", "load_post"):
+        for name in ("depsgraph_update_post", "load_post", "save_pre"):
             lst = getattr(bpy.app.handlers, name)
-            assert sum("furcollide" in getattr(h, "__module__", "") for h in lst) == 1, name
+            mine = [h.__name__ for h in lst if "furcollide" in getattr(h, "__module__", "")]
+            assert mine and len(mine) == len(set(mine)), (name, mine)  # each one once
     # the setup still plays after re-enabling, from the start frame
     s = hair.furcollide
     assert s.is_setup and s.output == out
@@ -378,7 +379,7 @@ def test_revert_after_edits(fc, tmp_path, capsys):
     ref = reference_frames(fc, scene, hair)
     groom = snapshot(hair)
     s = hair.furcollide
-    s.mode = "soft"
+    s.mode = "SOFT"
     s.colliders[0].enabled = False
     extra = make_box("Extra", size=0.3, location=(0.2, 0.2, 0.3))
     activate(hair, extra)
@@ -392,7 +393,7 @@ def test_revert_after_edits(fc, tmp_path, capsys):
     assert bpy.data.filepath == path
     hair = bpy.data.objects["Fur"]
     s = hair.furcollide
-    assert s.mode == "bend" and [c.object.name for c in s.colliders] == ["Box"]
+    assert s.mode == "BEND" and [c.object.name for c in s.colliders] == ["Box"]
     assert s.colliders[0].enabled and "Extra" not in bpy.data.objects
     assert_unchanged(hair, groom, "after Revert")
     scene = bpy.context.scene

@@ -289,7 +289,7 @@ def test_a_setting_changed_mid_shot_then_the_advice_works(fc, tmp_path):
     scene, hair, box, out = shot(fc, tmp_path)
     s = hair.furcollide
     before = play(scene, hair, out, range(1, 6), [box])
-    s.mode, s.collision_offset = "soft", 0.02
+    s.mode, s.collision_offset = "SOFT", 0.02
     outdated(hair, "Frame 5 is outdated", "Mode changed", "go to frame 1")
     scene.frame_set(6)
     outdated(hair, "Play from frame 1")

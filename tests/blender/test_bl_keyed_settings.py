@@ -8,6 +8,8 @@ value changed, and the status names the setting and the frame. Mode cannot be ke
 (a curve's state in one mode means nothing in another): Blender refuses the key.
 """
 
+import math
+
 import bpy
 import numpy as np
 import pytest
@@ -67,7 +69,7 @@ def _keyed_offset(s, hair):
 
 
 def _keyed_precision(s, hair):
-    _key(s, "rotation_precision", 2.0, 0.25)
+    _key(s, "rotation_precision", math.radians(2.0), math.radians(0.25))  # (keyed in radians)
 
 
 def _keyed_collider_enabled(s, hair):

@@ -2,6 +2,8 @@
 positions, a moved output gets every point transformed, and the status attribute and
 colours follow the status."""
 
+import math
+
 import bpy
 import numpy as np
 import pytest
@@ -147,7 +149,7 @@ def test_every_status_shows_the_readmes_colour(fc):
     stuck.location.x = 3.0
     make_box("Wall", size=0.6, location=(3.0, 0.0, 0.6))
     out_b = setup(stuck, [bpy.data.objects["Wall"]])
-    stuck.furcollide.max_angle = 1.0  # nothing clears within 1 degree: unresolved
+    stuck.furcollide.max_angle = math.radians(1.0)  # nothing clears within 1 degree
     seen = set()
     for f in range(1, 11):
         scene.frame_set(f)

@@ -8,7 +8,15 @@ refuses or an exception in ``draw()`` fails here as it would show an error in th
 sidebar. The states: no setup, a fresh setup, played, an error, outdated, a partial bake,
 baked, an outdated bake, no output, the output active, a collider out of the scene, an
 empty collider slot, the ray tracer missing, a bake in progress, Lock Interface off and
-on. The real application draws them too (``tests/app/test_real_blender_ui.py``).
+on, Playback Sync dropping frames. The real application draws them too
+(``tests/app/test_real_blender_ui.py``).
+
+Then the panel as Blender users expect it: the hint followed as written sets the hair up;
+every name, hint and status fits the sidebar at its default width (measured with
+Blender's font, ``ui/text.py``); every keyable setting shows its keyframe decorator;
+Recovery & Plasticity opens with the sections a setup needs; Remove asks first; the
+Object menu's FurCollide entry comes and goes with the add-on; a scene that drops frames
+or renders unlocked gets a one-line warning with the button that fixes it.
 """
 
 from __future__ import annotations
@@ -21,9 +29,13 @@ import pytest
 from helpers import (
     ADDON,
     DRAWN,
+    Bound,
+    RnaLayout,
     activate,
     bake_crashing_at,
     draw_rna,
+    make_box,
+    make_hair,
     make_surface,
     play,
     save_in,
@@ -36,7 +48,14 @@ pytestmark = pytest.mark.blender
 SETTINGS_PANELS = ("FURCOLLIDE_PT_colliders", "FURCOLLIDE_PT_resolution",
                    "FURCOLLIDE_PT_shrink", "FURCOLLIDE_PT_recovery", "FURCOLLIDE_PT_pinch",
                    "FURCOLLIDE_PT_enable")
-LOCK_WARNING = "Enable Render > Lock Interface"
+
+
+def _panel_module():
+    return sys.modules[ADDON + ".ui.panel"]
+
+
+def _text():
+    return sys.modules[ADDON + ".ui.text"]
 
 
 def _ui_classes():
@@ -93,8 +112,7 @@ def test_no_setup_offers_add_and_hides_the_sub_panels(fc):
     logs = draw_everything()
     main = logs["FURCOLLIDE_PT_main"]
     assert [e["name"] for e in entries(main, "operator")] == ["furcollide.add"]
-    assert "Select the colliders," in labels(main)
-    assert "then Shift-click the hair last" in labels(main)
+    assert " ".join(labels(main)) == "Select the colliders, then Shift-click the hair last"
     setup_panels = {"FURCOLLIDE_PT_colliders", "FURCOLLIDE_PT_resolution",
                     "FURCOLLIDE_PT_cache", "FURCOLLIDE_PT_stats", *SETTINGS_PANELS}
     assert not (setup_panels & _drawn(logs)), _drawn(logs)
@@ -163,9 +181,8 @@ def test_an_error_is_shown_in_the_main_panel(fc):
     shown = [e for e in main if e["kind"] == "label" and e["icon"] == "ERROR"]
     assert shown and message.startswith(shown[0]["text"]), (shown, message)
     # the whole message is shown, wrapped
-    box = [e["text"] for e in main if e["kind"] == "label" and e["icon"] in ("ERROR", "BLANK1")]
-    assert " ".join(box).replace(LOCK_WARNING, "").split() [:len(message.split())] \
-        == message.split()
+    box = [e["text"] for e in main if e["kind"] == "label" and e["boxes"] == 1]
+    assert " ".join(box).split() == message.split()
 
 
 def test_outdated_playback_cache_is_shown(fc):
@@ -178,7 +195,7 @@ def test_outdated_playback_cache_is_shown(fc):
     activate(hair)
     logs = draw_everything()
     cache = logs["FURCOLLIDE_PT_cache"]
-    assert "Outdated: play from the start frame or bake" in labels(cache), labels(cache)
+    assert _panel_module().OUTDATED in labels(cache), labels(cache)
     main = logs["FURCOLLIDE_PT_main"]
     assert any("outdated" in (t or "") for t in labels(main)), labels(main)
 
@@ -253,18 +270,349 @@ def test_collider_list_marks_a_collider_out_of_the_scene_and_an_empty_slot(fc):
         ("double_sided", "MOD_SOLIDIFY"), ("enabled", "CHECKBOX_HLT")]
 
 
-def test_lock_interface_warning_only_while_it_is_off(fc):
+def _warning_rows(log):
+    """(label, operator idname, button text) of each one-line warning a panel drew."""
+    rows = {}
+    for e in log:
+        if e.get("in_split") and e["kind"] in ("label", "operator"):
+            rows.setdefault(e["layout"], []).append(e)
+    return [(row[0]["text"], row[1]["name"], row[1]["text"]) for row in rows.values()]
+
+
+def test_lock_interface_off_is_one_line_with_its_fix(fc):
+    """Add FurCollide turns Render > Lock Interface on (renders from the UI could crash
+    while the handler writes hair): a fresh setup draws no warning. Turned off, one line
+    says so beside the button that turns it on again."""
+    scene = bpy.context.scene
+    scene.render.use_lock_interface = False
+    hair, box, out = small_setup(fc)
+    assert scene.render.use_lock_interface
+    activate(hair)
+    main = draw_everything()["FURCOLLIDE_PT_main"]
+    assert _warning_rows(main) == [] and not entries(main, "prop", "use_lock_interface")
+    scene.render.use_lock_interface = False
+    main = draw_everything()["FURCOLLIDE_PT_main"]
+    pm = _panel_module()
+    assert _warning_rows(main) == [(pm.LOCK_WARNING, "furcollide.lock_interface",
+                                    "Lock Interface")]
+    assert bpy.ops.furcollide.lock_interface() == {"FINISHED"}
+    assert scene.render.use_lock_interface
+    assert _warning_rows(draw_everything()["FURCOLLIDE_PT_main"]) == []
+
+
+def test_playback_sync_other_than_every_frame_is_one_line_with_its_fix(fc):
     scene = bpy.context.scene
     hair, box, out = small_setup(fc)
     activate(hair)
+    pm = _panel_module()
+    for sync in ("AUDIO_SYNC", "FRAME_DROP"):
+        scene.sync_mode = sync
+        main = draw_everything()["FURCOLLIDE_PT_main"]
+        assert _warning_rows(main) == [(pm.SYNC_WARNING, "furcollide.play_every_frame",
+                                        "Play Every Frame")], sync
+    # the button beside the warning, pressed: Sync is Play Every Frame and playback
+    # solves every frame again
+    ((_, idname, _),) = _warning_rows(main)
+    mod, _, op = idname.partition(".")
+    assert getattr(getattr(bpy.ops, mod), op)() == {"FINISHED"}
+    assert scene.sync_mode == "NONE"
+    assert _warning_rows(draw_everything()["FURCOLLIDE_PT_main"]) == []
+    with pytest.raises(RuntimeError, match="already"):  # (nothing to fix: greyed)
+        bpy.ops.furcollide.lock_interface()
+
+
+def test_following_the_hint_as_written_sets_up_the_hair_with_its_colliders(fc):
+    """"Select the colliders, then Shift-click the hair last": clicked as a user does
+    (each click selects and makes active; Shift adds), the hair is active, the panel
+    offers Add FurCollide, and Add takes both colliders (not the hair) in the list."""
+    hair, box = fc.make_scene()
+    box2 = make_box("Box2", location=(0.5, 0.5, 0.6))
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    vl = bpy.context.view_layer
+    for ob in (box, box2, hair):  # click, Shift-click, Shift-click
+        ob.select_set(True)
+        vl.objects.active = ob
+    main = draw_everything()["FURCOLLIDE_PT_main"]
+    assert " ".join(labels(main)) == _panel_module().HINT
+    assert entries(main, "operator", "furcollide.add")
+    assert bpy.ops.furcollide.add() == {"FINISHED"}
+    s = hair.furcollide
+    assert s.is_setup and [c.object for c in s.colliders] == [box, box2]
+    # the other way round (the hair first) the active object is a collider: no tab
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    hair, box = fc.make_scene()
+    vl = bpy.context.view_layer
+    for ob in (hair, box):
+        ob.select_set(True)
+        vl.objects.active = ob
+    assert draw_everything()["FURCOLLIDE_PT_main"] is None
+
+
+def _all_states(fc, tmp_path):
+    """Yields the draw logs of every panel in the states a setup goes through (no setup; fresh,
+    with a collider selected; an error; Soft with Shrink; wind, jiggle and the Region of
+    Influence off; a render groom and the output's modifier; a partial bake; baked;
+    outdated; the scene's warnings), each checked before the next state: a new file
+    removes the data a log holds)."""
+    scene = bpy.context.scene
+    hair, box = fc.make_scene()
+    activate(hair, box)
+    yield draw_everything()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    hair, box, out = small_setup(fc)
+    s = hair.furcollide
+    play(scene, range(1, 4))
+    yield draw_everything()
+    s.attract_to_growth_surface = True  # an error: no Surface
+    scene.frame_set(4)
+    yield draw_everything()
+    s.attract_to_growth_surface = False
+    s.mode, s.shrink = "SOFT", True
+    m = s.motion
+    m.use_wind = m.use_jiggle = m.write_collider_distance = True
+    m.use_region_of_influence = False
+    s.groom.groom = make_hair("Groom", nx=3, ny=3)
+    out.modifiers.new("Noise", "NODES")
     scene.render.use_lock_interface = False
-    main = draw_everything()["FURCOLLIDE_PT_main"]
-    assert LOCK_WARNING in labels(main)
-    toggle = entries(main, "prop", "use_lock_interface")
-    assert toggle and toggle[0]["data"] == scene.render
-    scene.render.use_lock_interface = True
-    main = draw_everything()["FURCOLLIDE_PT_main"]
-    assert LOCK_WARNING not in labels(main) and not entries(main, "prop", "use_lock_interface")
+    scene.sync_mode = "AUDIO_SYNC"
+    activate(hair)
+    yield draw_everything()
+    scene.render.use_lock_interface, scene.sync_mode = True, "NONE"
+    s.mode, s.shrink = "BEND", False
+    m.use_wind = m.use_jiggle = m.write_collider_distance = False
+    out.modifiers.clear()
+    save_in(tmp_path)
+    s.bake_path = "//furcollide_cache/partial/"
+    yield draw_everything()
+    s.bake_path = ""
+    assert bpy.ops.furcollide.bake() == {"FINISHED"}
+    box.rotation_euler.z += 0.3
+    scene.frame_set(4)
+    yield draw_everything()
+
+
+def test_every_name_and_line_fits_the_sidebar_at_its_default_width(fc, tmp_path):
+    """Measured with Blender's UI font at UI scale 1 in a sidebar of the default width
+    (``ui/text.py``; its limits were read off Blender 4.3's screenshots, which
+    ``tests/app`` takes): a setting's name beside its field, a checkbox's text, every
+    choice of a menu button, every label line, every button's text; a one-line warning
+    and its button side by side."""
+    t = _text()
+    ctx = bpy.context
+    assert t.ui_scale(ctx) == 1.0 and t.region_width(ctx) == t.SIDEBAR_WIDTH
+    width = t.text_width
+    row_width = t.line_width(ctx, icon=False)
+    too_wide = []
+
+    def check(what, text, limit):
+        if text and width(ctx, text) > limit:
+            too_wide.append(f"{what}: {text!r} {width(ctx, text):.0f} > {limit:.0f} px")
+
+    for logs in _all_states(fc, tmp_path):
+        for panel, log in logs.items():
+            if log is None or "_MT_" in panel or panel == "FURCOLLIDE_PT_presets":
+                continue  # (a menu is as wide as its entries)
+            buttons = {}
+            for e in log:
+                if e.get("list_item") is not None:
+                    continue  # (the colliders list: names of the user's objects)
+                if e["kind"] in ("prop", "prop_search"):
+                    prop = e["data"].bl_rna.properties[e["name"]]
+                    text = prop.name if e["text"] is None else e["text"]
+                    if prop.type == "ENUM" and not getattr(prop, "is_enum_flag", False):
+                        for item in prop.enum_items:
+                            check(f"{panel} {e['name']} choice", item.name, t.MENU_TEXT)
+                    if not e["split"]:
+                        check(f"{panel} {e['name']}", text,
+                              t.line_width(ctx, box=e["boxes"] > 0, icon=True))
+                    elif prop.type == "BOOLEAN":
+                        check(f"{panel} {e['name']} (checkbox)", text, t.CHECKBOX_TEXT)
+                    else:
+                        check(f"{panel} {e['name']}", text,
+                              t.SPLIT_LABEL_BOX if e["boxes"] else t.SPLIT_LABEL)
+                elif e["kind"] == "label" and not e["in_split"]:
+                    check(f"{panel} label", e["text"],
+                          t.line_width(ctx, box=e["boxes"] > 0, icon=e["icon"] not in (
+                              None, "NONE")))
+                elif e["kind"] == "operator" and not e["in_split"]:
+                    buttons.setdefault(e["layout"], []).append(e)
+            for row in buttons.values():
+                share = t.line_width(ctx, box=row[0]["boxes"] > 0, icon=False) / len(row)
+                for e in row:
+                    mod, _, op = e["name"].partition(".")
+                    text = (e["text"] if e["text"] is not None else
+                            getattr(getattr(bpy.ops, mod), op).get_rna_type().name)
+                    icon = t.ICON if e["icon"] else 0
+                    check(f"{panel} {e['name']} (button)", text,
+                          share - icon - t.BUTTON_PADDING)
+            for label, _op, button in _warning_rows(log):
+                need = (width(ctx, label) + t.ICON + 8 + width(ctx, button)
+                        + t.BUTTON_PADDING)
+                if need > row_width:
+                    too_wide.append(f"{panel} warning {label!r} [{button}]: {need:.0f} px")
+    assert not too_wide, "\n".join(sorted(set(too_wide)))
+
+
+def test_every_keyable_setting_shows_its_keyframe_decorator(fc, tmp_path):
+    """A setting that can be keyed, drawn as a setting (its name in the label column),
+    has the keyframe dot beside it; one drawn with its whole name (a box's title
+    checkbox) has its own decorator."""
+    missing = []
+    for logs in _all_states(fc, tmp_path):
+        for panel, log in logs.items():
+            own = {(id(e["data"]), e["name"]) for e in log or [] if e["kind"] ==
+                   "prop_decorator"}
+            for e in log or []:
+                if e["kind"] != "prop" or e.get("list_item") is not None:
+                    continue
+                if not e["data"].bl_rna.identifier.lower().startswith("furcollide"):
+                    continue
+                prop = e["data"].bl_rna.properties[e["name"]]
+                if not prop.is_animatable or prop.is_readonly or prop.type in (
+                        "STRING", "POINTER", "COLLECTION"):
+                    continue
+                if e["text"] == "" and not e["split"]:
+                    continue  # (a header's checkbox: Shrink, as Blender's own headers)
+                shown = (e["split"] and e["decorate"]) or (id(e["data"]), e["name"]) in own
+                if not shown:
+                    missing.append(f"{panel}: {e['name']}")
+    assert not missing, sorted(set(missing))
+
+
+def test_sections_open_as_registered(fc):
+    """The main panel, Colliders, Resolution, Recovery & Plasticity (the paper's
+    signature control) and Cache open; Shrink, Pinch, Per-Curve Enable, Last Frame and
+    Fur Pipeline closed; no sub-panel is titled like a setting."""
+    panels, _, _ = _ui_classes()
+    sidebar = [c for c in panels if getattr(c, "bl_region_type", "") == "UI"]
+    closed = {c.__name__ for c in sidebar if "DEFAULT_CLOSED" in getattr(c, "bl_options", ())}
+    assert closed == {"FURCOLLIDE_PT_shrink", "FURCOLLIDE_PT_pinch", "FURCOLLIDE_PT_enable",
+                      "FURCOLLIDE_PT_stats", "FURCOLLIDE_PT_pipeline"}, closed
+    titles = {c.bl_label for c in sidebar}
+    names = {p.name for rna in _property_groups() for p in rna.properties}
+    # (Colliders lists the colliders and Shrink's header is the Shrink checkbox: the same
+    # thing; "Resolution" titled a section and labelled the pinch setting)
+    assert titles & names == {"Colliders", "Shrink"}, titles & names
+
+
+def _property_groups():
+    s = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
+    return [s, *(s.properties[n].fixed_type for n in ("colliders", "motion", "groom",
+                                                      "children")),
+            bpy.types.Scene.bl_rna.properties["furcollide_pipeline"].fixed_type]
+
+
+def test_remove_asks_first(fc):
+    """From a button or a menu (invoke), Remove shows Blender's confirmation; only
+    confirming runs it (a script's call runs at once)."""
+    hair, box, out = small_setup(fc)
+    activate(hair)
+    asked = []
+
+    class WM:
+        def invoke_confirm(self, op, event, **kw):
+            asked.append(kw)
+            return {"RUNNING_MODAL"}
+
+    class Ctx:
+        window_manager = WM()
+        object = hair
+        scene = bpy.context.scene
+
+    op_cls = bpy.types.FURCOLLIDE_OT_remove
+    got = op_cls.invoke(Bound(op_cls, None), Ctx(), None)
+    assert got == {"RUNNING_MODAL"} and hair.furcollide.is_setup  # nothing removed yet
+    (kw,) = asked
+    assert kw["title"] == op_cls.CONFIRM and kw["confirm_text"] == "Remove"
+    assert out.name in kw["message"] and kw["icon"] == "WARNING"
+    # the keywords and the icon are those Blender's own invoke_confirm takes
+    params = bpy.types.WindowManager.bl_rna.functions["invoke_confirm"].parameters
+    assert set(kw) <= set(params.keys()), set(kw) - set(params.keys())
+    assert kw["icon"] in params["icon"].enum_items.keys()
+
+
+def test_object_menu_entry_comes_and_goes_with_the_add_on(fc):
+    hair, box, out = small_setup(fc)
+    activate(hair)
+    menu_module = sys.modules[ADDON + ".ui.menu"]
+    funcs = bpy.types.VIEW3D_MT_object.draw._draw_funcs
+    assert menu_module.draw_object_menu in funcs
+    log = []
+    menu_module.draw_object_menu(Bound(bpy.types.VIEW3D_MT_object,
+                                       RnaLayout(log, bpy.context)), bpy.context)
+    assert [e["name"] for e in log if e["kind"] == "menu"] == ["FURCOLLIDE_MT_object"]
+    sub = draw_rna(bpy.types.FURCOLLIDE_MT_object, header=False)
+    assert [e["name"] for e in sub if e["kind"] == "operator"] == [
+        "furcollide.add", "furcollide.bake", "furcollide.free_bake", "furcollide.remove"]
+    assert bpy.ops.preferences.addon_disable(module=ADDON) == {"FINISHED"}
+    try:
+        assert menu_module.draw_object_menu not in bpy.types.VIEW3D_MT_object.draw._draw_funcs
+        assert not hasattr(bpy.types, "FURCOLLIDE_MT_object")
+    finally:
+        assert bpy.ops.preferences.addon_enable(module=ADDON) == {"FINISHED"}
+    menu_module = sys.modules[ADDON + ".ui.menu"]
+    assert menu_module.draw_object_menu in bpy.types.VIEW3D_MT_object.draw._draw_funcs
+
+
+def test_object_menu_entries_run_on_the_active_hair(fc, tmp_path):
+    """Object > FurCollide, each entry pressed in turn as a user would (the hair active,
+    its collider selected): Add sets it up, Bake bakes, Free Bake frees, Remove (once
+    confirmed) removes the setup and its output."""
+    hair, box = fc.make_scene(frames=(1, 6), nx=4, ny=4)
+    activate(hair, box)
+    save_in(tmp_path)
+    sub = draw_rna(bpy.types.FURCOLLIDE_MT_object, header=False)
+    add, bake, free, remove = (e["name"] for e in sub if e["kind"] == "operator")
+
+    def press(idname, **kw):
+        mod, _, op = idname.partition(".")
+        return getattr(getattr(bpy.ops, mod), op)("EXEC_DEFAULT", **kw)
+
+    assert press(add) == {"FINISHED"}
+    s = hair.furcollide
+    out_name = s.output.name
+    assert s.is_setup and [c.object for c in s.colliders] == [box]
+    assert press(bake) == {"FINISHED"} and s.is_baked
+    assert press(free) == {"FINISHED"} and not s.is_baked
+    assert press(remove) == {"FINISHED"}  # (a click confirms first: test_remove_asks_first)
+    assert not s.is_setup and out_name not in bpy.data.objects
+
+
+def _meaning(prop_id):
+    """A setting's meaning: its identifier, without the owner it sits under (Wind's and
+    Jiggle's Falloff, Stage and Seed are the same setting of each motion; the Collider
+    Collection's Double Sided is a collider's); each setting's Map (the line under it)
+    is one meaning: the parameter map of the setting above."""
+    if prop_id.endswith("_map"):
+        return "map"
+    for owner in ("wind_", "jiggle_", "collection_"):
+        if prop_id.startswith(owner):
+            return prop_id[len(owner):]
+    return prop_id
+
+
+def test_every_drawn_name_means_one_thing(fc, tmp_path):
+    """In every state, a name drawn for a setting names one setting (the same setting of
+    another owner, e.g. a collider's own Offset, is the same meaning), and no setting is
+    named like a section ("Resolution" was both the section and Pinch's method)."""
+    panels, _, _ = _ui_classes()
+    titles = {c.bl_label for c in panels}
+    meanings = {}
+    for logs in _all_states(fc, tmp_path):
+        for log in logs.values():
+            for e in log or []:
+                if e["kind"] not in ("prop", "prop_search") or e.get("list_item") is not None:
+                    continue
+                prop = e["data"].bl_rna.properties[e["name"]]
+                text = prop.name if e["text"] is None else e["text"]
+                if text:
+                    meanings.setdefault(text, set()).add(_meaning(e["name"]))
+    shared = {k: v for k, v in meanings.items() if len(v) > 1}
+    assert not shared, shared
+    # (Colliders lists the colliders; Shrink's header is the Shrink checkbox)
+    assert set(meanings) & titles <= {"Colliders", "Shrink"}, set(meanings) & titles
 
 
 def test_missing_ray_tracer_is_explained_in_the_panel(fc, monkeypatch):

@@ -7,7 +7,7 @@ inputs of their frame."""
 import bpy
 import numpy as np
 import pytest
-from helpers import check_frame, make_hair, positions, sweep_box
+from helpers import check_frame, make_hair, positions, set_core, sweep_box
 
 pytestmark = pytest.mark.blender
 
@@ -58,9 +58,9 @@ def test_a_uniform_map_equals_the_setting_times_its_value(fc, name):
     s.shrink = name == "scale_minimum"
     base = {"plasticity": 0.8, "recovery_rate": 0.5, "collision_offset": 0.04,
             "max_angle": 120.0, "scale_minimum": 0.6}[name]
-    setattr(s, name, base * 0.5)
+    set_core(s, **{name: base * 0.5})  # (Max Angle in degrees)
     plain = _replay(scene, hair, out, box)
-    setattr(s, name, base)
+    set_core(s, **{name: base})
     _attribute(hair, "weight", np.full(len(hair.data.curves), 0.5))
     setattr(s, f"{name}_map", "weight")
     mapped = _replay(scene, hair, out, box)

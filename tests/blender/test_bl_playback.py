@@ -20,6 +20,7 @@ from helpers import (
     record,
     reset_cache,
     same_frame,
+    set_core,
     status_of,
 )
 
@@ -78,7 +79,7 @@ def test_setting_change_drops_the_playback_cache(fc):
     rt = fc.store.registry.get_runtime(hair)
     rec = positions_per_frame(out, range(1, 13))
     bpy.context.scene.frame_set(6)
-    hair.furcollide.mode = "stiff"
+    hair.furcollide.mode = "STIFF"
     assert len(rt.cache.memory) == 0
     assert hair.furcollide.is_outdated
     assert hair.furcollide.status_message == (
@@ -109,9 +110,7 @@ def clean_run(fc, mode, frames, **settings):
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
-    hair.furcollide.mode = mode
-    for k, v in settings.items():
-        setattr(hair.furcollide, k, v)
+    set_core(hair.furcollide, mode=mode, **settings)
     return positions_per_frame(out, frames)
 
 
@@ -125,10 +124,9 @@ def test_a_change_mid_animation_needs_the_start_frame_and_the_advice_works(fc, c
     hair, box = fc.make_scene()
     out = fc.setup(hair, [box])
     s = hair.furcollide
-    s.mode = "stiff"
+    s.mode = "STIFF"
     positions_per_frame(out, range(1, 11))
-    for k, v in change.items():
-        setattr(s, k, v)
+    set_core(s, **change)
     for f in (11, 12):
         bpy.context.scene.frame_set(f)
         assert s.is_outdated and "Play from frame 1" in s.status_message, s.status_message
@@ -155,7 +153,7 @@ def test_a_change_without_an_update_callback_is_not_stepped_from(fc, monkeypatch
     rt = fc.store.registry.get_runtime(hair)
     positions_per_frame(out, range(1, 7))
     monkeypatch.setattr(fc.store.invalidation, "invalidate", lambda *a, **k: None)
-    hair.furcollide.mode = "soft"
+    hair.furcollide.mode = "SOFT"
     if seen == "previous-frame-record":
         fc.frame.record.forget_structure(rt)  # (as after a shorter frame range)
     bpy.context.scene.frame_set(7)
@@ -171,7 +169,7 @@ def test_mode_change_then_play_from_start(fc):
     out = fc.setup(hair, [box])
     positions_per_frame(out, range(1, 8))
     bpy.context.scene.frame_set(1)
-    hair.furcollide.mode = "soft"
+    hair.furcollide.mode = "SOFT"
     rec = positions_per_frame(out, range(1, 8))
     assert hair.furcollide.status_message == ""
     assert not hair.furcollide.is_outdated
@@ -355,8 +353,8 @@ def test_a_setting_changed_mid_shot(fc, name, value):
     s = hair.furcollide
     scene = demo.scene
     first = play_demo(demo.scene, hair, out, range(1, 15))
-    before = getattr(s, name)
-    setattr(s, name, value)
+    before = fc.settings.core_values.core_value(s, name)
+    set_core(s, **{name: value})
     for f in (15, 16, 8, 3):
         scene.frame_set(f)
         said = f"{s.bl_rna.properties[name].name} changed"
@@ -371,6 +369,6 @@ def test_a_setting_changed_mid_shot(fc, name, value):
     reset_cache(hair)
     for f, got in play_demo(demo.scene, hair, out).items():
         same_frame(got, new[f], f"{name}={value}: replayed vs fresh, frame {f}")
-    setattr(s, name, before)
+    set_core(s, **{name: before})
     for f, got in play_demo(demo.scene, hair, out, range(1, 15)).items():
         same_frame(got, first[f], f"{name} set back, frame {f}")

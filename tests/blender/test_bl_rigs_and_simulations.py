@@ -188,7 +188,7 @@ def test_pinched_roots_recover_when_the_arm_lifts(fc, resolution):
     rig, arm = _arm_rig([(1, 0.45), (5, -0.8), (9, 0.45)])  # raised: clear of the tips
     out = fc.setup(hair, [arm])
     s = hair.furcollide
-    s.pinch_resolution = resolution
+    s.pinch_resolution = resolution.upper()
     s.recovery_rate = 1.0
     s.plasticity = 0.0
     s.recover_pinched = True
@@ -288,7 +288,7 @@ def test_ragged_groom_with_an_armature_collider(fc, tmp_path, mode):
     assert sizes.min() == 2 and len(set(sizes.tolist())) > 4
     _rig, arm = _arm_rig([(1, 0.2), (7, -0.75)])
     out = fc.setup(hair, [arm])
-    hair.furcollide.mode = mode
+    hair.furcollide.mode = mode.upper()
     scene.frame_set(1)
     counts = np.zeros(6, int)
     played = {}

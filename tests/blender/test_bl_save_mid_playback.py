@@ -65,6 +65,10 @@ def _opened(fc, path):
     return bpy.context.scene, hair, hair.furcollide.output
 
 
+#: What the Cache section says of a playback cache a saved file does not hold.
+NOT_SAVED = "Playback cache not saved: bake"
+
+
 def _cache_panel_labels():
     log = draw_enabled(bpy.types.FURCOLLIDE_PT_cache)
     return [entry[1] for entry in log if entry[0] == "label"]
@@ -83,7 +87,7 @@ def test_the_status_says_the_cache_is_not_saved_and_bake_gives_the_frames(fc, tm
                    "bake to keep the frames, or play from frame 1"), msg
     assert capsys.readouterr().out.count("is not saved with the file") == 1
     bpy.context.view_layer.objects.active = hair
-    assert "The playback cache is not saved with the file: bake" in _cache_panel_labels()
+    assert NOT_SAVED in _cache_panel_labels()
     # the saved frame shows what was saved; it and the frames after it say why
     np.testing.assert_array_equal(positions(out), ref[SAVED_AT][0])
     for f in (SAVED_AT, SAVED_AT + 1, SAVED_AT + 3, 3):
@@ -99,7 +103,7 @@ def test_the_status_says_the_cache_is_not_saved_and_bake_gives_the_frames(fc, tm
         assert s.status_message == "" and not s.is_outdated, (f, s.status_message)
         np.testing.assert_array_equal(positions(out), ref[f][0], err_msg=f"frame {f}")
         np.testing.assert_array_equal(status_of(out), ref[f][1], err_msg=f"frame {f}")
-    assert "The playback cache is not saved with the file: bake" not in _cache_panel_labels()
+    assert NOT_SAVED not in _cache_panel_labels()
     # a baked file has no playback cache to lose
     path = save_in(tmp_path, "baked.blend")
     scene, hair, out = _opened(fc, path)
@@ -119,7 +123,7 @@ def test_playing_from_the_start_frame_gives_the_frames_and_ends_the_note(fc, tmp
     scene.frame_set(FRAMES[1])
     assert s.status_message == (f"Frame {FRAMES[1]} is not cached: holding frame "
                                 f"{SAVED_AT + 2}. Play from frame 1 or bake."), s.status_message
-    assert "The playback cache is not saved with the file: bake" not in _cache_panel_labels()
+    assert NOT_SAVED not in _cache_panel_labels()
     # saved again: it is the new cache (8 frames) the next session is told about
     path = save_in(tmp_path, "again.blend")
     scene, hair, out = _opened(fc, path)

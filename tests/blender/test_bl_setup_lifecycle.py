@@ -3,6 +3,8 @@ setups, outputs deleted, replaced or swapped, hidden and excluded setups, undo, 
 registry pruned when a source is deleted, and errors as status messages (the handlers
 never raise)."""
 
+import math
+
 import bpy
 import numpy as np
 import pytest
@@ -21,6 +23,7 @@ from helpers import (
     reference_frames,
     same_frames,
     save_as,
+    set_core,
     snapshot,
     sweep_setup,
     world,
@@ -209,12 +212,12 @@ def test_invalid_setting_combination_is_a_status_not_a_traceback(fc, capsys):
     hair, box = fc.make_scene()
     fc.setup(hair, [box])
     s = hair.furcollide
-    s.rotation_precision = 10.0
-    s.max_angle = 5.0  # core: max_angle must be >= rotation_precision
+    s.rotation_precision = math.radians(10.0)
+    s.max_angle = math.radians(5.0)  # core: max_angle must be >= rotation_precision
     bpy.context.scene.frame_set(1)
     assert "max_angle" in s.status_message
     assert "Traceback" not in capsys.readouterr().err
-    s.max_angle = 90.0
+    s.max_angle = math.radians(90.0)
     bpy.context.scene.frame_set(1)
     assert s.status_message == ""
 
@@ -526,8 +529,7 @@ def test_extreme_valid_settings_give_finite_output(fc, name, capsys):
     hair, box, out = sweep_setup(fc)
     groom = snapshot(hair)
     s = hair.furcollide
-    for k, v in _EXTREMES[name].items():
-        setattr(s, k, v)
+    set_core(s, **_EXTREMES[name])
     activate(hair)
     assert bpy.ops.furcollide.reset() == {"FINISHED"}
     for f in list(range(1, 7)) + [3, 6]:

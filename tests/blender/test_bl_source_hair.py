@@ -147,7 +147,7 @@ def test_pinch_detected_and_put_to_growth_surface(fc):
     st = np.zeros(len(out.data.curves), np.int32)
     out.data.attributes["furcollide_status"].data.foreach_get("value", st)
     assert (st == fc.core.Status.PINCHED).sum() == s.stat_pinched
-    s.pinch_resolution = "growth_surface"
+    s.pinch_resolution = "GROWTH_SURFACE"
     bpy.context.scene.frame_set(1)
     play(bpy.context.scene, range(1, 4))
     assert s.stat_pinched > 0 and s.status_message == ""

@@ -1,15 +1,18 @@
 """The panels, operators' polls and messages, tooltips, presets (shipped, round trip,
-broken files), the settings mirroring ``core.Settings`` and the console messages."""
+broken files, an earlier version's), the settings mirroring ``core.Settings`` (angles
+as Blender angles, choices in Blender's upper case) and the console messages."""
 
 import dataclasses
+import math
 import os
 import subprocess
 import sys
 import textwrap
 
 import bpy
+import numpy as np
 import pytest
-from helpers import activate, dense_groom, draw_panel, groom_scene, play
+from helpers import activate, dense_groom, draw_panel, groom_scene, play, set_core
 
 pytestmark = pytest.mark.blender
 
@@ -27,7 +30,8 @@ def _preset_folder():
 
 
 def _load(path):
-    return bpy.ops.script.execute_preset(filepath=path, menu_idname=PRESETS)
+    """Apply preset ``path`` as the preset menu does."""
+    return bpy.ops.furcollide.preset_apply(filepath=path, menu_idname=PRESETS)
 
 
 def _furcollide_operators():
@@ -207,13 +211,15 @@ def test_pipeline_panel_draws_the_stages(fc):
                  "use_region_of_influence", "roi_margin", "write_collider_distance",
                  "distance_max", "groom", "use_clearance"):
         assert ("prop", name) in log
-    assert ("label", "Restricts motion After Collision (none is on)") in log
+    said = " ".join(v for k, v in log if k == "label")  # (notes wrap at the sidebar)
+    assert "Restricts motion After Collision (none is on)" in said
     assert bpy.ops.furcollide.groom_bind() == {"FINISHED"}
     guides.furcollide.motion.use_wind = True
     guides.furcollide.motion.use_region_of_influence = False
     log = draw_panel(panel)
     assert any(k == "label" and v and v.startswith("Render curves fixed") for k, v in log)
-    assert ("label", "Motion after collision may push hair into colliders") in log
+    said = " ".join(v for k, v in log if k == "label")
+    assert "Motion after collision may push hair into colliders" in said
 
 
 def test_preset_round_trip_restores_every_setting_exactly(fc):
@@ -221,7 +227,8 @@ def test_preset_round_trip_restores_every_setting_exactly(fc):
     out = fc.setup(hair, [box])
     s = hair.furcollide
     names = fc.package.operators.settings.properties.SOLVER_PROPERTIES
-    look = dict(
+    core_value = fc.settings.core_values.core_value
+    look = dict(  # (the core's names and units)
         mode="soft", rotation_precision=0.7, max_angle=77.7, affected_connected_cvs=4,
         cv_falloff=0.33, attract_to_growth_surface=True, follow_collider_motion=True,
         shrink=True, scale_minimum=0.42,
@@ -229,9 +236,10 @@ def test_preset_round_trip_restores_every_setting_exactly(fc):
         pinch_resolution="growth_surface", recover_pinched=False, collision_offset=0.0123,
     )
     assert set(look) == set(names)
-    for k, v in look.items():
-        setattr(s, k, v)
+    set_core(s, **look)
     saved = {k: getattr(s, k) for k in names}
+    degrees = {k: core_value(s, k) for k in ("rotation_precision", "max_angle", "scale_angle")}
+    assert degrees == {k: float(np.float32(look[k])) for k in degrees}  # (as typed)
     others = dict(threads=s.threads, frame_end=s.frame_end, wind=s.motion.wind_strength,
                   colliders=len(s.colliders))
     activate(out)  # saved from the output: it stores its source's settings
@@ -241,13 +249,19 @@ def test_preset_round_trip_restores_every_setting_exactly(fc):
         assert os.path.isfile(path)
         activate(hair)
         assert _load(os.path.join(_preset_folder(), "Short_Fur_(Stiff).py")) == {"FINISHED"}
-        s.cv_falloff, s.attract_to_growth_surface, s.pinch_resolution = 0.9, False, "stop"
+        s.cv_falloff, s.attract_to_growth_surface, s.pinch_resolution = 0.9, False, "STOP"
         s.recover_pinched, s.affected_connected_cvs, s.shrink = True, 1, False
         s.follow_collider_motion = False
         assert all(getattr(s, k) != saved[k] for k in names)
+        with open(path) as fh:
+            written = fh.read()
+        assert "furcollide_settings_version = 1" in written
+        assert "settings.max_angle = math.radians(77.7)" in written  # readable degrees
+        assert "settings.mode = 'SOFT'" in written
         assert _load(path) == {"FINISHED"}
         for k in names:
             assert getattr(s, k) == saved[k], k  # bit for bit
+        assert degrees == {k: core_value(s, k) for k in degrees}
         assert others == dict(threads=s.threads, frame_end=s.frame_end,
                               wind=s.motion.wind_strength, colliders=len(s.colliders))
     finally:
@@ -272,11 +286,12 @@ def test_broken_preset_files_report_clearly(fc, capsys):
         return path
 
     try:
-        # a bad enum value: a clear error naming the value and the valid ones
+        # a bad enum value: a clear error naming the value and the valid ones (an
+        # earlier version's preset: its choices are read in upper case)
         p = preset("enum", "settings.mode = 'warp'\n")
-        with pytest.raises(RuntimeError, match=r"Failed to execute the preset.*warp.*stiff"):
+        with pytest.raises(RuntimeError, match=r"Failed to execute the preset.*WARP.*STIFF"):
             _load(p)
-        assert s.mode == "bend"
+        assert s.mode == "BEND"
         # a value of the wrong type
         p = preset("type", "settings.affected_connected_cvs = 'three'\n")
         with pytest.raises(RuntimeError, match="Failed to execute the preset.*expected an int"):
@@ -291,11 +306,13 @@ def test_broken_preset_files_report_clearly(fc, capsys):
         assert _load(p) == {"FINISHED"}
         assert s.plasticity == pytest.approx(0.25)
         assert "wobble" not in s.keys()  # nothing stored in the file
-        # out of range values are clamped to the property's limits
+        # out of range values are clamped to the property's limits (degrees: an earlier
+        # version's preset)
         p = preset("range", "settings.max_angle = 1e9\nsettings.rotation_precision = -5.0\n")
         assert _load(p) == {"FINISHED"}
-        assert s.max_angle == pytest.approx(360.0)
-        assert s.rotation_precision == pytest.approx(0.001)
+        core_value = fc.settings.core_values.core_value
+        assert core_value(s, "max_angle") == 360.0 and s.max_angle == pytest.approx(2 * math.pi)
+        assert core_value(s, "rotation_precision") == pytest.approx(0.001)
         # a non-finite value the properties accept: a clear status when solving, no crash
         p = preset("nan", "settings.max_angle = float('nan')\n")
         assert _load(p) == {"FINISHED"}
@@ -306,9 +323,9 @@ def test_broken_preset_files_report_clearly(fc, capsys):
         assert _load(os.path.join(folder, "Long_Fur_(Bend).py")) == {"FINISHED"}
         play(scene, range(1, 4))
         assert fc.store.report.status_for(hair) == ("INFO", "")
-        # no active object: a clear error, not a crash
+        # no active object: refused with the reason, not a crash
         bpy.context.view_layer.objects.active = None
-        with pytest.raises(RuntimeError, match="Failed to execute the preset.*NoneType"):
+        with pytest.raises(RuntimeError, match="no FurCollide setup"):
             _load(p)
     finally:
         for path in written:
@@ -323,7 +340,13 @@ def test_solver_properties_mirror_core_settings(fc):
     rna = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
     defaults = fc.core.Settings()
     for name in props.SOLVER_PROPERTIES:
-        assert rna.properties[name].default == pytest.approx(getattr(defaults, name)), name
+        prop = rna.properties[name]
+        default = prop.default
+        if prop.subtype == "ANGLE":  # (Blender angles: radians)
+            default = math.degrees(default)
+        elif prop.type == "ENUM":  # (Blender's identifiers: upper case)
+            default = default.lower()
+        assert default == pytest.approx(getattr(defaults, name)), name
     hair, box = fc.make_scene()
     fc.setup(hair, [box])
     # (threads 0 -> None: all CPUs)
@@ -340,20 +363,20 @@ def test_shipped_presets(fc):
     fc.setup(hair, [box])
     s = hair.furcollide
     path = os.path.join(folder, "Tight_Cloth_Contact_(Soft).py")
-    bpy.ops.script.execute_preset(filepath=path, menu_idname="FURCOLLIDE_MT_presets")
-    assert s.mode == "soft" and s.affected_connected_cvs == 3
+    assert _load(path) == {"FINISHED"}
+    assert s.mode == "SOFT" and s.affected_connected_cvs == 3
     path = os.path.join(folder, "Grass_Trampling.py")
-    bpy.ops.script.execute_preset(filepath=path, menu_idname="FURCOLLIDE_MT_presets")
-    assert s.mode == "bend" and s.plasticity == pytest.approx(0.6)
+    assert _load(path) == {"FINISHED"}
+    assert s.mode == "BEND" and s.plasticity == pytest.approx(0.6)
     assert s.recovery_rate == pytest.approx(0.05)
+    assert fc.settings.core_values.core_value(s, "max_angle") == 170.0
     # a user preset round-trips
-    s.max_angle = 33.0
+    s.max_angle = math.radians(33.0)
     assert bpy.ops.furcollide.preset_add(name="My Test") == {"FINISHED"}
-    s.max_angle = 180.0
-    bpy.ops.script.execute_preset(
-        filepath=os.path.join(folder, "My_Test.py"), menu_idname="FURCOLLIDE_MT_presets"
-    )
-    assert s.max_angle == pytest.approx(33.0)
+    s.max_angle = math.pi
+    assert _load(os.path.join(folder, "My_Test.py")) == {"FINISHED"}
+    assert s.max_angle == pytest.approx(math.radians(33.0))
+    assert fc.settings.core_values.core_value(s, "max_angle") == 33.0
 
 
 def test_missing_ray_tracer_reports_clearly(tmp_path):
@@ -398,3 +421,79 @@ def test_missing_ray_tracer_reports_clearly(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     assert "FurCollide needs the embreex ray tracer" in r.stdout
     assert "POLL:" in r.stdout and "embreex" in r.stdout.split("POLL:")[1]
+
+
+def _groups():
+    s = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
+    return [s, *(s.properties[n].fixed_type for n in ("colliders", "motion", "groom",
+                                                      "children")),
+            bpy.types.Scene.bl_rna.properties["furcollide_pipeline"].fixed_type]
+
+
+def test_angles_are_blender_angles_shown_in_the_users_unit(fc):
+    """Rotation Precision, Max Angle and Scale Angle (and no other setting is an angle)
+    are Blender angles: radians, shown in the scene's rotation unit; their ranges are
+    the core's in degrees."""
+    rna = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
+    angles = fc.settings.angles.ANGLES
+    for name, (default, lo, hi) in angles.items():
+        p = rna.properties[name]
+        assert (p.type, p.subtype, p.unit) == ("FLOAT", "ANGLE", "ROTATION"), name
+        assert p.default == pytest.approx(math.radians(default))
+        assert (p.hard_min, p.hard_max) == pytest.approx((math.radians(lo), math.radians(hi)))
+    others = [f"{g.identifier}.{p.identifier}" for g in _groups() for p in g.properties
+              if p.type == "FLOAT" and p.identifier not in angles and (
+                  "angle" in p.name.lower() or "degree" in p.description.lower())]
+    assert others == [], others
+    # typed in degrees in the field, stored as typed (the core gets exactly that)
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    s = hair.furcollide
+    for deg in (0.25, 30.0, 77.7, 123.456, 359.9):
+        s.max_angle = math.radians(deg)  # what the field sets
+        assert s.to_core_kwargs()["max_angle"] == float(np.float32(deg)), deg
+    s.max_angle = math.radians(1e6)
+    assert s.to_core_kwargs()["max_angle"] == 360.0  # clamped as the field clamps
+
+
+def test_every_choice_is_an_upper_case_identifier(fc):
+    """One identifier style, Blender's own (``'BEND'``, ``'GROWTH_SURFACE'``, like
+    ``ob.type == 'MESH'``): the core keeps its lower-case names, the glue translates."""
+    lower = [f"{g.identifier}.{p.identifier}: {i.identifier}" for g in _groups()
+             for p in g.properties if p.type == "ENUM"
+             for i in p.enum_items if i.identifier != i.identifier.upper()]
+    assert lower == [], lower
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    s = hair.furcollide
+    s.mode, s.pinch_resolution = "STIFF", "GROWTH_SURFACE"
+    kw = s.to_core_kwargs()
+    assert (kw["mode"], kw["pinch_resolution"]) == ("stiff", "growth_surface")
+
+
+def test_an_earlier_versions_preset_gives_the_same_settings_as_this_versions(fc, tmp_path):
+    """The same look written by an earlier version (degrees, lower case, no version
+    line) and by this one: applied, the settings are the same, bit for bit."""
+    hair, box = fc.make_scene()
+    fc.setup(hair, [box])
+    s = hair.furcollide
+    activate(hair)
+    old = tmp_path / "old.py"
+    old.write_text(PRESET_HEAD + "settings.mode = 'stiff'\nsettings.rotation_precision = 0.3"
+                   "\nsettings.max_angle = 150.0\nsettings.scale_angle = 45.5\n"
+                   "settings.pinch_resolution = 'growth_surface'\n")
+    assert _load(str(old)) == {"FINISHED"}
+    names = fc.package.operators.settings.properties.SOLVER_PROPERTIES
+    first = {k: getattr(s, k) for k in names}
+    assert (s.mode, s.pinch_resolution) == ("STIFF", "GROWTH_SURFACE")
+    core = s.to_core_kwargs()
+    assert (core["rotation_precision"], core["max_angle"], core["scale_angle"]) == (
+        float(np.float32(0.3)), 150.0, 45.5)
+    assert bpy.ops.furcollide.preset_add(name="Same Look") == {"FINISHED"}
+    new = os.path.join(_preset_folder(), "Same_Look.py")
+    try:
+        set_core(s, mode="bend", max_angle=90.0, rotation_precision=1.0, scale_angle=10.0)
+        assert _load(new) == {"FINISHED"}
+        assert {k: getattr(s, k) for k in names} == first
+    finally:
+        os.remove(new)

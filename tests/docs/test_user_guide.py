@@ -151,7 +151,7 @@ def _states(fc):
     """Draw logs of the panels in the states a setup goes through: no setup; a setup
     with a collider selected in the list; a partial bake; Soft mode with Shrink, wind and
     jiggle; a render groom chosen and the output carrying a modifier (the children
-    box)."""
+    box), the scene rendering unlocked and dropping frames (its warnings)."""
     logs = []
     hair, box = fc.make_scene()
     activate(hair, box)
@@ -164,12 +164,14 @@ def _states(fc):
     s.bake_path = "//furcollide_cache/partial/"  # a partial bake: Free Partial
     logs += draw_all()
     s.bake_path = ""
-    s.mode, s.shrink = "soft", True
+    s.mode, s.shrink = "SOFT", True
     s.motion.use_wind = s.motion.use_jiggle = True
     s.motion.wind_stage = "OUTPUT"
     logs += draw_all()
     s.groom.groom = make_hair("Groom", nx=3, ny=3)
     out.modifiers.new("Noise", "NODES")
+    scene = bpy.context.scene  # (the scene's warnings and their buttons)
+    scene.render.use_lock_interface, scene.sync_mode = False, "AUDIO_SYNC"
     activate(hair)
     logs += draw_all()
     return logs
@@ -202,5 +204,5 @@ def test_the_states_draw_what_the_guide_documents(fc):
     options, the children box, the render groom box)."""
     drawn = drawn_names(_states(fc))
     for label in ("Own Offset", "Clear Children", "Clear in Viewport", "Guides per Curve",
-                  "Add FurCollide", "Fur Sampler", "Scale Minimum", "Lock Interface"):
+                  "Add FurCollide", "Fur Sampler", "Min Scale", "Lock Interface"):
         assert label in drawn, label
