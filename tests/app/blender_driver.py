@@ -30,7 +30,6 @@ Screenshots are taken from outside Blender with ImageMagick's ``import -window r
 from __future__ import annotations
 
 import glob
-import json
 import os
 import subprocess
 import sys
@@ -43,13 +42,11 @@ from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import override, select, start, ui  # noqa: E402
+from driver_session import Report, override, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 ZIP, WORK = ARGS[0], ARGS[1]
-OUT = os.path.join(WORK, "shots")
-RESULT = os.path.join(WORK, "result.json")
 N_CURVES, N_CV = int(os.environ.get("FC_APP_CURVES", 50000)), 8
 FRAMES = (1, 24)  # 1-12: the Ball (rigid) moves; 13-24: the Blob (deforming) bulges
 CHECK_FRAMES = (6, 12, 18, 24)
@@ -57,28 +54,8 @@ result: dict = {"steps": [], "errors": [], "blender": bpy.app.version_string,
                 "python": sys.version.split()[0], "numpy": np.__version__}
 
 
-def log(msg):
-    print(f"driver: {msg}", flush=True)
-
-
-def save_result():
-    with open(RESULT, "w") as fh:
-        json.dump(result, fh, indent=1, default=str)
-
-
-def step(name, **data):
-    result["steps"].append(name)
-    result.update(data)
-    save_result()
-    log(f"{name}: {data}" if data else name)
-
-
-def shot(name):
-    os.makedirs(OUT, exist_ok=True)
-    path = os.path.join(OUT, name + ".png")
-    proc = subprocess.run(["import", "-window", "root", path], capture_output=True, text=True)
-    result.setdefault("screenshots", []).append(path if proc.returncode == 0 else proc.stderr)
-    save_result()
+run_report = Report("driver", WORK, result)
+log, save_result, step, shot = run_report.log, run_report.save, run_report.step, run_report.shot
 
 
 # ----------------------------------------------------------------- scene

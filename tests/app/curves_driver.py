@@ -23,7 +23,6 @@ event loop, so the viewport really redraws):
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -34,37 +33,17 @@ from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import override, select, start, ui  # noqa: E402
+from driver_session import Report, override, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 ZIP, WORK = ARGS[0], ARGS[1]
-OUT = os.path.join(WORK, "shots")
-RESULT = os.path.join(WORK, "result.json")
 FRAMES = (1, 12)
 result: dict = {"steps": [], "errors": [], "checks": [], "blender": bpy.app.version_string}
 
 
-def log(msg):
-    print(f"curves_driver: {msg}", flush=True)
-
-
-def save_result():
-    with open(RESULT, "w") as fh:
-        json.dump(result, fh, indent=1, default=str)
-
-
-def step(name, **data):
-    result["steps"].append(name)
-    result.update(data)
-    save_result()
-    log(f"{name}: {data}" if data else name)
-
-
-def shot(name):
-    os.makedirs(OUT, exist_ok=True)
-    subprocess.run(["import", "-window", "root", os.path.join(OUT, name + ".png")],
-                   capture_output=True)
+run_report = Report("curves_driver", WORK, result)
+log, save_result, step, shot = run_report.log, run_report.save, run_report.step, run_report.shot
 
 
 # ----------------------------------------------------------------- scene

@@ -28,7 +28,6 @@ the setup's status was.
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -38,14 +37,13 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import demo_scene as ds  # noqa: E402
-from driver_session import select, start, ui  # noqa: E402
+from driver_session import Report, redraw, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 ZIP, WORK = ARGS[0], ARGS[1]
 SHOTS = os.path.join(WORK, "shots")  # full screenshots
 IMG = os.path.join(WORK, "img")  # the cropped pictures
-RESULT = os.path.join(WORK, "result.json")
 STILL = ds.STILL_FRAME
 #: The demo's settings (scripts/demo.py SETTINGS: the core's names and values).
 SETTINGS = {
@@ -72,26 +70,8 @@ TABS = 34
 result: dict = {"steps": [], "errors": [], "images": {}, "blender": bpy.app.version_string}
 
 
-def log(msg):
-    print(f"docs_driver: {msg}", flush=True)
-
-
-def save_result():
-    with open(RESULT, "w") as fh:
-        json.dump(result, fh, indent=1, default=str)
-
-
-def step(name, **data):
-    result["steps"].append(name)
-    result.update(data)
-    save_result()
-    log(f"{name}: {data}" if data else name)
-
-
-def redraw():
-    for win in bpy.context.window_manager.windows:
-        for area in win.screen.areas:
-            area.tag_redraw()
+run_report = Report("docs_driver", WORK, result)
+log, save_result, step = run_report.log, run_report.save, run_report.step
 
 
 # ------------------------------------------------------------------ pictures

@@ -7,9 +7,53 @@ whose each ``yield`` hands control back to Blender's event loop for that many se
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
 import traceback
 
 import bpy
+
+
+class Report:
+    """A driver's ``result.json`` in its work folder, its log lines (prefixed with the
+    driver's ``name``) and its screenshots (``shots/`` there, the whole X screen)."""
+
+    def __init__(self, name, work, result):
+        self.name, self.result = name, result
+        self.path = os.path.join(work, "result.json")
+        self.shots = os.path.join(work, "shots")
+
+    def log(self, msg):
+        print(f"{self.name}: {msg}", flush=True)
+
+    def save(self):
+        with open(self.path, "w") as fh:
+            json.dump(self.result, fh, indent=1, default=str)
+
+    def step(self, name, **data):
+        """Record step ``name`` (and ``data`` into the result), save, log."""
+        self.result["steps"].append(name)
+        self.result.update(data)
+        self.save()
+        self.log(f"{name}: {data}" if data else name)
+
+    def shot(self, name):
+        """Screenshot ``shots/<name>.png``; its path (or why it failed) is recorded."""
+        os.makedirs(self.shots, exist_ok=True)
+        path = os.path.join(self.shots, name + ".png")
+        proc = subprocess.run(["import", "-window", "root", path], capture_output=True,
+                              text=True)
+        self.result.setdefault("screenshots", []).append(
+            path if proc.returncode == 0 else proc.stderr)
+        self.save()
+
+
+def redraw():
+    """Ask every area of every window to draw again."""
+    for win in bpy.context.window_manager.windows:
+        for area in win.screen.areas:
+            area.tag_redraw()
 
 
 def ui():

@@ -33,7 +33,6 @@ event loop), as a new user would, from an empty file:
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -45,43 +44,18 @@ from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import start, ui  # noqa: E402
+from driver_session import Report, redraw, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 ZIP, WORK = ARGS[0], ARGS[1]
-OUT = os.path.join(WORK, "shots")
-RESULT = os.path.join(WORK, "result.json")
 FRAMES = (1, 12)
 RENDERED = 10  # the ball deep in the fur
 result: dict = {"steps": [], "errors": [], "blender": bpy.app.version_string}
 
 
-def log(msg):
-    print(f"quickstart_driver: {msg}", flush=True)
-
-
-def save_result():
-    with open(RESULT, "w") as fh:
-        json.dump(result, fh, indent=1, default=str)
-
-
-def step(name, **data):
-    result["steps"].append(name)
-    result.update(data)
-    save_result()
-    log(f"{name}: {data}" if data else name)
-
-
-def shot(name):
-    os.makedirs(OUT, exist_ok=True)
-    subprocess.run(["import", "-window", "root", os.path.join(OUT, name + ".png")],
-                   capture_output=True)
-
-
-def redraw():
-    for area in bpy.context.window_manager.windows[0].screen.areas:
-        area.tag_redraw()
+run_report = Report("quickstart_driver", WORK, result)
+log, save_result, step, shot = run_report.log, run_report.save, run_report.step, run_report.shot
 
 
 # ----------------------------------------------------------------- scene

@@ -24,7 +24,6 @@ redraws). Steps:
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -33,45 +32,19 @@ import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from driver_session import Report, override, redraw, select, start, ui  # noqa: E402
 from driver_session import instrument_ui as instrument  # noqa: E402
-from driver_session import override, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 ZIP, WORK = ARGS[0], ARGS[1]
-OUT = os.path.join(WORK, "shots")
-RESULT = os.path.join(WORK, "result.json")
 result: dict = {"steps": [], "errors": [], "draws": {}, "draw_errors": [],
                 "blender": bpy.app.version_string}
 _state = {"name": "start"}
 
 
-def log(msg):
-    print(f"ui_driver: {msg}", flush=True)
-
-
-def save_result():
-    with open(RESULT, "w") as fh:
-        json.dump(result, fh, indent=1, default=str)
-
-
-def step(name, **data):
-    result["steps"].append(name)
-    result.update(data)
-    save_result()
-    log(f"{name}: {data}" if data else name)
-
-
-def shot(name):
-    os.makedirs(OUT, exist_ok=True)
-    subprocess.run(["import", "-window", "root", os.path.join(OUT, name + ".png")],
-                   capture_output=True)
-
-
-def redraw():
-    for win in bpy.context.window_manager.windows:
-        for area in win.screen.areas:
-            area.tag_redraw()
+run_report = Report("ui_driver", WORK, result)
+log, save_result, step, shot = run_report.log, run_report.save, run_report.step, run_report.shot
 
 
 # ------------------------------------------------------------- counting draws

@@ -44,13 +44,12 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from driver_session import Report, override, select, start, ui  # noqa: E402
 from driver_session import instrument_ui as instrument  # noqa: E402
-from driver_session import override, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 ZIP, WORK = ARGS[0], ARGS[1]
-RESULT = os.path.join(WORK, "result.json")
 BASE = os.path.join(WORK, "base.blend")
 FRAMES = range(1, 9)
 result: dict = {"steps": [], "errors": [], "snaps": [], "draw_errors": [],
@@ -58,13 +57,8 @@ result: dict = {"steps": [], "errors": [], "snaps": [], "draw_errors": [],
 M: dict = {"scenario": "setup"}
 
 
-def log(msg):
-    print(f"undo_driver: {msg}", flush=True)
-
-
-def save_result():
-    with open(RESULT, "w") as fh:
-        json.dump(result, fh, indent=1, default=str)
+run_report = Report("undo_driver", WORK, result)
+log, save_result = run_report.log, run_report.save
 
 
 def show_sidebar():
