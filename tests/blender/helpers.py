@@ -9,6 +9,7 @@ what a panel draws. Test files import from here, never from each other.
 from __future__ import annotations
 
 import inspect
+import itertools
 import os
 import sys
 import types
@@ -387,6 +388,9 @@ def _rna_property(data, name, where):
     return prop
 
 
+_LAYOUT_SERIAL = itertools.count()
+
+
 class RnaLayout:
     """A recording stand-in for ``bpy.types.UILayout`` (panels cannot be drawn headless)
     that checks every call against Blender's own RNA, as the real layout would:
@@ -412,6 +416,8 @@ class RnaLayout:
         object.__setattr__(self, "_attrs", {"enabled": True, "active": True, "alert": False})
         object.__setattr__(self, "_item", getattr(parent, "_item", None))
         object.__setattr__(self, "_kind", kind)
+        # (a serial number, not id(): a freed layout's id is given to the next one)
+        object.__setattr__(self, "_serial", next(_LAYOUT_SERIAL))
 
     def _inherited(self, key):
         """``use_property_split`` / ``_decorate`` as the layout has it (set here, or on
@@ -468,7 +474,7 @@ class RnaLayout:
                  "split": self._inherited("use_property_split"),
                  "decorate": self._inherited("use_property_decorate"),
                  "boxes": self._count("box"), "in_split": self._count("split") > 0,
-                 "layout": id(self), "layout_kind": self._kind}
+                 "layout": self._serial, "layout_kind": self._kind}
         handler = getattr(self, "_do_" + name, None)
         result = handler(given, entry) if handler else None
         self._log.append(entry)

@@ -97,7 +97,7 @@ def test_the_bakes_stay_valid_and_show_what_was_baked(fc, old_file):
             np.testing.assert_array_equal(positions(ob.furcollide.output),
                                           points[f"{name}_{f}"])
             why = fc.store.baked.settings_change(ob, scene)
-            level, msg = fc.store.registry.status_for(ob)
+            level, msg = fc.store.report.status_for(ob)
             if name == "Fur" or f in (1, 5, 8):
                 assert why == "" and not ob.furcollide.is_outdated, (f, name, why)
                 assert level == "INFO", (f, name, msg)
