@@ -10,11 +10,11 @@ quick local run; it is refused when ``CI`` is set, so CI always runs every lane.
 lane   environment                                what runs
 =====  =========================================  ==========================================
 5.0    .venv: bpy 5.0.1, Python 3.11, numpy 1.26  ``pytest tests`` (the main lane)
-4.2    bpy 4.2.23 LTS, Python 3.11, numpy 1.26    ``pytest tests`` but the bpy-free suites (*)
-                                                  and the ``slow`` tests (**)
+4.2    bpy 4.2.23 LTS, Python 3.11, numpy 1.26    ``pytest tests`` but the bpy-free suites (*),
+                                                  the ``slow`` tests (**) and ``MAIN_LANE_ONLY``
 4.5    bpy 4.5.15 LTS, Python 3.11, numpy 1.26    the same as 4.2
 5.2    bpy 5.2.3 LTS, Python 3.13 (built from     ``pytest tests`` but the ``slow`` tests
-       Debian's source), numpy 2.5
+       Debian's source), numpy 2.5                and ``MAIN_LANE_ONLY``
 app    Debian's Blender 4.3.2 in a trixie chroot  ``pytest tests/app`` (``FURCOLLIDE_APP=1``)
        (Python 3.13, numpy 2.2), UI under Xvfb
 =====  =========================================  ==========================================
@@ -29,8 +29,9 @@ lane runs them on Python 3.13 and numpy 2.
 ``test_bl_playback.py``, ``test_bl_save_mid_playback.py``, ``test_bl_bake_resume.py``,
 ``test_bl_memory.py``, ``test_bl_soak.py`` and ``test_bl_baked_pipeline.py``; the off-centre
 motion-blur shutters of ``test_bl_render.py``) play the same frames on every Blender: they run
-in the main lane only, which keeps ``make test`` within its 20 minutes;
-every other Blender-side test runs in every ``bpy`` lane.
+in the main lane only, as do the files of ``MAIN_LANE_ONLY`` (the pipeline stages' frame
+logic played at length, and the demo script), which keeps ``make test`` within its 20
+minutes on 2 cores; every other Blender-side test runs in every ``bpy`` lane.
 
 The environments are prepared one at a time, then the lanes' pytest runs go side by side,
 one per core (``FURCOLLIDE_TEST_JOBS`` overrides it); a lane that runs the bpy-free suites
@@ -62,6 +63,21 @@ BPY_FREE = ("tests/core", "tests/cache", "tests/pipeline")
 SAME_CORE_AS_MAIN = ("4.2", "4.5")
 #: The lane that runs the tests marked ``slow`` (the others deselect them).
 SLOW_LANE = "5.0"
+#: Blender-side files the other ``bpy`` lanes leave to the main lane: the pipeline stages'
+#: frame logic played at length (wind and jiggle, the render groom and its status, baked
+#: pipelines) and the demo script. The Blender calls they make (curves outputs written,
+#: attributes, render handlers, bakes) are those of the files every lane runs
+#: (test_bl_output, test_bl_curve_types, test_bl_render, test_bl_bake_resume,
+#: test_bl_pipeline_operators, test_bl_children...); what they add is numpy logic, the
+#: same on every Blender.
+MAIN_LANE_ONLY = (
+    "tests/blender/test_bl_pipeline_playback.py",
+    "tests/blender/test_bl_render_groom.py",
+    "tests/blender/test_bl_render_groom_status.py",
+    "tests/blender/test_bl_baked_pipeline.py",
+    "tests/blender/test_bl_motion.py",
+    "tests/package/test_demo.py",
+)
 
 
 #: Serialises what the lanes running at once print.
@@ -118,6 +134,8 @@ def jobs_for(lane: str) -> list[tuple[str, list[str]]]:
         return [("app", ["tests/app"])]
     marks = [] if lane == SLOW_LANE else ["-m", "not slow"]
     blender_side = ["tests", *[f"--ignore={d}" for d in BPY_FREE], *marks]
+    if lane != SLOW_LANE:
+        blender_side += [f"--ignore={f}" for f in MAIN_LANE_ONLY]
     if lane in SAME_CORE_AS_MAIN:
         return [(lane, blender_side)]
     return [(lane, blender_side), (f"{lane} core", [*BPY_FREE, *marks])]
