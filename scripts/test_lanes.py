@@ -35,8 +35,9 @@ minutes on 2 cores; every other Blender-side test runs in every ``bpy`` lane.
 
 The environments are prepared one at a time, then the lanes' pytest runs go side by side,
 one per core (``FURCOLLIDE_TEST_JOBS`` overrides it); a lane that runs the bpy-free suites
-runs them as a second job (``5.0 core``, ``5.2 core``). Each run's output is printed when it
-ends (whole when it failed).
+runs them as a second job (``5.0 core``, ``5.2 core``), the main lane its ``slow`` tests as a
+third (``5.0 slow``); the longest start first. Each run's output is printed when it ends
+(whole when it failed).
 
 Each lane is judged by pytest's own JUnit report (counts of passed, failed, errors):
 a lane that cannot be prepared, collects no test, or reports a failure fails the run,
@@ -129,16 +130,25 @@ def junit_counts(path: Path) -> dict | None:
 
 def jobs_for(lane: str) -> list[tuple[str, list[str]]]:
     """The pytest runs of ``lane``: (name, targets). A lane that runs both the bpy-free
-    suites and the Blender side runs them as two jobs, so two cores share the work."""
+    suites and the Blender side runs them as two jobs, and the main lane its ``slow``
+    tests as a third, so the cores share the work."""
     if lane == "app":
         return [("app", ["tests/app"])]
-    marks = [] if lane == SLOW_LANE else ["-m", "not slow"]
-    blender_side = ["tests", *[f"--ignore={d}" for d in BPY_FREE], *marks]
-    if lane != SLOW_LANE:
-        blender_side += [f"--ignore={f}" for f in MAIN_LANE_ONLY]
+    blender_side = ["tests", *[f"--ignore={d}" for d in BPY_FREE]]
+    if lane == SLOW_LANE:
+        jobs = [(lane, [*blender_side, "-m", "not slow"]),
+                (f"{lane} slow", [*blender_side, "-m", "slow"])]
+    else:
+        jobs = [(lane, [*blender_side, "-m", "not slow",
+                        *[f"--ignore={f}" for f in MAIN_LANE_ONLY]])]
     if lane in SAME_CORE_AS_MAIN:
-        return [(lane, blender_side)]
-    return [(lane, blender_side), (f"{lane} core", [*BPY_FREE, *marks])]
+        return jobs
+    marks = [] if lane == SLOW_LANE else ["-m", "not slow"]
+    return [*jobs, (f"{lane} core", [*BPY_FREE, *marks])]
+
+
+#: The longest runs start first (measured on 2 cores), so no core idles at the end.
+LONGEST_FIRST = ("5.0 slow", "5.0", "5.2 core", "5.0 core", "app", "5.2", "4.5", "4.2")
 
 
 def run_job(name: str, lane: str, py: str, target: list[str], extra: list[str],
@@ -217,6 +227,7 @@ def main(argv: list[str]) -> int:
                          "note": f"cannot be prepared: {why}"})
             continue
         work += [(name, lane, py, target) for name, target in jobs_for(lane)]
+    work.sort(key=lambda w: LONGEST_FIRST.index(w[0]) if w[0] in LONGEST_FIRST else 0)
     jobs = test_jobs()
     log(f"{len(work)} pytest runs, {jobs} at a time (FURCOLLIDE_TEST_JOBS)")
     with tempfile.TemporaryDirectory(prefix="furcollide_lanes_") as tmp, \
