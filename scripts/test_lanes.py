@@ -151,6 +151,17 @@ def jobs_for(lane: str) -> list[tuple[str, list[str]]]:
 LONGEST_FIRST = ("5.0 slow", "5.0", "5.2 core", "5.0 core", "app", "5.2", "4.5", "4.2")
 
 
+def _slowest(lines: list[str]) -> list[str]:
+    """The ``--durations`` block of a pytest log (its five slowest steps), so each lane's
+    largest costs are in the log of every run."""
+    start = next((i for i, ln in enumerate(lines) if "slowest" in ln and "durations" in ln),
+                 None)
+    if start is None:
+        return []
+    block = lines[start:start + 6]
+    return [ln for ln in block if ln.strip()]
+
+
 def run_job(name: str, lane: str, py: str, target: list[str], extra: list[str],
             tmp: Path) -> dict:
     """Run one pytest job of ``lane`` with interpreter ``py``; its output goes to a log
@@ -167,7 +178,7 @@ def run_job(name: str, lane: str, py: str, target: list[str], extra: list[str],
     base = tmp / f"base_{slug}"
     base.mkdir()
     cmd = [py, "-m", "pytest", "-q", *target, "-p", "no:cacheprovider",
-           f"--junitxml={xml}", f"--basetemp={base}", *extra]
+           f"--junitxml={xml}", f"--basetemp={base}", "--durations=5", *extra]
     log(f"lane {name}: started ({' '.join(cmd[:1])} -m pytest -q {' '.join(target)})")
     with open(out, "w") as fh:
         proc = subprocess.Popen(cmd, cwd=str(ROOT), env=env, stdout=fh, stderr=subprocess.STDOUT)
@@ -199,7 +210,7 @@ def run_job(name: str, lane: str, py: str, target: list[str], extra: list[str],
     with PRINT:
         print(f"\n----- lane {name}: {'ok' if row['ok'] else 'FAILED'} "
               f"({row['wall_s']:.0f} s) -----", flush=True)
-        print("\n".join(text if not row["ok"] else text[-3:]), flush=True)
+        print("\n".join(text if not row["ok"] else _slowest(text) + text[-1:]), flush=True)
     return row
 
 
