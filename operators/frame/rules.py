@@ -342,7 +342,7 @@ def _after_the_end(setup, read, note):
     rt, end = setup.rt, setup.s.frame_end
     if rt.cache.hold is not None and rt.cache.hold[0] == end:
         level, msg = note
-        return Decision(Outcome.HOLD, show="hold", frame=end,
+        return Decision(Outcome.HOLD, show="hold", frame=end, outdated=False,
                         status=(level, msg or f"After the end frame: holding frame {end}"))
     return hold(setup, reason=f"after the end frame, and frame {end} is not")
 
