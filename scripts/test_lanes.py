@@ -27,7 +27,7 @@ lane runs them on Python 3.13 and numpy 2.
 (**) Tests marked ``slow`` (the demo's scene at real and demo size:
 ``tests/blender/test_bl_demo_scale.py`` and ``test_bl_warm_start.py``, and single tests of
 ``test_bl_playback.py``, ``test_bl_save_mid_playback.py``, ``test_bl_bake_resume.py``,
-``test_bl_memory.py``, ``test_bl_soak.py`` and ``test_bl_baked_pipeline.py``; the off-centre
+``test_bl_memory.py`` and ``test_bl_soak.py``; the off-centre
 motion-blur shutters of ``test_bl_render.py``) play the same frames on every Blender: they run
 in the main lane only, as do the files of ``MAIN_LANE_ONLY`` (the pipeline stages' frame
 logic played at length, and the demo script), which keeps ``make test`` within its 20

@@ -11,19 +11,15 @@ from helpers import (
     COLLIDER_CHANGES,
     KEEPS_COLLIDING,
     PIPELINE_FRAMES,
-    REAL_FRAMES,
     EnabledLayout,
     activate,
     draw_enabled,
     groom_scene,
     move_skin,
-    no_traceback,
     pipeline_frame,
     pipeline_scene,
-    pipeline_state,
     play,
     play_pipeline,
-    real_size_pipeline,
     reopen,
     same_pipeline_frame,
     save_in,
@@ -385,34 +381,3 @@ def test_a_collider_switched_off_on_a_baked_pipeline(fc, tmp_path, kind):
         scene.frame_set(f)
         assert not s.is_outdated and s.status_message == "", (kind, f, s.status_message)
         same_pipeline_frame(pipeline_frame(guides), baked[f], f"{kind} on again, frame {f}")
-
-
-# ------------------------------------------------- the demo's scene at real size
-@pytest.mark.slow
-def test_pipeline_baked_at_real_size(fc, tmp_path, capsys):
-    """The real-size pipeline played (Threads 2), saved at frame 10 and reopened, then
-    baked with Threads 1 (the render groom baked with it): every baked frame, guides and
-    render groom, equals the first session's bit for bit; no traceback anywhere."""
-    demo, guides, out, gout = real_size_pipeline()
-    scene = demo.scene
-    first = {}
-    for f in REAL_FRAMES:
-        scene.frame_set(f)
-        first[f] = pipeline_state(guides)
-    scene.frame_set(10)
-    name = guides.name
-    path = save_in(tmp_path)
-    reopen(path)
-    scene = bpy.context.scene
-    guides = bpy.data.objects[name]
-    same_pipeline_frame(pipeline_state(guides), first[10], "reopened at frame 10")
-    guides.furcollide.threads = 1
-    scene.frame_set(1)
-    activate(guides)
-    assert bpy.ops.furcollide.bake() == {"FINISHED"}
-    assert guides.furcollide.groom.is_baked_with
-    for f in list(REAL_FRAMES) + [7, 22, 1]:
-        scene.frame_set(f)
-        assert not guides.furcollide.is_outdated, guides.furcollide.status_message
-        same_pipeline_frame(pipeline_state(guides), first[f], f"baked frame {f}")
-    no_traceback(capsys)
