@@ -49,7 +49,10 @@ def run_session(work: Path, driver: str, timeout: int, env_vars: str = "") -> di
         "'import bpy; bpy.ops.wm.save_as_mainfile(filepath=\"/work/start.blend\")' >/dev/null"
         f" && env TMPDIR=/work/tmp BLENDER_USER_RESOURCES=/work/user {env_vars}"
         " xvfb-run -a -s '-screen 0 1600x900x24 +extension GLX'"
-        f" blender /work/start.blend -p 0 0 1600 900 --python /work/{driver}"
+        # (--python-exit-code: a driver that fails before its timers start, e.g. on an
+        # import, ends the session at once instead of leaving Blender's UI up)
+        f" blender /work/start.blend -p 0 0 1600 900 --python-exit-code 1"
+        f" --python /work/{driver}"
         f" -- /work/{zip_path.name} /work"
     )
     env = dict(os.environ, FURCOLLIDE_CHROOT_BIND=str(work))

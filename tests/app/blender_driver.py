@@ -72,6 +72,32 @@ def uv_sphere(name, radius, segments, rings, location):
     return ob
 
 
+def dense_sphere(name, radius, segments, rings, location):
+    """A UV sphere of triangles (two poles, ``rings - 1`` rings of ``segments``) built
+    with numpy: bmesh's ``create_uvsphere`` takes about 17 s at 512 x 128."""
+    phi = np.pi * np.arange(1, rings) / rings
+    th = 2 * np.pi * np.arange(segments) / segments
+    ring = np.stack([np.outer(np.sin(phi), np.cos(th)), np.outer(np.sin(phi), np.sin(th)),
+                     np.repeat(np.cos(phi)[:, None], segments, 1)], -1).reshape(-1, 3)
+    V = radius * np.concatenate([[[0.0, 0.0, 1.0]], ring, [[0.0, 0.0, -1.0]]])
+    south, j = len(V) - 1, np.arange(segments)
+    a = 1 + np.arange(rings - 2)[:, None] * segments + j  # ring i, then ring i + 1 below
+    b = 1 + np.arange(rings - 2)[:, None] * segments + (j + 1) % segments
+    F = np.concatenate([
+        np.stack([np.zeros(segments, int), 1 + j, 1 + (j + 1) % segments], 1),
+        np.stack([a, a + segments, b + segments], -1).reshape(-1, 3),
+        np.stack([a, b + segments, b], -1).reshape(-1, 3),
+        np.stack([np.full(segments, south), south - segments + (j + 1) % segments,
+                  south - segments + j], 1)])
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(V.tolist(), [], F.tolist())
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    ob.location = location
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
 def build_scene():
     scene = bpy.context.scene
     for ob in list(bpy.data.objects):
@@ -82,12 +108,12 @@ def build_scene():
     if not skin.data.uv_layers:
         skin.data.uv_layers.new(name="UVMap")
     # Ball: rigid, ~130k triangles, passes through the fur layer (1.0 < r < 1.25) on +x
-    ball = uv_sphere("Ball", 0.5, 512, 128, (2.6, 0, 0))
+    ball = dense_sphere("Ball", 0.5, 512, 128, (2.6, 0, 0))
     ball.keyframe_insert("location", frame=1)
     ball.location = (1.62, 0, 0)
     ball.keyframe_insert("location", frame=12)
     # Blob: deforming (shape key), ~130k triangles, bulges into the fur on -x
-    blob = uv_sphere("Blob", 0.5, 512, 128, (-1.62, 0, 0))
+    blob = dense_sphere("Blob", 0.5, 512, 128, (-1.62, 0, 0))
     blob.shape_key_add(name="Basis")
     key = blob.shape_key_add(name="Bulge")
     co = np.empty(len(blob.data.vertices) * 3, np.float32)
