@@ -227,7 +227,8 @@ def first_hit_segment(points, offsets, V_world, F, eps=SURE):
 
 
 def ray_crossings(O, D, V, F):
-    """(n,) int: number of triangles crossed by rays O + t D, t > 0."""
+    """(n,) int: number of triangles crossed by rays O + t D, t > 0 (every ray against
+    every triangle, Moller-Trumbore, in chunks of ray x triangle pairs)."""
     O = np.asarray(O, dtype=np.float64).reshape(-1, 3)
     D = np.asarray(D, dtype=np.float64).reshape(-1, 3)
     V = np.asarray(V, dtype=np.float64)
@@ -235,18 +236,20 @@ def ray_crossings(O, D, V, F):
     v0, v1, v2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     e1, e2 = v1 - v0, v2 - v0
     counts = np.zeros(len(O), dtype=np.int64)
-    for i in range(len(O)):
-        d = np.broadcast_to(D[i], e1.shape)
+    step = max(1, _CHUNK // max(len(F), 1))
+    for s in range(0, len(O), step):
+        o, d = O[s:s + step, None, :], D[s:s + step, None, :]  # (k, 1, 3) against (m, 3)
         p = np.cross(d, e2)
-        det = np.einsum("ij,ij->i", e1, p)
+        det = np.einsum("kmi,kmi->km", np.broadcast_to(e1, p.shape), p)
         ok = np.abs(det) > 1e-15
         inv = 1.0 / np.where(ok, det, 1.0)
-        tv = O[i] - v0
-        u = np.einsum("ij,ij->i", tv, p) * inv
+        tv = o - v0
+        u = np.einsum("kmi,kmi->km", tv, p) * inv
         q = np.cross(tv, e1)
-        v = np.einsum("ij,ij->i", d, q) * inv
-        t = np.einsum("ij,ij->i", e2, q) * inv
-        counts[i] = int(np.count_nonzero(ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)))
+        v = np.einsum("kmi,kmi->km", np.broadcast_to(d, q.shape), q) * inv
+        t = np.einsum("kmi,kmi->km", np.broadcast_to(e2, q.shape), q) * inv
+        counts[s:s + step] = np.count_nonzero(
+            ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0), axis=1)
     return counts
 
 
