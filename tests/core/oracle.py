@@ -205,8 +205,12 @@ def curves_crossing(points, offsets, meshes, select=None):
         V = np.asarray(V, np.float64)
         margin = float32_margin(P, V)
         pad = 2 * margin + 1e-9 * float(np.abs(V).max())
+        # (every leaf's box lies in the mesh's: the segments outside it meet no leaf)
+        lo, hi = V.min(0), V.max(0)
+        cand = np.flatnonzero(np.all(smin <= hi + pad, 1) & np.all(smax >= lo - pad, 1))
+        cmin, cmax = smin[cand], smax[cand]
         for tri, lo, hi in _leaves(V, np.asarray(F)):
-            near = np.flatnonzero(np.all(smin <= hi + pad, 1) & np.all(smax >= lo - pad, 1))
+            near = cand[np.all(cmin <= hi + pad, 1) & np.all(cmax >= lo - pad, 1)]
             if len(near):
                 hit = segment_hits(A[near], B[near], V, F[tri], abs_eps=margin)
                 bad[curve[near[hit]]] = True
