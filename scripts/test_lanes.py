@@ -22,7 +22,8 @@ app    Debian's Blender 4.3.2 in a trixie chroot  ``pytest tests/app`` (``FURCOL
 (*) ``tests/core``, ``tests/cache`` and ``tests/pipeline`` import no ``bpy``: with the main
 lane's Python, numpy and embreex (the pins of ``requirements/``) they would run there
 exactly as in the main lane, so these two lanes leave them out (``BPY_FREE``); the 5.2
-lane runs them on Python 3.13 and numpy 2.
+lane runs them on Python 3.13 and numpy 2, every test, with 40 % of the property tests'
+examples (``tests/hypothesis_profiles.py``, ``brief``).
 
 (**) Tests marked ``slow`` (the demo's scene at real and demo size:
 ``tests/blender/test_bl_demo_scale.py`` and ``test_bl_warm_start.py``, and single tests of
@@ -143,7 +144,9 @@ def jobs_for(lane: str) -> list[tuple[str, list[str]]]:
                         *[f"--ignore={f}" for f in MAIN_LANE_ONLY]])]
     if lane in SAME_CORE_AS_MAIN:
         return jobs
-    marks = [] if lane == SLOW_LANE else ["-m", "not slow"]
+    # (the main lane's run of the property tests is the full search; the other numpy's
+    # runs every test with 40 % of the examples: hypothesis_profiles.py "brief")
+    marks = [] if lane == SLOW_LANE else ["-m", "not slow", "--hypothesis-profile=brief"]
     return [*jobs, (f"{lane} core", [*BPY_FREE, *marks])]
 
 
