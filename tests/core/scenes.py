@@ -13,34 +13,27 @@ import numpy as np
 def uv_sphere(center=(0.0, 0.0, 0.0), radius=1.0, segments=32, rings=16):
     """Closed UV sphere, outward normals. Vertices lie on the sphere."""
     c = np.asarray(center, dtype=np.float64)
-    verts = [c + [0, 0, radius]]
-    for i in range(1, rings):
-        phi = np.pi * i / rings
-        for j in range(segments):
-            th = 2 * np.pi * j / segments
-            verts.append(
-                c + radius * np.array([np.sin(phi) * np.cos(th), np.sin(phi) * np.sin(th),
-                                       np.cos(phi)])
-            )
-    verts.append(c + [0, 0, -radius])
-    V = np.array(verts)
+    # (each sine and cosine taken as a scalar, as the rings and segments are drawn)
+    sp = np.array([np.sin(np.pi * i / rings) for i in range(1, rings)])
+    cp = np.array([np.cos(np.pi * i / rings) for i in range(1, rings)])
+    ct = np.array([np.cos(2 * np.pi * j / segments) for j in range(segments)])
+    st = np.array([np.sin(2 * np.pi * j / segments) for j in range(segments)])
+    ring = np.stack([sp[:, None] * ct, sp[:, None] * st,
+                     np.broadcast_to(cp[:, None], (rings - 1, segments))], -1)
+    V = np.concatenate([[c + [0, 0, radius]], (c + radius * ring).reshape(-1, 3),
+                        [c + [0, 0, -radius]]])
     south = len(V) - 1
-
-    def ring(i, j):
-        return 1 + (i - 1) * segments + (j % segments)
-
-    F = []
-    for j in range(segments):
-        F.append((0, ring(1, j), ring(1, j + 1)))
-    for i in range(1, rings - 1):
-        for j in range(segments):
-            a, b = ring(i, j), ring(i, j + 1)
-            c2, d = ring(i + 1, j), ring(i + 1, j + 1)
-            F.append((a, c2, d))
-            F.append((a, d, b))
-    for j in range(segments):
-        F.append((south, ring(rings - 1, j + 1), ring(rings - 1, j)))
-    return V, np.array(F, dtype=np.int64)
+    j = np.arange(segments)
+    a = 1 + np.arange(rings - 2)[:, None] * segments + j  # ring i (from 1), segment j
+    b = 1 + np.arange(rings - 2)[:, None] * segments + (j + 1) % segments
+    band = np.stack([np.stack([a, a + segments, b + segments], -1),
+                     np.stack([a, b + segments, b], -1)], 2).reshape(-1, 3)
+    last = 1 + (rings - 2) * segments
+    F = np.concatenate([np.stack([np.zeros(segments, int), 1 + j, 1 + (j + 1) % segments], 1),
+                        band,
+                        np.stack([np.full(segments, south), last + (j + 1) % segments,
+                                  last + j], 1)])
+    return V, F.astype(np.int64)
 
 
 def icosphere(center=(0.0, 0.0, 0.0), radius=1.0, subdivisions=2):
