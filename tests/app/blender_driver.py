@@ -42,7 +42,7 @@ from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import Report, override, select, start, ui  # noqa: E402
+from driver_session import Report, install, override, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -199,16 +199,11 @@ def run():
     subprocess.run(["xdotool", "mousemove", "800", "450", "key", "Escape"], capture_output=True)
     yield 0.5
     # 1. install the packaged zip, check it is really enabled
-    ret = bpy.ops.extensions.package_install_files(
-        filepath=ZIP, repo="user_default", enable_on_install=True)
-    enabled = ADDON in bpy.context.preferences.addons
+    install(run_report, ZIP, ADDON)
     import embreex  # the bundled cp313 wheel, unpacked into the user's .local
 
-    step("install", install_return=sorted(ret), enabled=enabled,
-         module_file=getattr(sys.modules.get(ADDON), "__file__", None),
+    step("bundled", module_file=getattr(sys.modules.get(ADDON), "__file__", None),
          embreex_file=embreex.__file__)
-    if not enabled:
-        raise RuntimeError("the add-on is not enabled after package_install_files")
     pkg = sys.modules[ADDON]
     registry = sys.modules[ADDON + ".operators.store.registry"]
     report = sys.modules[ADDON + ".operators.store.report"]

@@ -37,7 +37,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import demo_scene as ds  # noqa: E402
-from driver_session import Report, redraw, select, start, ui  # noqa: E402
+from driver_session import Report, install, redraw, select, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -181,12 +181,7 @@ def run():
     prefs = bpy.context.preferences
     if hasattr(prefs.system, "use_region_overlap"):
         prefs.system.use_region_overlap = False  # a solid sidebar to crop
-    ret = bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default",
-                                                   enable_on_install=True)
-    enabled = ADDON in prefs.addons
-    step("install", install_return=sorted(ret), enabled=enabled)
-    if not enabled:
-        raise RuntimeError("the add-on is not enabled after package_install_files")
+    install(run_report, ZIP, ADDON)
     win = bpy.context.window_manager.windows[0]
     layout_ws = win.workspace
     with bpy.context.temp_override(window=win):

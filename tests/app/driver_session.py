@@ -49,6 +49,18 @@ class Report:
         self.save()
 
 
+def install(report, zip_path, addon):
+    """Install the packaged zip as Install from Disk does, recorded as the step
+    ``install`` (what the operator returned, whether the add-on is enabled); raise
+    unless it really is enabled (the operator says FINISHED even when it is not)."""
+    ret = bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default",
+                                                   enable_on_install=True)
+    enabled = addon in bpy.context.preferences.addons
+    report.step("install", install_return=sorted(ret), enabled=enabled)
+    if not enabled:
+        raise RuntimeError("the add-on is not enabled after package_install_files")
+
+
 def redraw():
     """Ask every area of every window to draw again."""
     for win in bpy.context.window_manager.windows:

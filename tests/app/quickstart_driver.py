@@ -44,7 +44,7 @@ from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import Report, redraw, start, ui  # noqa: E402
+from driver_session import Report, install, redraw, start, ui  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -231,12 +231,7 @@ def run():
     yield 1.0
     subprocess.run(["xdotool", "mousemove", "800", "450", "key", "Escape"], capture_output=True)
     yield 0.5
-    ret = bpy.ops.extensions.package_install_files(
-        filepath=ZIP, repo="user_default", enable_on_install=True)
-    enabled = ADDON in bpy.context.preferences.addons
-    step("install", install_return=sorted(ret), enabled=enabled)
-    if not enabled:
-        raise RuntimeError("the add-on is not enabled after package_install_files")
+    install(run_report, ZIP, ADDON)
 
     # an empty file: nothing of the start file's objects
     scene = bpy.context.scene

@@ -32,7 +32,7 @@ import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import Report, override, redraw, select, start, ui  # noqa: E402
+from driver_session import Report, install, override, redraw, select, start, ui  # noqa: E402
 from driver_session import instrument_ui as instrument  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
@@ -105,12 +105,7 @@ def run():
     yield 1.0
     subprocess.run(["xdotool", "mousemove", "800", "450", "key", "Escape"], capture_output=True)
     yield 0.5
-    ret = bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default",
-                                                   enable_on_install=True)
-    enabled = ADDON in bpy.context.preferences.addons
-    step("install", install_return=sorted(ret), enabled=enabled)
-    if not enabled:
-        raise RuntimeError("the add-on is not enabled after package_install_files")
+    install(run_report, ZIP, ADDON)
     report = sys.modules[ADDON + ".operators.store.report"]
     step("instrumented", ui_classes=instrument_ui())
 

@@ -44,7 +44,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import Report, override, select, start, ui  # noqa: E402
+from driver_session import Report, install, override, select, start, ui  # noqa: E402
 from driver_session import instrument_ui as instrument  # noqa: E402
 
 ADDON = "bl_ext.user_default.furcollide"
@@ -569,11 +569,7 @@ def run():
     yield 1.0
     key("Escape")  # the splash screen
     yield 0.5
-    ret = bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default",
-                                                   enable_on_install=True)
-    if ADDON not in bpy.context.preferences.addons:
-        raise RuntimeError("the add-on is not enabled after package_install_files")
-    result["install_return"] = sorted(ret)
+    install(run_report, ZIP, ADDON)
     for name, module in (("registry", "store.registry"), ("report", "store.report"),
                          ("ops_bake", "ops.bake"),
                          ("bake", "store.bake"), ("fur_attach", "frame.attach"),
