@@ -55,6 +55,7 @@ FRAMES = range(1, 9)
 result: dict = {"steps": [], "errors": [], "snaps": [], "draw_errors": [],
                 "blender": bpy.app.version_string}
 M: dict = {"scenario": "setup"}
+T0 = time.perf_counter()
 
 
 run_report = Report("undo_driver", WORK, result)
@@ -215,7 +216,8 @@ def snap(label, **extra):
     registry, report = M["registry"], M["report"]
     scene = bpy.context.scene
     f = scene.frame_current
-    d = {"scenario": M["scenario"], "label": label, "frame": f}
+    d = {"scenario": M["scenario"], "label": label, "frame": f,
+         "t": round(time.perf_counter() - T0, 2)}  # (seconds into the session)
     fur = ob("Fur")
     s = fur.furcollide
     rt = registry.get_runtime(fur, create=False)

@@ -740,7 +740,7 @@ def test_a_relative_cache_directory_set_from_a_script_does_not_warn(fc):
 
 # ------------------------------------------------- the demo's scene at real size
 @pytest.mark.slow
-@pytest.mark.parametrize("mode", ["stiff", "bend", "soft"])
+@pytest.mark.parametrize("mode", ["bend", "soft"])
 def test_a_bake_resumed_after_a_crash_gives_the_played_frames(fc, tmp_path, monkeypatch,
                                                               mode):
     """A bake that crashed at frame 21 (the pinch, where the warm start's memory
