@@ -1,4 +1,4 @@
-"""Soak test at paper scale: 1,000 frame changes of playback with scrubbing and jumps.
+"""Soak test at paper scale: 600 frame changes of playback with scrubbing and jumps.
 
 50,000 curves x 8 CVs (the paper's groom size) and a small ball that sweeps back and
 forth through the fur every few frames, over a 60-frame shot, with the real handler
@@ -13,12 +13,12 @@ Bake operator, and:
 * the playback cache never passes its limit, and the process's memory stays flat
   (measured after the first pass over the shot).
 
-Why a 60-frame shot and not 1,000 frames: a bake at paper scale writes 5-6 MB per
-frame (the positions alone are 4.8 MB), so a 1,000-frame bake would write 5-6 GB and
-take minutes on 2 cores. 1,000 frame changes over 60 frames visit every frame about
-16 times, in every order the frame rules know; the ball is small (320 triangles) and
+Why a 60-frame shot and not 600 frames: a bake at paper scale writes 5-6 MB per
+frame (the positions alone are 4.8 MB), so a 600-frame bake would write over 3 GB and
+take minutes on 2 cores. 600 frame changes over 60 frames visit every frame about 10
+times, in every order the frame rules know; the ball is small (320 triangles) and
 fast, so a frame is cheap but thousands of curves collide and recover every frame.
-The test takes about two minutes on 2 cores (a ``slow`` test: the main lane only).
+The test takes about 30 s (a ``slow`` test: the main lane only).
 """
 
 import hashlib
@@ -32,7 +32,7 @@ from helpers import activate, positions
 pytestmark = pytest.mark.blender
 
 SHOT = (1, 60)
-CHANGES = 1000
+CHANGES = 600
 LIMIT_MB = 16
 
 
@@ -46,7 +46,7 @@ def _paper_groom():
 
     Poly: Blender evaluates a Catmull-Rom output's drawn curves again after every write
     (about 70 ms a frame at this size, docs/benchmarks.md), which is Blender's work and
-    not what this test is about; 1,000 frame changes would spend a minute on it."""
+    not what this test is about; 600 frame changes would spend 40 s on it."""
     nx, ny, npts = 250, 200, 8
     hc = bpy.data.hair_curves.new("Fur")
     hc.add_curves([npts] * (nx * ny))
@@ -81,7 +81,7 @@ def _digest(out):
 
 
 def _sequence(rng):
-    """1,000 frames: a first pass, then scrubs, jumps, replays and returns to the start."""
+    """CHANGES frames: a first pass, then scrubs, jumps, replays and returns to the start."""
     lo, hi = SHOT
     seq = list(range(lo, hi + 1))
     f = hi
@@ -134,7 +134,7 @@ def test_soak_paper_scale_playback_equals_the_bake(fc, tmp_path):
         if i >= SHOT[1] and i % 50 == 0:
             rss.append(_rss_mb())
     assert outdated > 20 and evicted > 100  # the sequence did reach those rules
-    assert how["solved"] > 2 * (SHOT[1] - SHOT[0] + 1) and how["cache"] > 300, how
+    assert how["solved"] > 2 * (SHOT[1] - SHOT[0] + 1) and how["cache"] > 200, how
     assert np.median(touched) > 1000  # colliding or recovering curves per frame
     assert len(shown) == SHOT[1] - SHOT[0] + 1
 
