@@ -284,14 +284,8 @@ def on_undo_post(*_args):
     a cached frame whose inputs hold is shown, anything else says why."""
     try:
         for ob in registry.setups(bpy.context.scene, owned=False):
-            if not bpy.app.background:  # (the refresh below needs the event loop)
-                # Until the refresh runs the output holds the undo step's data: never
-                # shown as current with the status of the frame shown before the undo.
-                rt = registry.get_runtime(ob, create=False)
-                if rt is not None:
-                    report.publish(ob, rt, ("INFO", "Updating the frame after the undo"),
-                                   outdated=True)
-            invalidation.schedule_refresh(ob.name)
+            # (until it runs, the output holds the undo step's data: outdated)
+            invalidation.schedule_refresh(ob.name, ("INFO", "Updating the frame after the undo"))
     except Exception as exc:  # noqa: BLE001 - a handler must never raise
         print(f"FurCollide: could not refresh the setups after the undo: {exc}", flush=True)
 

@@ -145,10 +145,17 @@ def refresh_groom(ob) -> None:
 _pending_refresh: dict = {}  # object name -> timer function
 
 
-def schedule_refresh(name: str) -> None:
-    """Re-evaluate the current frame soon (UI only: timers need an event loop)."""
+def schedule_refresh(name: str, status: tuple | None = None) -> None:
+    """Re-evaluate the current frame of the setup on object ``name`` soon (UI only:
+    timers need an event loop). Until then the frame shown is marked outdated (it is
+    not known to be current: an edit or an undo happened since it was shown), with
+    ``status`` ``(level, message)`` when given; the refresh sets the frame's own."""
     if bpy.app.background:
         return
+    ob = bpy.data.objects.get(name)
+    rt = registry.get_runtime(ob, create=False) if ob is not None else None
+    if rt is not None:
+        report.publish(ob, rt, status, outdated=True)
     pending = _pending_refresh.get(name)
     if pending is not None and bpy.app.timers.is_registered(pending):
         return

@@ -59,7 +59,9 @@ def test_no_frame_is_shown_as_current_unless_it_is(session):
     """An INFO status (not outdated, in the frame range) says the output is the frame:
     then it is, bit for bit, the frame played from the start in its mode (or the baked
     frame). After an undo the output holds the undo step's data: it used to keep it
-    with the status of the frame shown before the undo."""
+    with the status of the frame shown before the undo; after an edit, until its
+    refresh runs, the frame solved before it is outdated (snaps "... before its
+    refresh")."""
     claims = [s for s in session["result"]["snaps"] if s.get("claims_current")]
     assert len(claims) > 100
     wrong = [s for s in claims if s["matches"] is False]

@@ -168,12 +168,18 @@ def wait_bake(timeout=120):
 
 
 def settled(timeout=30):
-    """After an undo or redo: the refresh it scheduled has run (a loaded machine runs
-    the timer late; until then the status says the frame is being updated)."""
+    """After an edit, an undo or a redo: the refresh it scheduled has run (a loaded
+    machine runs the timer late; until then the frame shown is marked outdated)."""
     t0 = time.perf_counter()
     yield 0.5
-    while M["invalidation"]._pending_refresh and time.perf_counter() - t0 < timeout:
+    while refresh_pending() and time.perf_counter() - t0 < timeout:
         yield 0.1
+
+
+def refresh_pending():
+    """A refresh timer is registered (one a file opened dropped does not count)."""
+    return any(bpy.app.timers.is_registered(fn)
+               for fn in M["invalidation"]._pending_refresh.values())
 
 
 def play(frames, label=None):
@@ -310,7 +316,7 @@ def undo_redo(key, prefix=""):
     (``prefix`` + "undone" / "redone") and the frames played."""
     for what, done in (("undo", "undone"), ("redo", "redone")):
         result[f"{key}_{what}"] = ed(what)
-        yield 0.5
+        yield from settled()
         snap(f"{prefix}{done}")
         yield from play(FRAMES, f"{prefix}{done}, play")
 
@@ -471,7 +477,8 @@ def sc_playing():
     yield from fresh("playing")
     ob("Fur").furcollide.mode = "STIFF"
     push("Mode Stiff")
-    yield 0.5  # (an artist is slower than the refresh after a setting change)
+    snap("edited, before its refresh")  # (the frame shown is the old mode's: outdated)
+    yield from settled()
     scene = bpy.context.scene
     scene.sync_mode = "NONE"
     seen = []
@@ -502,7 +509,7 @@ def sc_playing():
             bpy.ops.screen.animation_cancel(restore_frame=False)
     finally:
         bpy.app.handlers.frame_change_post.remove(after)
-    yield 0.5
+    yield from settled()
     snap("stopped")
 
 
@@ -562,7 +569,7 @@ def sc_reopen():
     yield 0.1
     snap("opened")
     ob("Fur").furcollide.mode = "STIFF"  # an edit in the new file: frame 1 solved again
-    yield 0.5
+    yield from settled()
     snap("edited")
 
 
