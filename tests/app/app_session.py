@@ -70,11 +70,12 @@ def run_session(work: Path, driver: str, timeout: int, env_vars: str = "") -> di
 
 def assert_ran_to_the_end(session, work, tail=4000) -> dict:
     """The session's Blender exited with 0, left no crash report, and its driver
-    finished without an error after installing the zip; returns the driver's result."""
+    finished without an error after installing the zip and finding the add-on enabled
+    (``driver_session.install``); returns the driver's result."""
     assert session["rc"] == 0, session["log"][-tail:]
     crash = list((work / "tmp").glob("*.crash.txt")) + list(work.glob("*.crash.txt"))
     assert not crash, (crash, crash and crash[0].read_text()[-3000:])
     r = session["result"]
     assert r.get("finished") and not r.get("errors"), r.get("errors") or session["log"][-tail:]
-    assert r["install_return"] == ["FINISHED"], r["install_return"]
+    assert r["install_return"] == ["FINISHED"] and r["enabled"] is True, r["install_return"]
     return r

@@ -29,11 +29,18 @@ import sys
 
 import bpy
 import numpy as np
-from mathutils import Vector
-from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import Report, install, override, select, start, ui  # noqa: E402
+from driver_session import (  # noqa: E402
+    Report,
+    collider_tree,
+    crossing_curves,
+    install,
+    override,
+    select,
+    start,
+    ui,
+)
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -188,26 +195,8 @@ def drawn_crossings(out, collider, status):
     mod.node_group = resample_group("EVALUATED", source=out)
     P, offs = evaluated(probe)
     bpy.data.objects.remove(probe)
-    dg = bpy.context.evaluated_depsgraph_get()
-    oe = collider.evaluated_get(dg)
-    me = oe.to_mesh()
-    M = np.array(oe.matrix_world)
-    V = [tuple(M[:3, :3] @ np.array(v.co) + M[:3, 3]) for v in me.vertices]
-    me.calc_loop_triangles()
-    tree = BVHTree.FromPolygons(V, [tuple(t.vertices) for t in me.loop_triangles],
-                                all_triangles=True)
-    oe.to_mesh_clear()
-    bad = set()
-    for c in range(len(offs) - 1):
-        if status[c] not in (0, 1, 2):  # FREE, COLLIDING, RECOVERING
-            continue
-        for i in range(offs[c], offs[c + 1] - 1):
-            a, b = Vector(P[i]), Vector(P[i + 1])
-            d = b - a
-            if d.length > 0 and tree.ray_cast(a, d.normalized(), d.length)[0] is not None:
-                bad.add(c)
-                break
-    return len(bad)
+    tree = collider_tree(collider, bpy.context.evaluated_depsgraph_get())
+    return crossing_curves(P, offs, tree, keep=np.isin(status, (0, 1, 2)))  # resolved
 
 
 def check(fur, out, b, groups, how):

@@ -13,6 +13,9 @@ import subprocess
 import traceback
 
 import bpy
+import numpy as np
+from mathutils import Vector
+from mathutils.bvhtree import BVHTree
 
 
 class Report:
@@ -59,6 +62,36 @@ def install(report, zip_path, addon):
     report.step("install", install_return=sorted(ret), enabled=enabled)
     if not enabled:
         raise RuntimeError("the add-on is not enabled after package_install_files")
+
+
+# ------------------------------------------------ the oracle: Blender's own BVH
+def collider_tree(ob, depsgraph):
+    """Blender's BVH of ``ob``'s mesh as ``depsgraph`` evaluates it, in world space."""
+    oe = ob.evaluated_get(depsgraph)
+    me = oe.to_mesh()
+    M = np.array(oe.matrix_world)
+    V = [tuple(M[:3, :3] @ np.array(v.co) + M[:3, 3]) for v in me.vertices]
+    me.calc_loop_triangles()
+    tree = BVHTree.FromPolygons(V, [tuple(t.vertices) for t in me.loop_triangles],
+                                all_triangles=True)
+    oe.to_mesh_clear()
+    return tree
+
+
+def crossing_curves(P, offs, tree, keep=None):
+    """How many curves (of those ``keep``, a (C,) bool, allows; all when None) have a
+    segment through the collider of ``tree``: points ``P`` (world), ``offs`` (C+1,)."""
+    bad = 0
+    for c in range(len(offs) - 1):
+        if keep is not None and not keep[c]:
+            continue
+        for i in range(offs[c], offs[c + 1] - 1):
+            a, b = Vector(P[i]), Vector(P[i + 1])
+            d = b - a
+            if d.length > 0 and tree.ray_cast(a, d.normalized(), d.length)[0] is not None:
+                bad += 1
+                break
+    return bad
 
 
 def redraw():

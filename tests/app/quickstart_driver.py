@@ -41,10 +41,17 @@ import time
 import bpy
 import numpy as np
 from mathutils import Vector
-from mathutils.bvhtree import BVHTree
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from driver_session import Report, install, redraw, start, ui  # noqa: E402
+from driver_session import (  # noqa: E402
+    Report,
+    collider_tree,
+    crossing_curves,
+    install,
+    redraw,
+    start,
+    ui,
+)
 
 ADDON = "bl_ext.user_default.furcollide"
 ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
@@ -173,31 +180,6 @@ def world_points(ob):
     offs = np.empty(len(d.curves) + 1, np.int32)
     d.curve_offset_data.foreach_get("value", offs)
     return P.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3], offs
-
-
-def tree_of(ob, depsgraph):
-    oe = ob.evaluated_get(depsgraph)
-    me = oe.to_mesh()
-    M = np.array(oe.matrix_world)
-    V = [tuple(M[:3, :3] @ np.array(v.co) + M[:3, 3]) for v in me.vertices]
-    me.calc_loop_triangles()
-    tree = BVHTree.FromPolygons(V, [tuple(t.vertices) for t in me.loop_triangles],
-                                all_triangles=True)
-    oe.to_mesh_clear()
-    return tree
-
-
-def crossing_curves(P, offs, tree):
-    """Curves with a segment through the collider of ``tree``."""
-    bad = set()
-    for c in range(len(offs) - 1):
-        for i in range(offs[c], offs[c + 1] - 1):
-            a, b = Vector(P[i]), Vector(P[i + 1])
-            d = b - a
-            if d.length > 0 and tree.ray_cast(a, d.normalized(), d.length)[0] is not None:
-                bad.add(c)
-                break
-    return len(bad)
 
 
 def evaluated_curves(out):
@@ -359,7 +341,7 @@ def run():
     def spy(sc, depsgraph):
         if depsgraph is not None and depsgraph.mode == "RENDER":
             P, offs = world_points(out)
-            rendered[sc.frame_current] = (P.copy(), offs.copy(), tree_of(b, depsgraph))
+            rendered[sc.frame_current] = (P.copy(), offs.copy(), collider_tree(b, depsgraph))
 
     bpy.app.handlers.frame_change_post.append(spy)
     try:
@@ -376,7 +358,7 @@ def run():
          curves=(len(frame[1]) - 1) if frame else 0,
          crossings_rendered=crossing_curves(frame[0], frame[1], frame[2]) if frame else None,
          rendered_is_viewport=bool(frame and np.array_equal(frame[0], viewport_P)),
-         crossings_evaluated=crossing_curves(EP, eoffs, tree_of(b, dg)),
+         crossings_evaluated=crossing_curves(EP, eoffs, collider_tree(b, dg)),
          colliding_rendered=int(s.stat_colliding), status_rendered=s.status_message)
     shot("4_rendered")
     step("done")

@@ -1605,3 +1605,12 @@ def poly(ob):
     polygon): the solve then needs no margin for a spline (``core.splines.DrawnMargin``),
     for tests whose expectations are the polygon's exact clearance. Returns ``ob``."""
     return set_curve_type(ob, "POLY")
+
+
+def property_groups():
+    """The RNA of every FurCollide property group: a setup's, its colliders', motion,
+    render groom and children, and the scene's pipeline settings."""
+    s = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
+    return [s, *(s.properties[n].fixed_type for n in ("colliders", "motion", "groom",
+                                                      "children")),
+            bpy.types.Scene.bl_rna.properties["furcollide_pipeline"].fixed_type]

@@ -38,6 +38,7 @@ from helpers import (
     make_hair,
     make_surface,
     play,
+    property_groups,
     save_in,
     small_setup,
 )
@@ -491,17 +492,10 @@ def test_sections_open_as_registered(fc):
     assert closed == {"FURCOLLIDE_PT_shrink", "FURCOLLIDE_PT_pinch", "FURCOLLIDE_PT_enable",
                       "FURCOLLIDE_PT_stats", "FURCOLLIDE_PT_pipeline"}, closed
     titles = {c.bl_label for c in sidebar}
-    names = {p.name for rna in _property_groups() for p in rna.properties}
+    names = {p.name for rna in property_groups() for p in rna.properties}
     # (Colliders lists the colliders and Shrink's header is the Shrink checkbox: the same
     # thing; "Resolution" titled a section and labelled the pinch setting)
     assert titles & names == {"Colliders", "Shrink"}, titles & names
-
-
-def _property_groups():
-    s = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
-    return [s, *(s.properties[n].fixed_type for n in ("colliders", "motion", "groom",
-                                                      "children")),
-            bpy.types.Scene.bl_rna.properties["furcollide_pipeline"].fixed_type]
 
 
 def test_remove_asks_first(fc):

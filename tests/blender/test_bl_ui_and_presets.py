@@ -12,7 +12,7 @@ import textwrap
 import bpy
 import numpy as np
 import pytest
-from helpers import activate, dense_groom, draw_panel, groom_scene, play, set_core
+from helpers import activate, dense_groom, draw_panel, groom_scene, play, property_groups, set_core
 
 pytestmark = pytest.mark.blender
 
@@ -423,13 +423,6 @@ def test_missing_ray_tracer_reports_clearly(tmp_path):
     assert "POLL:" in r.stdout and "embreex" in r.stdout.split("POLL:")[1]
 
 
-def _groups():
-    s = bpy.types.Object.bl_rna.properties["furcollide"].fixed_type
-    return [s, *(s.properties[n].fixed_type for n in ("colliders", "motion", "groom",
-                                                      "children")),
-            bpy.types.Scene.bl_rna.properties["furcollide_pipeline"].fixed_type]
-
-
 def test_angles_are_blender_angles_shown_in_the_users_unit(fc):
     """Rotation Precision, Max Angle and Scale Angle (and no other setting is an angle)
     are Blender angles: radians, shown in the scene's rotation unit; their ranges are
@@ -441,7 +434,7 @@ def test_angles_are_blender_angles_shown_in_the_users_unit(fc):
         assert (p.type, p.subtype, p.unit) == ("FLOAT", "ANGLE", "ROTATION"), name
         assert p.default == pytest.approx(math.radians(default))
         assert (p.hard_min, p.hard_max) == pytest.approx((math.radians(lo), math.radians(hi)))
-    others = [f"{g.identifier}.{p.identifier}" for g in _groups() for p in g.properties
+    others = [f"{g.identifier}.{p.identifier}" for g in property_groups() for p in g.properties
               if p.type == "FLOAT" and p.identifier not in angles and (
                   "angle" in p.name.lower() or "degree" in p.description.lower())]
     assert others == [], others
@@ -459,7 +452,7 @@ def test_angles_are_blender_angles_shown_in_the_users_unit(fc):
 def test_every_choice_is_an_upper_case_identifier(fc):
     """One identifier style, Blender's own (``'BEND'``, ``'GROWTH_SURFACE'``, like
     ``ob.type == 'MESH'``): the core keeps its lower-case names, the glue translates."""
-    lower = [f"{g.identifier}.{p.identifier}: {i.identifier}" for g in _groups()
+    lower = [f"{g.identifier}.{p.identifier}: {i.identifier}" for g in property_groups()
              for p in g.properties if p.type == "ENUM"
              for i in p.enum_items if i.identifier != i.identifier.upper()]
     assert lower == [], lower

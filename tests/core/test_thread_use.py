@@ -38,6 +38,21 @@ def _probe_tracing(monkeypatch):
     return seen
 
 
+def _batch_sizes(monkeypatch):
+    """The sizes of the probe batches the steps build, as they come."""
+    from core import rigid
+
+    sizes = []
+    hits_uniform = rigid.RigidBatch._hits_uniform
+
+    def count(self, items, theta, hit):
+        sizes.append(len(items))
+        return hits_uniform(self, items, theta, hit)
+
+    monkeypatch.setattr(rigid.RigidBatch, "_hits_uniform", count)
+    return sizes
+
+
 def _pressed_grid(n):
     g = (np.arange(n) + 0.5) / n * 2 - 1
     X, Y = np.meshgrid(g, g, indexing="ij")
@@ -70,14 +85,7 @@ def test_a_batch_of_exactly_two_blocks_is_traced_in_two_halves(monkeypatch):
     that many is built and traced in two halves of one block each."""
     from core import rigid
 
-    sizes = []
-    hits_uniform = rigid.RigidBatch._hits_uniform
-
-    def count(self, items, theta, hit):
-        sizes.append(len(items))
-        return hits_uniform(self, items, theta, hit)
-
-    monkeypatch.setattr(rigid.RigidBatch, "_hits_uniform", count)
+    sizes = _batch_sizes(monkeypatch)
     pts, offs, col = _pressed_grid(6)
     Solver(offs, Settings(mode="bend", threads=2)).step(pts, [col])
     k = max(s for s in sizes if s % 2 == 0 and s >= 4)
@@ -248,14 +256,7 @@ def test_a_batch_of_n_blocks_is_traced_in_n_parts(monkeypatch, threads):
     one thread."""
     from core import rigid
 
-    sizes = []
-    hits_uniform = rigid.RigidBatch._hits_uniform
-
-    def count(self, items, theta, hit):
-        sizes.append(len(items))
-        return hits_uniform(self, items, theta, hit)
-
-    monkeypatch.setattr(rigid.RigidBatch, "_hits_uniform", count)
+    sizes = _batch_sizes(monkeypatch)
     pts, offs, col = _pressed_grid(8)
     ref = Solver(offs, Settings(mode="bend", threads=1)).step(pts, [col])
     k = max(sizes)
