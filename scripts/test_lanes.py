@@ -146,8 +146,8 @@ def jobs_for(lane: str) -> list[tuple[str, list[str]]]:
         return jobs
     # (the main lane's run of the property tests is the full search; the other numpy's
     # runs every test with 40 % of the examples: hypothesis_profiles.py "brief")
-    marks = [] if lane == SLOW_LANE else ["-m", "not slow", "--hypothesis-profile=brief"]
-    return [*jobs, (f"{lane} core", [*BPY_FREE, *marks])]
+    options = [] if lane == SLOW_LANE else ["-m", "not slow", "--hypothesis-profile=brief"]
+    return [*jobs, (f"{lane} core", [*BPY_FREE, *options])]
 
 
 #: The longest runs start first (measured on 2 cores), so no core idles at the end.
