@@ -90,7 +90,8 @@ def run(n_frames: int, repeat: int, deforming: bool):
         read = ops.settings.fingerprints.read_settings(hair, scene)
         ref = ops.frame.colliders.collider_objects(hair, scene)[0]
         parts = {
-            "source digest (positions + offsets)": lambda: cache.digest(inp.raw, inp.offsets),
+            "source digest (own positions + offsets + matrix)": lambda: cache.digest(
+                inp.source_local, inp.offsets, inp.source_matrix),
             "collider read + digests": lambda: ops.frame.colliders.read_collider_inputs(
                 ref.object, dg, ref.matrix(dg)),
             "settings signature": lambda: ops.settings.fingerprints.signature(

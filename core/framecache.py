@@ -224,10 +224,13 @@ class Frame:
     stats: dict = field(default_factory=dict)
     attributes: dict = field(default_factory=dict)  # name -> (P,) per-point values
     inputs: dict | None = None  # frame-inputs record it was solved from
+    #: (n,) bool: which of ``points`` differ from the input (the rest are the input's)
+    moved: np.ndarray | None = None
 
     @property
     def nbytes(self) -> int:
         n = self.curves.nbytes + self.points.nbytes + self.status_idx.nbytes
+        n += self.moved.nbytes if self.moved is not None else 0
         n += self.status_val.nbytes + sum(a.nbytes for a in self.attributes.values())
         if self.state:
             n += sum(a.nbytes for a in self.state.values())
@@ -349,12 +352,14 @@ class MemoryCache:
         else:
             curve_changed = np.zeros(C, bool)
         curves = np.flatnonzero(curve_changed).astype(np.int32)
-        pts = out[curve_point_mask(offsets, curves)].astype(np.float32, copy=True)
+        rows = curve_point_mask(offsets, curves)
+        pts = out[rows].astype(np.float32, copy=True)
+        moved = changed[rows] if len(rows) else np.zeros(0, bool)
         nz = np.flatnonzero(status).astype(np.int32)
         enc = self.sparse.encode(state) if (self.sparse is not None and state is not None) else None
         attrs = {k: np.array(v, copy=True) for k, v in (attributes or {}).items()}
         self.frames[f] = Frame(curves, pts, nz, status[nz].astype(np.int8), enc, dict(stats),
-                               attrs, dict(inputs) if inputs is not None else None)
+                               attrs, dict(inputs) if inputs is not None else None, moved)
         self._enforce_budget(keep=f)
 
     def get(self, f, inp, offsets):
@@ -381,6 +386,26 @@ class MemoryCache:
         status = np.zeros(len(offsets) - 1, np.int8)
         status[fr.status_idx] = fr.status_val
         return out, status, fr.stats
+
+    def get_moved(self, f, offsets):
+        """Frame ``f`` as the rows that differ from its input, without the input
+        (:meth:`get` is the input with these rows set, bit for bit).
+
+        Returns
+        -------
+        rows : (k,) int64 ndarray
+            Increasing point indices: exactly the rows where the frame's output
+            differs from its input (``rows_differ``).
+        points : (k, 3) float32 ndarray
+            Their world positions.
+        status : (C,) int8 ndarray
+        stats : dict
+        """
+        fr = self.frames[f]
+        rows = curve_point_mask(offsets, fr.curves)
+        status = np.zeros(len(offsets) - 1, np.int8)
+        status[fr.status_idx] = fr.status_val
+        return rows[fr.moved], fr.points[fr.moved], status, fr.stats
 
     def attributes(self, f) -> dict:
         """Per-point attributes stored with frame ``f`` (empty when none)."""

@@ -32,7 +32,10 @@ class FrameInputs:
     (``points``, ``offsets``, ``colliders`` and ``frame`` are enough).
     """
 
-    points: np.ndarray  # world (P, 3) float32, after the motion before collision
+    #: World (P, 3) float32, after the motion before collision; None when read with
+    #: ``attach=False`` under Fur Attach, or not yet computed from ``source_local`` and
+    #: ``source_matrix`` (:meth:`world` computes it: a cached frame shown never needs it).
+    points: np.ndarray | None
     offsets: np.ndarray  # (C+1,) int32
     enabled: np.ndarray | None = None  # (C,) bool per-curve enable mask (None: all)
     frame: int = 0
@@ -56,12 +59,37 @@ class FrameInputs:
     #: How the source draws its curves (:class:`SourceSplines`, read with the source).
     #: None: not read (a script: Catmull-Rom).
     splines: object = None
+    #: The source's own positions (P, 3) float32 and world matrix (4, 4) they were read
+    #: with (without Fur Attach): the world input is ``bridge.transform`` of them, and
+    #: the frame-inputs record digests them (part ``source local``).
+    source_local: np.ndarray | None = None
+    source_matrix: np.ndarray | None = None
 
     def __post_init__(self):
-        if self.raw is None:
+        if self.raw is None and self.points is not None:
             self.raw = self.points
         if self.key is None:
             self.key = framecache.topology_key(self.offsets)
+
+    @property
+    def has_points(self) -> bool:
+        """Were the world positions read (or can they be made: :meth:`world`)?"""
+        return self.points is not None or self.source_local is not None
+
+    def world(self) -> np.ndarray:
+        """The world positions ``points``, computed from the source's own positions on
+        first use (a frame that only shows a cached one never transforms them)."""
+        if self.points is None and self.source_local is not None:
+            self.points = bridge.transform(self.source_local, self.source_matrix)
+            if self.raw is None:
+                self.raw = self.points
+        return self.points
+
+    def before_motion(self) -> np.ndarray:
+        """The world positions before the motion before collision (``raw``)."""
+        if self.raw is None:
+            self.world()
+        return self.raw
 
 
 @dataclass
@@ -149,14 +177,18 @@ def read_inputs(setup, attach=True) -> FrameInputs:
         return FrameInputs(world, attached=att, **common)
     # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
     local = P if np.allclose(M, M_out, rtol=1e-6, atol=1e-7) else None
-    return FrameInputs(bridge.transform(P, M), local=local, **common)
+    # (world positions on first use: a cached frame shown needs none, see FrameInputs.world)
+    return FrameInputs(None, local=local, source_local=P, source_matrix=M, **common)
 
 
 def prepare_input(setup, inp, m) -> FrameInputs:
     """``inp`` after the motion that runs before collision
     (:func:`core.pipeline.frame.before_collision`, ``m``: the motion settings as
     :func:`..settings.motion.values` reads them), the roots recorded for jiggle first."""
+    if not m.active:  # (nothing moves the curves nor needs their roots)
+        return inp
     f = inp.frame
+    inp.world()
     if m.needs_history and f >= setup.s.frame_start:
         # (before the start frame the hair counts as at rest: frames viewed there
         # must not change a bake, which starts at the start frame)

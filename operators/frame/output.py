@@ -27,12 +27,17 @@ from .clock import clock
 class Shown:
     """What a frame writes into the output: world points (P, 3) and status codes (C,),
     with the points that differ from the input (``changed``, computed when None) and
-    per-point ``attributes`` (name -> (P,) array)."""
+    per-point ``attributes`` (name -> (P,) array).
+
+    With ``rows`` (k,) the frame is given as its difference from the input: ``points``
+    (k, 3) are the world positions of those rows, every other point is the input's
+    (a cached frame: :meth:`core.framecache.MemoryCache.get_moved`)."""
 
     points: np.ndarray
     status: np.ndarray
     changed: np.ndarray | None = None
     attributes: dict | None = None
+    rows: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -51,15 +56,46 @@ class Stage:
     fresh: tuple = ()
 
 
-def show(setup, inputs, shown, sync=False):
+def show(setup, inputs, shown, sync=False, world=True):
     """The one write of a frame: the output's layout follows the source's (``sync``),
     then ``shown`` (a :class:`Shown`, or None: the output keeps what it shows) is
-    written. Returns the world points written, or None."""
+    written. Returns the world points written, or None.
+
+    ``world=False``: the caller needs no world points back (no render groom follows
+    them, no frame is held): a frame given by its ``rows`` is then written from the
+    source's own positions without taking the input to world space (and None is
+    returned), where that writes the same bits (:func:`local_rows`)."""
     if sync:
         sync_output(setup, inputs)
     if shown is None:
         return None
+    if shown.rows is not None:
+        if not world and local_rows(inputs):
+            with clock.timing("write"):
+                local = inputs.local.copy()
+                if len(shown.rows):
+                    local[shown.rows] = bridge.transform(shown.points, inputs.m_out_inv)
+                _write_local(setup, inputs, local, shown.status, shown.attributes)
+            return None
+        # (the rows differ from the input before motion, which a cached frame keeps)
+        points = inputs.before_motion().copy()
+        points[shown.rows] = shown.points
+        shown = Shown(points, shown.status, None, shown.attributes)
     return write(setup, inputs, shown.points, shown.status, shown.changed, shown.attributes)
+
+
+def local_rows(inputs) -> bool:
+    """Can a frame given by the rows that differ from the input be written from the
+    source's own positions (those rows taken to the output's space, the rest as they
+    are), bit for bit what :func:`output_local` writes of it? Yes where the output
+    sits on the source, unless both are at the origin with a source matrix only close
+    to the identity (the world input is then written, not the source's positions) or
+    Bezier handles follow the points (they need the world input)."""
+    if inputs.local is None or inputs.source_matrix is None:
+        return False
+    if inputs.splines is not None and inputs.splines.has_handles:
+        return False
+    return not bridge.is_identity(inputs.m_out_inv) or bridge.is_identity(inputs.source_matrix)
 
 
 def publish(setup, status, outdated=None, stats=None) -> None:
@@ -113,11 +149,18 @@ def write(setup, inputs, points_world, status, changed=None, attributes=None) ->
 
 
 def _write(setup, inputs, points_world, status, changed, attributes) -> np.ndarray:
+    local = output_local(inputs, points_world, changed)
+    _write_local(setup, inputs, local, status, attributes, points_world)
+    return points_world
+
+
+def _write_local(setup, inputs, local, status, attributes, points_world=None) -> None:
+    """Write the output's local positions ``local``, its handles (``points_world``
+    given), ``attributes`` and, where a status changed, the status and colours."""
     rt = setup.rt
     data = setup.s.output.data
-    local = output_local(inputs, points_world, changed)
     bridge.set_positions(data, local)
-    if inputs.splines is not None:
+    if inputs.splines is not None and points_world is not None:
         write_handles(data, inputs.splines, inputs, points_world, local)
     if attributes:
         write_attributes(data, attributes)
@@ -132,7 +175,6 @@ def _write(setup, inputs, points_world, status, changed, attributes) -> np.ndarr
         colors = bridge.status_colors(status, inputs.offsets, previous, colors)
         bridge.write_status(data, status, inputs.offsets, colors)
         rt.output.status = (data.session_uid, status.copy(), colors)
-    return points_world
 
 
 def output_local(inputs, points_world, changed=None) -> np.ndarray:
@@ -147,7 +189,7 @@ def output_local(inputs, points_world, changed=None) -> np.ndarray:
     if bridge.is_identity(inputs.m_out_inv):  # both at the world origin
         return points_world
     if changed is None:
-        changed = framecache.rows_differ(points_world, inputs.points)
+        changed = framecache.rows_differ(points_world, inputs.world())
     local = inputs.local.copy()
     idx = np.flatnonzero(changed)
     if len(idx):
@@ -167,8 +209,8 @@ def write_handles(data, source, inputs, points_world, local) -> None:
     if not source.has_handles:
         return
     sp, offs = source.world, inputs.offsets
-    hl, hr = splines.moved_handles(inputs.points, points_world, offs,
-                                   *_pair(source.at(inputs.points, offs)))
+    world = inputs.world()
+    hl, hr = splines.moved_handles(world, points_world, offs, *_pair(source.at(world, offs)))
     L = bridge.transform(hl, inputs.m_out_inv)
     R = bridge.transform(hr, inputs.m_out_inv)
     moved = _moved_curves(source.points, points_world, offs)

@@ -40,8 +40,10 @@ def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False,
     Parameters
     ----------
     inp : FrameInputs
-        The frame's input: world positions before motion (``raw``), offsets and
-        the per-curve enable mask. With Fur Attach, the part ``attached`` digests
+        The frame's input: the source's own positions and world matrix (part ``source
+        local``; ``source``, the world positions before motion, for an input given
+        in world space), offsets and the per-curve enable mask. With Fur Attach, the
+        part ``attached`` digests
         the world positions of the Surface vertices the binding reads and the
         offsets instead of the positions (``attach.AttachInput.digest``): the
         attached positions are a function of them and of the binding (its
@@ -56,8 +58,9 @@ def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False,
     surface : (int, int) or None
         The growth surface's, when the solve reads it.
     attached_as_source : bool
-        With Fur Attach, the part ``source`` (the digest of the attached points)
-        instead of ``attached``: the record of a bake made before ``attached`` existed.
+        The part ``source`` (the digest of the world positions before motion; with Fur
+        Attach, of the attached points) instead of ``source local`` (``attached``):
+        the record of a bake made before that part existed.
     structure : str, optional
         :func:`..settings.fingerprints.structure` without identities: what every frame of the shot
         shares (part ``structure``).
@@ -82,7 +85,12 @@ def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False,
     rec["colliders"] = framecache.text_digest(repr(list(flags)))
     rec["settings"] = framecache.text_digest(sig)
     if inp.attached is None:
-        rec["source"] = framecache.digest(inp.raw, inp.offsets)
+        if inp.source_local is not None and not attached_as_source:
+            # (what the world input is made of: a frame checked needs no transform)
+            rec[SOURCE_LOCAL_PART] = framecache.digest(inp.source_local, inp.offsets,
+                                                       inp.source_matrix)
+        else:
+            rec["source"] = framecache.digest(inp.before_motion(), inp.offsets)
     elif attached_as_source:  # (as read_inputs makes the points: float32)
         rec["source"] = framecache.digest(np.asarray(inp.attached.points(), np.float32),
                                           inp.offsets)
@@ -131,6 +139,13 @@ MAPS_PART = "maps"
 #: attached points: :func:`current_inputs` makes that part for them (``like``,
 #: ``frame_inputs(attached_as_source=True)``).
 ATTACHED_PART = "attached"
+#: Part of a frame-inputs record standing for the source without Fur Attach: its own
+#: positions, offsets and world matrix (:func:`frame_inputs`), what the world input is
+#: a function of. Records made before it have ``source``, the digest of the world
+#: positions: :func:`current_inputs` makes that part for them (``like``).
+SOURCE_LOCAL_PART = "source local"
+#: The parts that stand for the source hair's own geometry.
+SOURCE_PARTS = ("source", SOURCE_LOCAL_PART)
 
 
 def _tagged(setup, record) -> dict:
@@ -145,8 +160,9 @@ def current_inputs(setup, inp, read, like=None) -> dict:
     equal to be shown.
 
     ``like``: the record it will be compared with. One of a bake made before the
-    ``attached`` part existed has ``source``, the digest of the attached points,
-    instead: the record made then has it too (the curves attached once, here).
+    ``attached`` or ``source local`` part existed has ``source``, the digest of the
+    attached or world points, instead: the record made then has it too (the curves
+    attached, or taken to world space, once, here).
     """
     ob, depsgraph = setup.ob, setup.depsgraph
     refs = read.refs
@@ -289,7 +305,7 @@ def changed_objects(setup, old, new, refs) -> set | None:
         if old.get(part) == new.get(part):
             continue
         what = part.rpartition(" ")[0]
-        if part in ("source", "enabled"):
+        if part in (*SOURCE_PARTS, "enabled"):
             names.add(ob.name)
         elif (part == ATTACHED_PART or what == "surface") and ob.data.surface is not None:
             names.add(ob.data.surface.name)
@@ -320,7 +336,7 @@ def describe_change(ob, part, scene, old=None, new=None, refs=None) -> str:
             return "the settings changed"
         at = scene.frame_current if keyed.Animation(ob).animates(path) else None
         return value_change(ob, path, at)
-    if part == "source":
+    if part in SOURCE_PARTS:
         return f"the source hair '{ob.name}' changed (groom, modifiers or placement)"
     if part == MAPS_PART:
         return f"a parameter map of '{ob.name}' changed (its values on the evaluated hair)"

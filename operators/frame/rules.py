@@ -283,7 +283,7 @@ def _topology(setup, inp):
     status = ("ERROR", topology.topology_message(setup.ob, old, new, what, s.frame_start))
     # Never left frozen while marked current: the output is outdated and, playing,
     # follows the source (its roots on the skin), not collided (a bake's frame stays).
-    source = not s.is_baked and inp.points is not None
+    source = not s.is_baked and inp.has_points
     return None, Decision(Outcome.TOPOLOGY, show="source" if source else None, status=status,
                           outdated=True)
 

@@ -78,7 +78,7 @@ def show_source(ob, scene, depsgraph) -> bool:
         if r is not None:
             output.forget_written(r)
             groom.forget_written(r)
-    written = output.show(setup, inp, Shown(inp.points, np.zeros(len(inp.offsets) - 1, np.int8)),
+    written = output.show(setup, inp, Shown(inp.world(), np.zeros(len(inp.offsets) - 1, np.int8)),
                           sync=True)
     if s.groom.output is not None:
         groom.follow_unsolved(setup, written)

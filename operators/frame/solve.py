@@ -150,13 +150,13 @@ def solve_frame(setup, inputs, motion=None) -> FrameResult:
     if inputs.splines is None:  # (no source read: Blender's default hair type)
         sp = splines.Splines.catmull_rom(len(inputs.offsets) - 1)
     else:
-        sp = inputs.splines.at(inputs.points, inputs.offsets)
+        sp = inputs.splines.at(inputs.world(), inputs.offsets)
     part.frame = None  # until the frame is solved: a failed stage leaves it unknown
-    result = frame.solve(part.solver, inputs.points, inputs.offsets, inputs.frame,
+    result = frame.solve(part.solver, inputs.world(), inputs.offsets, inputs.frame,
                          inputs.colliders, growth=inputs.growth, enabled=inputs.enabled,
                          motion=m, fps=setup.fps if m.active else 24.0,
                          history=part.history, threads=setup.s.core_threads,
-                         raw=inputs.raw, splines=sp, drawn=part.drawn)
+                         raw=inputs.before_motion(), splines=sp, drawn=part.drawn)
     part.frame = inputs.frame
     for stage, ms in result.timings.items():
         clock.add(stage, ms)

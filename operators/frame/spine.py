@@ -164,7 +164,7 @@ class Frame:
                  "result", "record")
 
     def __init__(self):
-        self.written = None  # world points written into the output
+        self.written = None  # world points written into the output (None: not needed)
         self.baked = None  # (frame, framecache.ShownFrame) of the bake shown
         self.stats = None  # the frame's statistics (None: unchanged)
         self.status = None  # (level, message), rules.NOTE or None (unchanged)
@@ -194,7 +194,7 @@ def _frame(setup, sink):
         return changes.topology.outcome, shown
     if solve.adopt_topology(rt, changes.adopt) and not len(rt.cache.memory):
         playback.forget_hold(rt)  # (other curves, nothing cached: the held frame is of the old)
-    if read.inputs.points is not None:  # (the jiggle's history and the motion feed a solve)
+    if read.inputs.has_points:  # (the jiggle's history and the motion feed a solve)
         read = shown.read = replace(read, inputs=prepare_input(setup, read.inputs, read.motion))
     _drop(setup, changes.after)
     if sink.sees:
@@ -241,18 +241,22 @@ def _show(setup, read, d, shown) -> None:
     cache = setup.rt.cache
     inp = read.inputs
     what, stats = None, None
+    world = True
     if d.show == "source":
-        what = Shown(inp.points, np.zeros(len(inp.offsets) - 1, np.int8))
+        what = Shown(inp.world(), np.zeros(len(inp.offsets) - 1, np.int8))
     elif d.show == "hold":
         what = Shown(cache.hold[1], cache.hold[2])
     elif d.show == "memory":
-        points, status, stats = cache.memory.get(d.frame, inp.raw, inp.offsets)
-        what = Shown(points, status, attributes=cache.memory.attributes(d.frame))
+        rows, points, status, stats = cache.memory.get_moved(d.frame, inp.offsets)
+        what = Shown(points, status, attributes=cache.memory.attributes(d.frame), rows=rows)
+        # (no render groom follows it, no frame is held: written without the world input)
+        world = d.keep_hold or setup.s.groom.output is not None
     elif d.show == "baked":
         b = d.baked
         what = Shown(b.points, b.status, attributes=b.attributes)
         shown.baked = (d.frame, b)
-    shown.written = output.show(setup, inp, what, sync=rules.syncs(setup, d.outcome))
+    shown.written = output.show(setup, inp, what, sync=rules.syncs(setup, d.outcome),
+                                world=world)
     if d.keep_hold:
         playback.hold(setup.rt, d.frame, shown.written, what.status)
     shown.stats = dict(stats, source="cache") if d.outcome is Outcome.CACHE else d.stats

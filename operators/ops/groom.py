@@ -84,7 +84,7 @@ class FURCOLLIDE_OT_groom_bind(SetupOperator, Operator):
             V, F = bridge.surface_mesh_world(surf, dg)
             surface = (V, F, bridge.mesh_topology_key(surf.evaluated_get(dg).data))
         arrays, notes = build_binding(
-            render_ref, roff, inp.points, inp.offsets, g.guides, surface, groom=groom
+            render_ref, roff, inp.world(), inp.offsets, g.guides, surface, groom=groom
         )
         out = g.output
         if out is None or out.type != "CURVES" or not in_scene(out, scene):

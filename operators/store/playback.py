@@ -60,7 +60,7 @@ def keep(rt, f, inputs, result, inputs_record) -> None:
     c.verified.add(f)
     c.verified &= c.memory.frames.keys() | {f}  # (frames the budget dropped go)
     c.memory.put(
-        f, inputs.raw, result.points, result.status, inputs.offsets, rt.solve.solver.state,
+        f, inputs.before_motion(), result.points, result.status, inputs.offsets, rt.solve.solver.state,
         result.stats, result.changed, result.attributes, inputs_record,
     )
     if c.hold is None or f >= c.hold[0]:

@@ -30,8 +30,8 @@ def _world_result(fc, hair):
     rt = fc.store.registry.get_runtime(hair)
     inp = fc.frame.inputs.read_inputs(
         fc.Setup(hair, bpy.context.scene, bpy.context.evaluated_depsgraph_get()))
-    points, status_of, _stats = rt.cache.memory.get(bpy.context.scene.frame_current, inp.points,
-                                            inp.offsets)
+    points, status_of, _stats = rt.cache.memory.get(bpy.context.scene.frame_current,
+                                                    inp.world(), inp.offsets)
     return inp, points
 
 
@@ -39,7 +39,7 @@ def test_output_in_the_source_space_keeps_untouched_curves_exact(fc):
     hair, out = _turned_setup(fc)
     inp, world = _world_result(fc, hair)
     assert inp.local is not None  # the output sits where the source sits
-    changed = fc.cache.rows_differ(world, inp.points)
+    changed = fc.cache.rows_differ(world, inp.world())
     assert 0 < changed.sum() < len(changed)
     got = fc.positions(out)
     src = fc.positions(hair)

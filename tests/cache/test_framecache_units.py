@@ -402,10 +402,35 @@ def test_memory_cache_put_and_get_keep_their_documented_types():
     fr = mem.frames[3]
     assert fr.curves.dtype == np.int32 and fr.points.dtype == np.float32
     assert fr.status_idx.dtype == np.int32 and fr.status_val.dtype == np.int8
-    assert fr.nbytes == 2 * 4 + 6 * 12 + 2 * 4 + 2 * 1 + sum(
+    assert fr.moved.dtype == bool and len(fr.moved) == len(fr.points)
+    assert fr.nbytes == 2 * 4 + 6 * 12 + 6 * 1 + 2 * 4 + 2 * 1 + sum(
         a.nbytes for a in fr.state.values())
     got, got_status, _ = mem.get(3, inp, offsets)
     assert got_status.dtype == np.int8 and got_status.tolist() == status.tolist()
+    rows, pts, moved_status, _ = mem.get_moved(3, offsets)
+    assert rows.dtype == np.int64 and pts.dtype == np.float32
+    assert moved_status.tolist() == status.tolist()
+
+
+def test_a_frame_as_its_moved_rows_is_the_frame_bit_for_bit():
+    """get_moved: exactly the rows where the frame differs from its input (bitwise:
+    a point of a changed curve left where it was is not among them, nor is -0.0 for
+    0.0 the same row), and the input with those rows set is get's frame, bit for bit."""
+    rng = np.random.default_rng(4)
+    offsets = np.array([0, 3, 7, 8, 12, 15], np.int32)  # curves of 3, 4, 1, 4, 3 points
+    inp = rng.normal(size=(15, 3)).astype(np.float32)
+    out = inp.copy()
+    out[[1, 2, 9]] += np.float32(0.25)  # curves 0 and 3 moved, their roots did not
+    out[13, 0] = -out[13, 0] if out[13, 0] == 0 else out[13, 0]  # (unchanged bits)
+    inp[14, 1], out[14, 1] = 0.0, -0.0  # curve 4: a sign bit only
+    mem = fc.MemoryCache()
+    mem.put(5, inp, out, np.zeros(5, np.int8), offsets, None, {})
+    rows, pts, _, _ = mem.get_moved(5, offsets)
+    assert rows.tolist() == [1, 2, 9, 14]
+    rebuilt = inp.copy()
+    rebuilt[rows] = pts
+    got, _, _ = mem.get(5, inp, offsets)
+    assert rebuilt.tobytes() == got.tobytes() == out.tobytes()
 
 
 def test_an_evicted_state_reads_as_none():
