@@ -60,8 +60,8 @@ def keep(rt, f, inputs, result, inputs_record) -> None:
     c.verified.add(f)
     c.verified &= c.memory.frames.keys() | {f}  # (frames the budget dropped go)
     c.memory.put(
-        f, inputs.before_motion(), result.points, result.status, inputs.offsets, rt.solve.solver.state,
-        result.stats, result.changed, result.attributes, inputs_record,
+        f, inputs.before_motion(), result.points, result.status, inputs.offsets,
+        rt.solve.solver.state, result.stats, result.changed, result.attributes, inputs_record,
     )
     if c.hold is None or f >= c.hold[0]:
         c.hold = (f, result.points, result.status)
