@@ -64,6 +64,10 @@ class FrameInputs:
     #: the frame-inputs record digests them (part ``source local``).
     source_local: np.ndarray | None = None
     source_matrix: np.ndarray | None = None
+    #: The setup's :class:`InputState`: the world positions last computed, reused while
+    #: the source's own positions and matrix stay the same (None: always computed).
+    state: object = None
+    _digest: int | None = field(default=None, repr=False)
 
     def __post_init__(self):
         if self.raw is None and self.points is not None:
@@ -76,11 +80,29 @@ class FrameInputs:
         """Were the world positions read (or can they be made: :meth:`world`)?"""
         return self.points is not None or self.source_local is not None
 
+    def source_digest(self) -> int:
+        """64-bit digest of the source's own positions, offsets and world matrix (what
+        the world input is made of; computed once)."""
+        if self._digest is None:
+            self._digest = framecache.digest(self.source_local, self.offsets,
+                                             self.source_matrix)
+        return self._digest
+
     def world(self) -> np.ndarray:
         """The world positions ``points``, computed from the source's own positions on
-        first use (a frame that only shows a cached one never transforms them)."""
+        first use (a frame that only shows a cached one never transforms them), or a
+        copy of the last ones computed when the source's own positions and matrix are
+        the same (a static groom, grass: the same bits, a copy being cheaper than the
+        product)."""
         if self.points is None and self.source_local is not None:
-            self.points = bridge.transform(self.source_local, self.source_matrix)
+            last = self.state.world if self.state is not None else None
+            if last is not None and last[0] == self.source_digest():
+                self.points = last[1].copy()  # (a copy: whoever gets it may write in it)
+            else:
+                self.points = bridge.transform(self.source_local, self.source_matrix)
+                if self.state is not None:
+                    # (a copy: the identity returns the source's own array)
+                    self.state.world = (self.source_digest(), self.points.copy())
             if self.raw is None:
                 self.raw = self.points
         return self.points
@@ -90,6 +112,14 @@ class FrameInputs:
         if self.raw is None:
             self.world()
         return self.raw
+
+
+@dataclass(slots=True)
+class InputState:
+    """The part of a setup's runtime owned here: the source's world positions last
+    computed, as ``(FrameInputs.source_digest, (P, 3) float32)`` (None: none yet)."""
+
+    world: tuple | None = None
 
 
 @dataclass
@@ -178,7 +208,8 @@ def read_inputs(setup, attach=True) -> FrameInputs:
     # Equal up to float noise: setting matrix_basis recomposes it from loc/rot/scale.
     local = P if np.allclose(M, M_out, rtol=1e-6, atol=1e-7) else None
     # (world positions on first use: a cached frame shown needs none, see FrameInputs.world)
-    return FrameInputs(None, local=local, source_local=P, source_matrix=M, **common)
+    return FrameInputs(None, local=local, source_local=P, source_matrix=M,
+                       state=setup.rt.inputs, **common)
 
 
 def prepare_input(setup, inp, m) -> FrameInputs:

@@ -87,8 +87,7 @@ def frame_inputs(inp, sig, colliders, flags, surface, attached_as_source=False,
     if inp.attached is None:
         if inp.source_local is not None and not attached_as_source:
             # (what the world input is made of: a frame checked needs no transform)
-            rec[SOURCE_LOCAL_PART] = framecache.digest(inp.source_local, inp.offsets,
-                                                       inp.source_matrix)
+            rec[SOURCE_LOCAL_PART] = inp.source_digest()
         else:
             rec["source"] = framecache.digest(inp.before_motion(), inp.offsets)
     elif attached_as_source:  # (as read_inputs makes the points: float32)

@@ -56,6 +56,8 @@ class Runtime:
     #: What the output got last: its status colours, the source's attributes
     #: (:class:`..frame.output.Written`).
     output: object
+    #: The source's world positions last computed (:class:`..frame.inputs.InputState`).
+    inputs: object
     name: str = ""  # the source object's name when last looked up (see prune)
     #: The render groom's binding and what it computed last (``frame.groom.GroomState``,
     #: :mod:`..frame.groom`; None until the stage first runs).
@@ -74,12 +76,13 @@ class Runtime:
 def new_runtime(uid, memory_limit_mb=framecache.DEFAULT_MEMORY_LIMIT_MB) -> Runtime:
     """A setup's runtime with every part empty, each made by its owner (its cache's
     Memory Limit ``memory_limit_mb``)."""
-    from ..frame import colliders, output, record, solve  # (they read the registry)
+    from ..frame import colliders, inputs, output, record, solve  # (they read the registry)
     from . import playback, report
 
     return Runtime(uid, cache=playback.new(memory_limit_mb), solve=solve.SolveState(),
                    colliders=colliders.ColliderState(), seen=record.Seen(),
-                   report=report.Report(), output=output.Written())
+                   report=report.Report(), output=output.Written(),
+                   inputs=inputs.InputState())
 
 
 registry: dict[str, Runtime] = {}
