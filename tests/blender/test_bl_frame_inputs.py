@@ -228,6 +228,62 @@ def test_source_groom_changed_while_cached_frames_exist(fc, tmp_path):
     same(got, bake(fc, hair))
 
 
+def test_source_moved_without_a_key_on_a_cached_frame(fc, tmp_path):
+    """The source object moved (no key) on a cached frame: the frame says so, naming it,
+    and played again its curves are solved where the source now is, as a new session
+    solves them (the world positions kept while a source stands still are not reused
+    once its placement changed)."""
+    scene, hair, box, out = shot(fc, tmp_path)
+    before = play(scene, hair, out, range(1, 7), [box])
+    hair.location.y += 0.05
+    scene.frame_set(3)
+    outdated(hair, "source hair 'Fur' changed")
+    scene.frame_set(1)
+    got = play(scene, hair, out, range(1, 7), [box])
+    world = fc.frame.inputs.read_inputs(
+        fc.Setup(hair, scene, bpy.context.evaluated_depsgraph_get())).world()
+    M = np.array(out.matrix_world, np.float32)
+    shown = got[6] @ M[:3, :3].T + M[:3, 3]
+    roots = offsets_of(hair)[:-1]
+    assert np.allclose(shown[roots], world[roots], atol=1e-6)  # (roots never move)
+    assert not np.allclose(shown[roots], before[6][roots] @ M[:3, :3].T + M[:3, 3] - [0, 0.05, 0])
+    fc.store.registry.clear_runtime(hair)
+    scene.frame_set(1)
+    same(play(scene, hair, out, range(1, 7), [box]), got)
+
+
+def test_world_positions_are_kept_only_for_the_same_source(fc):
+    """FrameInputs.world: a source read again with the same own positions, offsets and
+    matrix gets a copy of the world positions computed before (the same bits, never the
+    array another frame may have written in); other positions or another matrix are
+    transformed afresh."""
+    inputs = fc.frame.inputs
+    rng = np.random.default_rng(7)
+    P = rng.normal(size=(40, 3)).astype(np.float32)
+    offs = np.arange(0, 41, 4, dtype=np.int32)
+    M = np.eye(4)
+    M[:3, 3] = (0.5, -1.0, 2.0)
+    M[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    state = inputs.InputState()
+
+    def world(P, M):
+        return inputs.FrameInputs(None, offs, source_local=P, source_matrix=M,
+                                  state=state).world()
+
+    first = world(P, M)
+    assert first.tobytes() == fc.blender.bridge.transform(P, M).tobytes()
+    again = world(P.copy(), M.copy())
+    assert again.tobytes() == first.tobytes() and again is not first
+    again[:] = 0  # (a frame writing into its input never changes the next one's)
+    assert world(P, M).tobytes() == first.tobytes()
+    moved = M.copy()
+    moved[1, 3] += 1e-3
+    assert np.array_equal(world(P, moved), fc.blender.bridge.transform(P, moved))
+    P2 = P.copy()
+    P2[5, 2] += np.float32(0.25)
+    assert np.array_equal(world(P2, M), fc.blender.bridge.transform(P2, M))
+
+
 def test_renaming_or_a_new_list_order_never_counts(fc, tmp_path):
     scene, hair, box, out = shot(fc, tmp_path)
     ref = play(scene, hair, out, range(1, 9), [box])

@@ -49,6 +49,35 @@ def test_output_in_the_source_space_keeps_untouched_curves_exact(fc):
     assert np.allclose(got[changed], want, atol=1e-5)
 
 
+def test_a_cached_frame_is_written_from_the_source_without_its_world_positions(
+        fc, monkeypatch):
+    """Scrubbing back to a cached frame writes bit for bit what playing it wrote, and
+    transforms only the points the solver moved (into the output's space): never every
+    point of the source to world space and back."""
+    hair, out = _turned_setup(fc)
+    scene = bpy.context.scene
+    fc.store.registry.clear_runtime(hair)
+    played = {}
+    for f in range(1, 7):
+        scene.frame_set(f)
+        played[f] = fc.positions(out).copy()
+    sizes = []
+    real = fc.blender.bridge.transform
+
+    def spy(P, M):
+        sizes.append(len(P))
+        return real(P, M)
+
+    monkeypatch.setattr(fc.blender.bridge, "transform", spy)
+    for f in (3, 5, 2, 6):
+        sizes.clear()
+        scene.frame_set(f)
+        assert fc.store.report.stats_for(hair).get("source") == "cache", f
+        assert fc.positions(out).tobytes() == played[f].tobytes(), f
+        moved = int(fc.cache.rows_differ(played[f], fc.positions(hair)).sum())
+        assert sum(sizes) <= moved < len(played[f]), (f, sizes, moved)
+
+
 def test_moved_output_gets_every_point_transformed(fc):
     hair, out = _turned_setup(fc)
     out.location = (2.0, 0.0, 0.0)  # the artist moves the output away
