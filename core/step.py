@@ -111,6 +111,14 @@ class StepContext:
         self.eps_abs = tol.RAY_EXTEND_ULPS * (
             float(np.finfo(np.float32).eps) * size + float(np.finfo(points.dtype).eps) * mag
         )
+        # What the curves can reach (each root grown by its curve's length): a
+        # deforming collider builds only its triangles near it (Collider.set_reach),
+        # set before any build of this step starts.
+        if any(c.builds_reach for c, _ in cols):
+            r = self.roots.T
+            reach = (r - self.curve_len).min(axis=1), (r + self.curve_len).max(axis=1)
+            for c, _ in cols:
+                c.set_reach(*reach)
         # Candidate curves per collider: the ball a curve can sweep about its
         # root (any rotation, scale <= 1) meets the collider's bounds, then
         # comes near one of its vertices (Collider.near_surface).
