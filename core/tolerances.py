@@ -282,7 +282,7 @@ NEST_MAX_PARTS = 64
 #: curves can reach. Its shell's triangles are cut, once per topology, into runs of
 #: this many consecutive faces (one Embree geometry each, prepared once); a frame
 #: builds the runs whose box meets the reach.
-REACH_CHUNK_FACES = 4096
+REACH_CHUNK_FACES = 1024
 #: A reachable part is built only when it leaves out at least this fraction of the
 #: shell's triangles (else the whole shell is, as for any collider).
 REACH_MIN_SAVING = 0.25

@@ -57,20 +57,37 @@ class Reach:
 
 @dataclass(frozen=True)
 class Chunks:
-    """A shell layout's triangles cut into runs of consecutive faces
-    (``tol.REACH_CHUNK_FACES``), each ready to be built alone: ``starts`` (r+1,)
-    the runs' first faces; per run its vertices ``verts`` (indices into the
-    layout's vertices), its faces on them ``faces`` and their
-    :func:`core.rays.triangle_rows` ``rows`` (None with the numpy backend);
+    """A shell layout's triangles cut into runs (``tol.REACH_CHUNK_FACES`` each),
+    each ready to be built alone: ``order`` (k,) the shell's triangles in run order
+    and ``starts`` (r+1,) where each run starts in it; per run its vertices
+    ``verts`` (indices into the layout's vertices), its faces on them ``faces`` and
+    their :func:`core.rays.triangle_rows` ``rows`` (None with the numpy backend);
     ``vstarts`` (r+1,) where each run's vertices start in ``allverts``, the
     concatenation of ``verts`` (the runs' boxes in one pass)."""
 
+    order: np.ndarray
     starts: np.ndarray
     verts: list
     faces: list
     rows: list
     allverts: np.ndarray
     vstarts: np.ndarray
+
+
+def spatial_rank(V, F) -> np.ndarray:
+    """(m,) int64: each face's place in a Z-order (Morton) walk over the centroids of
+    ``V`` (n, 3), ``F`` (m, 3), 10 bits per axis of their bounds: faces near in the
+    ranking are near in space (ties keep the faces' order)."""
+    c = np.asarray(V, np.float64)[F].mean(axis=1)
+    lo, hi = c.min(axis=0), c.max(axis=0)
+    q = ((c - lo) / np.where(hi > lo, hi - lo, 1.0) * 1023.0).astype(np.uint64)
+    code = np.zeros(len(F), np.uint64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    rank = np.empty(len(F), np.int64)
+    rank[np.argsort(code, kind="stable")] = np.arange(len(F))
+    return rank
 
 
 class Shells:
@@ -213,7 +230,7 @@ class Shells:
         F = np.concatenate(blocks_F)
         real, flip = np.concatenate(real), np.concatenate(flip)
         single = len(blocks_F) == 1
-        part = None if reach is None else self._part(V, F, reach)
+        part = None if reach is None else self._part(V, F, real, reach)
         aliases = []
         if part is None:
             if reach is not None:  # (the part would be about all of it: the whole shell,
@@ -227,7 +244,7 @@ class Shells:
             backend = make_backend(self.backend_name, V, F, rows=self.rows(F))
         else:
             chunks, runs, cover = part
-            tri = np.concatenate([np.arange(chunks.starts[r], chunks.starts[r + 1])
+            tri = np.concatenate([chunks.order[chunks.starts[r]:chunks.starts[r + 1]]
                                   for r in runs])
             faces = ShellFaces(real[tri], flip[tri], single, cover=cover)
             backend = make_parts_backend(self.backend_name, [
@@ -241,13 +258,13 @@ class Shells:
         self.built += [(k, backend, faces) for k in [key, *aliases]]
         return backend, faces
 
-    def _part(self, V, F, reach):
+    def _part(self, V, F, real, reach):
         """``(Chunks, runs, cover)``: the runs of the shell ``V``, ``F`` whose box meets
         ``reach`` (:class:`Reach`), and the box every triangle meeting it is among
         them (the reach's, unbounded on the sides where it holds the whole shell); or
         None when they would leave out too little of it (``tol.REACH_MIN_SAVING``:
         then the whole shell is built)."""
-        chunks = self.chunks(F)
+        chunks = self.chunks(F, real)
         Vc = V[chunks.allverts]
         lo = np.minimum.reduceat(Vc, chunks.vstarts[:-1], axis=0)
         hi = np.maximum.reduceat(Vc, chunks.vstarts[:-1], axis=0)
@@ -263,23 +280,35 @@ class Shells:
                  np.where(reach.hi >= hi.max(axis=0), np.inf, reach.hi))
         return chunks, runs, cover
 
-    def chunks(self, F):
-        """The :class:`Chunks` of the shell faces ``F`` (a topology property: cut
-        once per layout, reused by every build of a reachable part)."""
+    def chunks(self, F, real):
+        """The :class:`Chunks` of the shell faces ``F`` (``real``: the collider face
+        of each; a topology property: cut once per layout, reused by every build of
+        a reachable part).
+
+        The runs follow the faces' order in space on the rest shape when the
+        collider has one (:func:`spatial_rank`: compact patches whatever the
+        mesh's face order), else the mesh's own face order (modelled meshes keep
+        neighbours near in it). Either is fixed by the collider as made, never by
+        the shapes seen since: what a frame builds depends on that frame only."""
         key = len(F)
         if key not in self._chunks:
             n = tol.REACH_CHUNK_FACES
+            if self.pose.rest is not None:
+                rank = spatial_rank(self.pose.rest, self.mesh.F)
+                order = np.argsort(rank[real], kind="stable")
+            else:
+                order = np.arange(len(F))
             starts = np.unique(np.r_[np.arange(0, len(F), n), len(F)]).astype(np.int64)
             verts, faces, rows = [], [], []
             for a, b in zip(starts[:-1], starts[1:], strict=True):
-                ids, local = np.unique(F[a:b], return_inverse=True)
+                ids, local = np.unique(F[order[a:b]], return_inverse=True)
                 local = local.reshape(-1, 3).astype(np.int64)
                 verts.append(ids)
                 faces.append(local)
                 rows.append(None if self.backend_name == "numpy" else triangle_rows(local))
             vstarts = np.cumsum([0] + [len(v) for v in verts]).astype(np.int64)
-            self._chunks[key] = Chunks(starts, verts, faces, rows, np.concatenate(verts),
-                                       vstarts)
+            self._chunks[key] = Chunks(order, starts, verts, faces, rows,
+                                       np.concatenate(verts), vstarts)
         return self._chunks[key]
 
     @staticmethod

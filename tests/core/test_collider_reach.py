@@ -94,6 +94,34 @@ def test_the_part_built_depends_on_the_frame_never_on_the_frames_before():
     assert ref[0][1].tobytes() == again[0][1].tobytes()
 
 
+def test_a_collider_given_its_rest_shape_cuts_its_runs_in_space():
+    """Faces listed in any order (here shuffled): given its rest shape, the runs are
+    cut along a walk in space over it, so the part near the fur stays small; the bits
+    are still the whole build's, and the same whatever frame the collider was made
+    at (the runs come from the rest shape, never from a shape seen)."""
+    V, F = _sheet()
+    F = F[np.random.default_rng(9).permutation(len(F))]
+    pts, offs = _fur()
+
+    def play(hint, made_at, frames=range(3, 5)):
+        col = Collider(_wave(V, made_at), F, deforming=hint, rest=V)
+        solver = Solver(offs, Settings(mode="bend"))
+        got = []
+        for f in frames:
+            col.vertices = _wave(V, f)
+            res = solver.step(pts, [col])
+            got.append(np.asarray(res.points).tobytes() + np.asarray(res.status).tobytes())
+        return got, col
+
+    part, col = play(True, 0)
+    again, _ = play(True, 4)
+    whole, ref = play(None, 0)
+    assert part == again == whole
+    _, _, faces = col.shells.built[-1]
+    _, _, all_faces = ref.shells.built[-1]
+    assert faces.cover is not None and len(faces.real) < 0.4 * len(all_faces.real)
+
+
 def test_a_segment_outside_the_reach_gets_the_whole_meshs_answer():
     """After a step set the reach near the fur, a query far from it (a script's, a
     distance check's) is traced against the whole shell, built then."""
