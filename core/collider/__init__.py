@@ -453,13 +453,19 @@ class Collider:
         never of the frames before: the same input gives the same bits. The only
         difference from the whole shell: which of two triangles a segment meets at
         exactly the same point is reported may differ (another BVH).
-        The solver sets it at the start of each step; other queries use the last
-        one set.
+        The solver sets it at the start of each step and passes what this returns
+        with its own segments (``reach=``: theirs by construction, so unchecked);
+        other queries use the last one set, checked.
+
+        Returns
+        -------
+        Reach or None
+            What was set (None: shells are built whole).
         """
         shells = self.shells
         if lo_wo is None or not self.builds_reach or self.empty:
             shells.reach = None
-            return
+            return None
         A, b = self.local_map()
         lo_wo, hi_wo = np.asarray(lo_wo, np.float64), np.asarray(hi_wo, np.float64)
         c = A @ (0.5 * (lo_wo + hi_wo)) + b
@@ -476,6 +482,7 @@ class Collider:
         key = ("reach", *i_lo.tolist(), *i_hi.tolist())
         if shells.reach is None or shells.reach.key != key:
             shells.reach = Reach(key, base + i_lo * cell, base + i_hi * cell)
+        return shells.reach
 
     def prefetch(self, offset_wo: float, threads: int):
         """Start building the BVH that queries at ``offset_wo`` need on a ray
@@ -542,13 +549,16 @@ class Collider:
             return np.zeros(len(o_wo), bool)
         return self.segment_hits_local(*self.pose.to_local(o_wo, d_wo), offset_wo, threads)
 
-    def segment_hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1) -> np.ndarray:
-        """:meth:`segment_hits` for segments already in the collider's space."""
+    def segment_hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1,
+                           reach=None) -> np.ndarray:
+        """:meth:`segment_hits` for segments already in the collider's space
+        (``reach``: the reach a solver step set, for its own segments: see
+        :meth:`set_reach`)."""
         if self.empty or len(o_lo) == 0:
             return np.zeros(len(o_lo), bool)
-        return self.shells.hits_local(o_lo, d_lo, offset_wo, threads)
+        return self.shells.hits_local(o_lo, d_lo, offset_wo, threads, reach)
 
-    def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0, faces=False):
+    def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0, faces=False, reach=None):
         """First hit of each segment: parameter, point and unit normal.
 
         Returns
@@ -567,7 +577,7 @@ class Collider:
         if self.empty or k == 0:
             out = np.zeros(k, bool), np.full(k, np.inf), np.zeros((k, 3))
             return (*out, np.full(k, -1, np.int64)) if faces else out
-        return self.shells.hit_details(o_wo, d_wo, offset_wo, faces)
+        return self.shells.hit_details(o_wo, d_wo, offset_wo, faces, reach)
 
     def contains(self, p_wo, offset_wo=0.0) -> np.ndarray:
         """Parity inside test (paper 3.1): more back faces than front faces.

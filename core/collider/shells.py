@@ -74,6 +74,11 @@ class Chunks:
     vstarts: np.ndarray
 
 
+#: Check the segments of solver steps against the reach they set too (and raise when
+#: one leaves it): the tests turn it on; off, they are trusted (see ``Shells.for_rays``).
+AUDIT = False
+
+
 def spatial_rank(V, F) -> np.ndarray:
     """(m,) int64: each face's place in a Z-order (Morton) walk over the centroids of
     ``V`` (n, 3), ``F`` (m, 3), 10 bits per axis of their bounds: faces near in the
@@ -149,27 +154,35 @@ class Shells:
             key = memo[2][offset_wo] = (version, float(f"{offset_wo:.9g}"), q)
         return key
 
-    def backend(self, offset_wo: float, whole: bool = False):
+    def backend(self, offset_wo: float, whole: bool = False, reach=None):
         """``(ray backend, ShellFaces)`` of the shell at ``offset_wo`` (built when
         missing): of its part within :attr:`reach` when one is set and leaves out
         enough triangles (``tol.REACH_MIN_SAVING``), else (or ``whole``) of all of
-        it. A few shells are kept (several solvers may share one collider with
-        different offsets, per-curve clearances use up to ``tol.OFFSET_LEVELS``),
-        newest last."""
+        it; ``reach`` instead of :attr:`reach` (the one a solver step set, whatever
+        another set since). A few shells are kept (several solvers may share one
+        collider with different offsets, per-curve clearances use up to
+        ``tol.OFFSET_LEVELS``), newest last."""
         with self.lock:
-            return self._backend_locked(offset_wo, whole)
+            return self._backend_locked(offset_wo, whole, reach)
 
-    def for_rays(self, offset_wo, o_lo, d_lo, tmax):
+    def for_rays(self, offset_wo, o_lo, d_lo, tmax, reach=None):
         """:meth:`backend` for the segments ``o_lo + t d_lo``, ``t`` in [0, ``tmax``]
         (local space): the whole shell when one leaves a reachable part's cover (a
-        query the reach did not foresee: the same answers, more work)."""
-        be, faces = self.backend(offset_wo)
-        if faces.cover is None or not len(o_lo):
+        query the reach did not foresee: the same answers, more work).
+
+        ``reach``: the :class:`Reach` the solver step asking set (its segments are
+        its curves', within it by construction): that part, unchecked (the check
+        costs about what the rays do); checked, and an escape raised, under
+        :data:`AUDIT` (the tests)."""
+        be, faces = self.backend(offset_wo, reach=reach)
+        if faces.cover is None or not len(o_lo) or (reach is not None and not AUDIT):
             return be, faces
         lo, hi = faces.cover
         end = o_lo + tmax * d_lo
         inside = (np.minimum(o_lo, end).min(axis=0) >= lo).all() and (
             np.maximum(o_lo, end).max(axis=0) <= hi).all()
+        if not inside and reach is not None:
+            raise AssertionError("a solver step's segment left the reach it set")
         return (be, faces) if inside else self.backend(offset_wo, whole=True)
 
     def prefetch(self, offset_wo: float, threads: int):
@@ -191,8 +204,9 @@ class Shells:
         reach = self.reach if reach is None else reach
         return key if whole or reach is None else key + (reach.key,)
 
-    def _backend_locked(self, offset_wo: float, whole: bool = False):
-        reach = None if whole else self.reach  # (read once: a solver may set another)
+    def _backend_locked(self, offset_wo: float, whole: bool = False, reach=None):
+        # (read once: a solver may set another)
+        reach = None if whole else (self.reach if reach is None else reach)
         key = self.part_key(offset_wo, reach is None, reach)
         for k, be, faces in self.built:
             if k == key:
@@ -368,18 +382,19 @@ class Shells:
         return apply(Sinv, vn * stretch[:, None])
 
     # ------------------------------------------------------------- queries
-    def hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1) -> np.ndarray:
+    def hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1, reach=None) -> np.ndarray:
         """Which segments ``o + t d``, ``t`` in [0, 1], already in the local space,
-        hit the shell at ``offset_wo``: (k,) bool."""
-        be, _ = self.for_rays(offset_wo, o_lo, d_lo, 1.0 + tol.T_SLACK)
+        hit the shell at ``offset_wo``: (k,) bool (``reach``: see :meth:`for_rays`)."""
+        be, _ = self.for_rays(offset_wo, o_lo, d_lo, 1.0 + tol.T_SLACK, reach)
         return be.any_hit(o_lo, d_lo, 1.0 + tol.T_SLACK, threads)
 
-    def hit_details(self, o_wo, d_wo, offset_wo=0.0, faces=False):
+    def hit_details(self, o_wo, d_wo, offset_wo=0.0, faces=False, reach=None):
         """First hit of each segment: ``(hit, t, n_wo[, face])``, see
-        ``Collider.segment_hit_details`` (segments given in world space)."""
+        ``Collider.segment_hit_details`` (segments given in world space; ``reach``:
+        see :meth:`for_rays`)."""
         k = len(o_wo)
         o_lo, d_lo = self.pose.to_local(o_wo, d_wo)
-        be, shell = self.for_rays(offset_wo, o_lo, d_lo, 1.0 + tol.T_SLACK)
+        be, shell = self.for_rays(offset_wo, o_lo, d_lo, 1.0 + tol.T_SLACK, reach)
         prim, t = be.hit_details(o_lo, d_lo, 1.0 + tol.T_SLACK)
         hit = prim >= 0
         t = np.where(hit, np.minimum(t, 1.0), np.inf)  # (a hit in the slack: at the end)
