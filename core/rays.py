@@ -231,17 +231,38 @@ class EmbreeBackend:
 
     name = "embree"
 
-    def __init__(self, V, F, rows=None):
+    def __init__(self, V, F, rows=None, parts=None):
         if _EMBREE_ERROR is not None:
             raise BackendUnavailable(embree_error())
-        V = np.ascontiguousarray(V, dtype=np.float32)
-        self._scene = _rs.EmbreeScene()
-        if rows is None or len(rows) != len(F) or not self._build_fast(V, F, rows):
-            _mc.TriangleMesh(self._scene, V, np.ascontiguousarray(F, dtype=np.int32))
+        self._starts = None  # first triangle of each geometry (parts only)
+        if parts is not None:
+            self._build_parts(parts)
+        else:
+            V = np.ascontiguousarray(V, dtype=np.float32)
+            self._scene = _rs.EmbreeScene()
+            if rows is None or len(rows) != len(F) or not self._build_fast(V, F, rows):
+                _mc.TriangleMesh(self._scene, V, np.ascontiguousarray(F, dtype=np.int32))
         # Commit now (Embree commits lazily on the first query) so that the
         # threads of a split batch never race to commit the same scene.
         one = np.zeros((1, 3), np.float32)
         self._scene.run(one, one + np.float32(1.0), dists=np.ones(1, np.float32))
+
+    def _build_parts(self, parts):
+        """One Embree geometry per part ``(V, F, rows)`` (see :func:`make_parts_backend`):
+        each the fast way (:func:`triangle_rows`), else every part from plain arrays."""
+        self._starts = np.cumsum([0] + [len(F) for _, F, _ in parts[:-1]]).astype(np.int64)
+        self._scene = _rs.EmbreeScene()
+        try:
+            for V, _, rows in parts:
+                _mc.TriangleMesh(self._scene, np.asarray(V, np.float32).astype(object), rows)
+            fast = self._probe(np.asarray(parts[0][0], np.float32), parts[0][1])
+        except Exception:  # noqa: BLE001 - a refusal only means: build the slow way
+            fast = False
+        if not fast:
+            self._scene = _rs.EmbreeScene()
+            for V, F, _ in parts:
+                _mc.TriangleMesh(self._scene, np.ascontiguousarray(V, dtype=np.float32),
+                                 np.ascontiguousarray(F, dtype=np.int32))
 
     def _build_fast(self, V, F, rows) -> bool:
         """``TriangleMesh`` fed Python objects (see :func:`triangle_rows`).
@@ -358,6 +379,9 @@ class EmbreeBackend:
         tmax = np.ascontiguousarray(np.broadcast_to(tmax, (k,)), dtype=np.float32)
         r = self._scene.run(o, d, dists=tmax, query="INTERSECT", output=1)
         prim = np.asarray(r["primID"], dtype=np.int32)
+        if self._starts is not None:  # (parts: the index in the parts' order)
+            hit = prim >= 0
+            prim[hit] += self._starts[np.asarray(r["geomID"])[hit]].astype(np.int32)
         t = np.where(prim >= 0, np.asarray(r["tfar"], dtype=np.float64), np.inf)
         if normals:
             return prim, t, np.asarray(r["Ng"])
@@ -430,6 +454,27 @@ class NumpyBackend:
 
     def any_hit(self, o, d, tmax, threads: int = 1):
         return self.first_hit(o, d, tmax) >= 0
+
+
+def make_parts_backend(name: str | None, parts):
+    """A backend over the triangles of several ``parts`` (a non-empty list of ``(V,
+    F, rows)``: each its own vertices (k, 3), triangles indexing them and their
+    :func:`triangle_rows`), answering as one mesh of them in that order: triangle
+    ``i`` of part ``j`` is triangle ``sum(len(F) of the parts before j) + i``.
+
+    With embree each part is one geometry built from its prepared rows, so a mesh
+    cut into parts once can have any subset of them built without preparing rows
+    again (``Shells``' reachable parts).
+    """
+    if name in (None, "embree"):
+        return EmbreeBackend(None, None, parts=parts)
+    if name == "numpy":
+        base = np.cumsum([0] + [len(V) for V, _, _ in parts[:-1]])
+        V = np.concatenate([np.asarray(V, np.float64) for V, _, _ in parts])
+        F = np.concatenate([np.asarray(F, np.int64) + b for (_, F, _), b in zip(parts, base,
+                                                                              strict=True)])
+        return NumpyBackend(V, F)
+    raise ValueError(f"unknown ray backend {name!r}; use 'embree' or 'numpy'")
 
 
 def make_backend(name: str | None, V, F, rows=None):

@@ -789,11 +789,13 @@ class RigidBatch:
             o += root_lo[items][rep]
             rays = mi[rep]
             if rays.all():
-                h = c.segment_hits_local(o - back * d, d * grow, off, ctx.threads)
+                h = c.segment_hits_local(o - back * d, d * grow, off, ctx.threads,
+                                         ctx.reaches.get(id(c)))
             else:
                 w = np.flatnonzero(rays)
                 h = np.zeros_like(rays)
-                h[w] = c.segment_hits_local(o[w] - back[w] * d[w], d[w] * grow[w], off, ctx.threads)
+                h[w] = c.segment_hits_local(o[w] - back[w] * d[w], d[w] * grow[w], off,
+                                            ctx.threads, ctx.reaches.get(id(c)))
             ctx.n_rays += int(rays.sum())
             hit |= np.logical_or.reduceat(h, first)
         return hit
@@ -838,7 +840,8 @@ class RigidBatch:
                     else:
                         oo, dd = o32[s0:s1, rest], d32[s0:s1, rest]
                     hi = c.segment_hits_local(oo.reshape(-1, 3), dd.reshape(-1, 3), off,
-                                              threads).reshape(s1 - s0, len(rest)).any(axis=0)
+                                              threads, ctx.reaches.get(id(c))).reshape(
+                                                  s1 - s0, len(rest)).any(axis=0)
                     n_rays += (s1 - s0) * len(rest)
                     h[rest[hi]] = True
                     rest = rest[~hi]

@@ -336,7 +336,8 @@ class _SegmentTurn:
             o = o_lo.take(it, axis=1)
             o -= back[w] * d
             d *= grow[w]
-            hit[w] |= c.segment_hits_local(rot.rows32(o), rot.rows32(d), off, ctx.threads)
+            hit[w] |= c.segment_hits_local(rot.rows32(o), rot.rows32(d), off, ctx.threads,
+                                           ctx.reaches.get(id(c)))
             ctx.n_rays += len(w)
         return ~hit
 

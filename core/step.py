@@ -111,6 +111,15 @@ class StepContext:
         self.eps_abs = tol.RAY_EXTEND_ULPS * (
             float(np.finfo(np.float32).eps) * size + float(np.finfo(points.dtype).eps) * mag
         )
+        # What the curves can reach (each root grown by its curve's length): a
+        # deforming collider builds only its triangles near it (Collider.set_reach),
+        # set before any build of this step starts.
+        self.reaches = {}  # id(collider) -> the Reach set (its own queries pass it)
+        if any(c.builds_reach for c, _ in cols):
+            r = self.roots.T
+            reach = (r - self.curve_len).min(axis=1), (r + self.curve_len).max(axis=1)
+            for c, _ in cols:
+                self.reaches[id(c)] = c.set_reach(*reach)
         # Candidate curves per collider: the ball a curve can sweep about its
         # root (any rotation, scale <= 1) meets the collider's bounds, then
         # comes near one of its vertices (Collider.near_surface).
@@ -532,7 +541,8 @@ class StepContext:
             for i in range(3):
                 o_lo[i] += b[i]
             d_lo = rot.apply_soa(A, dw)
-            h = c.segment_hits_local(rot.rows32(o_lo), rot.rows32(d_lo), off, self.threads)
+            h = c.segment_hits_local(rot.rows32(o_lo), rot.rows32(d_lo), off, self.threads,
+                                     self.reaches.get(id(c)))
             self.n_rays += h.size
             hit[w] |= h.reshape(ns, len(w)).any(axis=0)
         return hit
@@ -585,9 +595,11 @@ class StepContext:
             if len(m) == 0:
                 continue
             if motion:
-                h, t, nrm, face = c.segment_hit_details(o[m], d[m], off, faces=True)
+                h, t, nrm, face = c.segment_hit_details(o[m], d[m], off, faces=True,
+                                                        reach=self.reaches.get(id(c)))
             else:
-                h, t, nrm = c.segment_hit_details(o[m], d[m], off)
+                h, t, nrm = c.segment_hit_details(o[m], d[m], off,
+                                                  reach=self.reaches.get(id(c)))
             better = h & (t < best_t[m])
             mm = m[better]
             best_t[mm] = t[better]
@@ -841,7 +853,8 @@ class StepContext:
             for i in range(3):
                 o_lo[i] += b[i]
             d_lo = rot.apply_soa(A, d)
-            h = c.segment_hits_local(rot.rows32(o_lo), rot.rows32(d_lo), off, self.threads)
+            h = c.segment_hits_local(rot.rows32(o_lo), rot.rows32(d_lo), off, self.threads,
+                                     self.reaches.get(id(c)))
             seg_hit[:, w] |= h.reshape(ns, len(w))
         return seg_hit.any(axis=0), seg_hit.T.ravel()
 

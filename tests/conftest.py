@@ -1,11 +1,24 @@
 """Shared by every test folder: the hypothesis profiles (``hypothesis_profiles.py``:
-``ci`` by default, ``thorough`` with ``--hypothesis-profile=thorough``), and the test
-order of ``make mutate``."""
+``ci`` by default, ``thorough`` with ``--hypothesis-profile=thorough``), the test
+order of ``make mutate``, and the reach audit of the core's solver steps."""
 
 import json
 import os
 
 import hypothesis_profiles  # noqa: F401  (registers and loads the profiles)
+import pytest
+
+
+@pytest.fixture(autouse=True)
+def _solver_segments_stay_within_their_reach(monkeypatch):
+    """Every segment a solver step traces against a reachable part is checked to lie
+    within the reach the step set (``core.collider.shells.AUDIT``; unchecked in use,
+    where the check would cost what the rays do): a step that leaves it fails."""
+    try:
+        from core.collider import shells
+    except ImportError:  # (a lane without the core on its path)
+        return
+    monkeypatch.setattr(shells, "AUDIT", True)
 
 
 def pytest_collection_modifyitems(config, items):

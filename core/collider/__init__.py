@@ -36,7 +36,7 @@ from .grid import Occupancy
 from .inside import Closest, Inside
 from .mesh import ColliderMesh
 from .pose import Placement, Pose
-from .shells import ShellFaces, Shells
+from .shells import Reach, ShellFaces, Shells
 
 __all__ = ["Collider", "Placement", "ShellFaces", "clearance_levels"]
 
@@ -430,6 +430,60 @@ class Collider:
         """BVHs built so far (every shell, every shape)."""
         return self.shells.build_count
 
+    @property
+    def builds_reach(self) -> bool:
+        """Does this collider build only what the curves can reach
+        (:meth:`set_reach`)? A deforming one (the ``deforming`` hint) without an
+        inside test (open, or double-sided), not placed by a rigid fit (its rest
+        shape's shells are built once, whole)."""
+        return bool(self.deforming) and not self.detects_pinch and not self.pose.allowance
+
+    def set_reach(self, lo_wo=None, hi_wo=None):
+        """What the curves of a solver step can reach: the world box ``lo_wo``,
+        ``hi_wo`` (3,) (the roots grown by their curves' lengths), or None.
+
+        A collider that :attr:`builds_reach` then builds, for the shape it has, only
+        the runs of its triangles (``tol.REACH_CHUNK_FACES`` consecutive faces each)
+        whose box meets that box, rounded out to ``1 / tol.REACH_GRID`` of the
+        collider's size (``tol.REACH_GROW_REL`` grown first): a shirt or a body
+        much larger than the fur on it builds about the part near the fur. Every
+        triangle that meets the box is in that part, so a segment inside it gets
+        the answers of the whole mesh; one leaving it is traced against the whole
+        shell (built then). What is built is a function of the shape and the box,
+        never of the frames before: the same input gives the same bits. The only
+        difference from the whole shell: which of two triangles a segment meets at
+        exactly the same point is reported may differ (another BVH).
+        The solver sets it at the start of each step and passes what this returns
+        with its own segments (``reach=``: theirs by construction, so unchecked);
+        other queries use the last one set, checked.
+
+        Returns
+        -------
+        Reach or None
+            What was set (None: shells are built whole).
+        """
+        shells = self.shells
+        if lo_wo is None or not self.builds_reach or self.empty:
+            shells.reach = None
+            return None
+        A, b = self.local_map()
+        lo_wo, hi_wo = np.asarray(lo_wo, np.float64), np.asarray(hi_wo, np.float64)
+        c = A @ (0.5 * (lo_wo + hi_wo)) + b
+        h = np.abs(A) @ (0.5 * (hi_wo - lo_wo))
+        h = h + tol.REACH_GROW_REL * float(np.linalg.norm(h)) + 1e-9
+        lo, hi = self.mesh.bounds()
+        base = lo - self.mesh.center
+        size = hi - lo
+        cell = (float(size.max()) or 1.0) / tol.REACH_GRID  # (cubes: a thin sheet too)
+        # (one cell beyond the mesh on a side stands for any farther: the same part)
+        last = np.ceil(size / cell) + 1
+        i_lo = np.clip(np.floor((c - h - base) / cell), -1, last).astype(np.int64)
+        i_hi = np.clip(np.ceil((c + h - base) / cell), -1, last).astype(np.int64)
+        key = ("reach", *i_lo.tolist(), *i_hi.tolist())
+        if shells.reach is None or shells.reach.key != key:
+            shells.reach = Reach(key, base + i_lo * cell, base + i_hi * cell)
+        return shells.reach
+
     def prefetch(self, offset_wo: float, threads: int):
         """Start building the BVH that queries at ``offset_wo`` need on a ray
         thread, when the vertices or the offset changed.
@@ -495,13 +549,16 @@ class Collider:
             return np.zeros(len(o_wo), bool)
         return self.segment_hits_local(*self.pose.to_local(o_wo, d_wo), offset_wo, threads)
 
-    def segment_hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1) -> np.ndarray:
-        """:meth:`segment_hits` for segments already in the collider's space."""
+    def segment_hits_local(self, o_lo, d_lo, offset_wo=0.0, threads=1,
+                           reach=None) -> np.ndarray:
+        """:meth:`segment_hits` for segments already in the collider's space
+        (``reach``: the reach a solver step set, for its own segments: see
+        :meth:`set_reach`)."""
         if self.empty or len(o_lo) == 0:
             return np.zeros(len(o_lo), bool)
-        return self.shells.hits_local(o_lo, d_lo, offset_wo, threads)
+        return self.shells.hits_local(o_lo, d_lo, offset_wo, threads, reach)
 
-    def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0, faces=False):
+    def segment_hit_details(self, o_wo, d_wo, offset_wo=0.0, faces=False, reach=None):
         """First hit of each segment: parameter, point and unit normal.
 
         Returns
@@ -520,7 +577,7 @@ class Collider:
         if self.empty or k == 0:
             out = np.zeros(k, bool), np.full(k, np.inf), np.zeros((k, 3))
             return (*out, np.full(k, -1, np.int64)) if faces else out
-        return self.shells.hit_details(o_wo, d_wo, offset_wo, faces)
+        return self.shells.hit_details(o_wo, d_wo, offset_wo, faces, reach)
 
     def contains(self, p_wo, offset_wo=0.0) -> np.ndarray:
         """Parity inside test (paper 3.1): more back faces than front faces.

@@ -192,7 +192,7 @@ class Inside:
         """
         mesh = self.mesh
         k = len(p_wo)
-        be, _ = self.shells.backend(offset_wo)
+        be, _ = self.shells.backend(offset_wo, whole=True)
         p_lo = self.pose.to_local(np.asarray(p_wo), np.zeros((k, 3)))[0]  # (float64)
         lo, hi = mesh.bounds()
         diag = float(np.linalg.norm(hi - lo)) or 1.0

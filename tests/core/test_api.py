@@ -76,9 +76,9 @@ def test_the_ray_count_is_the_rays_traced(mode, ragged, monkeypatch):
     traced = []
     segment_hits_local = Collider.segment_hits_local
 
-    def spy(self, o, d, offset_wo=0.0, threads=1):
+    def spy(self, o, d, offset_wo=0.0, threads=1, reach=None):
         traced.append(len(o))
-        return segment_hits_local(self, o, d, offset_wo, threads)
+        return segment_hits_local(self, o, d, offset_wo, threads, reach)
 
     monkeypatch.setattr(Collider, "segment_hits_local", spy)
     roots = [(x, y) for x in np.linspace(-0.5, 0.5, 6) for y in np.linspace(-0.5, 0.5, 6)]

@@ -28,11 +28,11 @@ def _probe_tracing(monkeypatch):
     seen = []
     segment_hits_local = Collider.segment_hits_local
 
-    def spy(self, o, d, offset_wo=0.0, threads=1):
+    def spy(self, o, d, offset_wo=0.0, threads=1, reach=None):
         caller = sys._getframe(1)
         if caller.f_code.co_name == "part":  # rigid.RigidBatch's probe batches
             seen.append((caller.f_locals["a"], caller.f_locals["b"], threads))
-        return segment_hits_local(self, o, d, offset_wo, threads)
+        return segment_hits_local(self, o, d, offset_wo, threads, reach)
 
     monkeypatch.setattr(Collider, "segment_hits_local", spy)
     return seen
