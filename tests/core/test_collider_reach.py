@@ -21,8 +21,8 @@ from core import tolerances as tol
 from core.rays import make_backend, make_parts_backend, triangle_rows
 
 
-def _sheet(n=160, size=20.0):
-    """A 20 x 20 open sheet (51,200 triangles), far larger than the fur's patch."""
+def _sheet(n=100, size=20.0):
+    """A 20 x 20 open sheet (20,000 triangles), far larger than the fur's patch."""
     V, F = scenes.grid(size=size, n=n, z=0.3)
     return V.astype(np.float32), F
 
@@ -36,7 +36,7 @@ def _wave(V, f):
 
 def _fur():
     rng = np.random.default_rng(3)
-    return scenes.fur_on_plane(rng, n_curves=300, n_cvs=(3, 8), length=(0.4, 0.7),
+    return scenes.fur_on_plane(rng, n_curves=200, n_cvs=(3, 8), length=(0.4, 0.7),
                                extent=0.6, curly=0.2)
 
 
@@ -144,7 +144,7 @@ def test_a_shape_of_other_bounds_gets_its_own_reach_box():
     reach grid, change while the fur's reach rounds to the same cells): each frame's
     part is cut with that shape's box, the whole build's bits every frame (and,
     audited, every segment within it)."""
-    V, F = scenes.grid(size=4.0, n=160, z=0.3)
+    V, F = scenes.grid(size=4.0, n=80, z=0.3)
 
     def shape(f):
         W = V * np.array([1.0 + 0.06 * (f % 2), 1.0 + 0.06 * (f % 2), 1.0])
@@ -167,7 +167,7 @@ def test_an_offset_shell_standing_out_of_a_small_sheet_keeps_its_offset():
     """A Collision Offset larger than a cell of the reach grid (a leaf, an ear, a
     collar): the shells stand out of the mesh's bounds, and the part still holds every
     triangle of them the curves can reach (the whole build's bits), on both sides."""
-    V, F = scenes.grid(size=2.0, n=120, z=0.45)
+    V, F = scenes.grid(size=2.0, n=60, z=0.45)
     for double in (False, True):
         part, whole = _pair(V, F, range(3), lambda f: _wave(V.astype(np.float32), f),
                             Settings(mode="stiff", collision_offset=0.2), double=double)
