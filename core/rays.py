@@ -332,6 +332,8 @@ class EmbreeBackend:
         -------
         (k,) ndarray of int32
         """
+        if self._starts is not None and query == "INTERSECT":  # (parts: indices mapped)
+            return self.hit_details(o, d, tmax)[0]
         o = np.ascontiguousarray(o, dtype=np.float32)
         d = np.ascontiguousarray(d, dtype=np.float32)
         k = len(o)

@@ -114,12 +114,14 @@ class StepContext:
         # What the curves can reach (each root grown by its curve's length): a
         # deforming collider builds only its triangles near it (Collider.set_reach),
         # set before any build of this step starts.
+        # (every collider: one that builds no part this step forgets the last reach)
         self.reaches = {}  # id(collider) -> the Reach set (its own queries pass it)
+        reach = (None, None)
         if any(c.builds_reach for c, _ in cols):
             r = self.roots.T
             reach = (r - self.curve_len).min(axis=1), (r + self.curve_len).max(axis=1)
-            for c, _ in cols:
-                self.reaches[id(c)] = c.set_reach(*reach)
+        for c, _ in cols:
+            self.reaches[id(c)] = c.set_reach(*reach)
         # Candidate curves per collider: the ball a curve can sweep about its
         # root (any rotation, scale <= 1) meets the collider's bounds, then
         # comes near one of its vertices (Collider.near_surface).

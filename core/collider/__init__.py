@@ -475,13 +475,14 @@ class Collider:
         base = lo - self.mesh.center
         size = hi - lo
         cell = (float(size.max()) or 1.0) / tol.REACH_GRID  # (cubes: a thin sheet too)
-        # (one cell beyond the mesh on a side stands for any farther: the same part)
-        last = np.ceil(size / cell) + 1
-        i_lo = np.clip(np.floor((c - h - base) / cell), -1, last).astype(np.int64)
-        i_hi = np.clip(np.ceil((c + h - base) / cell), -1, last).astype(np.int64)
+        # (never clamped to the mesh: an offset shell stands out of it, and a reach
+        # that holds the whole shell on a side leaves that side open anyway)
+        i_lo = np.floor((c - h - base) / cell).astype(np.int64)
+        i_hi = np.ceil((c + h - base) / cell).astype(np.int64)
         key = ("reach", *i_lo.tolist(), *i_hi.tolist())
-        if shells.reach is None or shells.reach.key != key:
-            shells.reach = Reach(key, base + i_lo * cell, base + i_hi * cell)
+        # (always the box of this shape's grid: the same cells of another shape are
+        # another box; a build is keyed by the shape's version as well)
+        shells.reach = Reach(key, base + i_lo * cell, base + i_hi * cell)
         return shells.reach
 
     def prefetch(self, offset_wo: float, threads: int):

@@ -253,6 +253,7 @@ class Shells:
                 for k, be, faces in self.built:
                     if k == key:
                         self.built.append((aliases[0], be, faces))
+                        self.built = self.built[-(tol.OFFSET_LEVELS + 3):]
                         return be, faces
             faces = ShellFaces(real, flip, single)
             backend = make_backend(self.backend_name, V, F, rows=self.rows(F))
@@ -267,6 +268,7 @@ class Shells:
         # (room for every level of per-curve clearances, tol.OFFSET_LEVELS,
         # beside a few other offsets: several solvers may share a collider; a
         # fitted placement's shells beside the plain ones)
+        # (aliases: a reach whose part would be about all of it shares the whole shell)
         self.built = [b for b in self.built
                       if self._version_of(b[0]) == mesh.version][-(tol.OFFSET_LEVELS + 3):]
         self.built += [(k, backend, faces) for k in [key, *aliases]]

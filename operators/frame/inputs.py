@@ -95,13 +95,14 @@ class FrameInputs:
         the same (a static groom, grass: the same bits, a copy being cheaper than the
         product)."""
         if self.points is None and self.source_local is not None:
-            last = self.state.world if self.state is not None else None
+            # (at the origin the world positions are the source's own: nothing to keep)
+            keep = self.state is not None and not bridge.is_identity(self.source_matrix)
+            last = self.state.world if keep else None
             if last is not None and last[0] == self.source_digest():
                 self.points = last[1].copy()  # (a copy: whoever gets it may write in it)
             else:
                 self.points = bridge.transform(self.source_local, self.source_matrix)
-                if self.state is not None:
-                    # (a copy: the identity returns the source's own array)
+                if keep:
                     self.state.world = (self.source_digest(), self.points.copy())
             if self.raw is None:
                 self.raw = self.points

@@ -7,7 +7,9 @@ keeps; Blender's own C allocations are not in it) and the process's resident mem
 x 8 (``bench/bench_memory_blender.py`` measures that one):
 
 * Add keeps less than 120 bytes per point in Stiff mode (the solver state, its
-  curve layout, the output's colours and the last result: 102 measured). It kept 174
+  curve layout, the output's colours and the last result: 114 measured, the hair at
+  the origin; a moved hair object keeps its world positions too, 12 more, reused while
+  the source stands still: ``frame.inputs.InputState``). It kept 174
   before a fresh state's quaternions (Soft only) and the playback cache's baseline
   became one shared row each.
 * Once the cache is full, playback keeps memory flat: over 4 more sweeps of the ball

@@ -21,8 +21,8 @@ from core import tolerances as tol
 from core.rays import make_backend, make_parts_backend, triangle_rows
 
 
-def _sheet(n=160, size=20.0):
-    """A 20 x 20 open sheet (51,200 triangles), far larger than the fur's patch."""
+def _sheet(n=100, size=20.0):
+    """A 20 x 20 open sheet (20,000 triangles), far larger than the fur's patch."""
     V, F = scenes.grid(size=size, n=n, z=0.3)
     return V.astype(np.float32), F
 
@@ -36,7 +36,7 @@ def _wave(V, f):
 
 def _fur():
     rng = np.random.default_rng(3)
-    return scenes.fur_on_plane(rng, n_curves=300, n_cvs=(3, 8), length=(0.4, 0.7),
+    return scenes.fur_on_plane(rng, n_curves=200, n_cvs=(3, 8), length=(0.4, 0.7),
                                extent=0.6, curly=0.2)
 
 
@@ -122,6 +122,76 @@ def test_a_collider_given_its_rest_shape_cuts_its_runs_in_space():
     assert faces.cover is not None and len(faces.real) < 0.4 * len(all_faces.real)
 
 
+def _pair(V, F, frames, shape, settings, double=False, rest=None):
+    """(bits of a reachable-part collider, of the whole build) over ``frames``
+    (``shape(f)``: the vertices at frame ``f``)."""
+    pts, offs = _fur()
+    got = []
+    for hint in (True, None):
+        col = Collider(shape(frames[0]), F, double_sided=double, deforming=hint, rest=rest)
+        solver = Solver(offs, settings)
+        bits = []
+        for f in frames:
+            col.vertices = shape(f)
+            res = solver.step(pts, [col])
+            bits.append(np.asarray(res.points).tobytes() + np.asarray(res.status).tobytes())
+        got.append(bits)
+    return got
+
+
+def test_a_shape_of_other_bounds_gets_its_own_reach_box():
+    """The sheet growing and shrinking from frame to frame (its bounds, and so the
+    reach grid, change while the fur's reach rounds to the same cells): each frame's
+    part is cut with that shape's box, the whole build's bits every frame (and,
+    audited, every segment within it)."""
+    V, F = scenes.grid(size=4.0, n=80, z=0.3)
+
+    def shape(f):
+        W = V * np.array([1.0 + 0.06 * (f % 2), 1.0 + 0.06 * (f % 2), 1.0])
+        return _wave(W.astype(np.float32), f)
+
+    part, whole = _pair(V, F, range(4), shape, Settings(mode="bend"))
+    assert part == whole
+    # the box is that of the shape the collider has, whatever shape set it before
+    lo, hi = np.array([-1.33, -1.33, -0.5]), np.array([1.33, 1.33, 1.0])
+    col = Collider(shape(0), F, deforming=True)
+    col.set_reach(lo, hi)
+    col.vertices = shape(1)
+    got = col.set_reach(lo, hi)
+    fresh = Collider(shape(1), F, deforming=True).set_reach(lo, hi)
+    assert got.key == fresh.key
+    assert np.array_equal(got.lo, fresh.lo) and np.array_equal(got.hi, fresh.hi)
+
+
+def test_an_offset_shell_standing_out_of_a_small_sheet_keeps_its_offset():
+    """A Collision Offset larger than a cell of the reach grid (a leaf, an ear, a
+    collar): the shells stand out of the mesh's bounds, and the part still holds every
+    triangle of them the curves can reach (the whole build's bits), on both sides."""
+    V, F = scenes.grid(size=2.0, n=60, z=0.45)
+    for double in (False, True):
+        part, whole = _pair(V, F, range(3), lambda f: _wave(V.astype(np.float32), f),
+                            Settings(mode="stiff", collision_offset=0.2), double=double)
+        assert part == whole, double
+
+
+def test_a_collider_placed_by_its_rigid_fit_forgets_the_reach():
+    """A deforming collider whose shape one frame only moved rigidly from its rest
+    shape is placed by the fit (its rest shape's shells, built whole): the step
+    forgets the reach an earlier frame set, so nothing is built around a stale one."""
+    V, F = _sheet()
+    pts, offs = _fur()
+    col = Collider(_wave(V, 0), F, deforming=True, rest=V)
+    solver = Solver(offs, Settings(mode="bend"))
+    solver.step(pts, [col])
+    assert col.shells.reach is not None
+    M = scenes.affine(scenes.rotation_matrix([0, 0, 1], 0.05), t=(0.01, 0.0, 0.02))
+    col.vertices = (V @ M[:3, :3].T.astype(np.float32) + M[:3, 3].astype(np.float32))
+    solver.step(pts, [col])
+    assert col.pose.allowance > 0 and not col.builds_reach
+    assert col.shells.reach is None
+    assert all(faces.cover is None for _, _, faces in col.shells.built)
+
+
 def test_a_segment_outside_the_reach_gets_the_whole_meshs_answer():
     """After a step set the reach near the fur, a query far from it (a script's, a
     distance check's) is traced against the whole shell, built then."""
@@ -188,6 +258,7 @@ def test_parts_answer_as_one_mesh_in_their_order():
     want, wt = make_backend("numpy", V, F).hit_details(o, d, 1.0)
     for name in ("embree", "numpy"):
         prim, t = make_parts_backend(name, parts).hit_details(o, d, 1.0)
+        assert make_parts_backend(name, parts).first_hit(o, d, 1.0).tolist() == prim.tolist()
         hit = prim >= 0
         assert (hit == (want >= 0)).all(), name
         # (a ray through an edge may report either face: same point, same t)
