@@ -379,13 +379,10 @@ class MemoryCache:
         status : (C,) int8 ndarray
         stats : dict
         """
-        fr = self.frames[f]
+        rows, points, status, stats = self.get_moved(f, offsets)
         out = inp.astype(np.float32, copy=True)
-        if len(fr.curves):
-            out[curve_point_mask(offsets, fr.curves)] = fr.points
-        status = np.zeros(len(offsets) - 1, np.int8)
-        status[fr.status_idx] = fr.status_val
-        return out, status, fr.stats
+        out[rows] = points  # (the curves' other points are the input's bits)
+        return out, status, stats
 
     def get_moved(self, f, offsets):
         """Frame ``f`` as the rows that differ from its input, without the input

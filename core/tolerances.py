@@ -277,17 +277,18 @@ SIMILARITY_REL = 1e-5
 #: look for parts nested in others: every closed part faces outward.
 NEST_MAX_PARTS = 64
 
-#: Reachable-part builds (``Collider.reach``): a deforming collider without an inside
-#: test (open, or double-sided) builds, every frame, only the triangles near what the
-#: curves can reach. Its shell's triangles are cut, once per topology, into runs of
-#: this many consecutive faces (one Embree geometry each, prepared once); a frame
-#: builds the runs whose box meets the reach.
+#: Reachable-part builds (``Collider.set_reach``): a deforming collider without an
+#: inside test (open, or double-sided) builds, every frame, only the triangles near what
+#: the curves can reach. Its shell's triangles are cut, once per topology, into runs of
+#: this many triangles (along a walk in space over its rest shape, else in face order:
+#: ``Shells.chunks``; one Embree geometry each, prepared once); a frame builds the runs
+#: whose box meets the reach.
 REACH_CHUNK_FACES = 1024
 #: A reachable part is built only when it leaves out at least this fraction of the
 #: shell's triangles (else the whole shell is, as for any collider).
 REACH_MIN_SAVING = 0.25
 #: The reach (the curves' roots grown by their lengths) is rounded out to a grid of
-#: ``1 / REACH_GRID`` of the collider's size per axis, so the solvers of one frame
+#: cubes ``1 / REACH_GRID`` of the collider's largest side, so the solvers of one frame
 #: (guides, render groom) mostly ask for the same part and share its build.
 REACH_GRID = 16
 #: The reach is grown by this fraction of its size before rounding (room for the

@@ -443,9 +443,10 @@ class Collider:
         ``hi_wo`` (3,) (the roots grown by their curves' lengths), or None.
 
         A collider that :attr:`builds_reach` then builds, for the shape it has, only
-        the runs of its triangles (``tol.REACH_CHUNK_FACES`` consecutive faces each)
-        whose box meets that box, rounded out to ``1 / tol.REACH_GRID`` of the
-        collider's size (``tol.REACH_GROW_REL`` grown first): a shirt or a body
+        the runs of its shell's triangles (``tol.REACH_CHUNK_FACES`` each, cut once:
+        ``Shells.chunks``) whose box meets that box, rounded out to cubes of
+        ``1 / tol.REACH_GRID`` of the collider's largest side (``tol.REACH_GROW_REL``
+        grown first): a shirt or a body
         much larger than the fur on it builds about the part near the fur. Every
         triangle that meets the box is in that part, so a segment inside it gets
         the answers of the whole mesh; one leaving it is traced against the whole

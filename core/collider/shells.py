@@ -191,23 +191,22 @@ class Shells:
         Returns a callable that waits for it, or None when nothing was started."""
         if threads <= 1 or len(self.mesh.F) == 0:
             return None
-        key = self.part_key(offset_wo)
+        key = self.part_key(offset_wo, self.reach)
         if key == self._prefetching or any(b[0] == key for b in self.built):
             return None
         self._prefetching = key
         return beside(partial(self.backend, offset_wo), threads)
 
-    def part_key(self, offset_wo, whole=False, reach=None):
-        """:meth:`shell_key`, with the cells of ``reach`` (default :attr:`reach`)
-        when a part is asked for."""
+    def part_key(self, offset_wo, reach):
+        """:meth:`shell_key`, with the cells of ``reach`` (:class:`Reach`; None: the
+        whole shell)."""
         key = self.shell_key(offset_wo)
-        reach = self.reach if reach is None else reach
-        return key if whole or reach is None else key + (reach.key,)
+        return key if reach is None else key + (reach.key,)
 
     def _backend_locked(self, offset_wo: float, whole: bool = False, reach=None):
         # (read once: a solver may set another)
         reach = None if whole else (self.reach if reach is None else reach)
-        key = self.part_key(offset_wo, reach is None, reach)
+        key = self.part_key(offset_wo, reach)
         for k, be, faces in self.built:
             if k == key:
                 return be, faces
@@ -249,7 +248,7 @@ class Shells:
         if part is None:
             if reach is not None:  # (the part would be about all of it: the whole shell,
                 # shared with every other reach that finds the same)
-                aliases, key = [key], self.part_key(offset_wo, whole=True)
+                aliases, key = [key], self.part_key(offset_wo, None)
                 for k, be, faces in self.built:
                     if k == key:
                         self.built.append((aliases[0], be, faces))

@@ -67,7 +67,9 @@ class FrameInputs:
     #: The setup's :class:`InputState`: the world positions last computed, reused while
     #: the source's own positions and matrix stay the same (None: always computed).
     state: object = None
-    _digest: int | None = field(default=None, repr=False)
+    #: What is made of the source on first use (its digest, its world positions),
+    #: shared by the copies of these inputs (``dataclasses.replace`` passes it on).
+    _made: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self):
         if self.raw is None and self.points is not None:
@@ -83,35 +85,41 @@ class FrameInputs:
     def source_digest(self) -> int:
         """64-bit digest of the source's own positions, offsets and world matrix (what
         the world input is made of; computed once)."""
-        if self._digest is None:
-            self._digest = framecache.digest(self.source_local, self.offsets,
-                                             self.source_matrix)
-        return self._digest
+        made = self._made
+        if "digest" not in made:
+            made["digest"] = framecache.digest(self.source_local, self.offsets,
+                                               self.source_matrix)
+        return made["digest"]
 
-    def world(self) -> np.ndarray:
-        """The world positions ``points``, computed from the source's own positions on
-        first use (a frame that only shows a cached one never transforms them), or a
-        copy of the last ones computed when the source's own positions and matrix are
-        the same (a static groom, grass: the same bits, a copy being cheaper than the
-        product)."""
-        if self.points is None and self.source_local is not None:
+    def _source_world(self) -> np.ndarray:
+        """The source's world positions (before any motion), made once for these inputs
+        and their copies: a copy of the last ones the setup made when the source's own
+        positions and matrix are the same (a static groom, grass: the same bits, a copy
+        being cheaper than the product), else transformed."""
+        made = self._made
+        if "world" not in made:
             # (at the origin the world positions are the source's own: nothing to keep)
             keep = self.state is not None and not bridge.is_identity(self.source_matrix)
             last = self.state.world if keep else None
             if last is not None and last[0] == self.source_digest():
-                self.points = last[1].copy()  # (a copy: whoever gets it may write in it)
+                made["world"] = last[1].copy()  # (a copy: whoever gets it may write in it)
             else:
-                self.points = bridge.transform(self.source_local, self.source_matrix)
+                made["world"] = bridge.transform(self.source_local, self.source_matrix)
                 if keep:
-                    self.state.world = (self.source_digest(), self.points.copy())
-            if self.raw is None:
-                self.raw = self.points
+                    self.state.world = (self.source_digest(), made["world"].copy())
+        return made["world"]
+
+    def world(self) -> np.ndarray:
+        """The world positions ``points``, made from the source's own positions on
+        first use (a frame that only shows a cached one never transforms them)."""
+        if self.points is None and self.source_local is not None:
+            self.points = self._source_world()
         return self.points
 
     def before_motion(self) -> np.ndarray:
         """The world positions before the motion before collision (``raw``)."""
         if self.raw is None:
-            self.world()
+            self.raw = self._source_world() if self.source_local is not None else self.points
         return self.raw
 
 
@@ -220,13 +228,12 @@ def prepare_input(setup, inp, m) -> FrameInputs:
     if not m.active:  # (nothing moves the curves nor needs their roots)
         return inp
     f = inp.frame
-    inp.world()
     if m.needs_history and f >= setup.s.frame_start:
         # (before the start frame the hair counts as at rest: frames viewed there
         # must not change a bake, which starts at the start frame)
-        solve.record_roots(setup.rt, f, inp.points[inp.offsets[:-1]])
+        solve.record_roots(setup.rt, f, inp.world()[inp.offsets[:-1]])
     with clock.timing("motion"):
-        moved = before_collision(m, inp.points, inp.offsets, f, setup.fps, setup.history,
+        moved = before_collision(m, inp.world(), inp.offsets, f, setup.fps, setup.history,
                                  setup.s.core_threads)
     return inp if moved is None else replace(inp, points=moved, local=None)
 

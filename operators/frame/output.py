@@ -72,9 +72,7 @@ def show(setup, inputs, shown, sync=False, world=True):
     if shown.rows is not None:
         if not world and local_rows(inputs):
             with clock.timing("write"):
-                local = inputs.local.copy()
-                if len(shown.rows):
-                    local[shown.rows] = bridge.transform(shown.points, inputs.m_out_inv)
+                local = _on_source(inputs, shown.rows, shown.points)
                 _write_local(setup, inputs, local, shown.status, shown.attributes)
             return None
         # (the rows differ from the input before motion, which a cached frame keeps)
@@ -190,10 +188,16 @@ def output_local(inputs, points_world, changed=None) -> np.ndarray:
         return points_world
     if changed is None:
         changed = framecache.rows_differ(points_world, inputs.world())
-    local = inputs.local.copy()
     idx = np.flatnonzero(changed)
-    if len(idx):
-        local[idx] = bridge.transform(points_world[idx], inputs.m_out_inv)
+    return _on_source(inputs, idx, points_world[idx])
+
+
+def _on_source(inputs, rows, points_world) -> np.ndarray:
+    """The source's own local positions with ``rows`` set to ``points_world`` (k, 3)
+    taken to the output's space (the output sitting on the source)."""
+    local = inputs.local.copy()
+    if len(rows):
+        local[rows] = bridge.transform(points_world, inputs.m_out_inv)
     return local
 
 

@@ -267,7 +267,6 @@ def _solve(setup, read, d, shown, sink) -> dict:
     """Solve the frame (its solver prepared: reset, or holding ``f - 1``), have the sink
     keep it, show it; returns its inputs record."""
     inp = read.inputs
-    inp.world()  # (once, before the copy below: the cache keeps the same input)
     cols, growth, fresh = colliders.read_for_solve(setup, read.settings.refs,
                                                    continuous=sink.continuous(setup),
                                                    fresh=d.start == "reset")
