@@ -48,7 +48,7 @@ from math import comb
 import numpy as np
 
 from . import tolerances as tol
-from .curves import subset
+from .curves import subset, uniform_size
 from .rotations import stable_perpendicular
 
 #: ``curve_type`` codes (``CurveType`` in DNA_curves_types.h).
@@ -253,6 +253,20 @@ def _hermite_bound(L, a_perp, a_lo, a_hi, b_perp, b_lo, b_hi):
         above = _cubic_max01(*_poly((L, _T), (a_hi, _H10), (b_lo, _H11))) - L
         out[maybe] += np.maximum(0.0, np.maximum(below, above))
     return out
+
+
+def _hermite_upper(L, a_perp, a_lo, a_hi, b_perp, b_lo, b_hi):
+    """A cheap upper bound of :func:`_hermite_bound` (same arguments): ``4/27`` is the
+    largest ``h10`` and ``|h11|``, so the across term is at most ``4/27 (a_perp +
+    b_perp)`` and, on the segments where the along coordinate may leave the chord, the
+    overshoot at most ``4/27 (max(|a_lo|, |a_hi|) + max(|b_lo|, |b_hi|))``. Widened by
+    ``tol.SPLINE_BOUND_SLACK`` over the float rounding of either form."""
+    out = a_perp + b_perp
+    maybe = ((np.abs(a_lo) + 0.25 * np.abs(b_hi) > L)
+             | (0.25 * np.abs(a_hi) + np.abs(b_lo) > L))
+    out = out + np.where(maybe, np.maximum(np.abs(a_lo), np.abs(a_hi))
+                         + np.maximum(np.abs(b_lo), np.abs(b_hi)), 0.0)
+    return out * (4.0 / 27.0 * (1.0 + tol.SPLINE_BOUND_SLACK))
 
 
 # ------------------------------------------------------------ measured bounds
@@ -599,7 +613,128 @@ def _clearance_margin(splines: Splines, points, offsets, settings, enabled=None)
     return out
 
 
+def largest_margin(splines: Splines, points, offsets, settings, enabled=None) -> float:
+    """``clearance_margin(splines, points, offsets, settings, enabled).max()`` (0.0 for
+    no curve), the same bits, computed in full only on the curves that can hold it.
+
+    What every user of the margin needs is the largest (one widening for every curve
+    of a solve: :func:`core.pipeline.frame.drawn_clearance`). Each Catmull-Rom curve
+    gets a cheap upper bound of its margin (:func:`_hermite_upper`); the exact margin
+    of the ``tol.SPLINE_MARGIN_SEEDS`` curves of the largest bounds is a lower bound
+    of the largest, and only the curves whose bound exceeds it are measured in full
+    (with every Bezier and NURBS curve, measured in full always): no other curve can
+    hold the largest margin. A curve's margin depends on its own points, splines and
+    settings only, so measuring it among fewer curves gives the same bits.
+    """
+    with np.errstate(invalid="ignore", over="ignore"):  # (non-finite curves count 0)
+        return _largest_margin(splines, points, offsets, settings, enabled)
+
+
+def _largest_margin(splines, points, offsets, settings, enabled):
+    lay = _Layout(offsets)
+    if lay.P == 0 or splines.drawn_as_polygon:
+        return 0.0
+    P = np.asarray(points, np.float64)
+    offs = lay.offsets
+    if lay.C <= 4 * tol.SPLINE_MARGIN_SEEDS:
+        return float(_clearance_margin(splines, P, offs, settings, enabled).max())
+    phi_c, shrink = turn_allowance(settings, lay.sizes - 1)
+    types = np.asarray(splines.types)
+    open_c = ~_cyclic(splines, lay)
+    cr = (types == CATMULL_ROM) & open_c
+    n = uniform_size(offs)
+    if n > 1:
+        bound, longest = _catmull_rom_upper_uniform(P.reshape(lay.C, n, 3), phi_c, shrink,
+                                                    settings)
+    else:
+        bound, longest = _catmull_rom_upper(lay, P, cr, phi_c, shrink, settings)
+    bound[~cr] = 0.0
+    # every other drawn curve is measured in full; a non-finite bound tells nothing
+    bound[(~cr & (types != POLY) & open_c) | ~(bound < np.inf)] = np.inf
+    # a margin at most the noise of its curve counts 0 (as in clearance_margin)
+    bound[~(bound > tol.SPLINE_MARGIN_NOISE * longest)] = 0.0
+    if enabled is not None:
+        bound[~np.asarray(enabled, bool)] = 0.0
+
+    def measured(idx):
+        which = np.zeros(lay.C, bool)
+        which[idx] = True
+        rows, sub = subset(offs, which)
+        idx = np.flatnonzero(which)
+        return _clearance_margin(splines.take(which, offs), P[rows], sub, settings.take(idx),
+                                 None if enabled is None else np.asarray(enabled, bool)[idx])
+
+    k = tol.SPLINE_MARGIN_SEEDS
+    seeds = np.argpartition(-bound, k)[:k]
+    lower = float(measured(seeds).max())
+    rest = np.flatnonzero(bound > lower)
+    return max(lower, float(measured(rest).max())) if len(rest) else lower
+
+
+def _catmull_rom_upper(lay, P, cr, phi_c, shrink, settings):
+    """(upper bound of each curve's Catmull-Rom margin, NaN or inf where one of its
+    segments' is not finite; its longest segment) (C,) of any layout."""
+    d = lay.segments(P)
+    seglen = _norm(d)
+    mask = lay.seg & cr[lay.curve]
+    upper = np.zeros(lay.P)
+    if mask.any():
+        upper[mask] = _hermite_upper(*_catmull_rom_terms(lay, d, seglen, mask, phi_c,
+                                                         shrink, settings))
+    upper[~np.isfinite(upper)] = np.inf
+    nz = lay.sizes > 0
+    bound = np.zeros(lay.C)
+    bound[nz] = np.maximum.reduceat(np.where(lay.seg, upper, 0.0), lay.offsets[:-1][nz])
+    return bound, lay.per_curve_max(seglen, lay.seg)
+
+
+def _catmull_rom_upper_uniform(P3, phi_c, shrink, settings):
+    """:func:`_catmull_rom_upper` of ``C`` curves of ``n`` points each, ``P3`` (C, n, 3),
+    as every curve were Catmull-Rom: the same bound in whole (C, n - 1) columns, with
+    no gather (a groom's usual layout; the bound's rounding is within its slack)."""
+    d = P3[:, 1:] - P3[:, :-1]  # (C, m, 3): segment j from point j to j + 1
+    L = _norm(d)
+    c1 = _turn_coefficient(phi_c, shrink, 1)[:, None]
+    # A at each inner point j (segments j - 1 and j), as _catmull_rom_terms
+    A = 0.5 * np.minimum(_norm(d[:, 1:] - d[:, :-1]) + c1 * np.maximum(L[:, 1:], L[:, :-1]),
+                         L[:, 1:] + L[:, :-1])  # (C, m - 1): points 1 .. m - 1
+    if settings.shrink and settings.mode != "soft":
+        smin = np.broadcast_to(np.asarray(settings.scale_minimum, np.float64), (len(L),))
+        L_min = L * smin[:, None]
+    else:
+        L_min = L
+    # (_hermite_upper with the end rule written out: a curve's first segment has no
+    # across term at its start and -L_min / 2 along it, its last likewise at its end)
+    grow = 4.0 / 27.0 * (1.0 + tol.SPLINE_BOUND_SLACK)
+
+    def upper(a_perp, b_perp, a_abs, b_abs, L_min):
+        maybe = (a_abs + 0.25 * b_abs > L_min) | (0.25 * a_abs + b_abs > L_min)
+        return (a_perp + b_perp + np.where(maybe, a_abs + b_abs, 0.0)) * grow
+
+    m = L.shape[1]
+    if m == 1:
+        half = 0.5 * L_min[:, 0]
+        bound = upper(0.0, 0.0, half, half, L_min[:, 0])
+    else:
+        bound = np.maximum(upper(0.0, A[:, 0], 0.5 * L_min[:, 0], A[:, 0], L_min[:, 0]),
+                           upper(A[:, -1], 0.0, A[:, -1], 0.5 * L_min[:, -1], L_min[:, -1]))
+        if m > 2:
+            Al, Ar = A[:, :-1], A[:, 1:]
+            inner = upper(Al, Ar, Al, Ar, L_min[:, 1:-1])
+            inner[~np.isfinite(inner)] = np.inf
+            bound = np.maximum(bound, inner.max(axis=1))
+    bound[~np.isfinite(bound)] = np.inf
+    longest = np.where(np.isfinite(L), L, 0.0).max(axis=1)
+    return bound, np.maximum(longest, 0.0)
+
+
 def _catmull_rom_margin(lay, d, seglen, mask, phi_c, shrink, settings):
+    return _hermite_bound(*_catmull_rom_terms(lay, d, seglen, mask, phi_c, shrink, settings))
+
+
+def _catmull_rom_terms(lay, d, seglen, mask, phi_c, shrink, settings):
+    """The arguments of :func:`_hermite_bound` for the Catmull-Rom segments ``mask``
+    (point-indexed) through any solve of ``settings``."""
     c1 = _turn_coefficient(phi_c, shrink, 1)[lay.curve]
     prev_len = _shifted(seglen, 1)
     # half the second difference at each point (its two segments), grown by the turn:
@@ -618,9 +753,9 @@ def _catmull_rom_margin(lay, d, seglen, mask, phi_c, shrink, settings):
     else:
         L_min = L
     half = -0.5 * L_min
-    return _hermite_bound(L_min, np.where(start, 0.0, A), np.where(start, half, -A),
-                          np.where(start, half, A), np.where(end, 0.0, B),
-                          np.where(end, half, -B), np.where(end, half, B))
+    return (L_min, np.where(start, 0.0, A), np.where(start, half, -A),
+            np.where(start, half, A), np.where(end, 0.0, B),
+            np.where(end, half, -B), np.where(end, half, B))
 
 
 def _bezier_margin(lay, P, d, mask, splines, phi_c):
@@ -670,16 +805,29 @@ class DrawnMargin:
     def __init__(self):
         self._key = None
         self._margin = None
+        self._largest = None
 
     def __call__(self, splines: Splines, points, offsets, settings, enabled=None):
         """(C,) float64 margins of the curves ``points`` / ``offsets`` drawn as
         ``splines``, through any solve of ``settings``."""
         key = self._key_of(settings, splines, points, offsets, enabled)
-        if self._key is not None and _same_key(self._key, key):
+        if self._key is not None and self._margin is not None and _same_key(self._key, key):
             return self._margin
         margin = quantized(clearance_margin(splines, points, offsets, settings, enabled))
         self._key, self._margin = key, margin
+        self._largest = float(margin.max()) if len(margin) else 0.0
         return margin
+
+    def largest(self, splines: Splines, points, offsets, settings, enabled=None) -> float:
+        """The largest of :meth:`__call__`'s margins (0.0 for none), the same bits,
+        without measuring every curve in full (:func:`largest_margin`); kept as
+        ``__call__`` keeps its margins."""
+        key = self._key_of(settings, splines, points, offsets, enabled)
+        if self._key is not None and self._largest is not None and _same_key(self._key, key):
+            return self._largest
+        largest = float(quantized(largest_margin(splines, points, offsets, settings, enabled)))
+        self._key, self._margin, self._largest = key, None, largest
+        return largest
 
     @staticmethod
     def _key_of(settings, sp, points, offsets, enabled) -> tuple:

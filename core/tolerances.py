@@ -200,6 +200,10 @@ SPLINE_MARGIN_NOISE = 1e-5
 #: rebuilt every frame.
 SPLINE_MARGIN_STEPS = 16
 
+#: Relative widening of a spline margin's cheap upper bound (``splines._hermite_upper``)
+#: over the float rounding of it and of the exact bound (both ~1e-15 relative).
+SPLINE_BOUND_SLACK = 1e-9
+
 # ------------------------------------------------------------------------------
 # Thresholds of work. Each decides between two ways of computing the same thing
 # (two threads or one, one structure or another): only the time depends on them,
@@ -264,6 +268,11 @@ GRID_BIG_CELLS = 4096
 #: Triangle grids with at most this many cells get a dense cell -> triangles
 #: lookup (a sorted search above it).
 GRID_DENSE_CELLS = 1 << 23
+
+#: ``splines.largest_margin`` measures in full this many curves of the largest upper
+#: bounds first (their largest margin is the bar every other curve's bound must pass to
+#: be measured); grooms of at most four times as many curves are measured whole.
+SPLINE_MARGIN_SEEDS = 64
 
 # ------------------------------------------------------------------------------
 # Tolerances of the fur pipeline and the mesh repairs.

@@ -329,8 +329,8 @@ def drawn_clearance(solver, points, offsets, enabled, sp, drawn=None):
         yield
         return
     settings = solver.settings
-    margin = (drawn or splines_module.DrawnMargin())(sp, points, offsets, settings, enabled)
-    widen = float(margin.max()) if len(margin) else 0.0
+    widen = (drawn or splines_module.DrawnMargin()).largest(sp, points, offsets, settings,
+                                                            enabled)
     if widen <= 0.0:
         yield
         return

@@ -734,8 +734,8 @@ def drawn_settings(settings, splines, points, offsets, drawn=None) -> Settings:
     """
     if splines is None or splines.drawn_as_polygon:
         return settings
-    margin = (DrawnMargin() if drawn is None else drawn)(splines, points, offsets, settings)
-    widen = float(margin.max()) if len(margin) else 0.0
+    widen = (DrawnMargin() if drawn is None else drawn).largest(splines, points, offsets,
+                                                                 settings)
     if widen <= 0.0:
         return settings
     have = settings.clearance_margin

@@ -439,3 +439,70 @@ def test_take_keeps_each_curves_own_splines():
     np.testing.assert_array_equal(splines.clearance_margin(sub, P[rows], sub_off, s),
                                   splines.clearance_margin(sp, P, offs, s)[keep])
     assert splines.Splines.catmull_rom(C).take(keep, offs).cyclic is None
+
+
+# ----------------------------------------------------------- the largest margin
+def _mixed_splines(rng, P, offs):
+    """Mostly Catmull-Rom, with Poly, Bezier, NURBS and cyclic curves among them."""
+    C = len(offs) - 1
+    types = rng.choice([CATMULL_ROM] * 12 + [POLY, BEZIER, NURBS], C).astype(np.int8)
+    return splines.Splines(types, rng.random(C) < 0.03, P + rng.normal(size=P.shape) * 0.02,
+                           P + rng.normal(size=P.shape) * 0.02, np.zeros(len(P), np.int8),
+                           np.zeros(len(P), np.int8), np.full(C, 4), np.ones(C, np.int8),
+                           np.ones(len(P)))
+
+
+@pytest.mark.parametrize("seed", SEEDS[:4])
+@pytest.mark.parametrize("s", MODES, ids=lambda s: f"{s.mode}-{s.max_angle:g}-{s.shrink}")
+def test_the_largest_margin_is_the_largest_of_every_curves(seed, s):
+    """``largest_margin`` (what every solve widens by) measures only the curves that can
+    hold the largest: the same bits as the largest of ``clearance_margin``, on grooms
+    large enough to leave curves out, with every curve type, disabled curves, curves
+    with a non-finite point and per-curve settings; curves of any sizes, or all of one
+    size (2, 3 or 8 points: the bound's other form)."""
+    rng = np.random.default_rng(seed)
+    k = [(2, 9), (8, 8), (2, 2), (3, 3)][seed % 4]
+    P, offs = _groom(rng, n=900, kmin=k[0], kmax=k[1], wiggle=rng.uniform(0.05, 1.0))
+    C = len(offs) - 1
+    cr = splines.Splines.catmull_rom(C)
+    mixed = _mixed_splines(rng, P, offs)
+    enabled = rng.random(C) < 0.9
+    bad = P.copy()
+    bad[offs[rng.integers(0, C, 5)] + 1] = np.nan
+    per_curve = s.replace(max_angle=rng.uniform(5.0, 170.0, C)) if s.mode == "bend" else s
+    for sp, pts, en, st in ((cr, P, None, s), (mixed, P, None, s), (cr, P, enabled, s),
+                            (mixed, bad, enabled, s), (cr, P, None, per_curve)):
+        want = splines.clearance_margin(sp, pts, offs, st, en).max()
+        assert splines.largest_margin(sp, pts, offs, st, en) == want
+    # the cheap bound that decides which curves are measured holds on every segment
+    lay = splines._Layout(offs)
+    d = lay.segments(P)
+    phi, shrink = splines.turn_allowance(s, lay.sizes - 1)
+    terms = splines._catmull_rom_terms(lay, d, splines._norm(d), lay.seg, phi, shrink, s)
+    exact = splines._hermite_bound(*terms)
+    assert np.all(splines._hermite_upper(*terms) >= exact) and (exact.max() > 0) == (k[1] > 2)
+    if k[0] == k[1]:
+        upper, _ = splines._catmull_rom_upper_uniform(P.reshape(-1, k[0], 3), phi, shrink, s)
+        assert np.all(upper >= splines.clearance_margin(cr, P, offs, s))
+    # the frame's largest, as the solves are widened (kept: a groom that did not move)
+    drawn = splines.DrawnMargin()
+    assert drawn.largest(mixed, P, offs, s) == splines.quantized(
+        splines.clearance_margin(mixed, P, offs, s)).max()
+    assert drawn.largest(mixed, P, offs, s) == drawn(mixed, P, offs, s).max()
+
+
+def test_the_largest_margin_of_one_bent_curve_among_straight_ones():
+    """One curve of ten thousand holds the margin: it is found (the bound of a straight
+    curve is its float noise, which counts 0)."""
+    n = 10_000
+    offs = np.arange(n + 1) * 5
+    P = np.zeros((5 * n, 3))
+    P[:, 2] = np.tile(np.arange(5) * 0.1, n)
+    P[:, 0] = np.repeat(np.arange(n) * 0.01, 5)
+    P[5 * 7777 + 2, 1] = 0.05  # the one bent curve
+    sp = splines.Splines.catmull_rom(n)
+    s = Settings(mode="stiff")
+    m = splines.clearance_margin(sp, P, offs, s)
+    assert np.count_nonzero(m) == 1 and m[7777] > 0
+    assert splines.largest_margin(sp, P, offs, s) == m[7777]
+    assert splines.largest_margin(sp, np.where(P == 0.05, 0.0, P), offs, s) == 0.0
