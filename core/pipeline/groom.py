@@ -814,8 +814,6 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
                              f"render_offsets {R}")
         margins = ClearanceMargins() if margins is None else margins
         settings = drawn_settings(settings, splines, pts, off, margins.settings)
-        if fallback is not None:
-            fallback = drawn_settings(fallback, splines, pts, off, margins.fallback)
     nonfinite = np.zeros(R, bool)
     finite = None  # (None: every point is finite, the usual case)
     if not np.isfinite(pts.reshape(-1)).all():
@@ -844,6 +842,9 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     if fallback is not None and R:
         again = np.flatnonzero(status == Status.UNRESOLVED)
         if len(again):
+            if splines is not None:  # (measured only when the fallback runs: most frames
+                # free every curve with the settings; the widening is still every curve's)
+                fallback = drawn_settings(fallback, splines, pts, off, margins.fallback)
             sub, sub_off = _take(pts, off, again, n)
             res = Solver(sub_off, fallback.take(again)).step(sub, colliders, growth=growth)
             took = res.status != Status.UNRESOLVED
@@ -941,16 +942,24 @@ def _boxes(pts, off):
     """Bounding boxes ``(lo, hi)`` (R, 3) of the curves."""
     R = len(off) - 1
     n = uniform_size(off)
-    if n:  # column by column: reductions over 8 CVs are slow
+    if n:
         P3 = pts.reshape(R, n, 3)
-        lo, hi = P3[:, 0].copy(), P3[:, 0].copy()
-        for j in range(1, n):
-            np.minimum(lo, P3[:, j], out=lo)
-            np.maximum(hi, P3[:, j], out=hi)
-        return lo, hi
+        return _halving(np.minimum, P3), _halving(np.maximum, P3)
     if R == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
     return np.minimum.reduceat(pts, off[:-1], axis=0), np.maximum.reduceat(pts, off[:-1], axis=0)
+
+
+def _halving(ufunc, X):
+    """``ufunc.reduce(X, axis=1)`` of ``X`` (k, n, 3) for min and max (exact, so any
+    order gives the same bits), by halving the columns: log2(n) passes over whole
+    blocks (numpy's reductions over short rows are slow, and a pass a column reads
+    every row n times)."""
+    while X.shape[1] > 1:
+        h = X.shape[1] // 2
+        Y = ufunc(X[:, :h], X[:, h:2 * h])
+        X = np.concatenate([Y, X[:, 2 * h:]], axis=1) if X.shape[1] % 2 else Y
+    return X[:, 0]
 
 
 def _shape_seen(c) -> bool:

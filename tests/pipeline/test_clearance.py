@@ -352,6 +352,27 @@ def test_the_drawn_catmull_rom_curve_clears_the_collider(seed):
     assert_same(again, (out, st, n_fixed))
 
 
+def test_the_fallback_widens_its_solve_by_the_drawn_margin_when_it_runs():
+    """Stiff within 2 degrees frees few curves: the Bend fallback solves the rest, its
+    clearance widened by its own drawn margin (measured only on a frame where it runs):
+    no drawn sample of a resolved curve inside; where the fallback does not run, the
+    pass is the same with or without a fallback."""
+    pts, off, cols, V, F = _curly_fur_under_a_ball(0)
+    sp = splines.Splines.catmull_rom(len(off) - 1)
+    s, fb = Settings(mode="stiff", max_angle=2.0), Settings(mode="bend")
+    alone = clearance_pass(pts, off, cols, settings=s, splines=sp)
+    assert (alone[1] == Status.UNRESOLVED).sum() > 20
+    margins = ClearanceMargins()
+    out, st, _ = clearance_pass(pts, off, cols, settings=s, fallback=fb, splines=sp,
+                                margins=margins)
+    assert (st == Status.UNRESOLVED).sum() < (alone[1] == Status.UNRESOLVED).sum() // 2
+    assert _drawn_inside(out, off, st, V, F) == (0, 0)
+    assert margins.fallback.largest(sp, pts, off, fb) > 0
+    free = Settings(mode="stiff")
+    assert_same(clearance_pass(pts, off, cols, settings=free, fallback=fb, splines=sp),
+                clearance_pass(pts, off, cols, settings=free, splines=sp))
+
+
 def test_poly_curves_are_the_pass_without_splines_bit_for_bit():
     """Poly curves are drawn as their polygons: the pass with their splines is the pass
     without, bit for bit (and a pass on curves set aside keeps its own splines)."""
