@@ -469,7 +469,12 @@ def _nurbs_bound(splines, lay, P, d, nurbs, coef):
                 dist = _norm(rel - t[..., None] * dv[:, None, :])
                 if coef is not None:
                     gaps = np.abs(np.arange(k - 1) - s_)
-                    moves = (Lq * cm[gaps].T) @ paths[s_].T  # (m, window point)
+                    # (m, window point): the path sums in one fixed order (a BLAS
+                    # product's order depends on how many curves it takes)
+                    w_ = Lq * cm[gaps].T
+                    moves = np.zeros((len(cs), k))
+                    for j in range(k - 1):
+                        moves += w_[:, j, None] * paths[s_][:, j]
                     dist = dist + np.einsum("mbq,mq->mb", mix, moves)
                 piece = np.minimum(piece, dist.max(1))
             best = np.maximum(best, piece)
