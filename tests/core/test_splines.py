@@ -506,3 +506,46 @@ def test_the_largest_margin_of_one_bent_curve_among_straight_ones():
     assert np.count_nonzero(m) == 1 and m[7777] > 0
     assert splines.largest_margin(sp, P, offs, s) == m[7777]
     assert splines.largest_margin(sp, np.where(P == 0.05, 0.0, P), offs, s) == 0.0
+
+
+#: Two order-6 NURBS of 7 points whose window sums round differently when a BLAS product
+#: takes one curve (gemv) or several (gemm).
+_NURBS6_X = [[-0.0638830854654409, -0.3296146049811382, -1.8181040543096807],
+             [-0.01808425179065621, -0.3156816147323942, -1.7982404086759751],
+             [0.07815137658925154, -0.22049187590466068, -1.609622784650028],
+             [0.0039822364641147745, -0.23524905538437965, -1.5991427804630842],
+             [-0.005848125287705355, -0.28330911643507567, -1.3602132661895014],
+             [0.011707610953554784, -0.26661931959686286, -1.1860244031941884],
+             [0.03151340710124172, -0.16328222783832153, -1.0715242802179112]]
+_NURBS6_Y = [[0.36195245508939805, -0.23345599826833113, 0.776671510953765],
+             [0.33086205137182195, -0.2338517343564669, 0.9126417840800899],
+             [0.3430134106400944, -0.2400948745457677, 0.9347308573681701],
+             [0.3125498863130074, -0.1998214651918213, 1.0311570817984443],
+             [0.31528411619353314, -0.1527500824473255, 1.055887428389826],
+             [0.3034607138441243, -0.20722050640462963, 1.0200608167254017],
+             [0.30582196269100104, -0.18768721543526978, 1.0940487782083315]]
+
+
+def test_the_largest_margin_of_order_6_nurbs_measured_apart():
+    """Two order-6 NURBS of one size and knots mode, 70 Bezier and 230 Catmull-Rom
+    curves: the largest measures the two apart (one among the first 64 measured, or
+    the other not enabled), and gets the same bits as measuring them together."""
+    straight = [np.c_[np.zeros(4), np.full(4, i * 0.01), np.arange(4) * 0.1]
+                for i in range(300)]
+    curves = [np.array(_NURBS6_Y), np.array(_NURBS6_X)] + straight
+    types = np.array([NURBS, NURBS] + [BEZIER] * 70 + [CATMULL_ROM] * 230, np.int8)
+    P = np.vstack(curves)
+    offs = np.r_[0, np.cumsum([len(q) for q in curves])]
+    C = len(curves)
+    sp = splines.Splines(types, None, P.copy(), P.copy(), None, None, np.full(C, 6),
+                         np.full(C, splines.KNOTS_ENDPOINT_BEZIER), None)
+    s = Settings(mode="bend")
+    other = np.ones(C, bool)
+    other[0] = False
+    for en in (None, other):
+        want = splines.clearance_margin(sp, P, offs, s, en)
+        assert splines.largest_margin(sp, P, offs, s, en) == want.max()
+    one = np.arange(C) == 1
+    rows, sub = splines.subset(offs, one)
+    assert (splines.clearance_margin(sp.take(one, offs), P[rows], sub, s)[0]
+            == splines.clearance_margin(sp, P, offs, s)[1])
