@@ -629,7 +629,15 @@ def largest_margin(splines: Splines, points, offsets, settings, enabled=None) ->
     of the largest, and only the curves whose bound exceeds it are measured in full
     (with every Bezier and NURBS curve, measured in full always): no other curve can
     hold the largest margin. A curve's margin depends on its own points, splines and
-    settings only, so measuring it among fewer curves gives the same bits.
+    settings only (every sum in a fixed order), so measuring it among fewer curves
+    gives the same bits. Where that would not save work (Soft, where the bounds of a
+    groom are alike; mostly other curve types; most curves passing the bar; a few
+    hundred curves) every curve is measured.
+
+    Raises
+    ------
+    core.errors.SettingsError
+        A parameter map of ``settings`` without one value per curve.
     """
     with np.errstate(invalid="ignore", over="ignore"):  # (non-finite curves count 0)
         return _largest_margin(splines, points, offsets, settings, enabled)
@@ -641,12 +649,16 @@ def _largest_margin(splines, points, offsets, settings, enabled):
         return 0.0
     P = np.asarray(points, np.float64)
     offs = lay.offsets
-    if lay.C <= 4 * tol.SPLINE_MARGIN_SEEDS:
-        return float(_clearance_margin(splines, P, offs, settings, enabled).max())
-    phi_c, shrink = turn_allowance(settings, lay.sizes - 1)
+    settings.check_curve_count(lay.C)
     types = np.asarray(splines.types)
     open_c = ~_cyclic(splines, lay)
     cr = (types == CATMULL_ROM) & open_c
+    # Few curves, Soft (every turn allowed: the bounds of a groom are alike) or few
+    # Catmull-Rom curves (the others are measured in full anyway): measure every curve
+    if (lay.C <= 4 * tol.SPLINE_MARGIN_SEEDS or settings.mode == "soft"
+            or 2 * np.count_nonzero(cr) < lay.C):
+        return float(_clearance_margin(splines, P, offs, settings, enabled).max())
+    phi_c, shrink = turn_allowance(settings, lay.sizes - 1)
     n = uniform_size(offs)
     if n > 1:
         bound, longest = _catmull_rom_upper_uniform(P.reshape(lay.C, n, 3), phi_c, shrink,
@@ -672,12 +684,15 @@ def _largest_margin(splines, points, offsets, settings, enabled):
     k = tol.SPLINE_MARGIN_SEEDS
     seeds = np.argpartition(-bound, k)[:k]
     lower = float(measured(seeds).max())
+    bound[seeds] = 0.0  # (measured)
     rest = np.flatnonzero(bound > lower)
+    if 2 * len(rest) > lay.C:  # (a groom of even margins: measuring all costs less)
+        return float(_clearance_margin(splines, P, offs, settings, enabled).max())
     return max(lower, float(measured(rest).max())) if len(rest) else lower
 
 
 def _catmull_rom_upper(lay, P, cr, phi_c, shrink, settings):
-    """(upper bound of each curve's Catmull-Rom margin, NaN or inf where one of its
+    """(upper bound of each curve's Catmull-Rom margin, inf where one of its
     segments' is not finite; its longest segment) (C,) of any layout."""
     d = lay.segments(P)
     seglen = _norm(d)

@@ -801,6 +801,13 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
         :class:`core.Status` per render curve.
     n_fixed : int
         Number of render curves the pass had to move.
+
+    Raises
+    ------
+    InputError
+        Malformed curves, or ``splines`` of another number of curves.
+    SettingsError
+        A parameter map of ``settings`` or ``fallback`` without one value per curve.
     """
     pts, off = check_curves(render_points, render_offsets, "render_points", finite=False)
     if isinstance(colliders, Collider):
@@ -808,6 +815,9 @@ def clearance_pass(render_points, render_offsets, colliders, settings=None, grow
     colliders = list(colliders)
     settings = Settings(mode="stiff") if settings is None else settings
     R = len(off) - 1
+    for s in (settings, fallback):  # (a map of another length: named, before any work)
+        if isinstance(s, Settings):
+            s.check_curve_count(R)
     if splines is not None:
         if len(splines.types) != R:
             raise InputError(f"splines describe {len(splines.types)} curves, "
@@ -952,9 +962,9 @@ def _boxes(pts, off):
 
 def _halving(ufunc, X):
     """``ufunc.reduce(X, axis=1)`` of ``X`` (k, n, 3) for min and max (exact, so any
-    order gives the same bits), by halving the columns: log2(n) passes over whole
-    blocks (numpy's reductions over short rows are slow, and a pass a column reads
-    every row n times)."""
+    order gives the same values; a zero's sign may differ), by halving the columns:
+    log2(n) passes over whole blocks (numpy's reductions over short rows are slow, and
+    a pass a column reads every row n times)."""
     while X.shape[1] > 1:
         h = X.shape[1] // 2
         Y = ufunc(X[:, :h], X[:, h:2 * h])

@@ -448,8 +448,8 @@ def _mixed_splines(rng, P, offs):
     types = rng.choice([CATMULL_ROM] * 12 + [POLY, BEZIER, NURBS], C).astype(np.int8)
     return splines.Splines(types, rng.random(C) < 0.03, P + rng.normal(size=P.shape) * 0.02,
                            P + rng.normal(size=P.shape) * 0.02, np.zeros(len(P), np.int8),
-                           np.zeros(len(P), np.int8), np.full(C, 4), np.ones(C, np.int8),
-                           np.ones(len(P)))
+                           np.zeros(len(P), np.int8), rng.integers(2, 9, C),
+                           rng.integers(0, 4, C).astype(np.int8), rng.uniform(0.5, 2, len(P)))
 
 
 @pytest.mark.parametrize("seed", SEEDS[:4])
@@ -549,3 +549,19 @@ def test_the_largest_margin_of_order_6_nurbs_measured_apart():
     rows, sub = splines.subset(offs, one)
     assert (splines.clearance_margin(sp.take(one, offs), P[rows], sub, s)[0]
             == splines.clearance_margin(sp, P, offs, s)[1])
+
+
+def test_a_parameter_map_of_another_length_is_named_before_the_margin():
+    """A Max Angle map with one value too few, on a groom large enough to filter: the
+    settings' own message (the field, its length, the curve count), from the largest
+    margin and from the clearance pass."""
+    from core.errors import SettingsError
+    from core.pipeline import clearance_pass
+    rng = np.random.default_rng(2)
+    P, offs = _groom(rng, n=400)
+    sp = splines.Splines.catmull_rom(400)
+    s = Settings(mode="bend", max_angle=np.full(399, 30.0))
+    with pytest.raises(SettingsError, match="max_angle has 399 values but there are 400"):
+        splines.largest_margin(sp, P, offs, s)
+    with pytest.raises(SettingsError, match="max_angle has 399 values but there are 400"):
+        clearance_pass(P, offs, [], settings=Settings(mode="stiff"), fallback=s, splines=sp)
