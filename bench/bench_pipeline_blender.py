@@ -42,6 +42,11 @@ threads), median over the frames after the first.
 
     .venv/bin/python bench/bench_pipeline_blender.py [--curves 50000] [--frames 24]
         [--children-density 1500] [--children-only]
+
+With ``--vs CHECKOUT [--pairs 3]`` it compares this checkout with another one (e.g.
+``git worktree add ../before <commit>``, with its ``.venv``): each side's played frame,
+run in turn, each run a process of its own, with the other options given to both; per
+stage the medians and their ratio (how issue 32's pipeline target is measured).
 """
 
 from __future__ import annotations
@@ -87,10 +92,75 @@ def table(title, rows):
     return med
 
 
+def played_row(text):
+    """The played table's medians {stage: ms} in a run's printed ``text`` (None when it
+    has none): this script's output, of this checkout or of an earlier one."""
+    lines = text.splitlines()
+    for i, line in enumerate(lines):
+        if "frames played (ms per frame" in line and i + 2 < len(lines):
+            names, values = lines[i + 1].split(), lines[i + 2].split()
+            if len(names) == len(values):
+                try:
+                    return dict(zip(names, map(float, values), strict=True))
+                except ValueError:
+                    return None
+    return None
+
+
+def side_by_side(other, pairs, flags):
+    """This checkout's played pipeline frame beside ``other``'s (another checkout of the
+    repository: a worktree of an earlier commit), run in turn ``pairs`` times, each run a
+    process of its own (A B A B ...: a comparison that holds while the machine's speed
+    drifts). Prints per stage the median of each side's medians and their ratio, and the
+    total's ratio pair by pair."""
+    import subprocess
+
+    other = Path(other).resolve()
+    script = other / "bench" / "bench_pipeline_blender.py"
+    if not script.is_file():
+        print(f"  --vs {other}: no bench/bench_pipeline_blender.py there (a checkout of "
+              "this repository is needed)")
+        return 2
+    py = other / ".venv" / "bin" / "python"
+    sides = {"this": [sys.executable, str(Path(__file__).resolve())],
+             "other": [str(py) if py.exists() else sys.executable, str(script)]}
+    rows = {"this": [], "other": []}
+    for i in range(pairs):
+        for side in ("other", "this"):
+            done = subprocess.run(sides[side] + flags, capture_output=True, text=True,
+                                  cwd=str(other if side == "other" else ROOT))
+            row = played_row(done.stdout)
+            if row is None:
+                print(f"  run {i + 1} of {side} gave no played table (exit {done.returncode}):"
+                      f"\n{done.stderr[-2000:]}")
+                return 1
+            rows[side].append(row)
+            print(f"  pair {i + 1}, {side}: {row['total']:.1f} ms a played frame", flush=True)
+    keys = [k for k in rows["this"][0] if all(k in r for r in rows["other"])]
+    print(f"\n  side by side, {pairs} pairs: this checkout ({ROOT}) / {other}, ms per played "
+          "frame (median of the runs' medians)")
+    print(f"  {'stage':>10}{'this':>10}{'other':>10}{'ratio':>8}")
+    for k in keys:
+        a = float(np.median([r[k] for r in rows["this"]]))
+        b = float(np.median([r[k] for r in rows["other"]]))
+        ratio = f"{a / b:8.2f}" if b > 0 else f"{'':>8}"
+        print(f"  {k:>10}{a:10.1f}{b:10.1f}{ratio}")
+    per_pair = [a["total"] / b["total"] for a, b in zip(rows["this"], rows["other"],
+                                                         strict=True)]
+    print(f"  total, pair by pair: {', '.join(f'{r:.2f}' for r in per_pair)}")
+    return 0
+
+
 def main(argv=None):
+    ap = argparse.ArgumentParser(add_help=False)
+    ap.add_argument("--vs")
+    ap.add_argument("--pairs", type=int, default=3)
+    known, rest = ap.parse_known_args(argv if argv is not None else sys.argv[1:])
+    if known.vs:
+        return side_by_side(known.vs, max(1, known.pairs), rest)
     user = tempfile.mkdtemp(prefix="furcollide_bench_user_")
     try:
-        return run(user, argv)
+        return run(user, rest)
     finally:
         shutil.rmtree(user, ignore_errors=True)  # (the bake files too)
 
@@ -103,6 +173,11 @@ def run(user, argv=None):
                     help="children per unit area of the children figure (0: skip it)")
     ap.add_argument("--children-only", action="store_true",
                     help="only the children figure")
+    ap.add_argument("--vs", metavar="CHECKOUT",
+                    help="another checkout of the repository (a worktree of an earlier "
+                         "commit): its played frame and this one's, in turn, each run a "
+                         "process of its own; the other options go to both")
+    ap.add_argument("--pairs", type=int, default=3, help="runs of each side with --vs")
     args = ap.parse_args(argv)
     os.environ["BLENDER_USER_RESOURCES"] = user
     sys.path.insert(0, str(SCRIPTS))

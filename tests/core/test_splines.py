@@ -462,7 +462,7 @@ def test_the_largest_margin_is_the_largest_of_every_curves(seed, s):
     size (2, 3 or 8 points: the bound's other form)."""
     rng = np.random.default_rng(seed)
     k = [(2, 9), (8, 8), (2, 2), (3, 3)][seed % 4]
-    P, offs = _groom(rng, n=600, kmin=k[0], kmax=k[1], wiggle=rng.uniform(0.05, 1.0))
+    P, offs = _groom(rng, n=300, kmin=k[0], kmax=k[1], wiggle=rng.uniform(0.05, 1.0))
     C = len(offs) - 1
     cr = splines.Splines.catmull_rom(C)
     mixed = _mixed_splines(rng, P, offs)
