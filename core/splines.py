@@ -724,12 +724,10 @@ def _catmull_rom_upper_uniform(P3, phi_c, shrink, settings):
     else:
         L_min = L
     # (_hermite_upper with the end rule written out: a curve's first segment has no
-    # across term at its start and -L_min / 2 along it, its last likewise at its end)
-    grow = 4.0 / 27.0 * (1.0 + tol.SPLINE_BOUND_SLACK)
-
+    # across term at its start and -L_min / 2 along it, its last likewise at its end;
+    # only the along terms' sizes count)
     def upper(a_perp, b_perp, a_abs, b_abs, L_min):
-        maybe = (a_abs + 0.25 * b_abs > L_min) | (0.25 * a_abs + b_abs > L_min)
-        return (a_perp + b_perp + np.where(maybe, a_abs + b_abs, 0.0)) * grow
+        return _hermite_upper(L_min, a_perp, a_abs, a_abs, b_perp, b_abs, b_abs)
 
     m = L.shape[1]
     if m == 1:
